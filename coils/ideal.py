@@ -1,0 +1,118 @@
+"""Ideal fields of the published models: uniform (Config A) and constant-gradient (Config B)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._validate import as_vector
+from .field import Field
+
+__all__ = ["UniformField", "LinearField", "maxwell_gradient"]
+
+
+class UniformField(Field):
+    """A spatially uniform flux density (the ideal Helmholtz pair, Config (A)).
+
+    Parameters
+    ----------
+    B : array-like, shape (3,)
+        Flux density in tesla.
+
+    Examples
+    --------
+    >>> from coils import UniformField
+    >>> UniformField(B=(0, 5e-3, 0)).B([[0.01, 0.0, 0.0]])
+    array([[0.   , 0.005, 0.   ]])
+    """
+
+    uniform = True
+    linear = True
+
+    def __init__(self, B=(0.0, 0.0, 0.0)):
+        self.B0 = as_vector(B, "B")
+
+    def _B(self, pts):
+        return np.broadcast_to(self.B0, pts.shape).copy()
+
+    def _gradient(self, pts):
+        return np.zeros((pts.shape[0], 3, 3))
+
+    def __repr__(self):
+        return f"UniformField(B={self.B0.tolist()})"
+
+
+class LinearField(Field):
+    """A field with constant gradient: ``B(x) = B0 + G (x - origin)`` (Config (B)).
+
+    Parameters
+    ----------
+    B0 : array-like, shape (3,)
+        Flux density at ``origin``, tesla.
+    gradient : array-like, shape (3, 3)
+        ``G[i, j] = dB_i/dx_j`` in T/m.  A physical (current-free) field has G symmetric and
+        traceless; that is not enforced, so idealised models can be explored, but
+        :attr:`is_physical` tells.
+    origin : array-like, shape (3,)
+        Reference point, metres.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from coils import LinearField
+    >>> f = LinearField(B0=(0, 0, 0), gradient=np.diag([-0.5, 1.0, -0.5]))
+    >>> f.B([[0.0, 0.2, 0.0]])
+    array([[0. , 0.2, 0. ]])
+    """
+
+    linear = True
+
+    def __init__(self, B0=(0.0, 0.0, 0.0), gradient=None, origin=(0.0, 0.0, 0.0)):
+        self.B0 = as_vector(B0, "B0")
+        G = np.zeros((3, 3)) if gradient is None else np.asarray(gradient, dtype=float)
+        if G.shape != (3, 3):
+            raise ValueError(f"gradient must have shape (3, 3); got {np.shape(gradient)}")
+        if not np.all(np.isfinite(G)):
+            raise ValueError("gradient must be finite")
+        self.G = G
+        self.origin = as_vector(origin, "origin")
+        self.uniform = not np.any(G)
+
+    @property
+    def is_physical(self) -> bool:
+        """True if the gradient is symmetric and traceless (curl-free, divergence-free)."""
+        scale = max(np.abs(self.G).max(), 1e-300)
+        return bool(
+            np.allclose(self.G, self.G.T, atol=1e-12 * scale)
+            and abs(np.trace(self.G)) <= 1e-12 * scale
+        )
+
+    def _B(self, pts):
+        return self.B0 + (pts - self.origin) @ self.G.T
+
+    def _gradient(self, pts):
+        return np.broadcast_to(self.G, (pts.shape[0], 3, 3)).copy()
+
+    def __repr__(self):
+        return (
+            f"LinearField(B0={self.B0.tolist()}, gradient={self.G.tolist()}, "
+            f"origin={self.origin.tolist()})"
+        )
+
+
+def maxwell_gradient(g: float, axis: int = 1) -> np.ndarray:
+    """The ideal Maxwell-pair gradient ``g * diag(-1/2, 1, -1/2)`` with ``axis`` the pair axis.
+
+    Parameters
+    ----------
+    g : float
+        Axial gradient dB_axis/dx_axis in T/m.
+    axis : int
+        Index (0, 1, 2) of the pair axis; the seed's Config (B) uses 1 (y).
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+    """
+    d = np.full(3, -0.5 * g)
+    d[axis] = g
+    return np.diag(d)
