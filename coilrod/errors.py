@@ -19,8 +19,13 @@ class ConvergenceError(RuntimeError):
         The residual norm of the last failed attempt (NaN if it produced none).
     """
 
-    def __init__(self, message: str, reached: float = 0.0, target: float = float("nan"),
-                 residual: float = float("nan")):
+    def __init__(
+        self,
+        message: str,
+        reached: float = 0.0,
+        target: float = float("nan"),
+        residual: float = float("nan"),
+    ):
         super().__init__(message)
         self.reached = reached
         self.target = target

@@ -47,8 +47,13 @@ class Magnetization:
            [128000.,      0.]])
     """
 
-    def __init__(self, magnitude: Profile = 0.0, angle: Profile = 0.0,
-                 breakpoints: Sequence[float] = (), label: str = ""):
+    def __init__(
+        self,
+        magnitude: Profile = 0.0,
+        angle: Profile = 0.0,
+        breakpoints: Sequence[float] = (),
+        label: str = "",
+    ):
         self._magnitude = _check_profile(magnitude, "magnitude")
         self._angle = _check_profile(angle, "angle")
         self.breakpoints = tuple(sorted(finite_scalar(b, "breakpoints") for b in breakpoints))
@@ -91,8 +96,13 @@ class Magnetization:
 
     # -- constructors -------------------------------------------------------------------------
     @classmethod
-    def segments(cls, lengths: Sequence[float], magnitudes: Sequence[float],
-                 angles: Sequence[float] | float = 0.0, label: str = "") -> Magnetization:
+    def segments(
+        cls,
+        lengths: Sequence[float],
+        magnitudes: Sequence[float],
+        angles: Sequence[float] | float = 0.0,
+        label: str = "",
+    ) -> Magnetization:
         """Piecewise-constant magnetization from the clamp (s = 0) to the tip.
 
         Parameters
@@ -127,8 +137,7 @@ class Magnetization:
         def index(s):
             return np.clip(np.searchsorted(edges, s, side="right") - 1, 0, len(lengths) - 1)
 
-        m = cls(lambda s: mags[index(s)], lambda s: angs[index(s)], breakpoints=inner,
-                label=label)
+        m = cls(lambda s: mags[index(s)], lambda s: angs[index(s)], breakpoints=inner, label=label)
         m.segment_edges = edges
         m.segment_magnitudes = mags
         m.segment_angles = angs

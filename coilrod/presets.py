@@ -16,7 +16,15 @@ from .rod import Rod
 from .sections import Circle
 
 __all__ = [
-    "SEED_LENGTH", "SEED_M0", "seed_rod", "M1", "M2", "M3", "M41", "M42", "EXAMPLE_M41_LAYOUT",
+    "SEED_LENGTH",
+    "SEED_M0",
+    "seed_rod",
+    "M1",
+    "M2",
+    "M3",
+    "M41",
+    "M42",
+    "EXAMPLE_M41_LAYOUT",
 ]
 
 #: Robot length of the seed, m.
@@ -30,8 +38,9 @@ def M1(M0: float = SEED_M0, phi: float = 0.2) -> Magnetization:
     return Magnetization(M0 * phi, 0.0, label=f"M(1) |M|={M0 * phi:g} A/m")
 
 
-def M2(length: float = SEED_LENGTH, variant: str = "a", M0: float = SEED_M0,
-       phi: float = 0.2) -> Magnetization:
+def M2(
+    length: float = SEED_LENGTH, variant: str = "a", M0: float = SEED_M0, phi: float = 0.2
+) -> Magnetization:
     """M(2): direction varies along the rod.
 
     ``variant="a"``: theta_m = pi s / (2L) (seed Fig. 4a);
@@ -48,8 +57,9 @@ def M2(length: float = SEED_LENGTH, variant: str = "a", M0: float = SEED_M0,
 
 def M3(length: float = SEED_LENGTH, M0: float = SEED_M0, slope: float = 0.4) -> Magnetization:
     """M(3): magnitude varies, phi = slope * s / L (seed: 0.4 s/L), axial direction."""
-    return Magnetization(lambda s: M0 * slope * np.asarray(s) / length, 0.0,
-                         label=f"M(3) phi={slope:g} s/L")
+    return Magnetization(
+        lambda s: M0 * slope * np.asarray(s) / length, 0.0, label=f"M(3) phi={slope:g} s/L"
+    )
 
 
 #: Example segment layout for M(4.1): NOT the optimised design of the seed's ref. [7], whose
@@ -61,30 +71,47 @@ EXAMPLE_M41_LAYOUT = {
 }
 
 
-def M41(length: float = SEED_LENGTH, M0: float = SEED_M0, layout: dict | None = None
-        ) -> Magnetization:
+def M41(
+    length: float = SEED_LENGTH, M0: float = SEED_M0, layout: dict | None = None
+) -> Magnetization:
     """M(4.1): segments of different magnitude, all axial (example layout by default)."""
     layout = EXAMPLE_M41_LAYOUT if layout is None else layout
     lengths = [f * length for f in layout["fractions"]]
-    return Magnetization.segments(lengths, [M0 * p for p in layout["phi"]], 0.0,
-                                  label="M(4.1) example layout")
+    return Magnetization.segments(
+        lengths, [M0 * p for p in layout["phi"]], 0.0, label="M(4.1) example layout"
+    )
 
 
-def M42(length: float = SEED_LENGTH, M0: float = SEED_M0, layout: dict | None = None,
-        segment: int = -1, angle: float = math.pi / 2) -> Magnetization:
+def M42(
+    length: float = SEED_LENGTH,
+    M0: float = SEED_M0,
+    layout: dict | None = None,
+    segment: int = -1,
+    angle: float = math.pi / 2,
+) -> Magnetization:
     """M(4.2): M(4.1) with one segment's direction changed (by default the tip segment, to
     theta_m = pi/2)."""
     layout = EXAMPLE_M41_LAYOUT if layout is None else layout
     lengths = [f * length for f in layout["fractions"]]
     angles = np.zeros(len(lengths))
     angles[segment] = angle
-    return Magnetization.segments(lengths, [M0 * p for p in layout["phi"]], angles,
-                                  label=f"M(4.2) segment {segment} at {angle:.3g} rad")
+    return Magnetization.segments(
+        lengths,
+        [M0 * p for p in layout["phi"]],
+        angles,
+        label=f"M(4.2) segment {segment} at {angle:.3g} rad",
+    )
 
 
-def seed_rod(magnetization: Magnetization | None = None, youngs_modulus: float = 1e6,
-             length: float = SEED_LENGTH) -> Rod:
+def seed_rod(
+    magnetization: Magnetization | None = None,
+    youngs_modulus: float = 1e6,
+    length: float = SEED_LENGTH,
+) -> Rod:
     """The seed's robot: L = 40 mm, circular, D = L/20, E = 1 MPa by default (M(1) if None)."""
-    return Rod(length=length, youngs_modulus=youngs_modulus,
-               section=Circle(diameter=length / 20),
-               magnetization=magnetization if magnetization is not None else M1())
+    return Rod(
+        length=length,
+        youngs_modulus=youngs_modulus,
+        section=Circle(diameter=length / 20),
+        magnetization=magnetization if magnetization is not None else M1(),
+    )

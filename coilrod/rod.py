@@ -42,14 +42,15 @@ class Rod:
 
     def __post_init__(self):
         object.__setattr__(self, "length", positive(self.length, "length"))
-        object.__setattr__(self, "youngs_modulus",
-                           positive(self.youngs_modulus, "youngs_modulus"))
+        object.__setattr__(self, "youngs_modulus", positive(self.youngs_modulus, "youngs_modulus"))
         if not isinstance(self.section, Circle | Rectangle):
             raise ValueError(
-                f"section must be coilrod.Circle or coilrod.Rectangle; got {self.section!r}")
+                f"section must be coilrod.Circle or coilrod.Rectangle; got {self.section!r}"
+            )
         if not isinstance(self.magnetization, Magnetization):
             raise ValueError(
-                f"magnetization must be a coilrod.Magnetization; got {self.magnetization!r}")
+                f"magnetization must be a coilrod.Magnetization; got {self.magnetization!r}"
+            )
 
     @property
     def area(self) -> float:

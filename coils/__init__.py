@@ -5,8 +5,11 @@ protocol: ``B(points)`` -> (n, 3) T, ``gradient(points)`` -> (n, 3, 3) T/m with
 ``[k, i, j] = dB_i/dx_j``, points (n, 3) in metres.
 """
 
+from .coaxial import CoaxialCoils
 from .field import Field, FieldSum, ScaledField
-from .ideal import LinearField, UniformField, maxwell_gradient
+from .ideal import LinearField, UniformField, linearize, maxwell_gradient
+from .pairs import Coil, CoilPair, HelmholtzPair, MaxwellPair
+from .system import CoilSystem
 
 __all__ = [
     "Field",
@@ -14,5 +17,12 @@ __all__ = [
     "ScaledField",
     "UniformField",
     "LinearField",
+    "linearize",
     "maxwell_gradient",
+    "CoaxialCoils",
+    "Coil",
+    "CoilPair",
+    "HelmholtzPair",
+    "MaxwellPair",
+    "CoilSystem",
 ]

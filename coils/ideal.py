@@ -7,38 +7,7 @@ import numpy as np
 from ._validate import as_vector
 from .field import Field
 
-__all__ = ["UniformField", "LinearField", "maxwell_gradient"]
-
-
-class UniformField(Field):
-    """A spatially uniform flux density (the ideal Helmholtz pair, Config (A)).
-
-    Parameters
-    ----------
-    B : array-like, shape (3,)
-        Flux density in tesla.
-
-    Examples
-    --------
-    >>> from coils import UniformField
-    >>> UniformField(B=(0, 5e-3, 0)).B([[0.01, 0.0, 0.0]])
-    array([[0.   , 0.005, 0.   ]])
-    """
-
-    uniform = True
-    linear = True
-
-    def __init__(self, B=(0.0, 0.0, 0.0)):
-        self.B0 = as_vector(B, "B")
-
-    def _B(self, pts):
-        return np.broadcast_to(self.B0, pts.shape).copy()
-
-    def _gradient(self, pts):
-        return np.zeros((pts.shape[0], 3, 3))
-
-    def __repr__(self):
-        return f"UniformField(B={self.B0.tolist()})"
+__all__ = ["UniformField", "LinearField", "maxwell_gradient", "linearize"]
 
 
 class LinearField(Field):
@@ -99,6 +68,36 @@ class LinearField(Field):
         )
 
 
+class UniformField(LinearField):
+    """A spatially uniform flux density (the ideal Helmholtz pair, Config (A)).
+
+    A :class:`LinearField` with zero gradient; ``uniform`` is True, so solvers skip the force.
+
+    Parameters
+    ----------
+    B : array-like, shape (3,)
+        Flux density in tesla.
+
+    Examples
+    --------
+    >>> from coils import UniformField
+    >>> UniformField(B=(0, 5e-3, 0)).B([[0.01, 0.0, 0.0]])
+    array([[0.   , 0.005, 0.   ]])
+    """
+
+    uniform = True
+    linear = True
+
+    def __init__(self, B=(0.0, 0.0, 0.0)):
+        super().__init__(B0=as_vector(B, "B"))
+
+    def _B(self, pts):
+        return np.broadcast_to(self.B0, pts.shape).copy()
+
+    def __repr__(self):
+        return f"UniformField(B={self.B0.tolist()})"
+
+
 def maxwell_gradient(g: float, axis: int = 1) -> np.ndarray:
     """The ideal Maxwell-pair gradient ``g * diag(-1/2, 1, -1/2)`` with ``axis`` the pair axis.
 
@@ -116,3 +115,21 @@ def maxwell_gradient(g: float, axis: int = 1) -> np.ndarray:
     d = np.full(3, -0.5 * g)
     d[axis] = g
     return np.diag(d)
+
+
+def linearize(field: Field, center, zero_tol: float = 1e-12) -> LinearField:
+    """The :class:`LinearField` of ``field``'s B and gradient at ``center`` (m).
+
+    This is the ideal field that the published models assume.  Entries of B and of the gradient
+    below ``zero_tol`` times their natural scale (the largest entry, or ``|B0| / length_scale``
+    for the gradient) are round-off of a symmetric arrangement and are set to exactly zero, so a
+    Helmholtz pair linearizes to a uniform field and a Maxwell pair to a pure gradient.
+    """
+    c = as_vector(center, "center")
+    B0, G0 = field.B_and_gradient(c[None, :])
+    B0, G0 = B0[0], G0[0]
+    scale_g = max(np.abs(G0).max(), np.linalg.norm(B0) / field.length_scale)
+    scale_b = max(np.abs(B0).max(), np.abs(G0).max() * field.length_scale)
+    G0 = np.where(np.abs(G0) < zero_tol * scale_g, 0.0, G0)
+    B0 = np.where(np.abs(B0) < zero_tol * scale_b, 0.0, B0)
+    return LinearField(B0=B0, gradient=G0, origin=c)

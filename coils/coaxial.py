@@ -1,0 +1,146 @@
+"""Coaxial groups of circular filaments (tier 2: frames, winding checks, chunking).
+
+A :class:`CoaxialCoils` holds filaments sharing one axis and one centre; a single coil, a
+Helmholtz pair and a Maxwell pair are all coaxial groups, so a pair is evaluated in one local
+frame with one rotation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.constants import mu_0
+
+from ._validate import as_axis, as_vector
+from .field import CHUNK, Field
+from .loop import loop_B_and_gradient_local
+
+__all__ = ["CoaxialCoils", "frame_from_axis"]
+
+#: CODATA mu0 over the 4e-7 pi used inside the kernel.
+_MU0_SCALE = mu_0 / (4e-7 * np.pi)
+#: A point closer than this fraction of the radius to a filament is "on the winding".
+ON_WIRE_TOL = 1e-9
+
+
+def frame_from_axis(axis: np.ndarray) -> np.ndarray:
+    """Rotation matrix (3, 3) whose columns are (u, v, axis): local -> global coordinates."""
+    n = np.asarray(axis, dtype=float)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(helper, n)
+    u /= np.linalg.norm(u)
+    v = np.cross(n, u)
+    return np.column_stack([u, v, n])
+
+
+class CoaxialCoils(Field):
+    """Circular filaments sharing an axis and a centre.
+
+    Parameters
+    ----------
+    filaments : array-like, shape (f, 3)
+        Rows ``(z_offset, radius, current)``: loop plane at ``center + z_offset * axis`` (m),
+        radius (m), ampere-turns (A, counter-clockwise about ``axis``).
+    axis : {"x", "y", "z"} or array-like, shape (3,)
+        Common axis direction.
+    center : array-like, shape (3,)
+        Common centre, m.
+    windings : sequence of (z0, radius, width, height), optional
+        Winding cross-sections (m) inside which the field is not evaluated.
+    """
+
+    def __init__(self, filaments, axis="z", center=(0.0, 0.0, 0.0), windings=()):
+        fil = np.asarray(filaments, dtype=float)
+        if fil.ndim != 2 or fil.shape[1] != 3 or fil.shape[0] == 0:
+            raise ValueError(f"filaments must have shape (f, 3); got {fil.shape}")
+        if not np.all(np.isfinite(fil)):
+            raise ValueError("filaments must be finite")
+        if np.any(fil[:, 1] <= 0):
+            raise ValueError("filament radii must be positive")
+        self.filaments = fil
+        self.axis = as_axis(axis)
+        self.center = as_vector(center, "center")
+        self.rotation = frame_from_axis(self.axis)
+        self.windings = np.asarray(windings, dtype=float).reshape(-1, 4)
+
+    @property
+    def length_scale(self) -> float:
+        return float(np.min(self.filaments[:, 1]))
+
+    # -- tier 2: frames and singularities ------------------------------------------------------
+    def to_local(self, pts: np.ndarray) -> np.ndarray:
+        """Global points (n, 3) m -> coordinates in the coil frame (axis = local z)."""
+        return (pts - self.center) @ self.rotation
+
+    def _check_not_on_winding(self, local: np.ndarray) -> None:
+        rho = np.hypot(local[:, 0], local[:, 1])
+        z = local[:, 2]
+        for z0, a, _ in self.filaments:
+            d2 = (rho - a) ** 2 + (z - z0) ** 2
+            bad = d2 < (ON_WIRE_TOL * a) ** 2
+            if np.any(bad):
+                k = int(np.argmax(bad))
+                raise ValueError(
+                    f"point {k} lies on a coil winding (within {ON_WIRE_TOL:g} radius of the "
+                    f"filament of radius {a} m at axial offset {z0} m): the field is singular"
+                )
+        for z0, a, w, h in self.windings:
+            bad = (np.abs(z - z0) < 0.5 * w) & (np.abs(rho - a) < 0.5 * h)
+            if np.any(bad):
+                k = int(np.argmax(bad))
+                raise ValueError(
+                    f"point {k} lies inside a coil winding ({w} m x {h} m section at radius "
+                    f"{a} m): the filament model does not hold there"
+                )
+
+    def _evaluate(self, pts: np.ndarray, with_gradient: bool):
+        n = pts.shape[0]
+        B = np.empty((n, 3))
+        G = np.empty((n, 3, 3)) if with_gradient else None
+        R = self.rotation
+        for start in range(0, n, CHUNK):
+            sl = slice(start, min(start + CHUNK, n))
+            local = self.to_local(pts[sl])
+            self._check_not_on_winding(local)
+            b, g = loop_B_and_gradient_local(local, self.filaments, with_gradient)
+            B[sl] = (_MU0_SCALE * b) @ R.T
+            if with_gradient:
+                G[sl] = _MU0_SCALE * np.einsum("ia,kab,jb->kij", R, g, R, optimize=True)
+        return B, G
+
+    # -- tier 3 entry points (validated by Field) -------------------------------------------
+    def _B(self, pts):
+        return self._evaluate(pts, False)[0]
+
+    def _gradient(self, pts):
+        return self._evaluate(pts, True)[1]
+
+    def _B_and_gradient(self, pts):
+        return self._evaluate(pts, True)
+
+    def to_magpylib(self):
+        """The filaments as a ``magpylib.Collection`` of ``magpylib.current.Circle`` sources.
+
+        Use it to inspect or plot the coils with magpylib (``collection.show()``) or to
+        cross-check fields (``collection.getB(points)``, T).
+        """
+        import magpylib as magpy
+        from scipy.spatial.transform import Rotation
+
+        rot = Rotation.from_matrix(self.rotation)
+        loops = []
+        for z0, a, cur in self.filaments:
+            loop = magpy.current.Circle(current=float(cur), diameter=2.0 * a)
+            loop.rotate(rot, anchor=(0.0, 0.0, 0.0))
+            loop.move(self.center + z0 * self.axis)
+            loops.append(loop)
+        return magpy.Collection(*loops)
+
+    def ideal(self, zero_tol: float = 1e-12):
+        """The ideal field the published models assume: B and gradient at the centre.
+
+        See :func:`coils.ideal.linearize`; a Helmholtz pair's ideal field is uniform
+        (``ideal().uniform`` is True, so solvers skip the force path).
+        """
+        from .ideal import linearize
+
+        return linearize(self, self.center, zero_tol)

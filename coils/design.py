@@ -1,0 +1,177 @@
+"""Coil design helpers: the current or turns for a target centre field or gradient, and the
+copper resistance and power of a winding.
+
+Targets are met through the linearity of Biot-Savart in the current, using the coil's exact
+field at its centre -- so the helpers hold for finite windings and non-standard spacings, not
+only for the textbook closed forms.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ._validate import finite_scalar, positive
+from .coaxial import CoaxialCoils
+
+__all__ = [
+    "current_for_field",
+    "current_for_gradient",
+    "turns_for_field",
+    "turns_for_gradient",
+    "wire_length",
+    "WindingPower",
+    "winding_power",
+    "COPPER_RESISTIVITY",
+    "COPPER_TEMPERATURE_COEFFICIENT",
+]
+
+#: Resistivity of annealed copper at 20 degC, ohm m (IEC 60028).
+COPPER_RESISTIVITY = 1.7241e-8
+#: Temperature coefficient of copper's resistivity near 20 degC, 1/K.
+COPPER_TEMPERATURE_COEFFICIENT = 0.00393
+
+
+def _centre_values(coil: CoaxialCoils):
+    if not isinstance(coil, CoaxialCoils):
+        raise ValueError(f"coil must be a Coil, HelmholtzPair or MaxwellPair; got {coil!r}")
+    B, G = coil.B_and_gradient(coil.center[None, :])
+    n = coil.axis
+    return float(B[0] @ n), float(n @ G[0] @ n)
+
+
+def _per_unit(value: float, what: str, coil) -> float:
+    if value == 0.0:
+        raise ValueError(f"{coil!r} produces no {what} at its centre; cannot scale to a target")
+    return value
+
+
+def current_for_field(coil: CoaxialCoils, B: float) -> float:
+    """Current per turn (A) that gives the axial centre field ``B`` (T).
+
+    Examples
+    --------
+    >>> from coils import HelmholtzPair
+    >>> round(current_for_field(HelmholtzPair(0.1, 100, 1.0), 5e-3), 3)   # A
+    5.56
+    """
+    B = finite_scalar(B, "B")
+    b, _ = _centre_values(coil)
+    return coil.current * B / _per_unit(b, "field", coil)
+
+
+def current_for_gradient(coil: CoaxialCoils, gradient: float) -> float:
+    """Current per turn (A) that gives the axial centre gradient ``gradient`` (T/m)."""
+    gradient = finite_scalar(gradient, "gradient")
+    _, g = _centre_values(coil)
+    return coil.current * gradient / _per_unit(g, "gradient", coil)
+
+
+def turns_for_field(coil: CoaxialCoils, B: float) -> float:
+    """Turns per coil (at the coil's current) that give the axial centre field ``B`` (T).
+
+    Returned as a real number; round up to wind a real coil.
+    """
+    B = finite_scalar(B, "B")
+    b, _ = _centre_values(coil)
+    return coil.turns * B / _per_unit(b, "field", coil)
+
+
+def turns_for_gradient(coil: CoaxialCoils, gradient: float) -> float:
+    """Turns per coil (at the coil's current) that give the axial centre gradient (T/m)."""
+    gradient = finite_scalar(gradient, "gradient")
+    _, g = _centre_values(coil)
+    return coil.turns * gradient / _per_unit(g, "gradient", coil)
+
+
+def wire_length(coil: CoaxialCoils) -> float:
+    """Total conductor length (m): turns x 2 pi x mean radius, summed over the coils."""
+    n_coils = 2 if hasattr(coil, "spacing") else 1
+    return n_coils * coil.turns * 2 * math.pi * coil.radius
+
+
+@dataclass(frozen=True)
+class WindingPower:
+    """Electrical budget of a coil or pair.
+
+    Attributes
+    ----------
+    resistance : float
+        Total resistance, ohm.
+    power : float
+        Dissipated power I^2 R, W.
+    voltage : float
+        Drive voltage I R, V.
+    wire_length : float
+        Conductor length, m.
+    current_density : float
+        Current per wire cross-section, A/m^2.
+    """
+
+    resistance: float
+    power: float
+    voltage: float
+    wire_length: float
+    current_density: float
+
+
+def winding_power(
+    coil: CoaxialCoils,
+    wire_diameter: float,
+    *,
+    resistivity: float = COPPER_RESISTIVITY,
+    temperature: float = 20.0,
+    temperature_coefficient: float = COPPER_TEMPERATURE_COEFFICIENT,
+    packing: float = math.pi / 4,
+) -> WindingPower:
+    """Resistance and power of the coil wound with round wire (copper by default).
+
+    Parameters
+    ----------
+    coil : Coil, HelmholtzPair or MaxwellPair
+        Its ``turns``, ``radius``, ``current`` and optional ``winding`` are used.
+    wire_diameter : float
+        Bare conductor diameter, m.
+    resistivity : float
+        At 20 degC, ohm m.
+    temperature : float
+        Winding temperature, degC; ``rho(T) = rho20 (1 + alpha (T - 20))``.
+    temperature_coefficient : float
+        alpha, 1/K.
+    packing : float
+        Fill factor of round wire in the winding section (pi/4 for square packing); if the coil
+        has a ``winding`` cross-section, the turns must fit in it.
+
+    Raises
+    ------
+    ValueError
+        If the wire does not fit the winding cross-section.
+    """
+    d = positive(wire_diameter, "wire_diameter")
+    rho = positive(resistivity, "resistivity") * (
+        1
+        + finite_scalar(temperature_coefficient, "temperature_coefficient")
+        * (finite_scalar(temperature, "temperature") - 20.0)
+    )
+    if rho <= 0:
+        raise ValueError("resistivity at that temperature is not positive")
+    area = math.pi * d * d / 4
+    winding = getattr(coil, "winding", None)
+    if winding is not None:
+        capacity = positive(packing, "packing") * winding[0] * winding[1] / area
+        if coil.turns > capacity:
+            raise ValueError(
+                f"{coil.turns:g} turns of {1e3 * d:g} mm wire do not fit a "
+                f"{1e3 * winding[0]:g} x {1e3 * winding[1]:g} mm winding (room for "
+                f"{capacity:.0f} at packing {packing:.3g})"
+            )
+    length = wire_length(coil)
+    resistance = rho * length / area
+    current = abs(coil.current)
+    return WindingPower(
+        resistance=resistance,
+        power=current**2 * resistance,
+        voltage=current * resistance,
+        wire_length=length,
+        current_density=current / area,
+    )
