@@ -2,6 +2,7 @@
 
 from . import presets
 from .errors import ConvergenceError
+from .fem import solve_fem  # scikit-fem itself is imported lazily, inside the call
 from .magnetization import Magnetization
 from .rod import Rod
 from .sections import Circle, Rectangle
@@ -13,4 +14,5 @@ __all__ = [
     "Magnetization",
     "ConvergenceError",
     "presets",
+    "solve_fem",
 ]

@@ -53,7 +53,7 @@ def current_for_field(coil: CoaxialCoils, B: float) -> float:
     --------
     >>> from coils import HelmholtzPair
     >>> round(current_for_field(HelmholtzPair(0.1, 100, 1.0), 5e-3), 3)   # A
-    5.56
+    5.561
     """
     B = finite_scalar(B, "B")
     b, _ = _centre_values(coil)
