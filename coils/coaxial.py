@@ -11,10 +11,10 @@ import numpy as np
 from scipy.constants import mu_0
 
 from ._validate import as_axis, as_vector
-from .field import CHUNK, Field
+from .field import CHUNK, Field, FieldSum, ScaledField
 from .loop import loop_B_and_gradient_local
 
-__all__ = ["CoaxialCoils", "frame_from_axis"]
+__all__ = ["CoaxialCoils", "frame_from_axis", "coaxial_parts", "winding_mask"]
 
 #: CODATA mu0 over the 4e-7 pi used inside the kernel.
 _MU0_SCALE = mu_0 / (4e-7 * np.pi)
@@ -144,3 +144,27 @@ class CoaxialCoils(Field):
         from .ideal import linearize
 
         return linearize(self, self.center, zero_tol)
+
+
+def coaxial_parts(field: Field):
+    """Yield the coaxial filament groups (coils, pairs) inside ``field`` (sums, scalings)."""
+    if isinstance(field, FieldSum):
+        for p in field.parts:
+            yield from coaxial_parts(p)
+    elif isinstance(field, ScaledField):
+        yield from coaxial_parts(field.field)
+    elif hasattr(field, "filaments"):
+        yield field
+
+
+def winding_mask(field: Field, pts: np.ndarray, margin: float) -> np.ndarray:
+    """True where a point is within ``margin`` x radius of a filament or inside a winding."""
+    mask = np.zeros(len(pts), dtype=bool)
+    for part in coaxial_parts(field):
+        local = part.to_local(pts)
+        rho = np.hypot(local[:, 0], local[:, 1])
+        for z0, a, _ in part.filaments:
+            mask |= np.hypot(rho - a, local[:, 2] - z0) < margin * a
+        for z0, a, w, h in part.windings:
+            mask |= (np.abs(local[:, 2] - z0) <= 0.5 * w) & (np.abs(rho - a) <= 0.5 * h)
+    return mask

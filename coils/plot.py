@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from ._validate import as_vector, positive
-from .field import Field, FieldSum, ScaledField
+from .coaxial import coaxial_parts, winding_mask
+from .field import Field
 from .uniformity import deviation
 
 __all__ = ["plot_field_map", "plane_grid"]
@@ -30,29 +31,6 @@ def plane_grid(plane: str, center, half_width: float, n: int = 121):
     pts[:, i] = U.ravel()
     pts[:, j] = V.ravel()
     return pts, U, V, (i, j)
-
-
-def _coaxial_parts(field: Field):
-    if isinstance(field, FieldSum):
-        for p in field.parts:
-            yield from _coaxial_parts(p)
-    elif isinstance(field, ScaledField):
-        yield from _coaxial_parts(field.field)
-    elif hasattr(field, "filaments"):
-        yield field
-
-
-def _winding_mask(field: Field, pts: np.ndarray, margin: float) -> np.ndarray:
-    """True where a point is within ``margin`` x radius of a filament or inside a winding."""
-    mask = np.zeros(len(pts), dtype=bool)
-    for part in _coaxial_parts(field):
-        local = part.to_local(pts)
-        rho = np.hypot(local[:, 0], local[:, 1])
-        for z0, a, _ in part.filaments:
-            mask |= np.hypot(rho - a, local[:, 2] - z0) < margin * a
-        for z0, a, w, h in part.windings:
-            mask |= (np.abs(local[:, 2] - z0) <= 0.5 * w) & (np.abs(rho - a) <= 0.5 * h)
-    return mask
 
 
 def plot_field_map(
@@ -98,7 +76,7 @@ def plot_field_map(
     center = getattr(field, "center", np.zeros(3)) if center is None else center
     half_width = field.length_scale if half_width is None else half_width
     pts, U, V, (i, j) = plane_grid(plane, center, half_width, n)
-    mask = _winding_mask(field, pts, 0.02)
+    mask = winding_mask(field, pts, 0.02)
     B = np.full((len(pts), 3), np.nan)
     B[~mask] = field.B(pts[~mask])
     dev = np.full(len(pts), np.nan)
@@ -142,7 +120,7 @@ def plot_field_map(
     # where the windings cross this plane
     k = 3 - i - j
     t = np.linspace(0.0, 2 * np.pi, 721)
-    for part in _coaxial_parts(field):
+    for part in coaxial_parts(field):
         for z0, a, _ in part.filaments:
             ring = (
                 part.center

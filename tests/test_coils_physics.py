@@ -96,9 +96,9 @@ class TestAgainstMagpylib:
         coil = make()
         pts = coil.center + rng.uniform(-0.15, 0.15, (300, 3))
         # keep away from the windings, where finite differences lose accuracy
-        from coils.plot import _winding_mask
+        from coils.coaxial import winding_mask
 
-        pts = pts[~_winding_mask(coil, pts, 0.1)]
+        pts = pts[~winding_mask(coil, pts, 0.1)]
         B, G = coil.B_and_gradient(pts)
         Bm = magpylib_B(coil, pts)
         scale_b = np.abs(Bm).max()
