@@ -1,0 +1,182 @@
+"""The ``coilrod`` command line: run scenes, check them, list the shipped ones, run the demo.
+
+Exit codes: 0 success, 1 a solver could not reach its load, 2 invalid scene or usage.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import textwrap
+import time
+from importlib import resources
+from pathlib import Path
+
+__all__ = ["main", "shipped_scenes", "DEMO_SCENES"]
+
+DESCRIPTION = """\
+coilrod: how far do real Helmholtz and Maxwell coil pairs move a magnetic soft continuum
+robot away from what the ideal (uniform / constant-gradient) field predicts?
+
+A scene file (TOML) describes the robot, the field (ideal, or coils from Biot-Savart), the
+load path and the models (rod, fem2d, fem3d). Quantities carry units: "40 mm", "15 mT",
+"640 kA/m", "1 MPa", "0.4 T/m", "90 deg".
+"""
+
+EPILOG = """\
+examples:
+  coilrod demo --out demo-out          the seed's robot in a real Helmholtz pair vs ideal
+  coilrod scenes                       list the shipped scenes
+  coilrod scenes --show helmholtz_vs_ideal > my.toml   copy one to edit
+  coilrod check my.toml                validate a scene and print what would run
+  coilrod run my.toml --out results    run it: tables (CSV, JSON), figures (PNG), summary
+"""
+
+#: The demo's scenes: the seed's robot with M(1) and M(2a) in a real Helmholtz pair vs ideal.
+DEMO_SCENES = {
+    "M1": {"preset": "M1", "M0": "640 kA/m", "phi": 0.2},
+    "M2a": {"preset": "M2a", "M0": "640 kA/m", "phi": 0.2},
+}
+
+
+def _demo_scene(name: str, magnetization: dict) -> dict:
+    return {
+        "name": f"demo: seed robot, {name}, Helmholtz pair R = 80 mm vs ideal Config (A)",
+        "robot": {"length": "40 mm", "diameter": "2 mm", "youngs_modulus": "1 MPa",
+                  "magnetization": magnetization},
+        "field": {"type": "coils", "compare_ideal": True,
+                  "coil": [{"type": "helmholtz", "radius": "80 mm", "turns": 200,
+                            "B": "15 mT", "axis": "y"}]},
+        "load": {"steps": 12},
+        "models": {"run": ["rod"]},
+    }
+
+
+def shipped_scenes() -> dict[str, Path]:
+    """Name -> path of the scenes shipped in ``coilrod/scenes``."""
+    folder = resources.files("coilrod") / "scenes"
+    return {Path(p.name).stem: Path(str(p)) for p in folder.iterdir() if p.name.endswith(".toml")}
+
+
+def _resolve_scene(arg: str) -> Path:
+    path = Path(arg)
+    if path.exists():
+        return path
+    shipped = shipped_scenes()
+    if arg in shipped:
+        return shipped[arg]
+    return path  # load_scene reports the missing file
+
+
+def _print_err(msg: str) -> None:
+    print(f"coilrod: error: {msg}", file=sys.stderr)
+
+
+def _run(scene, out: Path | None, quiet: bool, no_cache: bool, progress: bool | None) -> int:
+    from .planner import plan_scene
+    from .runner import run_scene
+
+    plan = plan_scene(scene, cache=False if no_cache else None)
+    log = None if quiet else (lambda m: print(m, flush=True))
+    if not quiet:
+        print(plan, flush=True)
+    t0 = time.perf_counter()
+    result = run_scene(scene, plan=plan, progress=progress, log=log)
+    print(result.summary())
+    if out is not None:
+        for path in result.write(out):
+            if not quiet:
+                print(f"wrote {path}")
+    if not quiet:
+        print(f"done in {time.perf_counter() - t0:.1f} s")
+    return 0 if result.ok else 1
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``coilrod`` console script."""
+    parser = argparse.ArgumentParser(
+        prog="coilrod", description=DESCRIPTION, epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    p_demo = sub.add_parser("demo", help="the seed's robot in a real Helmholtz pair vs ideal",
+                            description="Run the embedded demo (no file needed): the seed's "
+                            "robot (L = 40 mm, D = L/20, M0 = 640 kA/m) with M(1) and M(2a) in "
+                            "a Helmholtz pair of radius 80 mm against the ideal uniform field.")
+    p_demo.add_argument("--out", type=Path, default=Path("coilrod-demo"),
+                        help="output folder (default: ./coilrod-demo)")
+    p_demo.add_argument("--quiet", action="store_true", help="print only the summary")
+
+    p_run = sub.add_parser("run", help="run a scene file",
+                           description="Validate, plan and run a scene; write tables (CSV, "
+                           "JSON) and figures (PNG) to --out.")
+    p_run.add_argument("scene", help="scene file (.toml) or the name of a shipped scene")
+    p_run.add_argument("--out", type=Path, default=None,
+                       help="output folder (default: ./coilrod-out/<scene name>)")
+    p_run.add_argument("--quiet", action="store_true", help="print only the summary")
+    p_run.add_argument("--no-cache", action="store_true",
+                       help="evaluate coil fields directly (no gridded cache)")
+    p_run.add_argument("--no-progress", action="store_true", help="hide progress bars")
+
+    p_check = sub.add_parser("check", help="validate a scene and print the plan",
+                             description="Validate a scene and print what would run and what "
+                             "is skipped, without solving.")
+    p_check.add_argument("scene", help="scene file (.toml) or the name of a shipped scene")
+
+    p_list = sub.add_parser("scenes", help="list the shipped scenes",
+                            description="List the scenes shipped with coilrod, or print one.")
+    p_list.add_argument("--show", metavar="NAME", help="print the scene file NAME")
+
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse exits 2 on usage errors, 0 on --help
+        return int(exc.code or 0)
+
+    from .scene import SceneError, load_scene, parse_scene
+
+    if args.command is None:
+        parser.print_help()
+        return 2
+    try:
+        if args.command == "scenes":
+            shipped = shipped_scenes()
+            if args.show:
+                if args.show not in shipped:
+                    _print_err(f"no shipped scene {args.show!r}; see 'coilrod scenes'")
+                    return 2
+                print(shipped[args.show].read_text(), end="")
+                return 0
+            for name, path in sorted(shipped.items()):
+                scene = load_scene(path)
+                print(f"{name:22s} {scene.name}")
+            return 0
+        if args.command == "check":
+            from .planner import plan_scene
+
+            scene = load_scene(_resolve_scene(args.scene))
+            print(f"{scene.source}: valid scene '{scene.name}'")
+            if scene.description:
+                print(textwrap.indent(textwrap.fill(scene.description, 90), "  "))
+            print(plan_scene(scene))
+            return 0
+        if args.command == "run":
+            scene = load_scene(_resolve_scene(args.scene))
+            out = args.out or Path("coilrod-out") / Path(scene.source).stem
+            return _run(scene, out, args.quiet, args.no_cache,
+                        False if args.no_progress else None)
+        if args.command == "demo":
+            code = 0
+            for name, mag in DEMO_SCENES.items():
+                scene = parse_scene(_demo_scene(name, mag), source=f"demo-{name}")
+                if not args.quiet:
+                    print(f"== {scene.name}")
+                code = max(code, _run(scene, args.out / name, args.quiet, False, None))
+            return code
+    except SceneError as exc:
+        _print_err(str(exc))
+        return 2
+    return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

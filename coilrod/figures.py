@@ -1,0 +1,99 @@
+"""Figures of a scene's results: tip deflection against field strength, deformed shapes over
+the field map (with the uniformity contour of the real coils)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["plot_tip_vs_field", "plot_scene_shapes", "centerline_of"]
+
+_STYLE = {"coils": "-", "ideal": "--"}
+_COLOR = {"rod": "tab:blue", "fem2d": "tab:orange", "fem3d": "tab:green"}
+
+
+def centerline_of(run, k: int = -1) -> np.ndarray:
+    """Deformed centreline (n, 3) in m of state ``k`` of a run (rod or FEM)."""
+    res = run.result
+    k = k % len(run.scales)
+    if hasattr(res, "centerline"):
+        return res.centerline(k)
+    p = np.asarray(res.mesh.p)
+    u = np.asarray(res.displacement(k))
+    dim = p.shape[0]
+    off = np.abs(p[1]) + (np.abs(p[2]) if dim == 3 else 0.0)
+    sel = off <= off.min() + 1e-9 * max(1.0, np.ptp(p[0]))
+    order = np.argsort(p[0, sel])
+    x = (p + u)[:, sel][:, order]
+    pts = np.zeros((x.shape[1], 3))
+    pts[:, :dim] = x.T
+    return pts
+
+
+def plot_tip_vs_field(result, ax=None):
+    """Tip deflection y/L against the magneto-elastic number, every model in every field.
+
+    Solid lines: real coils; dashed: the ideal field.  Returns the Axes.
+    """
+    import matplotlib.pyplot as plt
+
+    from .runner import field_strength
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=(6, 4.2))
+    value, kind, number = field_strength(result.scene)
+    L = result.scene.rod.length
+    for r in result.runs:
+        if len(r.scales) == 0:
+            continue
+        x = np.concatenate([[0.0], r.scales * number])
+        y = np.concatenate([[0.0], r.tip[:, 1] / L])
+        ax.plot(x, y, _STYLE.get(r.field_label, ":"), color=_COLOR.get(r.model, "k"),
+                marker="o" if r.model != "rod" else None, ms=3,
+                label=f"{r.model}, {r.field_label} field")
+    sym = r"$\lambda$" if kind == "B" else r"$\gamma$"
+    unit = f"{1e3 * value:.3g} mT" if kind == "B" else f"{value:.3g} T/m"
+    ax.set_xlabel(f"{sym} (scale 1 = {unit})")
+    ax.set_ylabel("tip deflection $y_{tip}/L$")
+    ax.set_title(result.scene.name, fontsize=10)
+    ax.grid(alpha=0.3)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=8)
+    return ax
+
+
+def plot_scene_shapes(result, ax=None, k: int = -1):
+    """Deformed shapes at load state ``k`` (default: the last), real vs ideal, over a map of the
+    real field's deviation from ideal with its 1% contour (coil scenes)."""
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=(6, 5))
+    scene = result.scene
+    L = scene.rod.length
+    shapes = [(r, centerline_of(r, k)) for r in result.runs
+              if len(r.scales) and r.result is not None]
+    pts = np.vstack([c for _, c in shapes] + [np.array([[0.0, 0.0, 0.0], [L, 0.0, 0.0]])])
+    lo, hi = pts[:, :2].min(axis=0), pts[:, :2].max(axis=0)
+    center = np.array([*(0.5 * (lo + hi)), 0.0])
+    half = 0.5 * float(np.max(hi - lo)) + 0.1 * L
+    real = scene.fields.get("coils")
+    if real is not None:
+        from coils.plot import plot_field_map
+
+        plot_field_map(real, "xy", center=center, half_width=half, n=81, ax=ax,
+                       streamlines=True)
+    else:
+        ax.set_xlim(1e3 * (center[0] - half), 1e3 * (center[0] + half))
+        ax.set_ylim(1e3 * (center[1] - half), 1e3 * (center[1] + half))
+    for r, c in shapes:
+        ax.plot(1e3 * c[:, 0], 1e3 * c[:, 1], _STYLE.get(r.field_label, ":"),
+                color=_COLOR.get(r.model, "k"), lw=2,
+                label=f"{r.model}, {r.field_label} (scale {r.scales[k]:.3g})")
+    ax.plot([0, 1e3 * L], [0, 0], color="0.6", lw=1, label="undeformed")
+    ax.plot(0, 0, "ks", ms=6)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.legend(fontsize=7, loc="best")
+    ax.set_title(scene.name, fontsize=10)
+    return ax

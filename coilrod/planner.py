@@ -1,0 +1,144 @@
+"""Decide what a scene needs and what it can skip, before any heavy import or computation.
+
+The plan says, in words, which solves run and why others are skipped: no Biot-Savart for ideal
+fields, no gradient (force) path for uniform fields, a gridded cache when a coil field will be
+queried many times over the robot's reach, no scikit-fem import for rod-only scenes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+import coils
+
+from .scene import Scene
+
+__all__ = ["Plan", "Job", "plan_scene", "robot_reach_box"]
+
+#: A coil field expected to be queried more than this many times per grid node is cached.
+CACHE_QUERIES_PER_NODE = 20
+#: Rough grid size of a cache over the robot's reach (nodes), for that decision.
+CACHE_NODES_ESTIMATE = 20_000
+#: Rough Newton iterations per load step, for the query estimate.
+ITERATIONS_PER_STEP = 6
+
+
+@dataclass
+class Job:
+    """One solve: a model in one of the scene's fields."""
+
+    model: str
+    field_label: str
+    field: coils.Field
+    note: str = ""
+
+
+@dataclass
+class Plan:
+    """What will run and what is skipped (human-readable reasons in ``decisions``)."""
+
+    jobs: list[Job] = field(default_factory=list)
+    decisions: list[str] = field(default_factory=list)
+    cache_box: tuple[np.ndarray, np.ndarray] | None = None
+
+    def __str__(self) -> str:
+        lines = ["plan:"]
+        lines += [f"  run   {j.model:6s} in {j.field_label:6s} field{j.note}" for j in self.jobs]
+        lines += [f"  note  {d}" for d in self.decisions]
+        return "\n".join(lines)
+
+
+def robot_reach_box(scene: Scene, margin: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned box (m) containing every point the robot can reach (a ball of radius L about
+    the clamp at the origin, in the plane z = 0 thickened by the section), with a margin."""
+    L = scene.rod.length
+    h = scene.rod.section.height
+    half = (1 + margin) * L + h
+    depth = max(h, getattr(scene.rod.section, "width", h))
+    return np.array([-half, -half, -depth]), np.array([half, half, depth])
+
+
+def _expected_queries(scene: Scene) -> int:
+    steps = len(scene.scales)
+    total = 0
+    for model in scene.models:
+        if model == "rod":
+            points = 2 * (scene.rod_options.get("nodes") or 200)
+        else:
+            points = 27 * 200 if model == "fem3d" else 9 * 80
+        total += points * steps * ITERATIONS_PER_STEP
+    return total
+
+
+def _box_clear_of_windings(field: coils.Field, box) -> bool:
+    from coils.coaxial import winding_mask
+
+    lo, hi = box
+    corners = np.array(np.meshgrid(*zip(lo, hi, strict=True), indexing="ij")).reshape(3, -1).T
+    grid = np.array(np.meshgrid(*[np.linspace(a, b, 9) for a, b in zip(lo, hi, strict=True)],
+                                indexing="ij")).reshape(3, -1).T
+    return not np.any(winding_mask(field, np.vstack([corners, grid]), 0.05))
+
+
+def plan_scene(scene: Scene, *, cache: bool | None = None) -> Plan:
+    """Plan the solves of ``scene``.
+
+    Parameters
+    ----------
+    scene : Scene
+    cache : bool, optional
+        Force (True) or forbid (False) the gridded field cache; default: decided from the
+        expected number of field queries.
+    """
+    plan = Plan()
+    if scene.field_kind in ("uniform", "gradient"):
+        plan.decisions.append("ideal field: no Biot-Savart evaluation")
+    if "ideal" in scene.fields:
+        ideal = scene.fields["ideal"]
+        if ideal.uniform:
+            plan.decisions.append("ideal field is uniform: force (gradient) path skipped, the "
+                                  "magnetic load is a pure torque")
+    fem = [m for m in scene.models if m.startswith("fem")]
+    if not fem:
+        plan.decisions.append("no FEM model requested: scikit-fem is not imported")
+    real = scene.fields.get("coils")
+    if real is not None:
+        n_fil = sum(len(p.filaments) for p in _coaxial(real))
+        plan.decisions.append(f"coil field: Biot-Savart of {n_fil} filaments (closed form, "
+                              "exact gradient)")
+        queries = _expected_queries(scene)
+        want = cache if cache is not None else (
+            queries > CACHE_QUERIES_PER_NODE * CACHE_NODES_ESTIMATE or bool(fem))
+        if want:
+            box = robot_reach_box(scene)
+            if _box_clear_of_windings(real, box):
+                plan.cache_box = box
+                plan.decisions.append(
+                    "coil field cached on a grid over the robot's reach "
+                    f"[{1e3 * box[0][0]:.0f}, {1e3 * box[1][0]:.0f}] x "
+                    f"[{1e3 * box[0][1]:.0f}, {1e3 * box[1][1]:.0f}] x "
+                    f"[{1e3 * box[0][2]:.1f}, {1e3 * box[1][2]:.1f}] mm "
+                    f"(~{queries:.1e} queries expected)")
+            else:
+                plan.decisions.append("the robot's reach comes close to a winding: no field "
+                                      "cache, direct evaluation")
+        else:
+            plan.decisions.append(f"~{queries:.1e} field queries expected: direct evaluation "
+                                  "(a grid cache would not pay off)")
+    for model in scene.models:
+        for label, fld in scene.fields.items():
+            note = ""
+            if fld.uniform:
+                note = " (uniform: torque only)"
+            elif fld.linear:
+                note = " (constant gradient)"
+            plan.jobs.append(Job(model, label, fld, note))
+    return plan
+
+
+def _coaxial(field):
+    from coils.coaxial import coaxial_parts
+
+    return list(coaxial_parts(field))

@@ -1,0 +1,265 @@
+"""Run a planned scene: solve each model in each field, collect tables, figures and a summary."""
+
+from __future__ import annotations
+
+import csv
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+import coils
+
+from .errors import ConvergenceError
+from .planner import Plan, plan_scene
+from .scene import Scene
+
+__all__ = ["ModelRun", "SceneResult", "run_scene", "field_strength"]
+
+
+@dataclass
+class ModelRun:
+    """The outcome of one job (a model in one field).
+
+    Attributes
+    ----------
+    model, field_label : str
+    scales : ndarray, shape (k,)
+        Scales reached (all requested ones on success).
+    tip : ndarray, shape (k, 3)
+        Tip positions, m (rod: centreline end; FEM: centroid of the free end face).
+    tip_angle : ndarray, shape (k,)
+        Tip tangent angle, rad (NaN where the model does not define it).
+    seconds : float
+        Wall time of the solve.
+    error : str
+        Empty on success, else the solver's message.
+    result : object
+        The solver's own result object (RodResult or FEMResult), or None.
+    """
+
+    model: str
+    field_label: str
+    scales: np.ndarray
+    tip: np.ndarray
+    tip_angle: np.ndarray
+    seconds: float
+    error: str = ""
+    result: object = None
+
+
+def field_strength(scene: Scene) -> tuple[float, str, float]:
+    """Reference strength of the scene's field at scale 1 and the magneto-elastic number.
+
+    Returns ``(value, label, number)``: |B| at the field's centre in T (label "B") and
+    lambda = |M| |B| A L^2 / (E I); or, for a pure-gradient field, the axial gradient in T/m
+    (label "gradient") and gamma = |M| g A L^3 / (E I).
+    """
+    rod = scene.rod
+    ideal = scene.fields.get("ideal")
+    if ideal is None:
+        ideal = coils.linearize(scene.fields["coils"], scene.fields["coils"].center)
+    b = float(np.linalg.norm(ideal.B0))
+    M = rod.magnetization.max_magnitude(rod.length)
+    if b > 0:
+        return b, "B", rod.magnetoelastic_number(b)
+    g = float(np.abs(np.linalg.eigvalsh(0.5 * (ideal.G + ideal.G.T))).max())
+    return g, "gradient", M * g * rod.area * rod.length**3 / rod.bending_stiffness
+
+
+@dataclass
+class SceneResult:
+    """All runs of a scene, with tables, the real-vs-ideal shift, figures and a summary."""
+
+    scene: Scene
+    plan: Plan
+    runs: list[ModelRun] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        """True if every job reached every scale."""
+        return all(not r.error for r in self.runs)
+
+    def run(self, model: str, field_label: str) -> ModelRun | None:
+        """The run of ``model`` in the field labelled ``field_label`` (None if absent)."""
+        for r in self.runs:
+            if r.model == model and r.field_label == field_label:
+                return r
+        return None
+
+    def table(self) -> list[dict]:
+        """One row per (model, field, scale): tip in mm, angle in degrees, lambda."""
+        value, kind, number = field_strength(self.scene)
+        L = self.scene.rod.length
+        rows = []
+        for r in self.runs:
+            for k, s in enumerate(r.scales):
+                rows.append({
+                    "model": r.model,
+                    "field": r.field_label,
+                    "scale": float(s),
+                    ("B_mT" if kind == "B" else "gradient_T_per_m"):
+                        float(s * value * (1e3 if kind == "B" else 1.0)),
+                    ("lambda" if kind == "B" else "gamma"): float(s * number),
+                    "tip_x_mm": 1e3 * float(r.tip[k, 0]),
+                    "tip_y_mm": 1e3 * float(r.tip[k, 1]),
+                    "tip_deflection_over_L": float(r.tip[k, 1] / L),
+                    "tip_angle_deg": float(np.degrees(r.tip_angle[k])),
+                })
+        return rows
+
+    def shift(self) -> list[dict]:
+        """Per model: how far the coil field moves the tip from the ideal-field prediction.
+
+        Reports the shift at the largest common scale and the maximum over scales, in mm, in
+        percent of L and (where defined) in degrees of tip angle.
+        """
+        L = self.scene.rod.length
+        out = []
+        for model in self.scene.models:
+            real, ideal = self.run(model, "coils"), self.run(model, "ideal")
+            if real is None or ideal is None or len(real.scales) == 0 or len(ideal.scales) == 0:
+                continue
+            n = min(len(real.scales), len(ideal.scales))
+            d = np.linalg.norm(real.tip[:n] - ideal.tip[:n], axis=1)
+            da = np.degrees(real.tip_angle[:n] - ideal.tip_angle[:n])
+            out.append({
+                "model": model,
+                "scale": float(real.scales[n - 1]),
+                "tip_shift_mm": 1e3 * float(d[-1]),
+                "tip_shift_percent_L": 100 * float(d[-1] / L),
+                "max_tip_shift_mm": 1e3 * float(d.max()),
+                "tip_angle_shift_deg": float(da[-1]),
+                "ideal_tip_mm": (1e3 * ideal.tip[n - 1, :2]).tolist(),
+                "coil_tip_mm": (1e3 * real.tip[n - 1, :2]).tolist(),
+            })
+        return out
+
+    def summary(self) -> str:
+        """A short human-readable account of the runs and of the shift."""
+        value, kind, number = field_strength(self.scene)
+        unit = f"{1e3 * value:.3g} mT" if kind == "B" else f"{value:.3g} T/m"
+        sym = "lambda" if kind == "B" else "gamma"
+        top = float(np.max(self.scene.scales))
+        lines = [f"scene: {self.scene.name}",
+                 f"robot: L = {1e3 * self.scene.rod.length:g} mm, "
+                 f"{self.scene.rod.magnetization!r}",
+                 f"field at scale 1: {unit} ({sym} = {number:.3g}); load to scale {top:g} "
+                 f"({sym} = {top * number:.3g})"]
+        for r in self.runs:
+            status = "ok" if not r.error else f"FAILED: {r.error}"
+            if len(r.scales):
+                tip = 1e3 * r.tip[-1]
+                lines.append(f"  {r.model:6s} {r.field_label:6s} tip ({tip[0]:7.3f}, "
+                             f"{tip[1]:7.3f}) mm at scale {r.scales[-1]:.3g}  "
+                             f"[{r.seconds:.2f} s, {status}]")
+            else:
+                lines.append(f"  {r.model:6s} {r.field_label:6s} [{status}]")
+        for s in self.shift():
+            lines.append(f"shift ({s['model']}): real coils move the tip by "
+                         f"{s['tip_shift_mm']:.3f} mm = {s['tip_shift_percent_L']:.2f}% of L "
+                         f"(tip angle {s['tip_angle_shift_deg']:+.2f} deg) vs the ideal field; "
+                         f"max over the path {s['max_tip_shift_mm']:.3f} mm")
+        return "\n".join(lines)
+
+    def write(self, out_dir: str | Path) -> list[Path]:
+        """Write tables (CSV, JSON) and figures (PNG) as the scene's outputs request."""
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        written = []
+        if self.scene.outputs.get("tables", True):
+            rows = self.table()
+            path = out / "tip_path.csv"
+            with path.open("w", newline="") as fh:
+                if rows:
+                    writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+                    writer.writeheader()
+                    writer.writerows(rows)
+            written.append(path)
+            path = out / "summary.json"
+            value, kind, number = field_strength(self.scene)
+            path.write_text(json.dumps({
+                "scene": self.scene.name,
+                "field_kind": self.scene.field_kind,
+                "reference": {kind: value, "number": number},
+                "plan": [str(d) for d in self.plan.decisions],
+                "runs": [{"model": r.model, "field": r.field_label, "seconds": r.seconds,
+                          "error": r.error, "scales_reached": len(r.scales)} for r in self.runs],
+                "shift": self.shift(),
+            }, indent=2))
+            written.append(path)
+        if self.scene.outputs.get("figures", True):
+            from .figures import plot_scene_shapes, plot_tip_vs_field
+
+            import matplotlib.pyplot as plt
+
+            for name, fn in (("tip_vs_field.png", plot_tip_vs_field),
+                             ("shapes.png", plot_scene_shapes)):
+                ax = fn(self)
+                path = out / name
+                ax.figure.savefig(path, dpi=120, bbox_inches="tight")
+                plt.close(ax.figure)
+                written.append(path)
+        return written
+
+
+def _solve(job, scene: Scene, field_obj, progress: bool):
+    scales = scene.scales
+    if job.model == "rod":
+        from .rod_solver import solve_rod
+
+        res = solve_rod(scene.rod, field_obj, scales, progress=progress, **scene.rod_options)
+        return res.scales, res.tip, res.tip_angle, res
+    from .fem import solve_fem
+
+    dim = 2 if job.model == "fem2d" else 3
+    opts = {"order": scene.fem_options.get("order", 2)}
+    key = "elements2d" if dim == 2 else "elements3d"
+    if key in scene.fem_options:
+        opts["elements"] = scene.fem_options[key]
+    if scene.poisson_ratio is not None:
+        opts["poisson_ratio"] = scene.poisson_ratio
+    res = solve_fem(scene.rod, field_obj, scales, dim=dim, progress=progress, **opts)
+    return res.scales, res.tip, np.full(len(res.scales), np.nan), res
+
+
+def run_scene(scene: Scene, *, plan: Plan | None = None, progress: bool | None = None,
+              log=None) -> SceneResult:
+    """Plan (unless given) and run every job of ``scene``.
+
+    A job that cannot reach its load is recorded with the solver's message (and whatever it
+    reached); the other jobs still run.  ``progress`` shows tqdm bars (default: when stderr is
+    a terminal); ``log`` is a callable for one-line messages (default: none).
+    """
+    plan = plan_scene(scene) if plan is None else plan
+    progress = sys.stderr.isatty() if progress is None else progress
+    result = SceneResult(scene, plan)
+    cached = None
+    if plan.cache_box is not None:
+        from coils.grid import GriddedField
+
+        t0 = time.perf_counter()
+        cached = GriddedField(scene.fields["coils"], plan.cache_box[0], plan.cache_box[1],
+                              tol=1e-7, tol_gradient=1e-5)
+        if log:
+            log(f"field cache: {cached.cells.tolist()} cells, estimated error B "
+                f"{cached.error_B:.1e}, gradient {cached.error_gradient:.1e} "
+                f"({time.perf_counter() - t0:.2f} s)")
+    for job in plan.jobs:
+        field_obj = cached if (cached is not None and job.field_label == "coils") else job.field
+        if log:
+            log(f"solving {job.model} in the {job.field_label} field ...")
+        t0 = time.perf_counter()
+        try:
+            scales, tip, angle, res = _solve(job, scene, field_obj, progress)
+            result.runs.append(ModelRun(job.model, job.field_label, np.asarray(scales), tip,
+                                        np.asarray(angle), time.perf_counter() - t0,
+                                        result=res))
+        except ConvergenceError as exc:
+            result.runs.append(ModelRun(job.model, job.field_label, np.zeros(0),
+                                        np.zeros((0, 3)), np.zeros(0),
+                                        time.perf_counter() - t0, error=str(exc)))
+    return result
