@@ -42,11 +42,19 @@ DEMO_SCENES = {
 def _demo_scene(name: str, magnetization: dict) -> dict:
     return {
         "name": f"demo: seed robot, {name}, Helmholtz pair R = 80 mm vs ideal Config (A)",
-        "robot": {"length": "40 mm", "diameter": "2 mm", "youngs_modulus": "1 MPa",
-                  "magnetization": magnetization},
-        "field": {"type": "coils", "compare_ideal": True,
-                  "coil": [{"type": "helmholtz", "radius": "80 mm", "turns": 200,
-                            "B": "15 mT", "axis": "y"}]},
+        "robot": {
+            "length": "40 mm",
+            "diameter": "2 mm",
+            "youngs_modulus": "1 MPa",
+            "magnetization": magnetization,
+        },
+        "field": {
+            "type": "coils",
+            "compare_ideal": True,
+            "coil": [
+                {"type": "helmholtz", "radius": "80 mm", "turns": 200, "B": "15 mT", "axis": "y"}
+            ],
+        },
         "load": {"steps": 12},
         "models": {"run": ["rod"]},
     }
@@ -95,36 +103,57 @@ def _run(scene, out: Path | None, quiet: bool, no_cache: bool, progress: bool | 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``coilrod`` console script."""
     parser = argparse.ArgumentParser(
-        prog="coilrod", description=DESCRIPTION, epilog=EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter)
+        prog="coilrod",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
-    p_demo = sub.add_parser("demo", help="the seed's robot in a real Helmholtz pair vs ideal",
-                            description="Run the embedded demo (no file needed): the seed's "
-                            "robot (L = 40 mm, D = L/20, M0 = 640 kA/m) with M(1) and M(2a) in "
-                            "a Helmholtz pair of radius 80 mm against the ideal uniform field.")
-    p_demo.add_argument("--out", type=Path, default=Path("coilrod-demo"),
-                        help="output folder (default: ./coilrod-demo)")
+    p_demo = sub.add_parser(
+        "demo",
+        help="the seed's robot in a real Helmholtz pair vs ideal",
+        description="Run the embedded demo (no file needed): the seed's "
+        "robot (L = 40 mm, D = L/20, M0 = 640 kA/m) with M(1) and M(2a) in "
+        "a Helmholtz pair of radius 80 mm against the ideal uniform field.",
+    )
+    p_demo.add_argument(
+        "--out",
+        type=Path,
+        default=Path("coilrod-demo"),
+        help="output folder (default: ./coilrod-demo)",
+    )
     p_demo.add_argument("--quiet", action="store_true", help="print only the summary")
 
-    p_run = sub.add_parser("run", help="run a scene file",
-                           description="Validate, plan and run a scene; write tables (CSV, "
-                           "JSON) and figures (PNG) to --out.")
+    p_run = sub.add_parser(
+        "run",
+        help="run a scene file",
+        description="Validate, plan and run a scene; write tables (CSV, "
+        "JSON) and figures (PNG) to --out.",
+    )
     p_run.add_argument("scene", help="scene file (.toml) or the name of a shipped scene")
-    p_run.add_argument("--out", type=Path, default=None,
-                       help="output folder (default: ./coilrod-out/<scene name>)")
+    p_run.add_argument(
+        "--out", type=Path, default=None, help="output folder (default: ./coilrod-out/<scene name>)"
+    )
     p_run.add_argument("--quiet", action="store_true", help="print only the summary")
-    p_run.add_argument("--no-cache", action="store_true",
-                       help="evaluate coil fields directly (no gridded cache)")
+    p_run.add_argument(
+        "--no-cache", action="store_true", help="evaluate coil fields directly (no gridded cache)"
+    )
     p_run.add_argument("--no-progress", action="store_true", help="hide progress bars")
 
-    p_check = sub.add_parser("check", help="validate a scene and print the plan",
-                             description="Validate a scene and print what would run and what "
-                             "is skipped, without solving.")
+    p_check = sub.add_parser(
+        "check",
+        help="validate a scene and print the plan",
+        description="Validate a scene and print what would run and what "
+        "is skipped, without solving.",
+    )
     p_check.add_argument("scene", help="scene file (.toml) or the name of a shipped scene")
 
-    p_list = sub.add_parser("scenes", help="list the shipped scenes",
-                            description="List the scenes shipped with coilrod, or print one.")
+    p_list = sub.add_parser(
+        "scenes",
+        help="list the shipped scenes",
+        description="List the scenes shipped with coilrod, or print one.",
+    )
     p_list.add_argument("--show", metavar="NAME", help="print the scene file NAME")
 
     try:
@@ -162,8 +191,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "run":
             scene = load_scene(_resolve_scene(args.scene))
             out = args.out or Path("coilrod-out") / Path(scene.source).stem
-            return _run(scene, out, args.quiet, args.no_cache,
-                        False if args.no_progress else None)
+            return _run(scene, out, args.quiet, args.no_cache, False if args.no_progress else None)
         if args.command == "demo":
             code = 0
             for name, mag in DEMO_SCENES.items():

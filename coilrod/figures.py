@@ -47,9 +47,15 @@ def plot_tip_vs_field(result, ax=None):
             continue
         x = np.concatenate([[0.0], r.scales * number])
         y = np.concatenate([[0.0], r.tip[:, 1] / L])
-        ax.plot(x, y, _STYLE.get(r.field_label, ":"), color=_COLOR.get(r.model, "k"),
-                marker="o" if r.model != "rod" else None, ms=3,
-                label=f"{r.model}, {r.field_label} field")
+        ax.plot(
+            x,
+            y,
+            _STYLE.get(r.field_label, ":"),
+            color=_COLOR.get(r.model, "k"),
+            marker="o" if r.model != "rod" else None,
+            ms=3,
+            label=f"{r.model}, {r.field_label} field",
+        )
     sym = r"$\lambda$" if kind == "B" else r"$\gamma$"
     unit = f"{1e3 * value:.3g} mT" if kind == "B" else f"{value:.3g} T/m"
     ax.set_xlabel(f"{sym} (scale 1 = {unit})")
@@ -70,8 +76,9 @@ def plot_scene_shapes(result, ax=None, k: int = -1):
         _, ax = plt.subplots(figsize=(6, 5))
     scene = result.scene
     L = scene.rod.length
-    shapes = [(r, centerline_of(r, k)) for r in result.runs
-              if len(r.scales) and r.result is not None]
+    shapes = [
+        (r, centerline_of(r, k)) for r in result.runs if len(r.scales) and r.result is not None
+    ]
     pts = np.vstack([c for _, c in shapes] + [np.array([[0.0, 0.0, 0.0], [L, 0.0, 0.0]])])
     lo, hi = pts[:, :2].min(axis=0), pts[:, :2].max(axis=0)
     center = np.array([*(0.5 * (lo + hi)), 0.0])
@@ -80,15 +87,19 @@ def plot_scene_shapes(result, ax=None, k: int = -1):
     if real is not None:
         from coils.plot import plot_field_map
 
-        plot_field_map(real, "xy", center=center, half_width=half, n=81, ax=ax,
-                       streamlines=True)
+        plot_field_map(real, "xy", center=center, half_width=half, n=81, ax=ax, streamlines=True)
     else:
         ax.set_xlim(1e3 * (center[0] - half), 1e3 * (center[0] + half))
         ax.set_ylim(1e3 * (center[1] - half), 1e3 * (center[1] + half))
     for r, c in shapes:
-        ax.plot(1e3 * c[:, 0], 1e3 * c[:, 1], _STYLE.get(r.field_label, ":"),
-                color=_COLOR.get(r.model, "k"), lw=2,
-                label=f"{r.model}, {r.field_label} (scale {r.scales[k]:.3g})")
+        ax.plot(
+            1e3 * c[:, 0],
+            1e3 * c[:, 1],
+            _STYLE.get(r.field_label, ":"),
+            color=_COLOR.get(r.model, "k"),
+            lw=2,
+            label=f"{r.model}, {r.field_label} (scale {r.scales[k]:.3g})",
+        )
     ax.plot([0, 1e3 * L], [0, 0], color="0.6", lw=1, label="undeformed")
     ax.plot(0, 0, "ks", ms=6)
     ax.set_aspect("equal")

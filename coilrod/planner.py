@@ -77,8 +77,13 @@ def _box_clear_of_windings(field: coils.Field, box) -> bool:
 
     lo, hi = box
     corners = np.array(np.meshgrid(*zip(lo, hi, strict=True), indexing="ij")).reshape(3, -1).T
-    grid = np.array(np.meshgrid(*[np.linspace(a, b, 9) for a, b in zip(lo, hi, strict=True)],
-                                indexing="ij")).reshape(3, -1).T
+    grid = (
+        np.array(
+            np.meshgrid(*[np.linspace(a, b, 9) for a, b in zip(lo, hi, strict=True)], indexing="ij")
+        )
+        .reshape(3, -1)
+        .T
+    )
     return not np.any(winding_mask(field, np.vstack([corners, grid]), 0.05))
 
 
@@ -98,19 +103,25 @@ def plan_scene(scene: Scene, *, cache: bool | None = None) -> Plan:
     if "ideal" in scene.fields:
         ideal = scene.fields["ideal"]
         if ideal.uniform:
-            plan.decisions.append("ideal field is uniform: force (gradient) path skipped, the "
-                                  "magnetic load is a pure torque")
+            plan.decisions.append(
+                "ideal field is uniform: force (gradient) path skipped, the "
+                "magnetic load is a pure torque"
+            )
     fem = [m for m in scene.models if m.startswith("fem")]
     if not fem:
         plan.decisions.append("no FEM model requested: scikit-fem is not imported")
     real = scene.fields.get("coils")
     if real is not None:
         n_fil = sum(len(p.filaments) for p in _coaxial(real))
-        plan.decisions.append(f"coil field: Biot-Savart of {n_fil} filaments (closed form, "
-                              "exact gradient)")
+        plan.decisions.append(
+            f"coil field: Biot-Savart of {n_fil} filaments (closed form, exact gradient)"
+        )
         queries = _expected_queries(scene)
-        want = cache if cache is not None else (
-            queries > CACHE_QUERIES_PER_NODE * CACHE_NODES_ESTIMATE or bool(fem))
+        want = (
+            cache
+            if cache is not None
+            else (queries > CACHE_QUERIES_PER_NODE * CACHE_NODES_ESTIMATE or bool(fem))
+        )
         if want:
             box = robot_reach_box(scene)
             if _box_clear_of_windings(real, box):
@@ -120,13 +131,17 @@ def plan_scene(scene: Scene, *, cache: bool | None = None) -> Plan:
                     f"[{1e3 * box[0][0]:.0f}, {1e3 * box[1][0]:.0f}] x "
                     f"[{1e3 * box[0][1]:.0f}, {1e3 * box[1][1]:.0f}] x "
                     f"[{1e3 * box[0][2]:.1f}, {1e3 * box[1][2]:.1f}] mm "
-                    f"(~{queries:.1e} queries expected)")
+                    f"(~{queries:.1e} queries expected)"
+                )
             else:
-                plan.decisions.append("the robot's reach comes close to a winding: no field "
-                                      "cache, direct evaluation")
+                plan.decisions.append(
+                    "the robot's reach comes close to a winding: no field cache, direct evaluation"
+                )
         else:
-            plan.decisions.append(f"~{queries:.1e} field queries expected: direct evaluation "
-                                  "(a grid cache would not pay off)")
+            plan.decisions.append(
+                f"~{queries:.1e} field queries expected: direct evaluation "
+                "(a grid cache would not pay off)"
+            )
     for model in scene.models:
         for label, fld in scene.fields.items():
             note = ""

@@ -97,18 +97,21 @@ class SceneResult:
         rows = []
         for r in self.runs:
             for k, s in enumerate(r.scales):
-                rows.append({
-                    "model": r.model,
-                    "field": r.field_label,
-                    "scale": float(s),
-                    ("B_mT" if kind == "B" else "gradient_T_per_m"):
-                        float(s * value * (1e3 if kind == "B" else 1.0)),
-                    ("lambda" if kind == "B" else "gamma"): float(s * number),
-                    "tip_x_mm": 1e3 * float(r.tip[k, 0]),
-                    "tip_y_mm": 1e3 * float(r.tip[k, 1]),
-                    "tip_deflection_over_L": float(r.tip[k, 1] / L),
-                    "tip_angle_deg": float(np.degrees(r.tip_angle[k])),
-                })
+                rows.append(
+                    {
+                        "model": r.model,
+                        "field": r.field_label,
+                        "scale": float(s),
+                        ("B_mT" if kind == "B" else "gradient_T_per_m"): float(
+                            s * value * (1e3 if kind == "B" else 1.0)
+                        ),
+                        ("lambda" if kind == "B" else "gamma"): float(s * number),
+                        "tip_x_mm": 1e3 * float(r.tip[k, 0]),
+                        "tip_y_mm": 1e3 * float(r.tip[k, 1]),
+                        "tip_deflection_over_L": float(r.tip[k, 1] / L),
+                        "tip_angle_deg": float(np.degrees(r.tip_angle[k])),
+                    }
+                )
         return rows
 
     def shift(self) -> list[dict]:
@@ -126,16 +129,18 @@ class SceneResult:
             n = min(len(real.scales), len(ideal.scales))
             d = np.linalg.norm(real.tip[:n] - ideal.tip[:n], axis=1)
             da = np.degrees(real.tip_angle[:n] - ideal.tip_angle[:n])
-            out.append({
-                "model": model,
-                "scale": float(real.scales[n - 1]),
-                "tip_shift_mm": 1e3 * float(d[-1]),
-                "tip_shift_percent_L": 100 * float(d[-1] / L),
-                "max_tip_shift_mm": 1e3 * float(d.max()),
-                "tip_angle_shift_deg": float(da[-1]),
-                "ideal_tip_mm": (1e3 * ideal.tip[n - 1, :2]).tolist(),
-                "coil_tip_mm": (1e3 * real.tip[n - 1, :2]).tolist(),
-            })
+            out.append(
+                {
+                    "model": model,
+                    "scale": float(real.scales[n - 1]),
+                    "tip_shift_mm": 1e3 * float(d[-1]),
+                    "tip_shift_percent_L": 100 * float(d[-1] / L),
+                    "max_tip_shift_mm": 1e3 * float(d.max()),
+                    "tip_angle_shift_deg": float(da[-1]),
+                    "ideal_tip_mm": (1e3 * ideal.tip[n - 1, :2]).tolist(),
+                    "coil_tip_mm": (1e3 * real.tip[n - 1, :2]).tolist(),
+                }
+            )
         return out
 
     def summary(self) -> str:
@@ -144,25 +149,30 @@ class SceneResult:
         unit = f"{1e3 * value:.3g} mT" if kind == "B" else f"{value:.3g} T/m"
         sym = "lambda" if kind == "B" else "gamma"
         top = float(np.max(self.scene.scales))
-        lines = [f"scene: {self.scene.name}",
-                 f"robot: L = {1e3 * self.scene.rod.length:g} mm, "
-                 f"{self.scene.rod.magnetization!r}",
-                 f"field at scale 1: {unit} ({sym} = {number:.3g}); load to scale {top:g} "
-                 f"({sym} = {top * number:.3g})"]
+        lines = [
+            f"scene: {self.scene.name}",
+            f"robot: L = {1e3 * self.scene.rod.length:g} mm, {self.scene.rod.magnetization!r}",
+            f"field at scale 1: {unit} ({sym} = {number:.3g}); load to scale {top:g} "
+            f"({sym} = {top * number:.3g})",
+        ]
         for r in self.runs:
             status = "ok" if not r.error else f"FAILED: {r.error}"
             if len(r.scales):
                 tip = 1e3 * r.tip[-1]
-                lines.append(f"  {r.model:6s} {r.field_label:6s} tip ({tip[0]:7.3f}, "
-                             f"{tip[1]:7.3f}) mm at scale {r.scales[-1]:.3g}  "
-                             f"[{r.seconds:.2f} s, {status}]")
+                lines.append(
+                    f"  {r.model:6s} {r.field_label:6s} tip ({tip[0]:7.3f}, "
+                    f"{tip[1]:7.3f}) mm at scale {r.scales[-1]:.3g}  "
+                    f"[{r.seconds:.2f} s, {status}]"
+                )
             else:
                 lines.append(f"  {r.model:6s} {r.field_label:6s} [{status}]")
         for s in self.shift():
-            lines.append(f"shift ({s['model']}): real coils move the tip by "
-                         f"{s['tip_shift_mm']:.3f} mm = {s['tip_shift_percent_L']:.2f}% of L "
-                         f"(tip angle {s['tip_angle_shift_deg']:+.2f} deg) vs the ideal field; "
-                         f"max over the path {s['max_tip_shift_mm']:.3f} mm")
+            lines.append(
+                f"shift ({s['model']}): real coils move the tip by "
+                f"{s['tip_shift_mm']:.3f} mm = {s['tip_shift_percent_L']:.2f}% of L "
+                f"(tip angle {s['tip_angle_shift_deg']:+.2f} deg) vs the ideal field; "
+                f"max over the path {s['max_tip_shift_mm']:.3f} mm"
+            )
         return "\n".join(lines)
 
     def write(self, out_dir: str | Path) -> list[Path]:
@@ -181,23 +191,38 @@ class SceneResult:
             written.append(path)
             path = out / "summary.json"
             value, kind, number = field_strength(self.scene)
-            path.write_text(json.dumps({
-                "scene": self.scene.name,
-                "field_kind": self.scene.field_kind,
-                "reference": {kind: value, "number": number},
-                "plan": [str(d) for d in self.plan.decisions],
-                "runs": [{"model": r.model, "field": r.field_label, "seconds": r.seconds,
-                          "error": r.error, "scales_reached": len(r.scales)} for r in self.runs],
-                "shift": self.shift(),
-            }, indent=2))
+            path.write_text(
+                json.dumps(
+                    {
+                        "scene": self.scene.name,
+                        "field_kind": self.scene.field_kind,
+                        "reference": {kind: value, "number": number},
+                        "plan": [str(d) for d in self.plan.decisions],
+                        "runs": [
+                            {
+                                "model": r.model,
+                                "field": r.field_label,
+                                "seconds": r.seconds,
+                                "error": r.error,
+                                "scales_reached": len(r.scales),
+                            }
+                            for r in self.runs
+                        ],
+                        "shift": self.shift(),
+                    },
+                    indent=2,
+                )
+            )
             written.append(path)
         if self.scene.outputs.get("figures", True):
-            from .figures import plot_scene_shapes, plot_tip_vs_field
-
             import matplotlib.pyplot as plt
 
-            for name, fn in (("tip_vs_field.png", plot_tip_vs_field),
-                             ("shapes.png", plot_scene_shapes)):
+            from .figures import plot_scene_shapes, plot_tip_vs_field
+
+            for name, fn in (
+                ("tip_vs_field.png", plot_tip_vs_field),
+                ("shapes.png", plot_scene_shapes),
+            ):
                 ax = fn(self)
                 path = out / name
                 ax.figure.savefig(path, dpi=120, bbox_inches="tight")
@@ -226,8 +251,9 @@ def _solve(job, scene: Scene, field_obj, progress: bool):
     return res.scales, res.tip, np.full(len(res.scales), np.nan), res
 
 
-def run_scene(scene: Scene, *, plan: Plan | None = None, progress: bool | None = None,
-              log=None) -> SceneResult:
+def run_scene(
+    scene: Scene, *, plan: Plan | None = None, progress: bool | None = None, log=None
+) -> SceneResult:
     """Plan (unless given) and run every job of ``scene``.
 
     A job that cannot reach its load is recorded with the solver's message (and whatever it
@@ -242,12 +268,15 @@ def run_scene(scene: Scene, *, plan: Plan | None = None, progress: bool | None =
         from coils.grid import GriddedField
 
         t0 = time.perf_counter()
-        cached = GriddedField(scene.fields["coils"], plan.cache_box[0], plan.cache_box[1],
-                              tol=1e-7, tol_gradient=1e-5)
+        cached = GriddedField(
+            scene.fields["coils"], plan.cache_box[0], plan.cache_box[1], tol=1e-7, tol_gradient=1e-5
+        )
         if log:
-            log(f"field cache: {cached.cells.tolist()} cells, estimated error B "
+            log(
+                f"field cache: {cached.cells.tolist()} cells, estimated error B "
                 f"{cached.error_B:.1e}, gradient {cached.error_gradient:.1e} "
-                f"({time.perf_counter() - t0:.2f} s)")
+                f"({time.perf_counter() - t0:.2f} s)"
+            )
     for job in plan.jobs:
         field_obj = cached if (cached is not None and job.field_label == "coils") else job.field
         if log:
@@ -255,11 +284,27 @@ def run_scene(scene: Scene, *, plan: Plan | None = None, progress: bool | None =
         t0 = time.perf_counter()
         try:
             scales, tip, angle, res = _solve(job, scene, field_obj, progress)
-            result.runs.append(ModelRun(job.model, job.field_label, np.asarray(scales), tip,
-                                        np.asarray(angle), time.perf_counter() - t0,
-                                        result=res))
+            result.runs.append(
+                ModelRun(
+                    job.model,
+                    job.field_label,
+                    np.asarray(scales),
+                    tip,
+                    np.asarray(angle),
+                    time.perf_counter() - t0,
+                    result=res,
+                )
+            )
         except ConvergenceError as exc:
-            result.runs.append(ModelRun(job.model, job.field_label, np.zeros(0),
-                                        np.zeros((0, 3)), np.zeros(0),
-                                        time.perf_counter() - t0, error=str(exc)))
+            result.runs.append(
+                ModelRun(
+                    job.model,
+                    job.field_label,
+                    np.zeros(0),
+                    np.zeros((0, 3)),
+                    np.zeros(0),
+                    time.perf_counter() - t0,
+                    error=str(exc),
+                )
+            )
     return result

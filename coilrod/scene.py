@@ -106,21 +106,24 @@ def _check_keys(data: dict, key: str, allowed: set[str], required: set[str] = fr
     unknown = sorted(set(data) - allowed)
     if unknown:
         where = f"{key}." if key else ""
-        raise SceneError(f"{where}{unknown[0]}: unknown key (allowed here: "
-                         f"{', '.join(sorted(allowed))})")
+        raise SceneError(
+            f"{where}{unknown[0]}: unknown key (allowed here: {', '.join(sorted(allowed))})"
+        )
     missing = sorted(required - set(data))
     if missing:
         where = f"{key}." if key else ""
         raise SceneError(f"{where}{missing[0]}: missing required key")
 
 
-def _quantity(data: dict, name: str, dimension: str, key: str, *, positive: bool = False,
-              default=None) -> float:
+def _quantity(
+    data: dict, name: str, dimension: str, key: str, *, positive: bool = False, default=None
+) -> float:
     full = f"{key}.{name}"
     if name not in data:
         if default is None:
-            raise SceneError(f"{full}: missing required key ({dimension}, e.g. "
-                             f"'{_EXAMPLES[dimension]}')")
+            raise SceneError(
+                f"{full}: missing required key ({dimension}, e.g. '{_EXAMPLES[dimension]}')"
+            )
         return default
     try:
         value = parse_quantity(data[name], dimension, full)
@@ -131,8 +134,17 @@ def _quantity(data: dict, name: str, dimension: str, key: str, *, positive: bool
     return value
 
 
-def _number(data: dict, name: str, key: str, *, positive: bool = False, integer: bool = False,
-            default=None, low=None, high=None) -> float:
+def _number(
+    data: dict,
+    name: str,
+    key: str,
+    *,
+    positive: bool = False,
+    integer: bool = False,
+    default=None,
+    low=None,
+    high=None,
+) -> float:
     full = f"{key}.{name}"
     if name not in data:
         if default is None:
@@ -154,9 +166,15 @@ def _number(data: dict, name: str, key: str, *, positive: bool = False, integer:
     return int(value) if integer else float(value)
 
 
-_EXAMPLES = {"length": "40 mm", "flux density": "5 mT", "gradient": "0.5 T/m",
-             "magnetization": "640 kA/m", "pressure": "1 MPa", "current": "2 A",
-             "angle": "90 deg"}
+_EXAMPLES = {
+    "length": "40 mm",
+    "flux density": "5 mT",
+    "gradient": "0.5 T/m",
+    "magnetization": "640 kA/m",
+    "pressure": "1 MPa",
+    "current": "2 A",
+    "angle": "90 deg",
+}
 
 
 def _axis(value, key: str) -> np.ndarray:
@@ -170,8 +188,9 @@ def _axis(value, key: str) -> np.ndarray:
 
 def _vector(value, dimension: str, key: str) -> np.ndarray:
     if not isinstance(value, list) or len(value) != 3:
-        raise SceneError(f"{key}: expected a list of 3 quantities, e.g. "
-                         f"['0 mm', '0 mm', '0 mm']; got {value!r}")
+        raise SceneError(
+            f"{key}: expected a list of 3 quantities, e.g. ['0 mm', '0 mm', '0 mm']; got {value!r}"
+        )
     out = []
     for i, v in enumerate(value):
         try:
@@ -184,15 +203,28 @@ def _vector(value, dimension: str, key: str) -> np.ndarray:
 # -- sections of the scene ---------------------------------------------------------------------
 def _parse_magnetization(data, length: float, key: str) -> Magnetization:
     data = _table(data, key)
-    _check_keys(data, key, {"preset", "M0", "phi", "magnitude", "angle", "segments", "slope",
-                            "segment", "segment_angle"})
+    _check_keys(
+        data,
+        key,
+        {
+            "preset",
+            "M0",
+            "phi",
+            "magnitude",
+            "angle",
+            "segments",
+            "slope",
+            "segment",
+            "segment_angle",
+        },
+    )
     if "preset" in data:
         preset = data["preset"]
         if preset not in PRESETS:
-            raise SceneError(f"{key}.preset: unknown preset {preset!r} "
-                             f"(one of {', '.join(PRESETS)})")
-        M0 = _quantity(data, "M0", "magnetization", key, positive=True,
-                       default=presets.SEED_M0)
+            raise SceneError(
+                f"{key}.preset: unknown preset {preset!r} (one of {', '.join(PRESETS)})"
+            )
+        M0 = _quantity(data, "M0", "magnetization", key, positive=True, default=presets.SEED_M0)
         if preset in ("M1", "M2a", "M2b"):
             phi = _number(data, "phi", key, positive=True, default=0.2, high=1.0)
             if preset == "M1":
@@ -204,13 +236,15 @@ def _parse_magnetization(data, length: float, key: str) -> Magnetization:
         if preset == "M4.1":
             return presets.M41(length, M0=M0)
         segment = _number(data, "segment", key, integer=True, default=-1)
-        angle = _quantity(data, "segment_angle", "angle", key, default=math.pi / 2)
+        angle = _quantity(data, "segment_angle", "angle", key, default=-math.pi / 4)
         return presets.M42(length, M0=M0, segment=segment, angle=angle)
     if "segments" in data:
         segs = data["segments"]
         if not isinstance(segs, list) or not segs:
-            raise SceneError(f"{key}.segments: expected a non-empty list of tables "
-                             "{ length = '10 mm', magnitude = '64 kA/m', angle = '0 deg' }")
+            raise SceneError(
+                f"{key}.segments: expected a non-empty list of tables "
+                "{ length = '10 mm', magnitude = '64 kA/m', angle = '0 deg' }"
+            )
         lengths, mags, angles = [], [], []
         for i, seg in enumerate(segs):
             sk = f"{key}.segments[{i}]"
@@ -221,8 +255,10 @@ def _parse_magnetization(data, length: float, key: str) -> Magnetization:
             angles.append(_quantity(seg, "angle", "angle", sk, default=0.0))
         total = sum(lengths)
         if abs(total - length) > 1e-9 * length:
-            raise SceneError(f"{key}.segments: lengths add up to {1e3 * total:g} mm; the robot "
-                             f"is {1e3 * length:g} mm long")
+            raise SceneError(
+                f"{key}.segments: lengths add up to {1e3 * total:g} mm; the robot "
+                f"is {1e3 * length:g} mm long"
+            )
         return Magnetization.segments(lengths, mags, angles, label="custom segments")
     magnitude = _quantity(data, "magnitude", "magnetization", key)
     angle = _quantity(data, "angle", "angle", key, default=0.0)
@@ -232,22 +268,39 @@ def _parse_magnetization(data, length: float, key: str) -> Magnetization:
 def _parse_robot(data) -> tuple[Rod, float | None]:
     key = "robot"
     data = _table(data, key)
-    _check_keys(data, key, {"length", "diameter", "width", "thickness", "youngs_modulus",
-                            "poisson_ratio", "magnetization"},
-                {"length", "youngs_modulus", "magnetization"})
+    _check_keys(
+        data,
+        key,
+        {
+            "length",
+            "diameter",
+            "width",
+            "thickness",
+            "youngs_modulus",
+            "poisson_ratio",
+            "magnetization",
+        },
+        {"length", "youngs_modulus", "magnetization"},
+    )
     length = _quantity(data, "length", "length", key, positive=True)
     E = _quantity(data, "youngs_modulus", "pressure", key, positive=True)
     if "diameter" in data:
         if "width" in data or "thickness" in data:
-            raise SceneError("robot.diameter: give either diameter (circle) or width and "
-                             "thickness (rectangle), not both")
+            raise SceneError(
+                "robot.diameter: give either diameter (circle) or width and "
+                "thickness (rectangle), not both"
+            )
         section = Circle(_quantity(data, "diameter", "length", key, positive=True))
     elif "width" in data or "thickness" in data:
-        section = Rectangle(_quantity(data, "width", "length", key, positive=True),
-                            _quantity(data, "thickness", "length", key, positive=True))
+        section = Rectangle(
+            _quantity(data, "width", "length", key, positive=True),
+            _quantity(data, "thickness", "length", key, positive=True),
+        )
     else:
-        raise SceneError("robot.diameter: missing required key (or width and thickness for a "
-                         "rectangular section)")
+        raise SceneError(
+            "robot.diameter: missing required key (or width and thickness for a "
+            "rectangular section)"
+        )
     nu = None
     if "poisson_ratio" in data:
         nu = _number(data, "poisson_ratio", key, low=-0.99, high=0.4999999)
@@ -257,20 +310,32 @@ def _parse_robot(data) -> tuple[Rod, float | None]:
 
 def _parse_coil(data, key: str) -> coils.Field:
     data = _table(data, key)
-    _check_keys(data, key, {"type", "radius", "turns", "current", "B", "gradient", "axis",
-                            "center", "spacing", "winding", "filaments"},
-                {"type", "radius", "turns"})
+    _check_keys(
+        data,
+        key,
+        {
+            "type",
+            "radius",
+            "turns",
+            "current",
+            "B",
+            "gradient",
+            "axis",
+            "center",
+            "spacing",
+            "winding",
+            "filaments",
+        },
+        {"type", "radius", "turns"},
+    )
     kind = data["type"]
-    classes = {"helmholtz": coils.HelmholtzPair, "maxwell": coils.MaxwellPair,
-               "coil": coils.Coil}
+    classes = {"helmholtz": coils.HelmholtzPair, "maxwell": coils.MaxwellPair, "coil": coils.Coil}
     if kind not in classes:
-        raise SceneError(f"{key}.type: unknown coil type {kind!r} (one of "
-                         f"{', '.join(classes)})")
+        raise SceneError(f"{key}.type: unknown coil type {kind!r} (one of {', '.join(classes)})")
     radius = _quantity(data, "radius", "length", key, positive=True)
     turns = _number(data, "turns", key, positive=True)
     axis = _axis(data.get("axis", "y"), f"{key}.axis")
-    center = _vector(data["center"], "length", f"{key}.center") if "center" in data \
-        else np.zeros(3)
+    center = _vector(data["center"], "length", f"{key}.center") if "center" in data else np.zeros(3)
     kwargs: dict[str, Any] = {"axis": axis, "center": center}
     if "spacing" in data:
         if kind == "coil":
@@ -279,16 +344,20 @@ def _parse_coil(data, key: str) -> coils.Field:
     if "winding" in data:
         w = data["winding"]
         if not isinstance(w, list) or len(w) != 2:
-            raise SceneError(f"{key}.winding: expected ['width', 'height'], e.g. "
-                             "['10 mm', '10 mm']")
-        kwargs["winding"] = tuple(parse_quantity(v, "length", f"{key}.winding[{i}]")
-                                  for i, v in enumerate(w))
+            raise SceneError(
+                f"{key}.winding: expected ['width', 'height'], e.g. ['10 mm', '10 mm']"
+            )
+        kwargs["winding"] = tuple(
+            parse_quantity(v, "length", f"{key}.winding[{i}]") for i, v in enumerate(w)
+        )
         if "filaments" in data:
             kwargs["filaments"] = tuple(int(v) for v in data["filaments"])
     given = [k for k in ("current", "B", "gradient") if k in data]
     if len(given) != 1:
-        raise SceneError(f"{key}: give exactly one of current, B (target centre field) or "
-                         f"gradient (target centre gradient); got {given or 'none'}")
+        raise SceneError(
+            f"{key}: give exactly one of current, B (target centre field) or "
+            f"gradient (target centre gradient); got {given or 'none'}"
+        )
     try:
         unit = classes[kind](radius, turns, 1.0, **kwargs)
         if "current" in data:
@@ -323,8 +392,9 @@ def _parse_field(data, rod: Rod) -> tuple[dict[str, coils.Field], str]:
         axis = _axis(data.get("axis", "y"), f"{key}.axis")
         G = g * (np.outer(axis, axis) - 0.5 * (np.eye(3) - np.outer(axis, axis)))
         B0 = _vector(data["B0"], "flux density", f"{key}.B0") if "B0" in data else np.zeros(3)
-        origin = _vector(data["origin"], "length", f"{key}.origin") if "origin" in data \
-            else np.zeros(3)
+        origin = (
+            _vector(data["origin"], "length", f"{key}.origin") if "origin" in data else np.zeros(3)
+        )
         return {"ideal": coils.LinearField(B0, G, origin)}, "gradient"
     if kind == "coils":
         _check_keys(data, key, {"type", "coil", "compare_ideal"}, {"coil"})
@@ -351,8 +421,11 @@ def _parse_load(data) -> np.ndarray:
         if "steps" in data:
             raise SceneError("load.scales: give either scales or steps, not both")
         sc = data["scales"]
-        if not isinstance(sc, list) or not sc or not all(
-                isinstance(v, int | float) and not isinstance(v, bool) for v in sc):
+        if (
+            not isinstance(sc, list)
+            or not sc
+            or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in sc)
+        ):
             raise SceneError("load.scales: expected a non-empty list of numbers")
         scales = np.array(sc, dtype=float)
         if not np.all(np.isfinite(scales)):
@@ -372,8 +445,12 @@ def parse_scene(data: dict, source: str = "<embedded>") -> Scene:
         Naming the first invalid key and the reason.
     """
     data = _table(data, "scene")
-    _check_keys(data, "", {"name", "description", "robot", "field", "load", "models", "rod",
-                           "fem", "output"}, {"robot", "field"})
+    _check_keys(
+        data,
+        "",
+        {"name", "description", "robot", "field", "load", "models", "rod", "fem", "output"},
+        {"robot", "field"},
+    )
     name = data.get("name", Path(source).stem)
     rod, nu = _parse_robot(data["robot"])
     fields, kind = _parse_field(data["field"], rod)
@@ -400,18 +477,30 @@ def parse_scene(data: dict, source: str = "<embedded>") -> Scene:
         if k in fem_opts:
             v = fem_opts[k]
             n = 2 if k == "elements2d" else 3
-            if not isinstance(v, list) or len(v) != n or not all(
-                    isinstance(x, int) and not isinstance(x, bool) and x > 0 for x in v):
+            if (
+                not isinstance(v, list)
+                or len(v) != n
+                or not all(isinstance(x, int) and not isinstance(x, bool) and x > 0 for x in v)
+            ):
                 raise SceneError(f"fem.{k}: expected {n} positive integers; got {v!r}")
             fem_options[k] = tuple(v)
     out = _table(data.get("output", {}), "output")
     _check_keys(out, "output", {"figures", "tables"})
     outputs = {"figures": bool(out.get("figures", True)), "tables": bool(out.get("tables", True))}
-    return Scene(name=str(name), rod=rod, fields=fields, field_kind=kind, scales=scales,
-                 models=tuple(dict.fromkeys(run)), rod_options=rod_options,
-                 fem_options=fem_options, outputs=outputs,
-                 description=str(data.get("description", "")), source=source,
-                 poisson_ratio=nu)
+    return Scene(
+        name=str(name),
+        rod=rod,
+        fields=fields,
+        field_kind=kind,
+        scales=scales,
+        models=tuple(dict.fromkeys(run)),
+        rod_options=rod_options,
+        fem_options=fem_options,
+        outputs=outputs,
+        description=str(data.get("description", "")),
+        source=source,
+        poisson_ratio=nu,
+    )
 
 
 def load_scene(path: str | Path) -> Scene:

@@ -64,22 +64,26 @@ def parse_quantity(value, dimension: str, key: str = "value") -> float:
             return 0.0
         raise UnitError(
             f"{key}: missing unit in {value!r}; write it as a string with a unit, "
-            f"e.g. '{value} {next(iter(units))}' ({dimension}: {', '.join(units)})")
+            f"e.g. '{value} {next(iter(units))}' ({dimension}: {', '.join(units)})"
+        )
     if not isinstance(value, str):
-        raise UnitError(f"{key}: expected a {dimension} such as '{_example(dimension)}'; "
-                        f"got {value!r}")
+        raise UnitError(
+            f"{key}: expected a {dimension} such as '{_example(dimension)}'; got {value!r}"
+        )
     match = _RE.match(value)
     if not match:
-        raise UnitError(f"{key}: cannot read {value!r} as a number with a unit, "
-                        f"e.g. '{_example(dimension)}'")
+        raise UnitError(
+            f"{key}: cannot read {value!r} as a number with a unit, e.g. '{_example(dimension)}'"
+        )
     number, unit = float(match["num"]), match["unit"]
     if not unit:
         raise UnitError(f"{key}: missing unit in {value!r} ({dimension}: {', '.join(units)})")
     if unit not in units:
         other = [d for d, u in DIMENSIONS.items() if unit in u]
         hint = f"; {unit!r} is a {other[0]}" if other else ""
-        raise UnitError(f"{key}: unknown unit {unit!r} for a {dimension} "
-                        f"(use one of {', '.join(units)}){hint}")
+        raise UnitError(
+            f"{key}: unknown unit {unit!r} for a {dimension} (use one of {', '.join(units)}){hint}"
+        )
     result = number * units[unit]
     if not math.isfinite(result):
         raise UnitError(f"{key}: {value!r} is not finite")
@@ -87,6 +91,12 @@ def parse_quantity(value, dimension: str, key: str = "value") -> float:
 
 
 def _example(dimension: str) -> str:
-    return {"length": "40 mm", "flux density": "5 mT", "gradient": "0.5 T/m",
-            "magnetization": "640 kA/m", "pressure": "1 MPa", "current": "2 A",
-            "angle": "90 deg"}[dimension]
+    return {
+        "length": "40 mm",
+        "flux density": "5 mT",
+        "gradient": "0.5 T/m",
+        "magnetization": "640 kA/m",
+        "pressure": "1 MPa",
+        "current": "2 A",
+        "angle": "90 deg",
+    }[dimension]

@@ -13,6 +13,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from ._validate import as_axis, as_points, as_vector, positive
+from .coaxial import coaxial_parts
 from .field import Field
 from .ideal import LinearField, linearize
 
@@ -136,6 +137,20 @@ def _ray_extent(dev_fn, direction, r_max, samples) -> float:
     )
 
 
+def _distance_to_windings(part, point: np.ndarray) -> float:
+    """Distance (m) from ``point`` to the nearest filament or winding cross-section of a
+    coaxial group (measured in the meridian plane, which is the 3D distance)."""
+    local = part.to_local(point[None, :])[0]
+    rho0, z = np.hypot(local[0], local[1]), local[2]
+    d = np.hypot(part.filaments[:, 1] - rho0, part.filaments[:, 0] - z)
+    best = float(d.min())
+    for z0, a, w, h in part.windings:
+        dr = max(a - h / 2 - rho0, 0.0, rho0 - a - h / 2)
+        dz = max(z0 - w / 2 - z, 0.0, z - z0 - w / 2)
+        best = min(best, float(np.hypot(dr, dz)))
+    return best
+
+
 def uniformity(
     field: Field,
     tol: float = 0.01,
@@ -165,7 +180,7 @@ def uniformity(
     points : array-like, shape (n, 3), optional
         Points to examine as well, e.g. the robot's reach (m).
     max_radius : float, optional
-        Search radius, m; default: 0.95 x the distance from the centre to the nearest filament.
+        Search radius, m; default: 0.95 x the distance from the centre to the nearest winding.
     directions : int
         Directions sampled for the sphere (and the mid-plane) radius.
     samples : int
@@ -189,13 +204,9 @@ def uniformity(
     ideal = linearize(field, c)
     quantity = _pick_quantity(quantity, ideal)
     if max_radius is None:
-        fil = getattr(field, "filaments", None)
-        if fil is not None:
-            # nearest filament to the centre (the series of the field converges inside it)
-            local = field.to_local(c[None, :])[0]
-            rho0 = np.hypot(local[0], local[1])
-            d = np.sqrt((fil[:, 1] - rho0) ** 2 + (fil[:, 0] - local[2]) ** 2)
-            max_radius = 0.95 * float(d.min())
+        parts = list(coaxial_parts(field))
+        if parts:
+            max_radius = 0.95 * min(_distance_to_windings(p, c) for p in parts)
         else:
             max_radius = field.length_scale
     max_radius = positive(max_radius, "max_radius")

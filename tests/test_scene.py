@@ -14,8 +14,12 @@ from coilrod.units import parse_quantity
 
 BASE = {
     "name": "test",
-    "robot": {"length": "40 mm", "diameter": "2 mm", "youngs_modulus": "1 MPa",
-              "magnetization": {"preset": "M1"}},
+    "robot": {
+        "length": "40 mm",
+        "diameter": "2 mm",
+        "youngs_modulus": "1 MPa",
+        "magnetization": {"preset": "M1"},
+    },
     "field": {"type": "uniform", "B": "5 mT", "direction": "y"},
     "load": {"steps": 4},
     "models": {"run": ["rod"]},
@@ -77,10 +81,16 @@ def test_invalid_scene_names_key_and_reason(path, value, message):
 
 
 def test_invalid_coil_reports_index():
-    data = with_change("field", {"type": "coils", "coil": [
-        {"type": "helmholtz", "radius": "80 mm", "turns": 100, "B": "5 mT"},
-        {"type": "maxwell", "radius": "-1 mm", "turns": 100, "current": "1 A"},
-    ]})
+    data = with_change(
+        "field",
+        {
+            "type": "coils",
+            "coil": [
+                {"type": "helmholtz", "radius": "80 mm", "turns": 100, "B": "5 mT"},
+                {"type": "maxwell", "radius": "-1 mm", "turns": 100, "current": "1 A"},
+            ],
+        },
+    )
     with pytest.raises(SceneError, match=r"field.coil\[1\].radius: must be positive"):
         parse_scene(data)
     data["field"]["coil"][1] = {"type": "maxwell", "radius": "80 mm", "turns": 10}
@@ -89,8 +99,15 @@ def test_invalid_coil_reports_index():
 
 
 def test_coil_scene_meets_target_field_and_builds_ideal():
-    data = with_change("field", {"type": "coils", "coil": [
-        {"type": "helmholtz", "radius": "80 mm", "turns": 200, "B": "15 mT", "axis": "y"}]})
+    data = with_change(
+        "field",
+        {
+            "type": "coils",
+            "coil": [
+                {"type": "helmholtz", "radius": "80 mm", "turns": 200, "B": "15 mT", "axis": "y"}
+            ],
+        },
+    )
     scene = parse_scene(data)
     real, ideal = scene.fields["coils"], scene.fields["ideal"]
     assert isinstance(real, coils.HelmholtzPair)
@@ -100,8 +117,12 @@ def test_coil_scene_meets_target_field_and_builds_ideal():
 
 
 def test_segments_must_add_up():
-    mag = {"segments": [{"length": "10 mm", "magnitude": "64 kA/m"},
-                        {"length": "20 mm", "magnitude": "128 kA/m", "angle": "90 deg"}]}
+    mag = {
+        "segments": [
+            {"length": "10 mm", "magnitude": "64 kA/m"},
+            {"length": "20 mm", "magnitude": "128 kA/m", "angle": "90 deg"},
+        ]
+    }
     with pytest.raises(SceneError, match="add up to 30 mm; the robot is 40 mm long"):
         parse_scene(with_change("robot.magnetization", mag))
     mag["segments"][1]["length"] = "30 mm"
@@ -119,8 +140,10 @@ def test_every_shipped_scene_is_valid():
 
 def test_cli_invalid_scene_exit_2_one_line(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
-    bad.write_text('[robot]\nlength = "-40 mm"\ndiameter = "2 mm"\nyoungs_modulus = "1 MPa"\n'
-                   'magnetization = { preset = "M1" }\n[field]\ntype = "uniform"\nB = "5 mT"\n')
+    bad.write_text(
+        '[robot]\nlength = "-40 mm"\ndiameter = "2 mm"\nyoungs_modulus = "1 MPa"\n'
+        'magnetization = { preset = "M1" }\n[field]\ntype = "uniform"\nB = "5 mT"\n'
+    )
     assert main(["run", str(bad), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1
@@ -133,18 +156,25 @@ def test_cli_invalid_scene_exit_2_one_line(tmp_path, capsys):
 
 def test_cli_console_script_no_traceback(tmp_path):
     bad = tmp_path / "bad.toml"
-    bad.write_text('[robot]\nlength = 40\ndiameter = "2 mm"\nyoungs_modulus = "1 MPa"\n'
-                   'magnetization = { preset = "M1" }\n[field]\ntype = "uniform"\nB = "5 mT"\n')
-    proc = subprocess.run([sys.executable, "-m", "coilrod.cli", "run", str(bad)],
-                          capture_output=True, text=True, timeout=120)
+    bad.write_text(
+        '[robot]\nlength = 40\ndiameter = "2 mm"\nyoungs_modulus = "1 MPa"\n'
+        'magnetization = { preset = "M1" }\n[field]\ntype = "uniform"\nB = "5 mT"\n'
+    )
+    proc = subprocess.run(
+        [sys.executable, "-m", "coilrod.cli", "run", str(bad)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
     assert "robot.length: missing unit" in proc.stderr
 
 
 def test_cli_help_teaches():
-    proc = subprocess.run([sys.executable, "-m", "coilrod.cli", "--help"], capture_output=True,
-                          text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "coilrod.cli", "--help"], capture_output=True, text=True, timeout=120
+    )
     assert proc.returncode == 0
     for word in ("demo", "run", "check", "scenes", "40 mm", "examples"):
         assert word in proc.stdout

@@ -1,0 +1,140 @@
+"""The demo and shipped scenes end to end: each asserts a number against an independent reference.
+
+- ideal-field rod runs against the closed-form elliptic-integral elastica;
+- coil-field rod runs against an independent scipy solve_bvp solve in the same Biot-Savart field;
+- the planner skips what the scene does not need (a rod-only run never imports scikit-fem).
+"""
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from rod_bvp_reference import solve_bvp_rod
+
+from coilrod import elastica
+from coilrod.cli import main, shipped_scenes
+from coilrod.planner import plan_scene
+from coilrod.runner import run_scene
+from coilrod.scene import load_scene
+
+
+def bvp_tip(rod, field, scales):
+    """Tip (x, y) of solve_bvp continued along ``scales`` (independent reference), m."""
+    guess = None
+    for s in scales:
+        sol = solve_bvp_rod(rod, field, s, tol=1e-9, guess=guess)
+        assert sol.status == 0
+
+        def guess(arc, sol=sol):
+            return sol.sol(arc)[0]
+
+    y = sol.sol(np.array([rod.length]))
+    return np.array([y[2], y[3]]).ravel()
+
+
+@pytest.fixture(scope="module")
+def demo_out(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo")
+    code = main(["demo", "--out", str(out), "--quiet"])
+    return code, out
+
+
+def test_demo_runs_and_writes_outputs(demo_out):
+    code, out = demo_out
+    assert code == 0
+    for case in ("M1", "M2a"):
+        for name in ("tip_path.csv", "summary.json", "tip_vs_field.png", "shapes.png"):
+            assert (out / case / name).stat().st_size > 0
+
+
+def test_demo_ideal_run_matches_closed_form_elastica(demo_out):
+    _, out = demo_out
+    summary = json.loads((out / "M1" / "summary.json").read_text())
+    lam = summary["reference"]["number"]
+    shift = summary["shift"][0]
+    L = 0.04
+    ref = elastica.elastica(lam, math.pi / 2, length=L)
+    np.testing.assert_allclose(np.array(shift["ideal_tip_mm"]) * 1e-3, ref.tip, atol=1e-6 * L)
+
+
+def test_demo_coil_run_matches_independent_bvp(demo_out):
+    _, out = demo_out
+    summary = json.loads((out / "M1" / "summary.json").read_text())
+    from coilrod.cli import DEMO_SCENES, _demo_scene
+    from coilrod.scene import parse_scene
+
+    scene = parse_scene(_demo_scene("M1", DEMO_SCENES["M1"]))
+    tip = bvp_tip(scene.rod, scene.fields["coils"], np.linspace(0.1, 1.0, 10))
+    np.testing.assert_allclose(
+        np.array(summary["shift"][0]["coil_tip_mm"]) * 1e-3, tip, atol=1e-6 * scene.rod.length
+    )
+    # and the real coils move the tip measurably (more than 1% of L for R = 2 L)
+    assert summary["shift"][0]["tip_shift_percent_L"] > 1.0
+
+
+def test_planner_skips_what_is_not_needed():
+    scene = load_scene(shipped_scenes()["config_a_m1"])
+    text = "\n".join(plan_scene(scene).decisions)
+    assert "no Biot-Savart" in text
+    assert "force (gradient) path skipped" in text
+    scene = load_scene(shipped_scenes()["helmholtz_vs_ideal"])
+    plan = plan_scene(scene)
+    text = "\n".join(plan.decisions)
+    assert "scikit-fem is not imported" in text
+    assert "Biot-Savart of 2 filaments" in text
+    assert plan.cache_box is None
+    assert plan_scene(scene, cache=True).cache_box is not None
+
+
+def test_rod_only_scene_never_imports_scikit_fem(tmp_path):
+    code = (
+        "import sys\n"
+        "from coilrod.cli import main\n"
+        f"rc = main(['run', 'helmholtz_vs_ideal', '--out', r'{tmp_path}', '--quiet',"
+        " '--no-progress'])\n"
+        "assert rc == 0, rc\n"
+        "print('skfem' in sys.modules)\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip().splitlines()[-1] == "False"
+
+
+def test_cached_coil_field_gives_same_tip_as_direct():
+    # the grid cache is an approximation: its tip must agree with the direct evaluation to far
+    # below the real-vs-ideal shift it is used to measure
+    scene = load_scene(shipped_scenes()["helmholtz_vs_ideal"])
+    scene.scales = scene.scales[::3]
+    direct = run_scene(scene, plan=plan_scene(scene, cache=False), progress=False)
+    cached = run_scene(scene, plan=plan_scene(scene, cache=True), progress=False)
+    a, b = direct.run("rod", "coils"), cached.run("rod", "coils")
+    np.testing.assert_allclose(a.tip, b.tip, atol=1e-7 * scene.rod.length)
+    assert direct.shift()[0]["tip_shift_mm"] > 100 * 1e3 * 1e-7 * scene.rod.length
+
+
+@pytest.mark.parametrize("name", ["config_a_m41", "config_a_m42"])
+def test_segment_scenes_run(name):
+    scene = load_scene(shipped_scenes()[name])
+    result = run_scene(scene, progress=False)
+    assert result.ok
+    # |M| A L^2 / EI lambda at the top load agrees with the formula computed by hand
+    rod = scene.rod
+    B = np.linalg.norm(scene.fields["ideal"].B0)
+    lam = 0.2 * 640e3 * B * rod.area * rod.length**2 / rod.bending_stiffness
+    assert result.table()[-1]["lambda"] == pytest.approx(lam, rel=1e-12)
+
+
+def test_seed_fig5_m42_deflects_more_at_high_field():
+    # the seed's Fig. 5 claim: turning one segment's magnetization increases the deflection,
+    # "especially in the range with a bigger strength of magnetic field" (example layout here)
+    deflection = {}
+    for name in ("config_a_m41", "config_a_m42"):
+        scene = load_scene(shipped_scenes()[name])
+        tip = run_scene(scene, progress=False).run("rod", "ideal").tip
+        deflection[name] = np.hypot(tip[:, 0] - scene.rod.length, tip[:, 1])
+    ratio = deflection["config_a_m42"] / deflection["config_a_m41"]
+    assert ratio[-1] > 1.05
+    assert ratio[-1] > ratio[0]
