@@ -21,6 +21,10 @@ __all__ = ["Plan", "Job", "plan_scene", "robot_reach_box"]
 CACHE_QUERIES_PER_NODE = 20
 #: Rough grid size of a cache over the robot's reach (nodes), for that decision.
 CACHE_NODES_ESTIMATE = 20_000
+#: Below this many filaments, direct closed-form evaluation is as fast as the interpolating
+#: cache (measured in benchmarks/bench_coils.py: a grid query costs about as much as two to
+#: four filaments), so no cache is built.
+CACHE_MIN_FILAMENTS = 8
 #: Rough Newton iterations per load step, for the query estimate.
 ITERATIONS_PER_STEP = 6
 
@@ -120,7 +124,10 @@ def plan_scene(scene: Scene, *, cache: bool | None = None) -> Plan:
         want = (
             cache
             if cache is not None
-            else (queries > CACHE_QUERIES_PER_NODE * CACHE_NODES_ESTIMATE or bool(fem))
+            else (
+                n_fil >= CACHE_MIN_FILAMENTS
+                and (queries > CACHE_QUERIES_PER_NODE * CACHE_NODES_ESTIMATE or bool(fem))
+            )
         )
         if want:
             box = robot_reach_box(scene)
@@ -138,10 +145,12 @@ def plan_scene(scene: Scene, *, cache: bool | None = None) -> Plan:
                     "the robot's reach comes close to a winding: no field cache, direct evaluation"
                 )
         else:
-            plan.decisions.append(
-                f"~{queries:.1e} field queries expected: direct evaluation "
-                "(a grid cache would not pay off)"
+            why = (
+                f"only {n_fil} filaments, as cheap as interpolation"
+                if n_fil < CACHE_MIN_FILAMENTS
+                else f"~{queries:.1e} field queries expected"
             )
+            plan.decisions.append(f"direct field evaluation, no grid cache ({why})")
     for model in scene.models:
         for label, fld in scene.fields.items():
             note = ""

@@ -7,8 +7,10 @@ protocol: ``B(points)`` -> (n, 3) T, ``gradient(points)`` -> (n, 3, 3) T/m with
 
 from .coaxial import CoaxialCoils
 from .field import Field, FieldSum, ScaledField
+from .grid import GriddedField
 from .ideal import LinearField, UniformField, linearize, maxwell_gradient
 from .pairs import Coil, CoilPair, HelmholtzPair, MaxwellPair
+from .region import UniformityReport, deviation, uniformity
 from .system import CoilSystem
 
 __all__ = [
@@ -25,4 +27,8 @@ __all__ = [
     "HelmholtzPair",
     "MaxwellPair",
     "CoilSystem",
+    "uniformity",
+    "deviation",
+    "UniformityReport",
+    "GriddedField",
 ]

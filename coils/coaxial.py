@@ -71,40 +71,44 @@ class CoaxialCoils(Field):
         """Global points (n, 3) m -> coordinates in the coil frame (axis = local z)."""
         return (pts - self.center) @ self.rotation
 
-    def _check_not_on_winding(self, local: np.ndarray) -> None:
-        rho = np.hypot(local[:, 0], local[:, 1])
-        z = local[:, 2]
-        for z0, a, _ in self.filaments:
-            d2 = (rho - a) ** 2 + (z - z0) ** 2
-            bad = d2 < (ON_WIRE_TOL * a) ** 2
-            if np.any(bad):
-                k = int(np.argmax(bad))
-                raise ValueError(
-                    f"point {k} lies on a coil winding (within {ON_WIRE_TOL:g} radius of the "
-                    f"filament of radius {a} m at axial offset {z0} m): the field is singular"
-                )
-        for z0, a, w, h in self.windings:
-            bad = (np.abs(z - z0) < 0.5 * w) & (np.abs(rho - a) < 0.5 * h)
-            if np.any(bad):
-                k = int(np.argmax(bad))
-                raise ValueError(
-                    f"point {k} lies inside a coil winding ({w} m x {h} m section at radius "
-                    f"{a} m): the filament model does not hold there"
-                )
+    def _check_not_on_winding(self, local: np.ndarray, nearest: np.ndarray) -> None:
+        """Raise if a point is on a filament (``nearest``: min (distance / radius)^2 from the
+        kernel) or inside a finite winding's cross-section."""
+        bad = ~(nearest >= ON_WIRE_TOL**2)  # also catches NaN/inf from a singular evaluation
+        if np.any(bad):
+            k = int(np.argmax(bad))
+            raise ValueError(
+                f"point {k} lies on a coil winding (within {ON_WIRE_TOL:g} radius of a "
+                f"filament): the field is singular there"
+            )
+        if len(self.windings):
+            rho = np.hypot(local[:, 0], local[:, 1])
+            z = local[:, 2]
+            for z0, a, w, h in self.windings:
+                inside = (np.abs(z - z0) < 0.5 * w) & (np.abs(rho - a) < 0.5 * h)
+                if np.any(inside):
+                    k = int(np.argmax(inside))
+                    raise ValueError(
+                        f"point {k} lies inside a coil winding ({w} m x {h} m section at "
+                        f"radius {a} m): the filament model does not hold there"
+                    )
 
     def _evaluate(self, pts: np.ndarray, with_gradient: bool):
         n = pts.shape[0]
         B = np.empty((n, 3))
         G = np.empty((n, 3, 3)) if with_gradient else None
         R = self.rotation
+        RR = np.kron(R, R)  # G_global = R g R^T as one (n x 9) @ (9 x 9) product
         for start in range(0, n, CHUNK):
             sl = slice(start, min(start + CHUNK, n))
             local = self.to_local(pts[sl])
-            self._check_not_on_winding(local)
-            b, g = loop_B_and_gradient_local(local, self.filaments, with_gradient)
+            nearest = np.empty(local.shape[0])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                b, g = loop_B_and_gradient_local(local, self.filaments, with_gradient, nearest)
+            self._check_not_on_winding(local, nearest)
             B[sl] = (_MU0_SCALE * b) @ R.T
             if with_gradient:
-                G[sl] = _MU0_SCALE * np.einsum("ia,kab,jb->kij", R, g, R, optimize=True)
+                G[sl] = (g.reshape(-1, 9) @ (_MU0_SCALE * RR.T)).reshape(-1, 3, 3)
         return B, G
 
     # -- tier 3 entry points (validated by Field) -------------------------------------------

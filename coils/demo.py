@@ -18,7 +18,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from . import HelmholtzPair, MaxwellPair
     from .plot import plot_field_map
-    from .uniformity import uniformity
+    from .region import uniformity
 
     argv = sys.argv[1:] if argv is None else argv
     out = Path(argv[0] if argv else "coils-demo")

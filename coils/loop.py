@@ -96,6 +96,8 @@ def loop_field_cyl(rho: np.ndarray, z: np.ndarray, a: float, current: float = 1.
         Axial flux density, T.
     dBz_dz, dBz_drho : ndarray, shape (n,)
         Derivatives of ``B_z``, T/m.
+    alpha2 : ndarray, shape (n,)
+        Squared distance to the wire, m^2.
 
     Notes
     -----
@@ -130,10 +132,15 @@ def loop_field_cyl(rho: np.ndarray, z: np.ndarray, a: float, current: float = 1.
     # Bz = C/2 Pz alpha^-2 beta^-1
     dBz_dz = 0.5 * C * inv_a2b * (dPz_dz - Pz * (2.0 * z / alpha2 + z / beta2))
     dBz_drho = 0.5 * C * inv_a2b * (dPz_drho - Pz * (2.0 * (rho - a) / alpha2 + (rho + a) / beta2))
-    return Q, Bz, dBz_dz, dBz_drho
+    return Q, Bz, dBz_dz, dBz_drho, alpha2
 
 
-def loop_B_and_gradient_local(p: np.ndarray, filaments: np.ndarray, with_gradient: bool = True):
+def loop_B_and_gradient_local(
+    p: np.ndarray,
+    filaments: np.ndarray,
+    with_gradient: bool = True,
+    nearest: np.ndarray | None = None,
+):
     """B and gradient of coaxial filaments, in their common local frame (axis = local z).
 
     Parameters
@@ -145,6 +152,9 @@ def loop_B_and_gradient_local(p: np.ndarray, filaments: np.ndarray, with_gradien
         radius (m) and ampere-turns carried (A).
     with_gradient : bool
         If False, only B is computed (the gradient array is None).
+    nearest : ndarray, shape (n,), optional
+        If given, filled with ``min over filaments of (distance to the wire / radius)^2``, so the
+        caller can detect points on a winding without recomputing distances.
 
     Returns
     -------
@@ -159,8 +169,12 @@ def loop_B_and_gradient_local(p: np.ndarray, filaments: np.ndarray, with_gradien
     Bz = np.zeros_like(rho)
     Gzz = np.zeros_like(rho)
     Gzr = np.zeros_like(rho)
+    if nearest is not None:
+        nearest.fill(np.inf)
     for z0, a, cur in filaments:
-        q, bz, gzz, gzr = loop_field_cyl(rho, p[:, 2] - z0, a, cur)
+        q, bz, gzz, gzr, alpha2 = loop_field_cyl(rho, p[:, 2] - z0, a, cur)
+        if nearest is not None:
+            np.minimum(nearest, alpha2 / (a * a), out=nearest)
         Q += q
         Bz += bz
         if with_gradient:

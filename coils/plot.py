@@ -7,7 +7,7 @@ import numpy as np
 from ._validate import as_vector, positive
 from .coaxial import coaxial_parts, winding_mask
 from .field import Field
-from .uniformity import deviation
+from .region import deviation
 
 __all__ = ["plot_field_map", "plane_grid"]
 

@@ -15,7 +15,7 @@ from coils.design import (
     turns_for_gradient,
     winding_power,
 )
-from coils.uniformity import deviation, uniformity
+from coils import deviation, uniformity
 
 
 def test_current_for_helmholtz_field_matches_closed_form():

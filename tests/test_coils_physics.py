@@ -20,7 +20,7 @@ from _magpylib_ref import magpylib_B, magpylib_gradient
 from scipy.constants import mu_0
 
 import coils
-from coils.uniformity import deviation, uniformity
+from coils import deviation, uniformity
 
 
 def on_axis_loop(a, current, z):

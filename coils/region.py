@@ -193,7 +193,7 @@ def uniformity(
     Examples
     --------
     >>> from coils import HelmholtzPair
-    >>> from coils.uniformity import uniformity
+    >>> from coils import uniformity
     >>> rep = uniformity(HelmholtzPair(radius=1.0, turns=1, current=1.0, axis="z"))
     >>> round(rep.axial, 3), round(rep.radial, 3)
     (0.314, 0.378)

@@ -1,0 +1,78 @@
+"""Shared benchmark helpers: describe the machine and time callables (best of several runs).
+
+Timings use the process CPU time (``time.process_time``) by default: on a machine shared with
+other jobs, wall time measures the neighbours as much as the code.  Set ``BENCH_CLOCK=wall`` in
+the environment to time by wall clock instead (the two agree on an idle machine with
+single-threaded numpy).
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import time
+
+
+def _cpu_model() -> str:
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.lower().startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown cpu"
+
+
+def machine_info() -> str:
+    """One paragraph naming the platform, CPU, core count, load and library versions."""
+    import magpylib
+    import numpy
+    import scipy
+
+    try:
+        load = "load average {:.2f} {:.2f} {:.2f}".format(*os.getloadavg())
+    except OSError:
+        load = "load average n/a"
+    return (
+        f"{platform.platform()}; {_cpu_model()}; {os.cpu_count()} cores ({load}); "
+        f"Python {platform.python_version()}, numpy {numpy.__version__}, "
+        f"scipy {scipy.__version__}, magpylib {magpylib.__version__}"
+    )
+
+
+def clock():
+    """The timer in use: process CPU time, or wall time if ``BENCH_CLOCK=wall``."""
+    return time.perf_counter() if os.environ.get("BENCH_CLOCK") == "wall" else time.process_time()
+
+
+def clock_name() -> str:
+    return "wall" if os.environ.get("BENCH_CLOCK") == "wall" else "process CPU"
+
+
+def best_time(fn, repeat: int = 3, number: int = 1) -> float:
+    """Smallest wall time (s) of ``repeat`` runs of ``number`` calls of ``fn``, per call."""
+    best = float("inf")
+    for _ in range(repeat):
+        t0 = clock()
+        for _ in range(number):
+            fn()
+        best = min(best, (clock() - t0) / number)
+    return best
+
+
+def best_times(fns, repeat: int = 3, number: int = 1) -> list[float]:
+    """Like :func:`best_time` for several callables, interleaved so that a burst of load from
+    other processes hits all of them alike; returns the best time per call of each."""
+    best = [float("inf")] * len(fns)
+    for _ in range(repeat):
+        for k, fn in enumerate(fns):
+            t0 = clock()
+            for _ in range(number):
+                fn()
+            best[k] = min(best[k], (clock() - t0) / number)
+    return best
+
+
+if __name__ == "__main__":
+    print(machine_info())

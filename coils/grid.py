@@ -1,0 +1,504 @@
+"""Gridded cache of a field over a box: tricubic Hermite interpolation with consistent derivatives.
+
+:class:`GriddedField` samples a (costly) field once on a regular grid of an axis-aligned box and
+answers later queries by interpolation.  Each component ``B_i`` is interpolated by a tricubic
+Hermite polynomial per cell (Lekien & Marsden 2005 style): in local coordinates
+``u, v, w in [0, 1]`` of a cell of size ``hx x hy x hz``
+
+    B_i(u, v, w) = sum_{a, b, c = 0..3}  C[cell, i, a, b, c]  u^a v^b w^c,
+
+whose 64 coefficients match, at the 8 corners, the value, the three first derivatives, the three
+mixed second derivatives ``d2/dxdy, d2/dxdz, d2/dydz`` and ``d3/dxdydz``.  The interpolant is
+C1 across cells.  The gradient and hessian returned are the exact first and second derivatives of
+that polynomial, so B, gradient and hessian are mutually consistent (the gradient is the
+derivative of the B the solver sees, which Newton tangents need).
+
+Node data: B and its gradient are taken exactly from the wrapped field
+(``field.B_and_gradient``); the mixed derivatives are second-order central differences of the
+exact gradient along the grid, averaged over the equivalent index orders.  The grid is padded by
+one ghost layer of nodes outside the box so the differences are central at the box faces too
+(one-sided second order if the field cannot be evaluated there, e.g. on a winding).  Their
+``O(h^2)`` error enters the interpolant multiplied by the size ``O(h^2)`` (or ``O(h^3)``) of
+the cross-derivative basis functions, so the interpolation error stays ``O(h^4)`` for B and
+``O(h^3)`` for the gradient (``O(h^2)`` for the hessian), the orders of tricubic Hermite
+interpolation with exact data.  ``cross="hessian"`` takes the second mixed derivatives from
+``field.hessian`` instead (six extra gradient evaluations per node, same order).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._validate import as_points, as_vector, positive
+from .field import Field
+
+__all__ = ["GriddedField"]
+
+#: Points interpolated per chunk (the gathered coefficients take 1.5 kB per point).
+GRID_CHUNK = 4096
+#: Sample points used by the error estimate: every cell up to this many cells, else a subset.
+CHECK_CELLS = 20000
+#: Local coordinate where the derivative error of a 1D cubic Hermite interpolant peaks.
+_GAUSS_OFFSET = math.sqrt(3.0) / 6.0
+
+
+def _hermite_matrix() -> np.ndarray:
+    """The 64 x 64 map from corner data to monomial coefficients of a tricubic.
+
+    Derived from the monomial basis: row ``8 * corner + deriv`` of the forward matrix holds the
+    derivative ``d^(dx+dy+dz)/(du^dx dv^dy dw^dz)`` of every monomial ``u^a v^b w^c`` (column
+    ``16 a + 4 b + c``) at ``corner = (cx, cy, cz) in {0, 1}^3`` (``corner = 4 cx + 2 cy + cz``,
+    ``deriv = 4 dx + 2 dy + dz``).  The forward matrix is inverted; its inverse has integer
+    entries, which are rounded exactly.
+    """
+    p = np.arange(4)
+    # T[d, x, p]: d-th derivative (d = 0, 1) of t^p at t = x (x = 0, 1)
+    T = np.zeros((2, 2, 4))
+    for x in (0, 1):
+        T[0, x] = float(x) ** p
+        T[1, x, 1:] = p[1:] * float(x) ** (p[1:] - 1)
+    # forward[cx, cy, cz, dx, dy, dz, a, b, c]
+    forward = np.einsum(
+        "upa,vqb,wrc->uvwpqrabc", T.transpose(1, 0, 2), T.transpose(1, 0, 2), T.transpose(1, 0, 2)
+    ).reshape(64, 64)
+    inverse = np.linalg.inv(forward)
+    rounded = np.rint(inverse)
+    if not np.allclose(inverse, rounded, atol=1e-9):  # pragma: no cover - a derivation bug
+        raise RuntimeError("tricubic Hermite inverse is not integer")
+    return rounded
+
+
+_HERMITE_INV = _hermite_matrix()
+
+
+def _as_triple(value, name: str, kind: type) -> np.ndarray:
+    arr = np.asarray(value)
+    if arr.ndim == 0:
+        arr = np.full(3, arr)
+    if arr.shape != (3,):
+        raise ValueError(f"{name} must be a scalar or have shape (3,); got {np.shape(value)}")
+    if kind is int:
+        if not np.all(np.isfinite(arr.astype(float))) or np.any(arr != np.round(arr)):
+            raise ValueError(f"{name} must be integers; got {np.asarray(value).tolist()}")
+        arr = arr.astype(int)
+        if np.any(arr < 2):
+            raise ValueError(f"{name} needs at least 2 nodes per axis; got {arr.tolist()}")
+        return arr
+    return np.array([positive(v, name) for v in arr.astype(float)])
+
+
+def _powers(t: np.ndarray, order: int) -> np.ndarray:
+    """Monomials ``t^p`` (p = 0..3) and their first ``order`` derivatives: shape (n, order+1, 4)."""
+    n = t.shape[0]
+    P = np.zeros((n, order + 1, 4))
+    t2 = t * t
+    P[:, 0, 0] = 1.0
+    P[:, 0, 1] = t
+    P[:, 0, 2] = t2
+    P[:, 0, 3] = t2 * t
+    if order >= 1:
+        P[:, 1, 1] = 1.0
+        P[:, 1, 2] = 2.0 * t
+        P[:, 1, 3] = 3.0 * t2
+    if order >= 2:
+        P[:, 2, 2] = 2.0
+        P[:, 2, 3] = 6.0 * t
+    return P
+
+
+class GriddedField(Field):
+    """A field cached on a regular grid over a box and interpolated (tricubic Hermite).
+
+    Parameters
+    ----------
+    field : Field
+        The field to cache (a coil, a pair, a :class:`~coils.CoilSystem`, ...).
+    lower, upper : array-like, shape (3,)
+        Opposite corners of the axis-aligned box, m (``lower < upper`` on every axis).
+    shape : int or array-like of 3 ints, optional
+        Grid nodes per axis (>= 2).  Give at most one of ``shape`` and ``spacing``.
+    spacing : float or array-like, shape (3,), optional
+        Largest node spacing per axis, m; the box is divided evenly so the spacing used
+        (:attr:`spacing`) is at most this.
+    tol : float
+        Used when neither ``shape`` nor ``spacing`` is given: the grid is refined until the
+        estimated relative errors of B and of the gradient (:attr:`error_B`,
+        :attr:`error_gradient`) are at most ``tol`` and ``tol_gradient``.
+    tol_gradient : float, optional
+        Tolerance of the gradient's relative error (default: ``tol``).  The gradient converges
+        one order slower than B, and near the centre of a Helmholtz pair it is small compared
+        with ``|B| / R``, so its relative error is the harder target.
+    outside : {"raise", "direct"}
+        Points outside the box raise ``ValueError`` naming the point, or (``"direct"``) are
+        evaluated with the wrapped field.
+    cross : {"grid", "hessian"}
+        Source of the mixed second derivatives at the nodes: central differences of the exact
+        gradient along the grid (default, no extra evaluations) or ``field.hessian``.
+    max_cells : int
+        Largest grid (cells) the automatic refinement may build; each cell stores 1.5 kB.
+
+    Attributes
+    ----------
+    shape : ndarray of int, shape (3,)
+        Nodes per axis.
+    spacing : ndarray, shape (3,)
+        Node spacing per axis, m.
+    error_B, error_gradient : float
+        Estimated relative interpolation errors, ``max |B - B_field| / max |B_field|`` and
+        ``max |G - G_field| / max |G_field|`` (largest entries over the sample points), measured
+        against the wrapped field at three points per cell: the centre (where the error of a
+        cubic peaks), a point where the error of its derivative peaks (``1/2 +- sqrt(3)/6`` on
+        each axis, random signs) and a uniformly random point; over every cell, or a random
+        subset of :data:`CHECK_CELLS` cells for larger grids.
+    ghost : bool
+        True if the mixed derivatives used a ghost layer of nodes one spacing outside the box
+        (central differences everywhere); False if the field could not be evaluated there.
+
+    Notes
+    -----
+    Interpolation error ``O(h^4)`` for B, ``O(h^3)`` for the gradient and ``O(h^2)`` for the
+    hessian (node data: exact B and gradient, mixed derivatives to ``O(h^2)``; see the module
+    docstring).  The gradient is the exact derivative of the interpolated B and the hessian that
+    of the interpolated gradient (piecewise, discontinuous across cell faces).
+
+    Examples
+    --------
+    >>> from coils import GriddedField, MaxwellPair
+    >>> pair = MaxwellPair(radius=0.1, turns=100, current=2.0, axis="y")
+    >>> grid = GriddedField(pair, lower=(-0.02, -0.02, -0.02), upper=(0.02, 0.02, 0.02))
+    >>> bool(grid.error_B <= 1e-6 and grid.error_gradient <= 1e-6)
+    True
+    >>> B, G = grid.B_and_gradient([[0.0, 0.01, 0.0]])
+    >>> round(float(B[0, 1]), 10), round(float(G[0, 1, 1]), 7)   # T, T/m; direct: same digits
+    (0.0001611664, 0.0161133)
+    """
+
+    uniform = False
+    linear = False
+
+    def __init__(
+        self,
+        field: Field,
+        lower,
+        upper,
+        shape=None,
+        spacing=None,
+        tol: float = 1e-6,
+        tol_gradient: float | None = None,
+        outside: str = "raise",
+        cross: str = "grid",
+        max_cells: int = 200_000,
+    ):
+        if not isinstance(field, Field):
+            raise ValueError(f"field must be a coils Field; got {type(field).__name__}")
+        self.field = field
+        self.lower = as_vector(lower, "lower")
+        self.upper = as_vector(upper, "upper")
+        if np.any(self.lower >= self.upper):
+            raise ValueError(
+                f"lower must be below upper on every axis; got lower={self.lower.tolist()}, "
+                f"upper={self.upper.tolist()}"
+            )
+        if outside not in ("raise", "direct"):
+            raise ValueError(f"outside must be 'raise' or 'direct'; got {outside!r}")
+        if cross not in ("grid", "hessian"):
+            raise ValueError(f"cross must be 'grid' or 'hessian'; got {cross!r}")
+        if shape is not None and spacing is not None:
+            raise ValueError("give at most one of shape and spacing")
+        self.outside = outside
+        self.cross = cross
+        self.tol = positive(tol, "tol")
+        self.tol_gradient = (
+            self.tol if tol_gradient is None else positive(tol_gradient, "tol_gradient")
+        )
+        if isinstance(max_cells, bool) or int(max_cells) != max_cells or max_cells < 1:
+            raise ValueError(f"max_cells must be a positive integer; got {max_cells!r}")
+        self.max_cells = int(max_cells)
+        extent = self.upper - self.lower
+        self._slack = 1e-12 * extent
+        if shape is not None:
+            self._build(_as_triple(shape, "shape", int))
+            self.error_estimate()
+        elif spacing is not None:
+            h = _as_triple(spacing, "spacing", float)
+            self._build(self._nodes_for(h))
+            self.error_estimate()
+        else:
+            self._refine_to_tol()
+
+    # -- construction ---------------------------------------------------------------------------
+    def _nodes_for(self, h: np.ndarray) -> np.ndarray:
+        extent = self.upper - self.lower
+        return np.maximum(np.ceil(extent / h - 1e-9).astype(int) + 1, 2)
+
+    def _refine_to_tol(self) -> None:
+        extent = self.upper - self.lower
+        h = np.full(3, extent.max() / 8.0)
+        for _ in range(12):
+            nodes = self._nodes_for(h)
+            cells = int(np.prod(nodes - 1))
+            if cells > self.max_cells:
+                # largest grid of this aspect within the limit, tried once before giving up
+                shrink = (cells / self.max_cells) ** (1.0 / 3.0)
+                nodes = np.maximum(((nodes - 1) / shrink).astype(int) + 1, 2)
+                at_limit = True
+            else:
+                at_limit = False
+            self._build(nodes)
+            eb, eg = self.error_estimate()
+            if eb <= self.tol and eg <= self.tol_gradient:
+                return
+            if at_limit:
+                break
+            # h^4 law for B, h^3 for the gradient; 10% margin, at most 2.5x finer per step
+            factor = 0.9 * min(
+                (self.tol / max(eb, 1e-300)) ** 0.25,
+                (self.tol_gradient / max(eg, 1e-300)) ** (1.0 / 3.0),
+            )
+            h = self.spacing * min(max(factor, 0.4), 0.9)
+        raise ValueError(
+            f"tol={self.tol:g}, tol_gradient={self.tol_gradient:g} not reached: the grid of "
+            f"{self.shape.tolist()} nodes ({self.n_cells} cells, max_cells={self.max_cells}) "
+            f"gives error_B={self.error_B:.3g}, error_gradient={self.error_gradient:.3g}; "
+            f"loosen tol, shrink the box (keep it away from the windings) or raise max_cells"
+        )
+
+    def _build(self, nodes: np.ndarray) -> None:
+        nodes = np.asarray(nodes, dtype=int)
+        self.shape = nodes
+        self.cells = nodes - 1
+        self.n_cells = int(np.prod(self.cells))
+        self.spacing = (self.upper - self.lower) / self.cells
+        axes = [
+            np.linspace(lo, hi, n) for lo, hi, n in zip(self.lower, self.upper, nodes, strict=False)
+        ]
+        B, G, ghost = self._node_data(axes)
+        self.ghost = ghost
+        nx, ny, nz = nodes
+        hx, hy, hz = self.spacing
+
+        def diff(f, axis):
+            n = f.shape[axis]
+            return np.gradient(f, self.spacing[axis], axis=axis, edge_order=2 if n >= 3 else 1)
+
+        def crop(f):
+            return f[1:-1, 1:-1, 1:-1] if ghost else f
+
+        if self.cross == "hessian":
+            X = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+            H = self.field.hessian(X).reshape(nx, ny, nz, 3, 3, 3)
+            fxy, fxz, fyz = H[..., 0, 1], H[..., 0, 2], H[..., 1, 2]
+            fxyz = (diff(fxy, 2) + diff(fxz, 1) + diff(fyz, 0)) / 3.0
+        else:
+            gx, gy, gz = G[..., 0], G[..., 1], G[..., 2]  # each (nx, ny, nz, 3)
+            fxy = 0.5 * (diff(gx, 1) + diff(gy, 0))
+            fxz = 0.5 * (diff(gx, 2) + diff(gz, 0))
+            fyz = 0.5 * (diff(gy, 2) + diff(gz, 1))
+            fxyz = (diff(diff(gx, 1), 2) + diff(diff(gy, 0), 2) + diff(diff(gz, 0), 1)) / 3.0
+            B, G, fxy, fxz, fyz, fxyz = map(crop, (B, G, fxy, fxz, fyz, fxyz))
+        # node data in local (unit-cell) units, deriv index 4 dx + 2 dy + dz
+        data = np.stack(
+            [
+                B,
+                G[..., 2] * hz,
+                G[..., 1] * hy,
+                fyz * (hy * hz),
+                G[..., 0] * hx,
+                fxz * (hx * hz),
+                fxy * (hx * hy),
+                fxyz * (hx * hy * hz),
+            ],
+            axis=-1,
+        )  # (nx, ny, nz, 3, 8)
+        cx, cy, cz = self.cells
+        corners = [
+            data[i : i + cx, j : j + cy, k : k + cz] for i in (0, 1) for j in (0, 1) for k in (0, 1)
+        ]
+        cell_data = np.stack(corners, axis=3)  # (cx, cy, cz, 8 corners, 3, 8 derivs)
+        cell_data = cell_data.transpose(0, 1, 2, 4, 3, 5).reshape(self.n_cells * 3, 64)
+        self._coef = cell_data @ _HERMITE_INV.T  # (n_cells * 3, 64), monomial 16 a + 4 b + c
+        self._coef = self._coef.reshape(self.n_cells, 192)
+
+    def _node_data(self, axes):
+        """Exact B and gradient at the nodes, with one ghost layer outside the box if possible.
+
+        The ghost layer lets the mixed derivatives use central differences at the box faces;
+        where the wrapped field cannot be evaluated there (a winding), one-sided differences
+        are used instead.  Returns ``(B, G, ghost)`` shaped on the (possibly padded) grid.
+        """
+        if self.cross == "grid":
+            padded = [
+                np.concatenate([[a[0] - h], a, [a[-1] + h]])
+                for a, h in zip(axes, self.spacing, strict=True)
+            ]
+            try:
+                return (*self._sample(padded), True)
+            except ValueError:
+                pass
+        return (*self._sample(axes), False)
+
+    def _sample(self, axes):
+        shape = tuple(len(a) for a in axes)
+        X = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        B, G = self.field.B_and_gradient(X)
+        return B.reshape(*shape, 3), G.reshape(*shape, 3, 3)
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held by the cell coefficients, bytes."""
+        return int(self._coef.nbytes)
+
+    @property
+    def length_scale(self) -> float:
+        return self.field.length_scale
+
+    # -- error estimate ------------------------------------------------------------------------
+    def error_estimate(self, points=None, seed: int = 0) -> tuple[float, float]:
+        """Estimate the relative interpolation errors of B and of the gradient.
+
+        Parameters
+        ----------
+        points : array-like, shape (n, 3), optional
+            Points (m, inside the box) to compare at.  Default: three points per cell (see
+            :attr:`error_B`), over all cells or a random subset of :data:`CHECK_CELLS`.
+        seed : int
+            Seed of the random choices.
+
+        Returns
+        -------
+        error_B, error_gradient : float
+            ``max |B - B_field| / max |B_field|`` and the same for the gradient (largest entries
+            over the points).  Also stored as :attr:`error_B` and :attr:`error_gradient` when
+            ``points`` is None.
+        """
+        rng = np.random.default_rng(seed)
+        if points is None:
+            if self.n_cells <= CHECK_CELLS:
+                cells = np.arange(self.n_cells)
+            else:
+                cells = rng.choice(self.n_cells, CHECK_CELLS, replace=False)
+            ijk = np.stack(np.unravel_index(cells, self.cells), axis=1)
+            signs = rng.choice([-1.0, 1.0], size=ijk.shape)
+            local = np.concatenate(
+                [
+                    np.full(ijk.shape, 0.5),
+                    0.5 + _GAUSS_OFFSET * signs,
+                    rng.uniform(0.0, 1.0, ijk.shape),
+                ]
+            )
+            pts = self.lower + (np.concatenate([ijk, ijk, ijk]) + local) * self.spacing
+        else:
+            pts = as_points(points)
+        B, G, _ = self._interpolate(self._check_inside(pts, force_raise=True), 1)
+        Bf, Gf = self.field.B_and_gradient(pts)
+        eb = _relative(B - Bf, Bf)
+        eg = _relative(G - Gf, Gf)
+        if points is None:
+            self.error_B, self.error_gradient = eb, eg
+        return eb, eg
+
+    # -- evaluation ----------------------------------------------------------------------------
+    def _check_inside(self, pts: np.ndarray, force_raise: bool = False) -> np.ndarray:
+        """Validated points -> boolean mask of points outside the box (raises if not allowed)."""
+        out = np.any((pts < self.lower - self._slack) | (pts > self.upper + self._slack), axis=1)
+        if np.any(out) and (force_raise or self.outside == "raise"):
+            k = int(np.argmax(out))
+            raise ValueError(
+                f"point {k} at {pts[k].tolist()} m lies outside the grid box "
+                f"lower={self.lower.tolist()}, upper={self.upper.tolist()}; enlarge the box or "
+                f"pass outside='direct' to evaluate such points with the wrapped field"
+            )
+        if force_raise:
+            return pts
+        return out
+
+    def _interpolate(self, pts: np.ndarray, order: int):
+        """B (order 0), + gradient (1), + hessian (2) of the interpolant at inside points."""
+        n = pts.shape[0]
+        B = np.empty((n, 3))
+        G = np.empty((n, 3, 3)) if order >= 1 else None
+        H = np.empty((n, 3, 3, 3)) if order >= 2 else None
+        inv_h = 1.0 / self.spacing
+        buf = np.empty((min(n, GRID_CHUNK), 192))
+        for start in range(0, n, GRID_CHUNK):
+            sl = slice(start, min(start + GRID_CHUNK, n))
+            s = (pts[sl] - self.lower) * inv_h
+            idx = np.clip(np.floor(s).astype(np.intp), 0, self.cells - 1)
+            t = s - idx
+            cell = (idx[:, 0] * self.cells[1] + idx[:, 1]) * self.cells[2] + idx[:, 2]
+            m = cell.shape[0]
+            c = np.take(self._coef, cell, axis=0, out=buf[:m])  # (m, 3 * 64)
+            PU, PV, PW = (_powers(t[:, a], order) for a in range(3))
+            # contract w, then v, then u; D[(du, dv, dw)] = d^(du+dv+dw) B / du^du dv^dv dw^dw
+            Tw = np.matmul(c.reshape(m, 48, 4), PW.transpose(0, 2, 1))  # (m, 48, order+1)
+            Tw = Tw.reshape(m, 3, 4, 4, order + 1)
+            D = {}
+            for dw in range(order + 1):
+                Sv = np.matmul(Tw[..., dw].reshape(m, 12, 4), PV.transpose(0, 2, 1))
+                Sv = Sv.reshape(m, 3, 4, order + 1)
+                for dv in range(order + 1 - dw):
+                    Ru = np.matmul(Sv[..., dv], PU.transpose(0, 2, 1))  # (m, 3, order+1)
+                    for du in range(order + 1 - dw - dv):
+                        D[du, dv, dw] = Ru[..., du]
+            B[sl] = D[0, 0, 0]
+            if order >= 1:
+                G[sl, :, 0] = D[1, 0, 0] * inv_h[0]
+                G[sl, :, 1] = D[0, 1, 0] * inv_h[1]
+                G[sl, :, 2] = D[0, 0, 1] * inv_h[2]
+            if order >= 2:
+                for j in range(3):
+                    for k in range(j, 3):
+                        e = [0, 0, 0]
+                        e[j] += 1
+                        e[k] += 1
+                        H[sl, :, j, k] = H[sl, :, k, j] = D[tuple(e)] * (inv_h[j] * inv_h[k])
+        return B, G, H
+
+    def _dispatch(self, pts: np.ndarray, order: int):
+        out = self._check_inside(pts)
+        if not np.any(out):
+            return self._interpolate(pts, order)
+        inside = ~out
+        res = self._interpolate(pts[inside], order)
+        full = []
+        direct = {
+            0: lambda p: (self.field.B(p),),
+            1: lambda p: self.field.B_and_gradient(p),
+            2: lambda p: (*self.field.B_and_gradient(p), self.field.hessian(p)),
+        }[order](pts[out])
+        for q in range(order + 1):
+            arr = np.empty((pts.shape[0],) + res[q].shape[1:])
+            arr[inside] = res[q]
+            arr[out] = direct[q]
+            full.append(arr)
+        return tuple(full) + (None,) * (2 - order)
+
+    def _B(self, pts):
+        return self._dispatch(pts, 0)[0]
+
+    def _gradient(self, pts):
+        return self._dispatch(pts, 1)[1]
+
+    def _B_and_gradient(self, pts):
+        B, G, _ = self._dispatch(pts, 1)
+        return B, G
+
+    def _hessian(self, pts):
+        return self._dispatch(pts, 2)[2]
+
+    def __repr__(self):
+        return (
+            f"GriddedField({self.field!r}, lower={self.lower.tolist()}, "
+            f"upper={self.upper.tolist()}, shape={self.shape.tolist()})"
+        )
+
+
+def _relative(diff: np.ndarray, ref: np.ndarray) -> float:
+    """``max |diff| / max |ref|`` over all entries (0 when both vanish, inf if only ref does)."""
+    num = float(np.abs(diff).max(initial=0.0))
+    den = float(np.abs(ref).max(initial=0.0))
+    if den == 0.0:
+        return 0.0 if num == 0.0 else math.inf
+    return num / den

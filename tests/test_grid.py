@@ -1,0 +1,280 @@
+"""Gridded field cache (coils.GriddedField): accuracy, honesty of its error bound, convergence
+order, consistency of B / gradient / hessian, and input checks.
+
+Cross-checks (every number against something independent of the cache):
+
+* the wrapped field's closed form (elliptic-integral loop kernel) at fresh random points;
+* magpylib's ``getB`` of the same filaments;
+* exact reproduction of a cubic harmonic field B = grad Re (x + i y)^4 (in the tricubic space);
+* exact data at the grid nodes (Hermite interpolation property);
+* finite differences of the interpolant itself (gradient = d(B), hessian = d(gradient));
+* the fitted convergence order against the theory of tricubic Hermite interpolation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import coils
+from coils import Field, GriddedField, HelmholtzPair, LinearField, MaxwellPair
+
+R = 0.1  # coil radius, m
+
+
+class CubicHarmonic(Field):
+    """B = grad Re (x + i y)^4 = (4x^3 - 12 x y^2, 4 y^3 - 12 x^2 y, 0): cubic, harmonic."""
+
+    def _B(self, p):
+        x, y = p[:, 0], p[:, 1]
+        return np.column_stack([4 * x**3 - 12 * x * y**2, 4 * y**3 - 12 * x**2 * y, 0 * x])
+
+    def _gradient(self, p):
+        x, y = p[:, 0], p[:, 1]
+        G = np.zeros((p.shape[0], 3, 3))
+        G[:, 0, 0] = 12 * x**2 - 12 * y**2
+        G[:, 0, 1] = G[:, 1, 0] = -24 * x * y
+        G[:, 1, 1] = 12 * y**2 - 12 * x**2
+        return G
+
+
+def _rel(a, ref):
+    return np.abs(a - ref).max() / np.abs(ref).max()
+
+
+@pytest.fixture(scope="module")
+def maxwell_grid():
+    """A tilted, off-centre Maxwell pair cached over an off-centre box (grid given by shape)."""
+    pair = MaxwellPair(R, 100, 2.0, axis=(0.3, 1.0, 0.2), center=(0.004, -0.003, 0.002))
+    lower, upper = np.array([-0.03, -0.025, -0.02]), np.array([0.025, 0.03, 0.035])
+    return pair, GriddedField(pair, lower, upper, shape=(24, 25, 22))
+
+
+# -- accuracy against the direct field and magpylib -----------------------------------------------
+def test_accuracy_within_reported_bound(maxwell_grid):
+    pair, grid = maxwell_grid
+    pts = np.random.default_rng(11).uniform(grid.lower, grid.upper, (5000, 3))
+    B, G = grid.B_and_gradient(pts)
+    Bd, Gd = pair.B_and_gradient(pts)
+    assert grid.error_B < 1e-5
+    assert grid.error_gradient < 1e-4
+    # the bound is honest: fresh random points stay within a small factor of it
+    assert _rel(B, Bd) <= 1.5 * grid.error_B
+    assert _rel(G, Gd) <= 1.5 * grid.error_gradient
+    # and it is not vacuous: the actual error is within a factor 10 of it
+    assert _rel(B, Bd) >= 0.1 * grid.error_B
+
+
+def test_B_against_magpylib(maxwell_grid):
+    pair, grid = maxwell_grid
+    pts = np.random.default_rng(12).uniform(grid.lower, grid.upper, (2000, 3))
+    Bm = pair.to_magpylib().getB(pts)
+    assert _rel(grid.B(pts), Bm) <= 1.5 * grid.error_B + 1e-12
+
+
+def test_auto_grid_meets_tol_on_a_coil_system():
+    system = coils.CoilSystem(
+        [HelmholtzPair(R, 100, 1.0, axis="y"), MaxwellPair(R, 100, 1.0, axis="y")]
+    )
+    lower, upper = np.full(3, -0.02), np.full(3, 0.02)
+    grid = GriddedField(system, lower, upper, tol=1e-6, tol_gradient=1e-5)
+    assert grid.error_B <= 1e-6
+    assert grid.error_gradient <= 1e-5
+    pts = np.random.default_rng(13).uniform(lower, upper, (5000, 3))
+    B, G = grid.B_and_gradient(pts)
+    Bd, Gd = system.B_and_gradient(pts)
+    assert _rel(B, Bd) <= 1.5e-6
+    assert _rel(G, Gd) <= 1.5e-5
+
+
+def test_exact_at_nodes(maxwell_grid):
+    pair, grid = maxwell_grid
+    ijk = np.random.default_rng(14).integers(0, grid.shape, (200, 3))
+    nodes = grid.lower + ijk * grid.spacing
+    B, G = grid.B_and_gradient(nodes)
+    Bd, Gd = pair.B_and_gradient(nodes)
+    assert _rel(B, Bd) < 1e-12
+    assert _rel(G, Gd) < 1e-11
+
+
+def test_reproduces_cubic_field_exactly():
+    field = CubicHarmonic()
+    grid = GriddedField(field, (-1.0, -0.5, -0.3), (0.7, 1.2, 0.4), shape=(4, 5, 3))
+    pts = np.random.default_rng(15).uniform(grid.lower, grid.upper, (1000, 3))
+    B, G = grid.B_and_gradient(pts)
+    assert _rel(B, field.B(pts)) < 1e-12
+    assert _rel(G, field.gradient(pts)) < 1e-12
+    x, y = pts[:, 0], pts[:, 1]
+    H = grid.hessian(pts)  # d2 B_x / dx2 = 24 x, d2 B_x / dy2 = -24 x, d2 B_x/dxdy = -24 y
+    np.testing.assert_allclose(H[:, 0, 0, 0], 24 * x, atol=1e-10)
+    np.testing.assert_allclose(H[:, 0, 1, 1], -24 * x, atol=1e-10)
+    np.testing.assert_allclose(H[:, 0, 0, 1], -24 * y, atol=1e-10)
+    assert np.abs(H[:, 2]).max() < 1e-10
+    assert grid.error_B < 1e-12
+
+
+def test_linear_field_hessian_vanishes():
+    G0 = coils.maxwell_gradient(0.5)
+    grid = GriddedField(LinearField((1e-3, 0, 0), G0), (-1, -1, -1), (1, 1, 1), shape=3)
+    pts = np.random.default_rng(16).uniform(-1, 1, (100, 3))
+    np.testing.assert_allclose(grid.gradient(pts), np.broadcast_to(G0, (100, 3, 3)), atol=1e-14)
+    assert np.abs(grid.hessian(pts)).max() < 1e-13
+
+
+# -- physics: the interpolated field is div- and curl-free within its error -----------------------
+def test_gradient_symmetric_and_traceless_within_bound(maxwell_grid):
+    _, grid = maxwell_grid
+    pts = np.random.default_rng(17).uniform(grid.lower, grid.upper, (2000, 3))
+    G = grid.gradient(pts)
+    scale = np.abs(G).max()
+    assert np.abs(np.trace(G, axis1=1, axis2=2)).max() <= 3 * grid.error_gradient * scale
+    assert np.abs(G - G.transpose(0, 2, 1)).max() <= 2 * grid.error_gradient * scale
+
+
+# -- convergence order ----------------------------------------------------------------------------
+def test_convergence_order():
+    """Tricubic Hermite: error O(h^4) for B, O(h^3) for its gradient (fitted log-log slope)."""
+    coil = coils.Coil(R, 10, 1.0, axis="z", center=(0.01, 0.0, 0.02))
+    lower, upper = np.array([-0.03, -0.03, -0.01]), np.array([0.03, 0.03, 0.05])
+    pts = np.random.default_rng(18).uniform(lower, upper, (4000, 3))
+    Bd, Gd = coil.B_and_gradient(pts)
+    h, eb, eg = [], [], []
+    for n in (9, 17, 33):
+        grid = GriddedField(coil, lower, upper, shape=n)
+        B, G = grid.B_and_gradient(pts)
+        h.append(grid.spacing[0])
+        eb.append(_rel(B, Bd))
+        eg.append(_rel(G, Gd))
+    slope_B = np.polyfit(np.log(h), np.log(eb), 1)[0]
+    slope_G = np.polyfit(np.log(h), np.log(eg), 1)[0]
+    assert slope_B == pytest.approx(4.0, abs=0.4)
+    assert slope_G == pytest.approx(3.0, abs=0.4)
+
+
+# -- consistency: the derivatives are those of the interpolant ------------------------------------
+def test_gradient_is_derivative_of_interpolated_B(maxwell_grid):
+    _, grid = maxwell_grid
+    rng = np.random.default_rng(19)
+    ijk = rng.integers(0, grid.shape - 1, (300, 3))
+    pts = grid.lower + (ijk + rng.uniform(0.1, 0.9, (300, 3))) * grid.spacing  # inside cells
+    d = 1e-4 * grid.spacing.min()
+    G = grid.gradient(pts)
+    H = grid.hessian(pts)
+    for j in range(3):
+        e = np.zeros(3)
+        e[j] = d
+        dB = (grid.B(pts + e) - grid.B(pts - e)) / (2 * d)
+        dG = (grid.gradient(pts + e) - grid.gradient(pts - e)) / (2 * d)
+        assert np.abs(G[:, :, j] - dB).max() <= 1e-8 * np.abs(G).max()
+        assert np.abs(H[:, :, :, j] - dG).max() <= 1e-8 * np.abs(H).max()
+
+
+# -- outside the box and bad input ----------------------------------------------------------------
+def test_outside_box_raises_naming_the_point(maxwell_grid):
+    _, grid = maxwell_grid
+    pts = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.2]])
+    with pytest.raises(ValueError, match=r"point 1 .* outside the grid box"):
+        grid.B(pts)
+    with pytest.raises(ValueError, match="outside"):
+        grid.gradient(pts)
+    # the box faces themselves are inside
+    grid.B(np.vstack([grid.lower, grid.upper]))
+
+
+def test_outside_direct_falls_back_to_wrapped_field():
+    pair = HelmholtzPair(R, 50, 1.0, axis="x")
+    grid = GriddedField(pair, (-0.01,) * 3, (0.01,) * 3, shape=9, outside="direct")
+    pts = np.array([[0.0, 0.0, 0.0], [0.03, 0.01, -0.02], [0.005, -0.005, 0.0]])
+    B, G = grid.B_and_gradient(pts)
+    Bd, Gd = pair.B_and_gradient(pts)
+    np.testing.assert_array_equal(B[1], Bd[1])  # outside: the wrapped field itself
+    np.testing.assert_array_equal(G[1], Gd[1])
+    assert _rel(B, Bd) <= 1.5 * grid.error_B
+    assert grid.hessian(pts).shape == (3, 3, 3, 3)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"spacing": 0.0}, "spacing must be positive"),
+        ({"spacing": -1e-3}, "spacing must be positive"),
+        ({"spacing": (1e-3, np.nan, 1e-3)}, "spacing must be finite"),
+        ({"shape": 1}, "shape needs at least 2"),
+        ({"shape": (4, 4.5, 4)}, "shape must be integers"),
+        ({"shape": 4, "spacing": 1e-3}, "at most one of shape and spacing"),
+        ({"lower": (0.01, 0, 0)}, "lower must be below upper"),
+        ({"lower": (-0.01, 0.02, -0.01)}, "lower must be below upper"),
+        ({"lower": (np.nan, 0, 0)}, "lower must be finite"),
+        ({"upper": (0.01, np.inf, 0.01)}, "upper must be finite"),
+        ({"tol": 0.0}, "tol must be positive"),
+        ({"tol": np.nan}, "tol must be finite"),
+        ({"tol_gradient": -1.0}, "tol_gradient must be positive"),
+        ({"outside": "clip"}, "outside must be"),
+        ({"cross": "fd"}, "cross must be"),
+        ({"max_cells": 0}, "max_cells must be a positive integer"),
+    ],
+)
+def test_bad_input(kwargs, match):
+    args = {"lower": (-0.01,) * 3, "upper": (0.01,) * 3, "shape": 3} | kwargs
+    if "spacing" in kwargs and "shape" not in kwargs:
+        del args["shape"]
+    if "tol" in kwargs or "tol_gradient" in kwargs:
+        del args["shape"]
+    with pytest.raises(ValueError, match=match):
+        GriddedField(HelmholtzPair(R, 10, 1.0), **args)
+
+
+def test_field_must_be_a_field():
+    with pytest.raises(ValueError, match="field must be a coils Field"):
+        GriddedField(lambda p: p, (-1, -1, -1), (1, 1, 1), shape=3)
+
+
+def test_nan_points_rejected(maxwell_grid):
+    _, grid = maxwell_grid
+    with pytest.raises(ValueError, match="points must be finite"):
+        grid.B([[0.0, np.nan, 0.0]])
+
+
+def test_unreachable_tol_says_what_it_reached():
+    pair = HelmholtzPair(R, 10, 1.0)
+    with pytest.raises(ValueError, match=r"tol=1e-09.*not reached.*error_B="):
+        GriddedField(pair, (-0.04,) * 3, (0.04,) * 3, tol=1e-9, max_cells=2000)
+
+
+def test_cross_hessian_option_agrees(maxwell_grid):
+    pair, grid = maxwell_grid
+    other = GriddedField(pair, grid.lower, grid.upper, shape=grid.shape, cross="hessian")
+    pts = np.random.default_rng(20).uniform(grid.lower, grid.upper, (2000, 3))
+    Bd, Gd = pair.B_and_gradient(pts)
+    B, G = other.B_and_gradient(pts)
+    assert _rel(B, Bd) <= 1.5 * other.error_B
+    assert _rel(G, Gd) <= 1.5 * other.error_gradient
+    assert other.error_B < 1e-5
+
+
+def test_one_sided_differences_when_field_undefined_outside_box():
+    """A wrapped field that refuses points outside the box: no ghost layer, bound still honest."""
+    pair = MaxwellPair(R, 100, 2.0, axis="z")
+    lower, upper = np.full(3, -0.02), np.full(3, 0.02)
+    inner = GriddedField(pair, lower, upper, shape=30)  # raises outside its box
+    assert inner.ghost
+    grid = GriddedField(inner, lower, upper, shape=12)
+    assert not grid.ghost
+    pts = np.random.default_rng(21).uniform(lower, upper, (3000, 3))
+    B, G = grid.B_and_gradient(pts)
+    Bd, Gd = inner.B_and_gradient(pts)
+    assert grid.error_B < 1e-5
+    assert _rel(B, Bd) <= 1.5 * grid.error_B
+    assert _rel(G, Gd) <= 1.5 * grid.error_gradient
+
+
+def test_error_estimate_at_given_points(maxwell_grid):
+    pair, grid = maxwell_grid
+    pts = np.random.default_rng(22).uniform(grid.lower, grid.upper, (500, 3))
+    eb, eg = grid.error_estimate(pts)
+    B, G = grid.B_and_gradient(pts)
+    Bd, Gd = pair.B_and_gradient(pts)
+    assert eb == pytest.approx(_rel(B, Bd), rel=1e-12)
+    assert eg == pytest.approx(_rel(G, Gd), rel=1e-12)
+    with pytest.raises(ValueError, match="outside the grid box"):
+        grid.error_estimate(np.array([[1.0, 0.0, 0.0]]))
