@@ -87,10 +87,14 @@ def M42(
     M0: float = SEED_M0,
     layout: dict | None = None,
     segment: int = -1,
-    angle: float = math.pi / 2,
+    angle: float = -math.pi / 4,
 ) -> Magnetization:
-    """M(4.2): M(4.1) with one segment's direction changed (by default the tip segment, to
-    theta_m = pi/2)."""
+    """M(4.2): M(4.1) with one segment's direction changed.
+
+    By default the tip segment is turned to theta_m = -pi/4: once the rod has bent, it meets the
+    field closer to perpendicular, so M(4.2) deflects more than M(4.1) at high field (the trend
+    of the seed's Fig. 5; the seed's exact layout is not available).
+    """
     layout = EXAMPLE_M41_LAYOUT if layout is None else layout
     lengths = [f * length for f in layout["fractions"]]
     angles = np.zeros(len(lengths))

@@ -87,3 +87,45 @@ def test_ideal_vs_real_notebook():
     for shifts in r["helmholtz"].values():
         assert shifts[r["ratios"].index(4)] < 0.002
     assert r["helmholtz"]["M(1)"][r["ratios"].index(2)] > 0.01
+
+
+def bvp_tip(rod, field, scales):
+    """Tip (x, y) of an independent scipy solve_bvp continuation along ``scales``, m."""
+    from rod_bvp_reference import solve_bvp_rod
+
+    guess = None
+    for s in scales:
+        sol = solve_bvp_rod(rod, field, s, tol=1e-9, guess=guess)
+        assert sol.status == 0
+
+        def guess(arc, sol=sol):
+            return sol.sol(arc)[0]
+
+    y = sol.sol(np.array([rod.length]))
+    return np.ravel([y[2], y[3]])
+
+
+def test_seed_figures_notebook():
+    import coils
+    from coilrod import presets
+
+    r = execute("seed_figures.ipynb")
+    L = presets.SEED_LENGTH
+    # Fig. 4 and 6: FEM (continuum, neo-Hookean) against the rod: 1% of L (M(2), lambda ~ 10)
+    # and 2% of L (M(3) in the gradient field), the agreement the seed reports
+    assert r["fig4"]["a"] < 0.01
+    assert r["fig4"]["b"] < 0.01
+    assert r["fig6"] < 0.02
+    assert r["fig5"]["gap"] < 0.01
+    # Fig. 5: M(4.2) deflects more than M(4.1), especially at high field
+    assert r["fig5"]["ratio_high"] > 1.05
+    assert r["fig5"]["ratio_high"] > r["fig5"]["ratio_low"]
+    # the rod's numbers against independent solve_bvp solves of seed eq. (5)
+    scales = np.linspace(0.1, 1.0, 10)
+    tip = bvp_tip(
+        presets.seed_rod(presets.M2(variant="a")), coils.UniformField((0.0, 12e-3, 0.0)), scales
+    )
+    np.testing.assert_allclose(r["m2a_rod_tip"][:2], tip, atol=1e-6 * L)
+    field_b = coils.LinearField(B0=(0.0, 5e-3, 0.0), gradient=coils.maxwell_gradient(0.4))
+    tip = bvp_tip(presets.seed_rod(presets.M3()), field_b, scales)
+    np.testing.assert_allclose(r["m3_tip"][:2], tip, atol=1e-6 * L)
