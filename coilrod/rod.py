@@ -31,8 +31,8 @@ class Rod:
     --------
     >>> from coilrod import Rod, Circle, Magnetization
     >>> rod = Rod(0.04, 1e6, Circle(2e-3), Magnetization(128e3, 0.0))
-    >>> round(rod.bending_stiffness, 12)   # E I in N m^2
-    7.85e-07
+    >>> f"{rod.bending_stiffness:.4e}"   # E I = E pi D^4 / 64 in N m^2
+    '7.8540e-07'
     """
 
     length: float

@@ -1,0 +1,216 @@
+"""``trace_rod``: pseudo-arclength continuation of rod equilibria through limit points."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from coils._validate import finite_scalar
+
+from .arclength import ArcLength
+from .errors import ConvergenceError
+from .rod_newton import NewtonOptions, newton
+from .rod_solver import _check_inputs, build_problem, make_mesh
+
+__all__ = ["trace_rod", "RodPath"]
+
+
+@dataclass
+class RodPath:
+    """Equilibrium path traced by :func:`trace_rod` (ordered by arc length along the path).
+
+    Attributes
+    ----------
+    scale : ndarray, shape (m,)
+        Field multiplier of each point.
+    tip : ndarray, shape (m, 3)
+        Tip positions, m.
+    tip_angle : ndarray, shape (m,)
+        Tip tangent angles, rad.
+    stable : ndarray of bool, shape (m,)
+        Positive-definite second variation.
+    min_eigenvalue : ndarray, shape (m,)
+        Smallest eigenvalue of the second variation (non-dimensional, see ``RodResult``).
+    residual : ndarray, shape (m,)
+        Scaled residual of each point.
+    limit_points : list of dict
+        Folds of the path: ``kind`` "fold" where the sampled scale passes an extremum
+        (``scale`` from a parabola through the three points), "stability" where the smallest
+        second-variation eigenvalue changes sign between two points (a fold too narrow to be
+        resolved, or a bifurcation; ``scale`` interpolated); ``index`` (point after it) and
+        ``tip_angle``.  A rod loaded past a fold snaps through to another branch.
+    s : ndarray, shape (n,)
+        Arc length of the nodes, m.
+    """
+
+    scale: np.ndarray
+    tip: np.ndarray
+    tip_angle: np.ndarray
+    stable: np.ndarray
+    min_eigenvalue: np.ndarray
+    residual: np.ndarray
+    s: np.ndarray
+    _theta: np.ndarray = field(repr=False)
+    _points: np.ndarray = field(repr=False)
+    limit_points: list = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.scale)
+
+    def centerline(self, k: int) -> np.ndarray:
+        """Centreline of point ``k``, shape (n, 3), m."""
+        return self._points[k].copy()
+
+    def theta(self, k: int) -> np.ndarray:
+        """Tangent angles of point ``k`` at :attr:`s`, shape (n,), rad."""
+        return self._theta[k].copy()
+
+
+def trace_rod(
+    rod,
+    field,
+    scale_start: float,
+    scale_range,
+    *,
+    initial=None,
+    direction: int = 1,
+    step: float | None = None,
+    max_steps: int = 400,
+    nodes: int | None = 64,
+    clamp_position=(0.0, 0.0, 0.0),
+    clamp_angle: float = 0.0,
+    tol: float = 1e-9,
+) -> RodPath:
+    """Follow an equilibrium path in the field scale by pseudo-arclength continuation.
+
+    Unlike :func:`~coilrod.solve_rod`, which steps the scale monotonically, the path may turn
+    back at a limit point (fold); each fold is reported in ``limit_points``.
+
+    Parameters
+    ----------
+    rod : Rod
+    field : coils.Field
+        Field multiplied by the scale.
+    scale_start : float
+        Scale of the first point.
+    scale_range : (float, float)
+        The trace stops when the scale leaves this interval.
+    initial : callable or array-like, optional
+        Starting guess: ``theta(s)`` (s in m, returns rad) or node angles, shape (n,).  Default:
+        the straight rod.  The first point is the equilibrium Newton finds from it.
+    direction : {1, -1}
+        Initial direction of the scale.
+    step : float, optional
+        Initial arc-length step (scale units mixed with rms angle in rad); default 2 % of the
+        scale range.
+    max_steps : int
+        Maximum number of path points.
+    nodes : int, optional
+        Segments of the mesh (one mesh, second order, no extrapolation).
+    clamp_position, clamp_angle, tol
+        As in :func:`~coilrod.solve_rod`.
+
+    Returns
+    -------
+    RodPath
+
+    Raises
+    ------
+    coilrod.ConvergenceError
+        If the first point cannot be found.
+    """
+    lo, hi = sorted(finite_scalar(v, "scale_range") for v in scale_range)
+    c0 = finite_scalar(scale_start, "scale_start")
+    _, nodes, clamp, angle = _check_inputs(rod, field, [c0], nodes, clamp_position, clamp_angle)
+    if direction not in (1, -1):
+        raise ValueError(f"direction must be 1 or -1; got {direction!r}")
+    if not lo <= c0 <= hi:
+        raise ValueError(f"scale_start {c0} lies outside scale_range ({lo}, {hi})")
+    span = max(hi - lo, 1e-300)
+    ds = 0.02 * span if step is None else finite_scalar(step, "step")
+    opts = NewtonOptions(tol=finite_scalar(tol, "tol"))
+    problem = build_problem(rod, field, make_mesh(rod, nodes), clamp, angle)
+    theta0 = _initial_theta(problem, rod, initial)
+    u, ok, res, _, _ = newton(problem, problem.from_theta(theta0, c0), c0, opts)
+    if not ok:
+        raise ConvergenceError(
+            f"trace_rod found no equilibrium at scale {c0:g} from the given "
+            f"initial state (residual {res:.3g})",
+            reached=float("nan"),
+            target=c0,
+            residual=res,
+        )
+    tracer = ArcLength(problem, span, opts, step=ds)
+    pts_u, pts_c, residuals = [u], [c0], [res]
+    for u_new, c_new, res in tracer.follow(u, c0, direction, max_steps - 1):
+        pts_u.append(u_new)
+        pts_c.append(c_new)
+        residuals.append(res)
+        if not lo <= c_new <= hi:
+            break
+    return _finish(problem, rod, pts_u, pts_c, residuals)
+
+
+def _initial_theta(problem, rod, initial) -> np.ndarray:
+    s = problem.mesh.s * rod.length
+    if initial is None:
+        return np.full(problem.n, problem.theta0)
+    if callable(initial):
+        theta = np.asarray(initial(s), dtype=float)
+    else:
+        theta = np.asarray(initial, dtype=float)
+    theta = np.broadcast_to(theta, s.shape).astype(float)
+    if not np.all(np.isfinite(theta)):
+        raise ValueError("initial must give finite angles")
+    theta = theta.copy()
+    theta[0] = problem.theta0
+    return theta
+
+
+def _finish(problem, rod, pts_u, pts_c, residuals) -> RodPath:
+    scale = np.array(pts_c)
+    thetas = np.array([problem.theta(u) for u in pts_u])
+    points = np.array([problem.points(problem.positions(th)) for th in thetas])
+    mu = np.array([problem.min_eigenvalue(u, c) for u, c in zip(pts_u, pts_c, strict=True)])
+    path = RodPath(
+        scale=scale,
+        tip=points[:, -1].copy(),
+        tip_angle=thetas[:, -1].copy(),
+        stable=mu > 0,
+        min_eigenvalue=mu,
+        residual=np.array(residuals),
+        s=problem.mesh.s * rod.length,
+        _theta=thetas,
+        _points=points,
+    )
+    dc = np.diff(scale)
+    events = {}
+    for k in range(1, len(dc)):
+        if dc[k - 1] * dc[k] < 0:  # the scale turns back: a fold between k - 1 and k + 1
+            # vertex of the parabola scale(tip angle) through the three points
+            phi, c3 = thetas[k - 1 : k + 2, -1], scale[k - 1 : k + 2]
+            ext = float(c3[1])
+            if len(np.unique(phi)) == 3:
+                a2, a1, a0 = np.polyfit(phi - phi[1], c3, 2)
+                if a2 != 0:
+                    ext = float(a0 - a1 * a1 / (4 * a2))
+            events[k] = {
+                "index": k + 1,
+                "scale": ext,
+                "tip_angle": float(thetas[k, -1]),
+                "kind": "fold",
+            }
+    for k in range(1, len(mu)):
+        if (mu[k - 1] > 0) != (mu[k] > 0) and not ({k - 1, k} & events.keys()):
+            # a stability change between sampled points: a fold too narrow to resolve (or a
+            # bifurcation); scale by linear interpolation of the smallest eigenvalue
+            w = mu[k - 1] / (mu[k - 1] - mu[k])
+            events[k] = {
+                "index": k,
+                "scale": float(scale[k - 1] + w * (scale[k] - scale[k - 1])),
+                "tip_angle": float(thetas[k - 1, -1] + w * (thetas[k, -1] - thetas[k - 1, -1])),
+                "kind": "stability",
+            }
+    path.limit_points = [events[k] for k in sorted(events)]
+    return path

@@ -1,0 +1,78 @@
+"""Result of a rod solve: equilibrium states along a load sweep."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["RodResult", "StabilityWarning"]
+
+
+class StabilityWarning(UserWarning):
+    """An equilibrium branch followed by the solver lost (or regained) stability."""
+
+
+@dataclass
+class RodResult:
+    """Equilibria of a rod for each requested field scale.
+
+    Attributes
+    ----------
+    scales : ndarray, shape (k,)
+        The field multipliers, in the order solved.
+    s : ndarray, shape (n,)
+        Arc length of the output nodes, m.
+    tip : ndarray, shape (k, 3)
+        Tip positions, m (Richardson-extrapolated when enabled).
+    tip_angle : ndarray, shape (k,)
+        Tangent angle at the tip, rad.
+    converged : ndarray of bool, shape (k,)
+        True where Newton reached the tolerance (always True for returned states: a scale that
+        cannot be reached raises :class:`~coilrod.ConvergenceError`).
+    stable : ndarray of bool, shape (k,)
+        False where the second variation is not positive definite (unstable equilibrium).
+    residual : ndarray, shape (k,)
+        Scaled residual max-norm of each state (largest over the meshes used), non-dimensional.
+    min_eigenvalue : ndarray, shape (k,)
+        Smallest eigenvalue of the second variation per unit length, in EI / L^3 units
+        (non-dimensional); it crosses zero at a bifurcation or limit point.  The straight
+        unloaded rod has pi^2 / 4.  Computed on the coarse mesh (extrapolated near a loss of
+        stability for uniform fields); for large meshes in non-uniform fields it is the
+        eigenvalue closest to zero.
+    iterations : ndarray of int, shape (k,)
+        Newton iterations spent on each scale (all meshes, all sub-steps).
+    instabilities : list of dict
+        One entry per change of stability between consecutive scales: ``index`` (first scale
+        with the new stability), ``scale`` (critical scale estimated by linear interpolation of
+        ``min_eigenvalue``), ``stable`` (the new stability); and one per snap-through, with
+        ``kind`` "snap", ``scale`` (last converged scale before the fold) and ``landing``
+        (scale at which the path, followed around the fold, was stable again).
+    segments : int
+        Segments of the (coarse) mesh; the fine mesh of the extrapolation has twice as many.
+    """
+
+    scales: np.ndarray
+    s: np.ndarray
+    tip: np.ndarray
+    tip_angle: np.ndarray
+    converged: np.ndarray
+    stable: np.ndarray
+    residual: np.ndarray
+    min_eigenvalue: np.ndarray
+    iterations: np.ndarray
+    segments: int
+    _theta: np.ndarray = field(repr=False)
+    _points: np.ndarray = field(repr=False)
+    instabilities: list = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.scales)
+
+    def centerline(self, k: int) -> np.ndarray:
+        """Centreline of state ``k`` at the nodes :attr:`s`, shape (n, 3), m."""
+        return self._points[k].copy()
+
+    def theta(self, k: int) -> np.ndarray:
+        """Tangent angle of state ``k`` at the nodes :attr:`s`, shape (n,), rad."""
+        return self._theta[k].copy()

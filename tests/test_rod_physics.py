@@ -1,0 +1,288 @@
+"""Physics consistency of solve_rod (the planar hard-magnetic Kirchhoff rod, seed eq. 5).
+
+Cross-checks, each against an independent reference:
+* small deflection: tip deflection lambda L / 3 (linear beam theory);
+* M(1) in a uniform field at several angles, lambda up to 50, default settings: tip within
+  1e-6 L of the closed-form elliptic-integral elastica (coilrod.elastica);
+* convergence order: log-log slopes ~2 (one mesh) and ~4 (Richardson) against the elastica,
+  and for a gradient field against scipy solve_bvp at tol 1e-10;
+* a pure-gradient case solved by hand (Maxwell gradient, transverse magnetization):
+  y_tip = 11/48 gamma L, tip angle gamma / 3 (linear Euler-Bernoulli beam);
+* scale invariance (metres vs millimetres, E and B scaled together) and mirror symmetry,
+  rotated/translated clamp (exact symmetries of the equations);
+* Jacobian against central finite differences of the residual (uniform, linear, nonlinear
+  fields with an analytic Hessian, and a real coil pair);
+* segments with jumps (M(4.1), M(4.2)) and gradients (M(3), Config B) against solve_bvp;
+* coupling: a Helmholtz pair of radius 2L moves the tip measurably away from its ideal()
+  field, and the coil solve agrees with solve_bvp on the same coil field.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from rod_bvp_reference import solve_bvp_rod
+
+import coils
+from coilrod import Circle, Magnetization, Rod, presets, solve_rod
+from coilrod.elastica import elastica
+from coilrod.rod_solver import build_problem, make_mesh
+
+UNIT_ROD = Rod(1.0, 1.0, Circle(1.0), Magnetization(1.0, 0.0))
+
+
+def _field_at_angle(rod, lam, phi):
+    B = rod.field_for_lambda(lam)
+    return coils.UniformField(B=(B * math.cos(phi), B * math.sin(phi), 0.0))
+
+
+def test_small_deflection_lambda_over_three():
+    rod = presets.seed_rod()
+    lam = 1e-4
+    res = solve_rod(rod, _field_at_angle(rod, lam, math.pi / 2), [1.0])
+    # linear theory has relative error O(lambda^2) here: (tip - lambda L/3) / (lambda L/3)
+    assert res.tip[0, 1] == pytest.approx(lam * rod.length / 3, rel=1e-6)
+    assert res.tip_angle[0] == pytest.approx(lam / 2, rel=1e-6)
+
+
+@pytest.mark.parametrize("phi", [math.pi / 6, math.pi / 2, 2.0, 2.8, 3.1, -math.pi / 2])
+def test_elastica_sweep_to_lambda_50_default_settings(phi):
+    lams = np.linspace(0.0, 50.0, 11)[1:]
+    res = solve_rod(UNIT_ROD, _field_at_angle(UNIT_ROD, 1.0, phi), lams)
+    assert res.converged.all()
+    assert res.stable.all()
+    for k, lam in enumerate(lams):
+        ref = elastica(lam, phi)
+        assert np.linalg.norm(res.tip[k, :2] - ref.tip) <= 1e-6
+        assert res.tip_angle[k] == pytest.approx(ref.tip_angle, abs=1e-5)
+
+
+def test_single_jump_to_lambda_50_with_physical_units():
+    rod = presets.seed_rod()
+    res = solve_rod(rod, _field_at_angle(rod, 50.0, 2.0), [1.0])
+    ref = elastica(50.0, 2.0, length=rod.length)
+    assert np.linalg.norm(res.tip[0, :2] - ref.tip) <= 1e-6 * rod.length
+    assert res.centerline(0)[0] == pytest.approx([0, 0, 0])
+    assert np.allclose(res.centerline(0)[-1], res.tip[0])
+    assert res.s[-1] == pytest.approx(rod.length)
+
+
+def _slope(ns, errs):
+    return -np.polyfit(np.log(ns), np.log(errs), 1)[0]
+
+
+def test_convergence_order_uniform_field():
+    lam, phi = 20.0, 2.0
+    ref = elastica(lam, phi).tip
+    ns = np.array([16, 32, 64])
+    err2 = [
+        np.linalg.norm(
+            solve_rod(
+                UNIT_ROD, _field_at_angle(UNIT_ROD, lam, phi), [1.0], nodes=n, richardson=False
+            ).tip[0, :2]
+            - ref
+        )
+        for n in ns
+    ]
+    err4 = [
+        np.linalg.norm(
+            solve_rod(UNIT_ROD, _field_at_angle(UNIT_ROD, lam, phi), [1.0], nodes=n).tip[0, :2]
+            - ref
+        )
+        for n in ns
+    ]
+    assert _slope(ns, err2) == pytest.approx(2.0, abs=0.1)
+    assert _slope(ns, err4) == pytest.approx(4.0, abs=0.3)
+
+
+def test_convergence_order_gradient_field():
+    rod = presets.seed_rod(presets.M3())
+    L = rod.length
+    field = coils.LinearField(
+        B0=(0.0, 8e-3, 0.0), gradient=coils.maxwell_gradient(0.4), origin=(0.5 * L, 0.0, 0.0)
+    )
+    start = solve_rod(rod, field, [1.0], nodes=8, richardson=False)  # picks the branch only
+    ref = solve_bvp_rod(
+        rod, field, tol=1e-10, guess=lambda s: np.interp(s, start.s, start.theta(0))
+    )
+    assert ref.status == 0
+    tip = ref.sol(L)[2:4]
+    ns = np.array([8, 16, 32])
+    err2 = [
+        np.linalg.norm(solve_rod(rod, field, [1.0], nodes=n, richardson=False).tip[0, :2] - tip) / L
+        for n in ns
+    ]
+    err4 = [np.linalg.norm(solve_rod(rod, field, [1.0], nodes=n).tip[0, :2] - tip) / L for n in ns]
+    assert err2[0] > 1e-5  # a real deflection (not the trivial state)
+    assert _slope(ns, err2) == pytest.approx(2.0, abs=0.15)
+    assert _slope(ns, err4) == pytest.approx(4.0, abs=0.4)
+
+
+def test_pure_gradient_small_deflection_closed_form():
+    """Maxwell gradient g diag(-1/2, 1, -1/2) at the clamp, B0 = 0, M transverse (theta_m =
+    pi/2).  Linearised: torque A M g s / 2 and force A M g along y, so
+    EI theta'' = -A M g (L - s/2): theta(L) = gamma/3, y(L) = 11 gamma L / 48,
+    gamma = A M g L^3 / (EI)."""
+    rod = Rod(0.04, 1e6, Circle(2e-3), Magnetization(128e3, math.pi / 2))
+    gamma = 1e-4
+    g = gamma * rod.bending_stiffness / (rod.area * 128e3 * rod.length**3)
+    field = coils.LinearField(gradient=coils.maxwell_gradient(g))
+    res = solve_rod(rod, field, [1.0])
+    assert res.tip[0, 1] == pytest.approx(11 * gamma * rod.length / 48, rel=1e-3)
+    assert res.tip_angle[0] == pytest.approx(gamma / 3, rel=1e-3)
+
+
+def test_scale_invariance_metres_millimetres_and_E_B():
+    rod_m = presets.seed_rod(presets.M2(variant="b"))
+    field_m = coils.LinearField(
+        B0=(2e-3, 6e-3, 0.0), gradient=coils.maxwell_gradient(0.3), origin=(0.01, 0.004, 0.0)
+    )
+    res_m = solve_rod(rod_m, field_m, [0.5, 1.0], nodes=24)
+    # millimetres, newtons, amperes: E in N/mm^2, M in A/mm, B in N/(A mm), G in N/(A mm^2)
+    L_mm = 40.0
+    rod_mm = Rod(
+        L_mm, 1e6 * 1e-6, Circle(L_mm / 20), presets.M2(length=L_mm, variant="b", M0=640e3 * 1e-3)
+    )
+    field_mm = coils.LinearField(
+        B0=(2e-6, 6e-6, 0.0), gradient=coils.maxwell_gradient(0.3e-6), origin=(10.0, 4.0, 0.0)
+    )
+    res_mm = solve_rod(rod_mm, field_mm, [0.5, 1.0], nodes=24)
+    assert np.allclose(res_mm.tip * 1e-3, res_m.tip, rtol=0, atol=1e-12 * rod_m.length)
+    # E and B scaled by the same factor: same shape
+    rod_e = Rod(rod_m.length, 7.0 * rod_m.youngs_modulus, rod_m.section, rod_m.magnetization)
+    field_e = coils.LinearField(
+        B0=7.0 * field_m.B0, gradient=7.0 * field_m.G, origin=field_m.origin
+    )
+    res_e = solve_rod(rod_e, field_e, [0.5, 1.0], nodes=24)
+    assert np.allclose(res_e.tip, res_m.tip, rtol=0, atol=1e-12 * rod_m.length)
+
+
+def test_mirror_symmetry():
+    L = 0.04
+    P = np.diag([1.0, -1.0, 1.0])
+    G = np.array([[0.1, 0.3, 0.0], [0.3, 0.2, 0.05], [0.0, 0.05, -0.3]])
+    rod = presets.seed_rod(presets.M2(variant="a"))
+    angle = rod.magnetization.angle
+    rod_mirror = Rod(
+        rod.length,
+        rod.youngs_modulus,
+        rod.section,
+        Magnetization(rod.magnetization.magnitude, lambda s: -angle(s)),
+    )
+    field = coils.LinearField(B0=(3e-3, 5e-3, 1e-3), gradient=G, origin=(0.3 * L, 0.1 * L, 0))
+    field_mirror = coils.LinearField(B0=P @ field.B0, gradient=P @ G @ P, origin=P @ field.origin)
+    res = solve_rod(rod, field, [1.0], nodes=24, clamp_angle=0.2, clamp_position=(0, 0.1 * L, 0))
+    mir = solve_rod(
+        rod_mirror, field_mirror, [1.0], nodes=24, clamp_angle=-0.2, clamp_position=(0, -0.1 * L, 0)
+    )
+    assert abs(res.tip[0, 1] - 0.1 * L) > 0.05 * L  # bent
+    assert np.allclose(mir.tip[0], P @ res.tip[0], rtol=0, atol=1e-13)
+    assert mir.tip_angle[0] == pytest.approx(-res.tip_angle[0], abs=1e-12)
+
+
+def test_rotated_translated_clamp():
+    """Rotating the clamp and the field together rotates the solution (frame indifference)."""
+    L = 0.04
+    a = 0.7
+    R = np.array([[math.cos(a), -math.sin(a), 0], [math.sin(a), math.cos(a), 0], [0, 0, 1]])
+    x0 = np.array([0.01, -0.02, 0.003])
+    rod = presets.seed_rod(presets.M42())
+    G = coils.maxwell_gradient(0.5)
+    field = coils.LinearField(B0=(1e-3, 8e-3, 0.0), gradient=G, origin=(0.5 * L, 0, 0))
+    rfield = coils.LinearField(B0=R @ field.B0, gradient=R @ G @ R.T, origin=x0 + R @ field.origin)
+    res = solve_rod(rod, field, [1.0], nodes=32)
+    rot = solve_rod(rod, rfield, [1.0], nodes=32, clamp_position=x0, clamp_angle=a)
+    assert np.allclose(rot.tip[0], x0 + R @ res.tip[0], rtol=0, atol=1e-13)
+    assert rot.tip_angle[0] == pytest.approx(res.tip_angle[0] + a, abs=1e-12)
+
+
+class QuadraticField(coils.Field):
+    """Curl- and divergence-free B = c (x^2 - y^2, -2xy, 0) with closed-form derivatives."""
+
+    def __init__(self, c):
+        self.c = c
+
+    def _B(self, p):
+        x, y = p[:, 0], p[:, 1]
+        return self.c * np.stack([x * x - y * y, -2 * x * y, 0 * x], axis=1)
+
+    def _gradient(self, p):
+        x, y = p[:, 0], p[:, 1]
+        G = np.zeros((p.shape[0], 3, 3))
+        G[:, 0, 0], G[:, 0, 1] = 2 * x, -2 * y
+        G[:, 1, 0], G[:, 1, 1] = -2 * y, -2 * x
+        return self.c * G
+
+    def _hessian(self, p):
+        H = np.zeros((p.shape[0], 3, 3, 3))
+        H[:, 0, 0, 0], H[:, 0, 1, 1] = 2.0, -2.0
+        H[:, 1, 0, 1] = H[:, 1, 1, 0] = -2.0
+        return self.c * H
+
+
+@pytest.mark.parametrize("kind", ["uniform", "linear", "quadratic", "helmholtz"])
+def test_jacobian_matches_finite_differences(kind):
+    rod = presets.seed_rod(presets.M42())
+    L = rod.length
+    field = {
+        "uniform": coils.UniformField(B=(3e-3, 8e-3, 0.0)),
+        "linear": coils.LinearField(
+            B0=(2e-3, 8e-3, 0.0), gradient=coils.maxwell_gradient(0.5), origin=(0.01, 0.005, 0.0)
+        ),
+        "quadratic": QuadraticField(20.0) + coils.UniformField(B=(0.0, 5e-3, 0.0)),
+        "helmholtz": coils.HelmholtzPair(
+            radius=1.5 * L, turns=300, current=2.0, axis="y", center=(0.3 * L, 0.1 * L, 0.0)
+        ),
+    }[kind]
+    problem = build_problem(rod, field, make_mesh(rod, 10), np.zeros(3), 0.1)
+    rng = np.random.default_rng(3)
+    theta = 0.1 + np.cumsum(rng.normal(scale=0.2, size=problem.n))
+    u = problem.from_theta(theta, 1.3) + (
+        0 if problem.uniform else rng.normal(scale=1e-3, size=problem.size)
+    )
+    J = problem.dense_jacobian(u, 1.3)
+    eps = 1e-6
+    Jfd = np.empty_like(J)
+    for j in range(problem.size):
+        e = np.zeros(problem.size)
+        e[j] = eps
+        Jfd[:, j] = (problem.residual(u + e, 1.3) - problem.residual(u - e, 1.3)) / (2 * eps)
+    tol = 1e-6 if kind == "helmholtz" else 1e-8  # coil Hessian: central difference of G
+    assert np.abs(J - Jfd).max() <= tol * np.abs(J).max()
+
+
+@pytest.mark.parametrize("case", ["M41", "M42", "M3_configB"])
+def test_profiles_and_gradients_against_solve_bvp(case):
+    L = presets.SEED_LENGTH
+    if case == "M3_configB":
+        rod = presets.seed_rod(presets.M3())
+        field = coils.LinearField(B0=(0.0, 5e-3, 0.0), gradient=coils.maxwell_gradient(0.6))
+    else:
+        rod = presets.seed_rod(getattr(presets, case)())
+        field = coils.UniformField(B=(0.0, 0.02, 0.0))
+    res = solve_rod(rod, field, [0.5, 1.0])
+    ref = solve_bvp_rod(rod, field, tol=1e-9, guess=lambda s: np.interp(s, res.s, res.theta(1)))
+    assert ref.status == 0
+    assert abs(res.tip_angle[1]) > 0.2  # large deflection
+    assert np.linalg.norm(res.tip[1, :2] - ref.sol(L)[2:4]) <= 1e-6 * L
+
+
+def test_helmholtz_pair_differs_from_ideal_and_matches_solve_bvp():
+    rod = presets.seed_rod()
+    L = rod.length
+    pair = coils.HelmholtzPair(radius=2 * L, turns=200, current=1.0, axis="y")
+    ideal = pair.ideal()
+    scale = 5.0 / rod.magnetoelastic_number(ideal.B0[1])  # lambda = 5 at the centre
+    res = solve_rod(rod, pair, [0.5 * scale, scale])
+    res_ideal = solve_rod(rod, ideal, [0.5 * scale, scale])
+    shift = np.linalg.norm(res.tip[1] - res_ideal.tip[1])
+    assert shift > 1e-3 * L  # the real field moves the tip measurably
+    ref = solve_bvp_rod(
+        rod, pair, scale, tol=1e-9, guess=lambda s: np.interp(s, res.s, res.theta(1))
+    )
+    assert ref.status == 0
+    assert np.linalg.norm(res.tip[1, :2] - ref.sol(L)[2:4]) <= 1e-3 * shift
+    assert np.linalg.norm(res.tip[1, :2] - ref.sol(L)[2:4]) <= 1e-6 * L
+    # the lagged-Hessian quasi-Newton option reaches the same equilibrium
+    lagged = solve_rod(rod, pair, [0.5 * scale, scale], hessian_lag=1e-3)
+    assert np.linalg.norm(lagged.tip[1, :2] - ref.sol(L)[2:4]) <= 1e-6 * L
