@@ -3,6 +3,7 @@
 from . import elastica, presets
 from .continuation import RodPath, trace_rod
 from .errors import ConvergenceError
+from .fem import solve_fem  # scikit-fem itself is imported lazily, inside the call
 from .magnetization import Magnetization
 from .rod import Rod
 from .rod_result import RodResult, StabilityWarning
@@ -16,6 +17,7 @@ __all__ = [
     "Magnetization",
     "ConvergenceError",
     "presets",
+    "solve_fem",
     "solve_rod",
     "trace_rod",
     "RodResult",

@@ -1,0 +1,14 @@
+"""Finite-element model of hard-magnetic soft rods on scikit-fem (2D and 3D neo-Hookean).
+
+Imported lazily by :func:`coilrod.solve_fem`: ``import coilrod`` never imports scikit-fem.
+
+Modules: ``mesh`` (reference meshes), ``material`` (neo-Hookean energy, stress, tangent),
+``magnetic`` (magnetic stress, body force, tangent terms), ``assembly`` (vectorised kernels,
+sparse pattern), ``solver`` (Newton continuation), ``result`` (tips, export, plots),
+``solve`` (the public entry point).
+"""
+
+from .result import FEMResult
+from .solve import DEFAULT_POISSON_RATIO, solve_fem
+
+__all__ = ["solve_fem", "FEMResult", "DEFAULT_POISSON_RATIO"]

@@ -1,0 +1,128 @@
+"""Results of a finite-element solve: tips, displacement fields, export and plotting."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["FEMResult"]
+
+
+class FEMResult:
+    """Equilibria of :func:`coilrod.solve_fem` at each requested load scale.
+
+    Attributes
+    ----------
+    scales : ndarray, shape (n,)
+        The requested field multipliers.
+    tip : ndarray, shape (n, 3)
+        Centroid of the deformed free end face (x = L) at each scale, m (z = 0 in 2D).
+    converged : ndarray, shape (n,)
+        True for every returned state (unreachable loads raise ``ConvergenceError``).
+    iterations : ndarray, shape (n,)
+        Newton iterations spent reaching each scale from the previous one.
+    mesh : skfem.Mesh
+        The reference mesh.
+    nodes : ndarray, shape (dim, n_nodes)
+        Reference positions of the displacement nodes (mesh vertices first, then the edge,
+        face and interior nodes of quadratic elements), m.
+    stats : SolveStats
+        Counters (evaluations, factorisations, step cuts).
+    """
+
+    def __init__(self, assembler, scales, states, stats):
+        self._asm = assembler
+        self.scales = np.asarray(scales, dtype=float)
+        self._states = list(states)
+        self.stats = stats
+        self.mesh = assembler.mesh
+        self.nodes = assembler.nodes
+        self.dim = assembler.dim
+        self.order = assembler.order
+        self.tip = np.array([assembler.tip(u) for u in self._states]).reshape(-1, 3)
+        self.converged = np.ones(len(self._states), dtype=bool)
+        self.iterations = np.asarray(stats.iterations, dtype=int)
+
+    def __len__(self) -> int:
+        return len(self._states)
+
+    def displacement(self, k: int) -> np.ndarray:
+        """Nodal displacement of state ``k``, shape (dim, n_nodes), m (see :attr:`nodes`)."""
+        return self._asm.nodal(self._states[k])
+
+    def deformed_nodes(self, k: int) -> np.ndarray:
+        """Deformed node positions of state ``k``, shape (dim, n_nodes), m."""
+        return self.nodes + self.displacement(k)
+
+    # -- export -----------------------------------------------------------------------------
+    def _meshio(self, k: int):
+        from skfem.io.meshio import to_meshio
+
+        u = self.displacement(k)
+        npts = self.mesh.p.shape[1]
+        if u.shape[1] < npts:  # linear elements on a quadratic-geometry mesh: export vertices
+            from skfem import MeshHex1
+
+            mesh = MeshHex1(self.mesh.p[:, : self.mesh.t.max() + 1], self.mesh.t)
+            npts = mesh.p.shape[1]
+        else:
+            mesh = self.mesh
+        disp = np.zeros((npts, 3))
+        disp[:, : self.dim] = u[:, :npts].T
+        return to_meshio(mesh, point_data={"displacement": disp})
+
+    def export(self, path, k: int | None = None) -> Path:
+        """Write displacement fields for ParaView (apply "Warp By Vector" to see the shape).
+
+        Parameters
+        ----------
+        path : str or Path
+            ``.xdmf`` writes all states as a time series (time = load scale) unless ``k``
+            is given; any other meshio extension (``.vtu``, ``.vtk``) writes state ``k``
+            (default: the last).
+
+        Returns
+        -------
+        Path
+        """
+        import meshio
+
+        path = Path(path)
+        if path.suffix == ".xdmf" and k is None:
+            first = self._meshio(0)
+            # XML (inline) data: no HDF5 dependency
+            with meshio.xdmf.TimeSeriesWriter(path, data_format="XML") as writer:
+                writer.write_points_cells(first.points, first.cells)
+                for j, s in enumerate(self.scales):
+                    writer.write_data(float(s), point_data=self._meshio(j).point_data)
+            return path
+        k = len(self) - 1 if k is None else k
+        self._meshio(k).write(path)
+        return path
+
+    def plot(self, k: int = -1, ax=None, **kwargs):
+        """Draw the edges of the deformed mesh of state ``k`` in the x-y (bending) plane.
+
+        Returns
+        -------
+        matplotlib.axes.Axes
+        """
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots()
+        x = self.deformed_nodes(k)
+        edges = self.mesh.facets if self.dim == 2 else self.mesh.edges
+        segs = np.stack([x[:2, edges[0]], x[:2, edges[1]]]).transpose(2, 0, 1)
+        from matplotlib.collections import LineCollection
+
+        kwargs.setdefault("linewidths", 0.6)
+        kwargs.setdefault("colors", "C0")
+        ax.add_collection(LineCollection(segs, **kwargs))
+        ax.autoscale()
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.set_title(f"scale {self.scales[k]:g}")
+        return ax

@@ -1,0 +1,184 @@
+"""``solve_fem``: validate the inputs, build mesh and assembler, run the continuation."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from coilrod.rod import Rod
+from coilrod.sections import Circle
+from coils._validate import finite_scalar
+from coils.field import Field
+
+from .assembly import Assembler
+from .material import moduli
+from .mesh import check_elements, rod_mesh
+from .result import FEMResult
+from .solver import NewtonOptions, continuation
+
+__all__ = ["solve_fem", "DEFAULT_POISSON_RATIO"]
+
+#: Default Poisson's ratio: K/G = 2(1 + nu) / (3(1 - 2 nu)) = 999.7, nearly incompressible
+#: like the elastomers of Zhao et al. (2019), who take K >> G.
+DEFAULT_POISSON_RATIO = 0.4995
+
+
+def _scales(scales) -> np.ndarray:
+    arr = np.atleast_1d(np.asarray(scales, dtype=float))
+    if arr.ndim != 1 or arr.size == 0:
+        raise ValueError(f"scales must be a non-empty 1D sequence; got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"scales must be finite; got {arr.tolist()}")
+    return arr
+
+
+def solve_fem(
+    rod: Rod,
+    field: Field,
+    scales,
+    dim: int = 3,
+    order: int = 2,
+    elements=None,
+    *,
+    poisson_ratio: float = DEFAULT_POISSON_RATIO,
+    plane: str = "stress",
+    formulation: str = "mixed",
+    mesh=None,
+    rtol: float = 1e-8,
+    utol: float = 1e-6,
+    max_iterations: int = 25,
+    max_cuts: int = 16,
+    predictor: str = "tangent",
+    line_search: bool = True,
+    progress=None,
+) -> FEMResult:
+    """Large-deformation equilibria of a hard-magnetic neo-Hookean rod body (FEM).
+
+    Parameters
+    ----------
+    rod : coilrod.Rod
+        Length L (m), Young's modulus E (Pa), section and magnetization; the body is
+        ``[0, L]`` along x with the section centred on the x axis, clamped at x = 0.
+    field : coils.Field
+        Applied field (T) at scale 1; evaluated at the deformed positions.
+    scales : sequence of float, shape (n,)
+        Field multipliers, continued in order from the unloaded state.
+    dim : {2, 3}
+        2D over length x thickness (plane stress by default) or 3D over the section.
+    order : {1, 2}
+        Element order (quadrilaterals/hexahedra); quadratic by default (linear ones lock in
+        bending).
+    elements : tuple of int, optional
+        Elements along (length, thickness) in 2D and (length, thickness, width) for a 3D
+        Rectangle; for a 3D Circle (length, core, ring): ``core`` elements along each side
+        of the O-grid's central square (``4 core`` arcs around the circumference) and
+        ``ring`` radial layers.  Default (20, 1) in 2D, (20, 1, 1) in 3D and (20, 2, 1) for
+        a 3D Circle.
+    poisson_ratio : float
+        nu in (-1, 0.5); sets G = E / (2(1 + nu)) and K = E / (3(1 - 2 nu)).
+    plane : {"stress", "strain"}
+        2D assumption.  Plane stress has the rod's bending stiffness E I; plane strain is
+        stiffer by 1/(1 - nu^2).  In 2D a Circle section is the strip of equal I/A
+        (height sqrt(3) D / 2).
+    formulation : {"mixed", "displacement"}
+        "mixed" (default): displacement/pressure with a discontinuous pressure (linear per
+        element for order 2, constant for order 1) condensed element by element; free of
+        volumetric locking.  "displacement": plain neo-Hookean displacement elements.
+        Plane stress has no volumetric constraint and always uses displacements.
+    mesh : skfem.Mesh, optional
+        A reference mesh to use instead of the generated one (must span x in [0, L], with
+        facets on x = 0 and x = L).
+    rtol, utol : float
+        Newton tolerances: residual relative to the force scale, increment relative to L.
+    max_iterations, max_cuts : int
+        Newton iterations per step; consecutive step halvings before giving up.
+    predictor : {"tangent", "secant", "none"}
+        Extrapolation to the next load step.
+    line_search : bool
+        Backtracking line search on each Newton update.
+    progress : callable, optional
+        Called as ``progress(k, scale)`` after each requested scale converges.
+
+    Returns
+    -------
+    FEMResult
+        ``tip`` (n, 3) m, ``displacement(k)`` (dim, n_nodes) m, ``mesh``, ``export``,
+        ``plot``.
+
+    Raises
+    ------
+    ValueError
+        Bad input (the message names the argument).
+    coilrod.ConvergenceError
+        A scale could not be reached; ``reached`` is the last converged scale.
+
+    Notes
+    -----
+    Energy per reference volume (Zhao et al. 2019, seed eqs. 7-13)::
+
+        W(F, x) = G/2 (J^(-2/3) tr(F^T F) - 3) + K/2 (J - 1)^2 - (F M) . B(x),  x = X + u
+
+    with M(X) the reference magnetization, ``|M|(s) (cos theta_m, sin theta_m, 0)`` at
+    s = X_1.  First Piola stress ``P = dW_nH/dF - B (x) M``, body force ``G^T (F M)``
+    (G = grad B); the tangent includes the gradient terms of seed eq. (13) and the field's
+    second derivatives ``field.hessian`` for non-linear fields.  For a uniform field the
+    magnetic load is dead and the tangent purely elastic.
+
+    Examples
+    --------
+    >>> import coils, coilrod
+    >>> rod = coilrod.Rod(0.04, 1e6, coilrod.Rectangle(2e-3, 2e-3), coilrod.presets.M1())
+    >>> B = rod.field_for_lambda(1.0)
+    >>> res = solve_fem(rod, coils.UniformField((0, B, 0)), [1.0], dim=2, elements=(10, 1))
+    >>> bool(0.25 < res.tip[0, 1] / rod.length < 0.35)   # about lambda/3 for small lambda
+    True
+    """
+    if not isinstance(rod, Rod):
+        raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
+    if not isinstance(field, Field):
+        raise ValueError(f"field must be a coils Field; got {type(field).__name__}")
+    scales = _scales(scales)
+    if isinstance(dim, bool) or dim not in (2, 3):
+        raise ValueError(f"dim must be 2 or 3; got {dim!r}")
+    if isinstance(order, bool) or order not in (1, 2):
+        raise ValueError(f"order must be 1 or 2; got {order!r}")
+    if plane not in ("stress", "strain"):
+        raise ValueError(f"plane must be 'stress' or 'strain'; got {plane!r}")
+    if formulation not in ("mixed", "displacement"):
+        raise ValueError(f"formulation must be 'mixed' or 'displacement'; got {formulation!r}")
+    if predictor not in ("tangent", "secant", "none"):
+        raise ValueError(f"predictor must be 'tangent', 'secant' or 'none'; got {predictor!r}")
+    nu = finite_scalar(poisson_ratio, "poisson_ratio")
+    if not -1.0 < nu < 0.5:
+        raise ValueError(f"poisson_ratio must lie in (-1, 0.5); got {nu}")
+    for name, val in (("rtol", rtol), ("utol", utol)):
+        if not finite_scalar(val, name) > 0:
+            raise ValueError(f"{name} must be positive; got {val}")
+    for name, val in (("max_iterations", max_iterations), ("max_cuts", max_cuts)):
+        if isinstance(val, bool) or not isinstance(val, int | np.integer) or val < 1:
+            raise ValueError(f"{name} must be a positive integer; got {val!r}")
+    if mesh is None:
+        if elements is None:
+            elements = (
+                (20, 1)
+                if dim == 2
+                else ((20, 2, 1) if isinstance(rod.section, Circle) else (20, 1, 1))
+            )
+        mesh = rod_mesh(rod, dim, check_elements(elements, dim))
+    elif mesh.p.shape[0] != dim:
+        raise ValueError(f"mesh must be {dim}-dimensional for dim={dim}; got {mesh.p.shape[0]}")
+    G, K = moduli(rod.youngs_modulus, nu)
+    asm = Assembler(mesh, order, rod, field, G, K, plane=plane, mixed=formulation == "mixed")
+    # the field must be finite on the undeformed body
+    B, Gr, _ = asm.field_at(asm.X.reshape(-1, dim), True, False)
+    if not (np.all(np.isfinite(B)) and (Gr is None or np.all(np.isfinite(Gr)))):
+        raise ValueError("field must be finite on the rod body; it returned non-finite values")
+    opts = NewtonOptions(
+        rtol=float(rtol),
+        utol=float(utol),
+        max_iterations=int(max_iterations),
+        max_cuts=int(max_cuts),
+        predictor=predictor,
+        line_search=bool(line_search),
+    )
+    states, stats = continuation(asm, scales, opts, progress)
+    return FEMResult(asm, scales, states, stats)

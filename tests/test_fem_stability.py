@@ -1,0 +1,132 @@
+"""FEM numerical stability (stress tests): the solver converges or says how far it got.
+
+Every run either returns finite, converged states (checked against the elastica of
+test_fem_rod where a reference exists) or raises ``ConvergenceError`` with ``reached``,
+``target`` and ``residual``; never NaN, never a silently unconverged state.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_fem_rod import elastica_tips
+
+import coilrod
+import coils
+from coilrod import presets
+from coilrod.fem.assembly import Assembler
+from coilrod.fem.material import moduli
+
+L = 0.04
+D = L / 20
+
+
+@pytest.fixture
+def rod():
+    return coilrod.Rod(L, 1e6, coilrod.Rectangle(D, D), presets.M1())
+
+
+def _uniform(rod, lam=1.0):
+    return coils.UniformField((0.0, rod.field_for_lambda(lam), 0.0))
+
+
+def _err(res, ref):
+    return np.linalg.norm(res.tip[:, :2] - ref, axis=1) / L
+
+
+@pytest.mark.stress
+def test_nearly_incompressible_K_over_G_5000(rod):
+    lams = [2.5, 5.0, 7.5, 10.0]
+    res = coilrod.solve_fem(rod, _uniform(rod), lams, dim=3, poisson_ratio=0.4999)
+    ref = elastica_tips(rod, _uniform(rod), lams)
+    assert _err(res, ref).max() < 0.01
+
+
+@pytest.mark.stress
+def test_large_lambda_large_rotation(rod):
+    """lambda = 40: the tip turns past 60 degrees and the rod nearly aligns with B."""
+    lams = [10.0, 20.0, 30.0, 40.0]
+    ref = elastica_tips(rod, _uniform(rod), lams, substeps=10)
+    res = coilrod.solve_fem(rod, _uniform(rod), lams, dim=2, elements=(20, 1))
+    assert np.all(np.isfinite(res.tip))
+    assert _err(res, ref).max() < 0.012
+    assert ref[-1, 1] > 0.9 * L
+
+
+@pytest.mark.stress
+def test_one_load_step_far_too_large(rod):
+    """lambda 0 -> 10 in one requested step: the solver cuts it and lands on the same state
+    as a 20-step continuation."""
+    one = coilrod.solve_fem(rod, _uniform(rod), [10.0], dim=3)
+    many = coilrod.solve_fem(rod, _uniform(rod), np.linspace(0.5, 10.0, 20), dim=3)
+    assert one.stats.cuts + one.stats.steps > 1
+    np.testing.assert_allclose(one.tip[0], many.tip[-1], atol=1e-6 * L)
+
+
+@pytest.mark.stress
+def test_unreachable_load_raises_with_progress(rod):
+    with pytest.raises(coilrod.ConvergenceError) as info:
+        coilrod.solve_fem(rod, _uniform(rod), [1.0, 10.0], dim=3, max_cuts=1, max_iterations=8)
+    err = info.value
+    assert err.target == 10.0
+    assert 1.0 <= err.reached < 10.0
+    assert "could not reach 10" in str(err)
+    assert len(err.result_states) == 1  # the converged scale 1.0 is kept
+    assert all(np.all(np.isfinite(s)) for s in err.result_states)
+
+
+@pytest.mark.stress
+def test_compressive_gradient_force(rod):
+    """Maxwell gradient with B antiparallel to M along the rod: compressive body force and a
+    destabilising torque.  The path is continued (with a tiny transverse imperfection) and
+    matches the elastica continued along the same path."""
+    g = 10 * rod.bending_stiffness / (rod.magnetization.max_magnitude(L) * rod.area * L**3)
+    field = coils.LinearField(
+        (0.0, 1e-2 * rod.field_for_lambda(1.0), 0.0), coils.maxwell_gradient(g), (0.0, 0.0, 0.0)
+    )
+    scales = np.linspace(0.5, 4.0, 8)
+    ref = elastica_tips(rod, field, scales, substeps=2)
+    res = coilrod.solve_fem(rod, field, scales, dim=2, elements=(20, 1))
+    assert np.all(np.isfinite(res.tip))
+    assert _err(res, ref).max() < 0.01
+    assert res.tip[-1, 0] < L  # the body is compressed
+
+
+@pytest.mark.stress
+def test_coarse_and_distorted_meshes(rod):
+    from skfem import MeshHex1
+
+    lams = [2.0, 5.0]
+    ref = elastica_tips(rod, _uniform(rod), lams)
+    coarse = coilrod.solve_fem(rod, _uniform(rod), lams, dim=3, elements=(4, 1, 1))
+    assert np.all(np.isfinite(coarse.tip))
+    assert _err(coarse, ref).max() < 0.05
+    rng = np.random.default_rng(11)
+    m = MeshHex1.init_tensor(
+        np.linspace(0, L, 21), np.linspace(-D / 2, D / 2, 3), np.linspace(-D / 2, D / 2, 3)
+    )
+    p = m.p.copy()
+    inner = (p[0] > 0) & (p[0] < L)
+    p[0, inner] += 0.3 * (L / 20) * rng.uniform(-1, 1, inner.sum())
+    mid = np.abs(p[1]) < D / 4
+    p[1, mid & inner] += 0.2 * D * rng.uniform(-1, 1, (mid & inner).sum())
+    distorted = coilrod.solve_fem(rod, _uniform(rod), lams, dim=3, mesh=MeshHex1(p, m.t))
+    assert _err(distorted, ref).max() < 0.01
+
+
+@pytest.mark.stress
+def test_inverted_state_is_reported_not_nan(rod):
+    """det F <= 0 makes an evaluation 'not ok' without NaN or warnings (RuntimeWarning is an
+    error in this suite)."""
+    G, K = moduli(1e6, 0.4995)
+    from coilrod.fem.mesh import rod_mesh
+
+    asm = Assembler(rod_mesh(rod, 3, (4, 1, 1)), 2, rod, _uniform(rod), G, K)
+    z = np.zeros(asm.size)
+    nodes = asm.nodes
+    u = np.zeros_like(nodes)
+    u[1] = -3.0 * nodes[1]  # flips the section inside out
+    z[: asm.nfree] = u.T.ravel()[asm.free]
+    ev = asm.evaluate(z, 1.0)
+    assert not ev.ok
+    assert ev.min_jacobian <= 0
