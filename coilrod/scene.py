@@ -42,7 +42,7 @@ from . import presets
 from .magnetization import Magnetization
 from .rod import Rod
 from .sections import Circle, Rectangle
-from .units import UnitError, parse_quantity
+from .units import EXAMPLES, UnitError, parse_quantity
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "MODELS", "PRESETS"]
 
@@ -122,7 +122,7 @@ def _quantity(
     if name not in data:
         if default is None:
             raise SceneError(
-                f"{full}: missing required key ({dimension}, e.g. '{_EXAMPLES[dimension]}')"
+                f"{full}: missing required key ({dimension}, e.g. '{EXAMPLES[dimension]}')"
             )
         return default
     try:
@@ -164,17 +164,6 @@ def _number(
     if high is not None and value > high:
         raise SceneError(f"{full}: must be at most {high}; got {value!r}")
     return int(value) if integer else float(value)
-
-
-_EXAMPLES = {
-    "length": "40 mm",
-    "flux density": "5 mT",
-    "gradient": "0.5 T/m",
-    "magnetization": "640 kA/m",
-    "pressure": "1 MPa",
-    "current": "2 A",
-    "angle": "90 deg",
-}
 
 
 def _axis(value, key: str) -> np.ndarray:

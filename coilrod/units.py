@@ -90,13 +90,17 @@ def parse_quantity(value, dimension: str, key: str = "value") -> float:
     return result
 
 
+#: A typical value of each dimension, quoted in error messages.
+EXAMPLES = {
+    "length": "40 mm",
+    "flux density": "5 mT",
+    "gradient": "0.5 T/m",
+    "magnetization": "640 kA/m",
+    "pressure": "1 MPa",
+    "current": "2 A",
+    "angle": "90 deg",
+}
+
+
 def _example(dimension: str) -> str:
-    return {
-        "length": "40 mm",
-        "flux density": "5 mT",
-        "gradient": "0.5 T/m",
-        "magnetization": "640 kA/m",
-        "pressure": "1 MPa",
-        "current": "2 A",
-        "angle": "90 deg",
-    }[dimension]
+    return EXAMPLES[dimension]

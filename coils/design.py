@@ -40,10 +40,16 @@ def _centre_values(coil: CoaxialCoils):
     return float(B[0] @ n), float(n @ G[0] @ n)
 
 
-def _per_unit(value: float, what: str, coil) -> float:
-    if value == 0.0:
+def _scale_factor(coil: CoaxialCoils, target, quantity: str) -> float:
+    """target / (the coil's present axial centre field or gradient): Biot-Savart is linear in
+    the ampere-turns, so current or turns scale by this factor."""
+    target = finite_scalar(target, quantity)
+    b, g = _centre_values(coil)
+    present = b if quantity == "B" else g
+    if present == 0.0:
+        what = "field" if quantity == "B" else "gradient"
         raise ValueError(f"{coil!r} produces no {what} at its centre; cannot scale to a target")
-    return value
+    return target / present
 
 
 def current_for_field(coil: CoaxialCoils, B: float) -> float:
@@ -55,16 +61,12 @@ def current_for_field(coil: CoaxialCoils, B: float) -> float:
     >>> round(current_for_field(HelmholtzPair(0.1, 100, 1.0), 5e-3), 3)   # A
     5.561
     """
-    B = finite_scalar(B, "B")
-    b, _ = _centre_values(coil)
-    return coil.current * B / _per_unit(b, "field", coil)
+    return coil.current * _scale_factor(coil, B, "B")
 
 
 def current_for_gradient(coil: CoaxialCoils, gradient: float) -> float:
     """Current per turn (A) that gives the axial centre gradient ``gradient`` (T/m)."""
-    gradient = finite_scalar(gradient, "gradient")
-    _, g = _centre_values(coil)
-    return coil.current * gradient / _per_unit(g, "gradient", coil)
+    return coil.current * _scale_factor(coil, gradient, "gradient")
 
 
 def turns_for_field(coil: CoaxialCoils, B: float) -> float:
@@ -72,16 +74,12 @@ def turns_for_field(coil: CoaxialCoils, B: float) -> float:
 
     Returned as a real number; round up to wind a real coil.
     """
-    B = finite_scalar(B, "B")
-    b, _ = _centre_values(coil)
-    return coil.turns * B / _per_unit(b, "field", coil)
+    return coil.turns * _scale_factor(coil, B, "B")
 
 
 def turns_for_gradient(coil: CoaxialCoils, gradient: float) -> float:
     """Turns per coil (at the coil's current) that give the axial centre gradient (T/m)."""
-    gradient = finite_scalar(gradient, "gradient")
-    _, g = _centre_values(coil)
-    return coil.turns * gradient / _per_unit(g, "gradient", coil)
+    return coil.turns * _scale_factor(coil, gradient, "gradient")
 
 
 def wire_length(coil: CoaxialCoils) -> float:

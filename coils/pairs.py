@@ -44,9 +44,9 @@ def _winding_filaments(z0, radius, turns, current, winding, filaments, turn_layo
     return fil, (z0, radius, width, height)
 
 
-def _turns(turns) -> float:
-    val = positive(turns, "turns")
-    return val
+def _coil_parameters(radius, turns, current) -> tuple[float, float, float]:
+    """Validated (radius m > 0, turns > 0, current A finite)."""
+    return positive(radius, "radius"), positive(turns, "turns"), finite_scalar(current, "current")
 
 
 class Coil(CoaxialCoils):
@@ -83,9 +83,7 @@ class Coil(CoaxialCoils):
         filaments=(3, 3),
         turn_layout=None,
     ):
-        self.radius = positive(radius, "radius")
-        self.turns = _turns(turns)
-        self.current = finite_scalar(current, "current")
+        self.radius, self.turns, self.current = _coil_parameters(radius, turns, current)
         fil, box = _winding_filaments(
             0.0, self.radius, self.turns, self.current, winding, filaments, turn_layout
         )
@@ -122,9 +120,7 @@ class CoilPair(CoaxialCoils):
         filaments=(3, 3),
         turn_layout=None,
     ):
-        self.radius = positive(radius, "radius")
-        self.turns = _turns(turns)
-        self.current = finite_scalar(current, "current")
+        self.radius, self.turns, self.current = _coil_parameters(radius, turns, current)
         if spacing is None:
             spacing = self.default_spacing_factor * self.radius
         self.spacing = positive(spacing, "spacing")

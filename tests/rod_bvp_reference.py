@@ -110,3 +110,19 @@ def solve_bvp_rod(
         Y0[6 * j + 3] = np.interp(s, s_all, y_all)
     raw = solve_bvp(rhs, bc, tau, Y0, tol=tol, max_nodes=max_nodes)
     return BVPSolution(raw, edges)
+
+
+def bvp_tip_continued(rod, field, scales, tol=1e-9):
+    """Tip (x, y) in m of solve_bvp continued along ``scales`` (each solve starts from the
+    previous one's theta), for references at loads too large for a cold start."""
+    guess = None
+    for s in scales:
+        sol = solve_bvp_rod(rod, field, s, tol=tol, guess=guess)
+        if sol.status != 0:
+            raise RuntimeError(f"solve_bvp failed at scale {s} (status {sol.status})")
+
+        def guess(arc, sol=sol):
+            return sol.sol(arc)[0]
+
+    y = sol.sol(np.array([rod.length]))
+    return np.ravel([y[2], y[3]])

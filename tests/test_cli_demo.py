@@ -12,27 +12,13 @@ import sys
 
 import numpy as np
 import pytest
-from rod_bvp_reference import solve_bvp_rod
+from rod_bvp_reference import bvp_tip_continued
 
 from coilrod import elastica
 from coilrod.cli import main, shipped_scenes
 from coilrod.planner import plan_scene
 from coilrod.runner import run_scene
 from coilrod.scene import load_scene
-
-
-def bvp_tip(rod, field, scales):
-    """Tip (x, y) of solve_bvp continued along ``scales`` (independent reference), m."""
-    guess = None
-    for s in scales:
-        sol = solve_bvp_rod(rod, field, s, tol=1e-9, guess=guess)
-        assert sol.status == 0
-
-        def guess(arc, sol=sol):
-            return sol.sol(arc)[0]
-
-    y = sol.sol(np.array([rod.length]))
-    return np.array([y[2], y[3]]).ravel()
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +53,7 @@ def test_demo_coil_run_matches_independent_bvp(demo_out):
     from coilrod.scene import parse_scene
 
     scene = parse_scene(_demo_scene("M1", DEMO_SCENES["M1"]))
-    tip = bvp_tip(scene.rod, scene.fields["coils"], np.linspace(0.1, 1.0, 10))
+    tip = bvp_tip_continued(scene.rod, scene.fields["coils"], np.linspace(0.1, 1.0, 10))
     np.testing.assert_allclose(
         np.array(summary["shift"][0]["coil_tip_mm"]) * 1e-3, tip, atol=1e-6 * scene.rod.length
     )

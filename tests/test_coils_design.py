@@ -7,6 +7,7 @@ import pytest
 from scipy.constants import mu_0
 
 import coils
+from coils import deviation, uniformity
 from coils.design import (
     COPPER_RESISTIVITY,
     current_for_field,
@@ -15,7 +16,6 @@ from coils.design import (
     turns_for_gradient,
     winding_power,
 )
-from coils import deviation, uniformity
 
 
 def test_current_for_helmholtz_field_matches_closed_form():

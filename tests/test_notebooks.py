@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from rod_bvp_reference import bvp_tip_continued
 from scipy.constants import mu_0
 
 NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
@@ -58,8 +59,6 @@ def test_coil_design_notebook():
 
 
 def test_ideal_vs_real_notebook():
-    from rod_bvp_reference import solve_bvp_rod
-
     from coilrod import presets
     from coilrod.studies import make_pair
 
@@ -73,36 +72,12 @@ def test_ideal_vs_real_notebook():
     # the coil-field tip at R = 2 L against an independent solve_bvp continuation
     rod = presets.seed_rod(presets.M1())
     pair = make_pair("helmholtz", 2 * rod.length, 15e-3)
-    guess = None
-    for s in np.linspace(0.1, 1.0, 10):
-        sol = solve_bvp_rod(rod, pair, s, tol=1e-9, guess=guess)
-        assert sol.status == 0
-
-        def guess(arc, sol=sol):
-            return sol.sol(arc)[0]
-
-    y = sol.sol(np.array([rod.length]))
-    np.testing.assert_allclose(r["tip_real_r2"][:2], np.ravel([y[2], y[3]]), atol=1e-6 * 0.04)
+    tip = bvp_tip_continued(rod, pair, np.linspace(0.1, 1.0, 10))
+    np.testing.assert_allclose(r["tip_real_r2"][:2], tip, atol=1e-6 * 0.04)
     # a shift of more than 1% of L at R = 2 L, well under 0.2% at R = 4 L, for every design
     for shifts in r["helmholtz"].values():
         assert shifts[r["ratios"].index(4)] < 0.002
     assert r["helmholtz"]["M(1)"][r["ratios"].index(2)] > 0.01
-
-
-def bvp_tip(rod, field, scales):
-    """Tip (x, y) of an independent scipy solve_bvp continuation along ``scales``, m."""
-    from rod_bvp_reference import solve_bvp_rod
-
-    guess = None
-    for s in scales:
-        sol = solve_bvp_rod(rod, field, s, tol=1e-9, guess=guess)
-        assert sol.status == 0
-
-        def guess(arc, sol=sol):
-            return sol.sol(arc)[0]
-
-    y = sol.sol(np.array([rod.length]))
-    return np.ravel([y[2], y[3]])
 
 
 def test_seed_figures_notebook():
@@ -122,10 +97,10 @@ def test_seed_figures_notebook():
     assert r["fig5"]["ratio_high"] > r["fig5"]["ratio_low"]
     # the rod's numbers against independent solve_bvp solves of seed eq. (5)
     scales = np.linspace(0.1, 1.0, 10)
-    tip = bvp_tip(
+    tip = bvp_tip_continued(
         presets.seed_rod(presets.M2(variant="a")), coils.UniformField((0.0, 12e-3, 0.0)), scales
     )
     np.testing.assert_allclose(r["m2a_rod_tip"][:2], tip, atol=1e-6 * L)
     field_b = coils.LinearField(B0=(0.0, 5e-3, 0.0), gradient=coils.maxwell_gradient(0.4))
-    tip = bvp_tip(presets.seed_rod(presets.M3()), field_b, scales)
+    tip = bvp_tip_continued(presets.seed_rod(presets.M3()), field_b, scales)
     np.testing.assert_allclose(r["m3_tip"][:2], tip, atol=1e-6 * L)
