@@ -55,8 +55,9 @@ def _demo_scene(name: str, magnetization: dict) -> dict:
                 {"type": "helmholtz", "radius": "80 mm", "turns": 200, "B": "15 mT", "axis": "y"}
             ],
         },
-        "load": {"steps": 12},
-        "models": {"run": ["rod"]},
+        "load": {"steps": 24},
+        "models": {"run": ["rod", "fem2d"]},
+        "fem": {"order": 2, "elements2d": [40, 2]},
     }
 
 

@@ -17,7 +17,7 @@ def centerline_of(run, k: int = -1) -> np.ndarray:
     k = k % len(run.scales)
     if hasattr(res, "centerline"):
         return res.centerline(k)
-    p = np.asarray(res.mesh.p)
+    p = np.asarray(res.nodes)
     u = np.asarray(res.displacement(k))
     dim = p.shape[0]
     off = np.abs(p[1]) + (np.abs(p[2]) if dim == 3 else 0.0)
@@ -38,9 +38,20 @@ def plot_tip_vs_field(result, ax=None):
 
     from .runner import field_strength
 
-    if ax is None:
-        _, ax = plt.subplots(figsize=(6, 4.2))
     value, kind, number = field_strength(result.scene)
+    pairs = [
+        (result.run(m, "coils"), result.run(m, "ideal"))
+        for m in result.scene.models
+        if result.run(m, "coils") is not None and result.run(m, "ideal") is not None
+    ]
+    shift_ax = None
+    if ax is None:
+        if pairs:
+            _, (ax, shift_ax) = plt.subplots(
+                2, 1, figsize=(6, 6.5), sharex=True, gridspec_kw={"height_ratios": [3, 2]}
+            )
+        else:
+            _, ax = plt.subplots(figsize=(6, 4.2))
     L = result.scene.rod.length
     for r in result.runs:
         if len(r.scales) == 0:
@@ -64,6 +75,26 @@ def plot_tip_vs_field(result, ax=None):
     ax.grid(alpha=0.3)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=8)
+    if shift_ax is not None:
+        for real, ideal in pairs:
+            n = min(len(real.scales), len(ideal.scales))
+            if n == 0:
+                continue
+            shift = np.linalg.norm(real.tip[:n] - ideal.tip[:n], axis=1) / L
+            shift_ax.plot(
+                np.concatenate([[0.0], real.scales[:n] * number]),
+                np.concatenate([[0.0], 100 * shift]),
+                "-",
+                color=_COLOR.get(real.model, "k"),
+                marker="o" if real.model != "rod" else None,
+                ms=3,
+                label=real.model,
+            )
+        shift_ax.set_ylabel("tip shift coils vs ideal (% of L)")
+        shift_ax.set_xlabel(ax.get_xlabel())
+        ax.set_xlabel("")
+        shift_ax.grid(alpha=0.3)
+        shift_ax.legend(fontsize=8)
     return ax
 
 

@@ -32,7 +32,7 @@ class ModelRun:
     tip : ndarray, shape (k, 3)
         Tip positions, m (rod: centreline end; FEM: centroid of the free end face).
     tip_angle : ndarray, shape (k,)
-        Tip tangent angle, rad (NaN where the model does not define it).
+        Tip tangent angle, rad (FEM: the normal of the deformed end face).
     seconds : float
         Wall time of the solve.
     error : str
@@ -248,7 +248,7 @@ def _solve(job, scene: Scene, field_obj, progress: bool):
     if scene.poisson_ratio is not None:
         opts["poisson_ratio"] = scene.poisson_ratio
     res = solve_fem(scene.rod, field_obj, scales, dim=dim, progress=progress, **opts)
-    return res.scales, res.tip, np.full(len(res.scales), np.nan), res
+    return res.scales, res.tip, res.tip_angle, res
 
 
 def run_scene(

@@ -17,7 +17,7 @@ from rod_bvp_reference import bvp_tip_continued
 from coilrod import elastica
 from coilrod.cli import main, shipped_scenes
 from coilrod.planner import plan_scene
-from coilrod.runner import run_scene
+from coilrod.runner import field_strength, run_scene
 from coilrod.scene import load_scene
 
 
@@ -124,3 +124,33 @@ def test_seed_fig5_m42_deflects_more_at_high_field():
     ratio = deflection["config_a_m42"] / deflection["config_a_m41"]
     assert ratio[-1] > 1.05
     assert ratio[-1] > ratio[0]
+
+
+def test_demo_rod_and_fem_agree_on_the_shift(demo_out):
+    # two independent models (Kirchhoff rod, neo-Hookean continuum) see the same coil effect
+    _, out = demo_out
+    for case in ("M1", "M2a"):
+        shift = {
+            s["model"]: s for s in json.loads((out / case / "summary.json").read_text())["shift"]
+        }
+        assert set(shift) == {"rod", "fem2d"}
+        assert shift["fem2d"]["tip_shift_percent_L"] == pytest.approx(
+            shift["rod"]["tip_shift_percent_L"], abs=0.1
+        )
+        assert shift["fem2d"]["tip_angle_shift_deg"] == pytest.approx(
+            shift["rod"]["tip_angle_shift_deg"], abs=0.1
+        )
+
+
+def test_fem_scene_matches_closed_form_elastica():
+    scene = load_scene(shipped_scenes()["config_a_m1"])
+    scene.scales = scene.scales[1::3]
+    result = run_scene(scene, progress=False)
+    assert result.ok
+    _, _, lam = field_strength(scene)
+    L = scene.rod.length
+    fem = result.run("fem2d", "ideal")
+    for k, s in enumerate(fem.scales):
+        ref = elastica.elastica(s * lam, math.pi / 2, length=L)
+        np.testing.assert_allclose(fem.tip[k, :2], ref.tip, atol=0.01 * L)
+        assert fem.tip_angle[k] == pytest.approx(ref.tip_angle, abs=0.02)

@@ -18,6 +18,10 @@ class FEMResult:
         The requested field multipliers.
     tip : ndarray, shape (n, 3)
         Centroid of the deformed free end face (x = L) at each scale, m (z = 0 in 2D).
+    tip_angle : ndarray, shape (n,)
+        Angle (rad, from +x, unwrapped along the path) of the deformed tip tangent: the normal
+        of the free end face, taken as the image of the section's y direction (least squares
+        over the face nodes) turned by -pi/2 -- the rod model's tip angle.
     converged : ndarray, shape (n,)
         True for every returned state (unreachable loads raise ``ConvergenceError``).
     iterations : ndarray, shape (n,)
@@ -41,8 +45,24 @@ class FEMResult:
         self.dim = assembler.dim
         self.order = assembler.order
         self.tip = np.array([assembler.tip(u) for u in self._states]).reshape(-1, 3)
+        self.tip_angle = self._tip_angles()
         self.converged = np.ones(len(self._states), dtype=bool)
         self.iterations = np.asarray(stats.iterations, dtype=int)
+
+    def _tip_angles(self) -> np.ndarray:
+        X = self.nodes
+        length = X[0].max()
+        face = np.abs(X[0] - length) <= 1e-9 * max(length, 1e-300)
+        # deformed face positions ~ c + Y a + Z b: a is the image of the section's y axis
+        cols = [np.ones(face.sum()), X[1, face]] + ([X[2, face]] if self.dim == 3 else [])
+        design = np.column_stack(cols)
+        angles = np.empty(len(self._states))
+        for k in range(len(self._states)):
+            x = self.deformed_nodes(k)[:2, face].T
+            coef = np.linalg.lstsq(design, x, rcond=None)[0]
+            a = coef[1]
+            angles[k] = np.arctan2(a[1], a[0]) - np.pi / 2
+        return np.unwrap(np.concatenate([[0.0], angles]))[1:]
 
     def __len__(self) -> int:
         return len(self._states)

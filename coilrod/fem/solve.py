@@ -95,8 +95,9 @@ def solve_fem(
         Extrapolation to the next load step.
     line_search : bool
         Backtracking line search on each Newton update.
-    progress : callable, optional
-        Called as ``progress(k, scale)`` after each requested scale converges.
+    progress : bool or callable, optional
+        True shows a tqdm progress bar over the scales; a callable is called as
+        ``progress(k, scale)`` after each requested scale converges.
 
     Returns
     -------
@@ -180,5 +181,23 @@ def solve_fem(
         predictor=predictor,
         line_search=bool(line_search),
     )
-    states, stats = continuation(asm, scales, opts, progress)
+    bar = None
+    if progress is True:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=len(scales), desc=f"solve_fem {dim}D", unit="scale")
+
+        def progress(k, scale):
+            bar.update(1)
+            bar.set_postfix(scale=f"{scale:.3g}")
+
+    elif not progress:
+        progress = None
+    elif not callable(progress):
+        raise ValueError(f"progress must be a bool or a callable; got {progress!r}")
+    try:
+        states, stats = continuation(asm, scales, opts, progress)
+    finally:
+        if bar is not None:
+            bar.close()
     return FEMResult(asm, scales, states, stats)
