@@ -154,3 +154,20 @@ def test_fem_scene_matches_closed_form_elastica():
         ref = elastica.elastica(s * lam, math.pi / 2, length=L)
         np.testing.assert_allclose(fem.tip[k, :2], ref.tip, atol=0.01 * L)
         assert fem.tip_angle[k] == pytest.approx(ref.tip_angle, abs=0.02)
+
+
+@pytest.mark.slow
+def test_maxwell_scene_rod_fem_and_bvp_agree():
+    # Config (B) with real coils: the rod's coil-field tip against an independent solve_bvp, and
+    # the rod and FEM shifts against each other
+    scene = load_scene(shipped_scenes()["maxwell_vs_ideal"])
+    result = run_scene(scene, progress=False)
+    assert result.ok
+    L = scene.rod.length
+    tip = bvp_tip_continued(scene.rod, scene.fields["coils"], scene.scales)
+    np.testing.assert_allclose(result.run("rod", "coils").tip[-1, :2], tip, atol=1e-6 * L)
+    shift = {s["model"]: s for s in result.shift()}
+    assert shift["rod"]["tip_shift_percent_L"] > 0.5
+    assert shift["fem2d"]["tip_shift_percent_L"] == pytest.approx(
+        shift["rod"]["tip_shift_percent_L"], abs=0.1
+    )
