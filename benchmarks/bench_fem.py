@@ -19,13 +19,13 @@ from __future__ import annotations
 
 import math
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 
+from _machine import best_wall as best  # noqa: E402
 from _machine import machine_info  # noqa: E402
 
 import coilrod  # noqa: E402
@@ -45,15 +45,6 @@ OUT: list[str] = []
 def emit(line: str = "") -> None:
     print(line, flush=True)
     OUT.append(line)
-
-
-def best(fn, repeat=3):
-    t_best, out = math.inf, None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        t_best = min(t_best, time.perf_counter() - t0)
-    return t_best, out
 
 
 def box_rod():

@@ -14,6 +14,8 @@ and says what it does not need to compute, so solvers can skip work:
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
+
 import numpy as np
 
 from ._validate import as_points, finite_scalar
@@ -24,7 +26,7 @@ __all__ = ["Field", "FieldSum", "ScaledField"]
 CHUNK = 65536
 
 
-class Field:
+class Field(ABC):
     """Base class of all magnetic field sources (a protocol with shared conveniences).
 
     Subclasses implement ``_B(points)`` and ``_gradient(points)`` on validated ``(n, 3)`` arrays;
@@ -101,8 +103,9 @@ class Field:
     __rmul__ = __mul__
 
     # -- defaults for subclasses ---------------------------------------------------------------
+    @abstractmethod
     def _B(self, pts: np.ndarray) -> np.ndarray:
-        raise NotImplementedError(f"{type(self).__name__} must implement _B")
+        """B (n, 3) in T at validated points (n, 3) in m; every source implements it."""
 
     def _gradient(self, pts: np.ndarray) -> np.ndarray:
         return self._B_and_gradient(pts)[1]
