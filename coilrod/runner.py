@@ -50,6 +50,12 @@ class ModelRun:
     error: str = ""
     result: object = None
 
+    @property
+    def stable(self) -> np.ndarray:
+        """Stability flag per reached scale, shape (k,) (True where the model does not say)."""
+        flags = getattr(self.result, "stable", None)
+        return np.ones(len(self.scales), bool) if flags is None else np.asarray(flags, bool)
+
 
 def field_strength(scene: Scene) -> tuple[float, str, float]:
     """Reference strength of the scene's field at scale 1 and the magneto-elastic number.
@@ -110,6 +116,7 @@ class SceneResult:
                         "tip_y_mm": 1e3 * float(r.tip[k, 1]),
                         "tip_deflection_over_L": float(r.tip[k, 1] / L),
                         "tip_angle_deg": float(np.degrees(r.tip_angle[k])),
+                        "stable": bool(r.stable[k]),
                     }
                 )
         return rows
@@ -157,6 +164,8 @@ class SceneResult:
         ]
         for r in self.runs:
             status = "ok" if not r.error else f"FAILED: {r.error}"
+            if not r.error and not r.stable.all():
+                status += f", UNSTABLE at {np.count_nonzero(~r.stable)} scale(s)"
             if len(r.scales):
                 tip = 1e3 * r.tip[-1]
                 lines.append(

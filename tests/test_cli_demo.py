@@ -171,3 +171,35 @@ def test_maxwell_scene_rod_fem_and_bvp_agree():
     assert shift["fem2d"]["tip_shift_percent_L"] == pytest.approx(
         shift["rod"]["tip_shift_percent_L"], abs=0.1
     )
+
+
+def test_runner_reports_buckling_in_both_models():
+    # M(1) in a field antiparallel to it: rod and FEM stay straight and both report the loss of
+    # stability past the Euler load lambda = pi^2/4 (about 2.47) in the table and the summary
+    import warnings
+
+    from coilrod.scene import parse_scene
+
+    scene = parse_scene(
+        {
+            "robot": {
+                "length": "40 mm",
+                "width": "3 mm",
+                "thickness": "2 mm",
+                "youngs_modulus": "1 MPa",
+                "magnetization": {"preset": "M1"},
+            },
+            "field": {"type": "uniform", "B": "5 mT", "direction": "-x"},
+            "load": {"scales": [0.5, 1.0]},
+            "models": {"run": ["rod", "fem2d"]},
+        }
+    )
+    lam = field_strength(scene)[2]
+    assert 0.5 * lam < math.pi**2 / 4 < lam
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = run_scene(scene, progress=False)
+    for model in ("rod", "fem2d"):
+        rows = [r for r in result.table() if r["model"] == model]
+        assert [r["stable"] for r in rows] == [True, False]
+    assert result.summary().count("UNSTABLE") == 2

@@ -79,17 +79,34 @@ def test_unreachable_load_raises_with_progress(rod):
 def test_compressive_gradient_force(rod):
     """Maxwell gradient with B antiparallel to M along the rod: compressive body force and a
     destabilising torque.  The path is continued (with a tiny transverse imperfection) and
-    matches the elastica continued along the same path."""
+    matches the elastica continued along the same path -- the near-straight branch, which is
+    unstable past gamma ~ 2: the solver stays on it and says so (StabilityWarning, stable
+    False), while the rod solver's stable branch bends away (tip y ~ 0.75 L)."""
     g = 10 * rod.bending_stiffness / (rod.magnetization.max_magnitude(L) * rod.area * L**3)
     field = coils.LinearField(
         (0.0, 1e-2 * rod.field_for_lambda(1.0), 0.0), coils.maxwell_gradient(g), (0.0, 0.0, 0.0)
     )
     scales = np.linspace(0.5, 4.0, 8)
     ref = elastica_tips(rod, field, scales, substeps=2)
-    res = coilrod.solve_fem(rod, field, scales, dim=2, elements=(20, 1))
+    with pytest.warns(coilrod.StabilityWarning, match="already unstable"):
+        res = coilrod.solve_fem(rod, field, scales, dim=2, elements=(20, 1))
     assert np.all(np.isfinite(res.tip))
     assert _err(res, ref).max() < 0.01
     assert res.tip[-1, 0] < L  # the body is compressed
+    assert not res.stable.any()
+    # the same field from a small load: stable first, then the loss of stability is reported
+    with pytest.warns(coilrod.StabilityWarning, match="lost stability"):
+        early = coilrod.solve_fem(rod, field, [0.05, 0.1, 0.5], dim=2, elements=(20, 1))
+    np.testing.assert_array_equal(early.stable, [True, True, False])
+    # the rod solver, continued from the unloaded state, follows the stable bent branch, far
+    # from the FEM's near-straight (unstable) state
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", coilrod.StabilityWarning)
+        bent = coilrod.solve_rod(rod, field, scales)
+    assert bent.stable.all()
+    assert bent.tip[-1, 1] > 0.5 * L
 
 
 @pytest.mark.stress
@@ -130,3 +147,31 @@ def test_inverted_state_is_reported_not_nan(rod):
     ev = asm.evaluate(z, 1.0)
     assert not ev.ok
     assert ev.min_jacobian <= 0
+
+
+@pytest.mark.parametrize(("dim", "width"), [(2, 2e-3), (3, 3e-3)])
+def test_antiparallel_field_loses_stability_at_euler_load(dim, width):
+    # M along +x, B along -x: the straight state is an equilibrium for every field, stable below
+    # the clamped-free Euler load lambda = pi^2/4 of rod theory and unstable above it.  (In 3D a
+    # wider-than-thick section keeps the out-of-plane mode, at (w/t)^2 pi^2/4, out of the range.)
+    import coils
+    from coilrod import Rectangle, Rod, StabilityWarning, presets, solve_fem
+
+    rod = Rod(0.04, 1e6, Rectangle(width, 2e-3), presets.M1())
+    field = coils.UniformField((-rod.field_for_lambda(1.0), 0.0, 0.0))
+    lams = np.array([1.0, 2.0, 2.3, 2.7, 3.5])
+    with pytest.warns(StabilityWarning, match="lost stability between scales 2.3 and 2.7"):
+        res = solve_fem(rod, field, lams, dim=dim)
+    assert np.pi**2 / 4 == pytest.approx(2.467, abs=1e-3)
+    np.testing.assert_array_equal(res.stable, [True, True, True, False, False])
+    np.testing.assert_allclose(res.tip[:, 1], 0.0, atol=1e-9 * rod.length)  # stayed straight
+
+
+def test_bent_path_stays_stable():
+    import coils
+    from coilrod import presets, solve_fem
+
+    rod = presets.seed_rod(presets.M1())
+    field = coils.UniformField((0.0, rod.field_for_lambda(1.0), 0.0))
+    res = solve_fem(rod, field, [1.0, 5.0, 10.0], dim=2)
+    assert res.stable.all()

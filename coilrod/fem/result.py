@@ -24,6 +24,10 @@ class FEMResult:
         over the face nodes) turned by -pi/2 -- the rod model's tip angle.
     converged : ndarray, shape (n,)
         True for every returned state (unreachable loads raise ``ConvergenceError``).
+    stable : ndarray, shape (n,)
+        False where the (condensed) tangent has an odd number of negative eigenvalues, i.e. an
+        eigenvalue crossed zero since the unloaded state (sign of its determinant from the
+        Newton factorisation).  Two eigenvalues crossing together cancel: a guard, not a proof.
     iterations : ndarray, shape (n,)
         Newton iterations spent reaching each scale from the previous one.
     mesh : skfem.Mesh
@@ -47,6 +51,7 @@ class FEMResult:
         self.tip = np.array([assembler.tip(u) for u in self._states]).reshape(-1, 3)
         self.tip_angle = self._tip_angles()
         self.converged = np.ones(len(self._states), dtype=bool)
+        self.stable = np.asarray(stats.det_signs, dtype=int) > 0
         self.iterations = np.asarray(stats.iterations, dtype=int)
 
     def _tip_angles(self) -> np.ndarray:

@@ -200,4 +200,32 @@ def solve_fem(
     finally:
         if bar is not None:
             bar.close()
-    return FEMResult(asm, scales, states, stats)
+    result = FEMResult(asm, scales, states, stats)
+    _report_stability_changes(result)
+    return result
+
+
+def _report_stability_changes(result) -> None:
+    """Warn (StabilityWarning) where the path loses or regains stability between two scales:
+    the solver stays on its branch, so a bifurcation is reported, never crossed silently."""
+    import warnings
+
+    from coilrod.rod_result import StabilityWarning
+
+    st = result.stable
+    for k in range(1, len(st)):
+        if st[k] != st[k - 1]:
+            what = "regained" if st[k] else "lost"
+            warnings.warn(
+                f"the FEM equilibrium path {what} stability between scales "
+                f"{result.scales[k - 1]:g} and {result.scales[k]:g} (the tangent's determinant "
+                "changed sign): a bifurcation or limit point",
+                StabilityWarning,
+                stacklevel=3,
+            )
+    if len(st) and not st[0]:
+        warnings.warn(
+            f"the FEM equilibrium at the first scale {result.scales[0]:g} is already unstable",
+            StabilityWarning,
+            stacklevel=3,
+        )

@@ -25,7 +25,7 @@ import numpy as np
 
 from coilrod.errors import ConvergenceError
 
-__all__ = ["NewtonOptions", "SolveStats", "continuation"]
+__all__ = ["NewtonOptions", "SolveStats", "continuation", "determinant_sign"]
 
 
 @dataclass(frozen=True)
@@ -61,10 +61,34 @@ class SolveStats:
     """Counters of one continuation: Newton iterations, evaluations and factorisations."""
 
     iterations: list = field(default_factory=list)  # Newton iterations per requested scale
+    det_signs: list = field(default_factory=list)  # sign of det(tangent) per requested scale
     evaluations: int = 0
     factorizations: int = 0
     cuts: int = 0
     steps: int = 0
+
+
+def _permutation_parity(perm: np.ndarray) -> int:
+    """Parity (0 even, 1 odd) of a permutation: (n - number of cycles) mod 2."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = perm.size
+    graph = coo_matrix((np.ones(n), (np.arange(n), perm)), shape=(n, n))
+    cycles = connected_components(graph, directed=True, connection="weak")[0]
+    return (n - cycles) % 2
+
+
+def determinant_sign(lu) -> int:
+    """Sign (+1 or -1) of the determinant of the matrix factorised by ``scipy splu``.
+
+    ``Pr A Pc = L U`` with unit-diagonal L: the sign is that of prod(diag U) times the
+    parities of the two permutations.  For a symmetric tangent, a change of sign along the
+    path means an odd number of eigenvalues crossed zero: a loss (or gain) of stability.
+    """
+    negative = int(np.count_nonzero(lu.U.diagonal() < 0))
+    odd = (negative + _permutation_parity(lu.perm_r) + _permutation_parity(lu.perm_c)) % 2
+    return -1 if odd else 1
 
 
 #: A full Newton step is accepted if it raises the residual norm by at most this factor.
@@ -168,11 +192,13 @@ def continuation(asm, scales, opts: NewtonOptions, progress=None):
     atol = 1e4 * np.finfo(float).eps * max(asm.bulk, asm.shear) * asm.w.sum() / asm.length
     states = []
     asm._lu = None
+    ev0 = asm.evaluate(u, 0.0, tangent=True)  # the unloaded, stable reference state
+    stats.evaluations += 1
+    stats.factorizations += 1
+    lu0 = asm.factorize(ev0)
+    sign0 = determinant_sign(lu0)
     if opts.predictor != "none":  # the linear response starts the path
-        ev0 = asm.evaluate(u, 0.0, tangent=True)
-        stats.evaluations += 1
-        stats.factorizations += 1
-        rate = asm.load_tangent(ev0, asm.factorize(ev0))
+        rate = asm.load_tangent(ev0, lu0)
     for target in scales:
         target = float(target)
         h = target - s_cur
@@ -227,6 +253,12 @@ def continuation(asm, scales, opts: NewtonOptions, progress=None):
             h = 2.0 * ds if its <= 4 and cuts == 0 else ds
             cuts = 0
         stats.iterations.append(its_here)
+        # stability from the last Newton factorisation (within utol * L of the state); a step
+        # that converged without iterating left none at this state: factorise its tangent
+        if asm._lu is None or its == 0:
+            asm._lu = asm.factorize(ev)
+            stats.factorizations += 1
+        stats.det_signs.append(determinant_sign(asm._lu) * sign0)
         states.append(u.copy())
         if progress is not None:
             progress(len(states) - 1, target)
