@@ -170,7 +170,7 @@ def plot_shift(
         _, ax = plt.subplots(figsize=(6, 4))
     xs = [r[x] if np.ndim(r[x]) == 0 else r[x][0] for r in rows]
     ys = [100 * r["tip_shift_over_L"] if percent else r["tip_shift"] for r in rows]
-    ax.semilogy(xs, ys, "o-", label=label or None)
+    ax.loglog(xs, ys, "o-", label=label or None)
     ax.set_xlabel({"radius_over_length": "coil radius / robot length R/L"}.get(x, x))
     ax.set_ylabel("tip shift, real vs ideal (% of L)" if percent else "tip shift (m)")
     ax.grid(alpha=0.3, which="both")
