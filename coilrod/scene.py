@@ -153,10 +153,10 @@ def _number(
     value = data[name]
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise SceneError(f"{full}: expected a number; got {value!r}")
-    if integer and int(value) != value:
-        raise SceneError(f"{full}: expected an integer; got {value!r}")
     if not math.isfinite(value):
         raise SceneError(f"{full}: must be finite; got {value!r}")
+    if integer and int(value) != value:
+        raise SceneError(f"{full}: expected an integer; got {value!r}")
     if positive and value <= 0:
         raise SceneError(f"{full}: must be positive; got {value!r}")
     if low is not None and value < low:
@@ -171,8 +171,11 @@ def _axis(value, key: str) -> np.ndarray:
         from coils._validate import as_axis
 
         return as_axis(value, key)
-    except ValueError as exc:
-        raise SceneError(str(exc)) from None
+    except (ValueError, TypeError):
+        raise SceneError(
+            f"{key}: expected 'x', 'y', 'z' (optionally signed, e.g. '-x') or a list of 3 "
+            f"numbers; got {value!r}"
+        ) from None
 
 
 def _vector(value, dimension: str, key: str) -> np.ndarray:
@@ -225,6 +228,12 @@ def _parse_magnetization(data, length: float, key: str) -> Magnetization:
         if preset == "M4.1":
             return presets.M41(length, M0=M0)
         segment = _number(data, "segment", key, integer=True, default=-1)
+        n_seg = len(presets.EXAMPLE_M41_LAYOUT["fractions"])
+        if not -n_seg <= segment < n_seg:
+            raise SceneError(
+                f"{key}.segment: the M(4.x) layout has {n_seg} segments (index 0 at the clamp, "
+                f"-1 at the tip); got {segment}"
+            )
         angle = _quantity(data, "segment_angle", "angle", key, default=-math.pi / 4)
         return presets.M42(length, M0=M0, segment=segment, angle=angle)
     if "segments" in data:
@@ -319,7 +328,7 @@ def _parse_coil(data, key: str) -> coils.Field:
     )
     kind = data["type"]
     classes = {"helmholtz": coils.HelmholtzPair, "maxwell": coils.MaxwellPair, "coil": coils.Coil}
-    if kind not in classes:
+    if not isinstance(kind, str) or kind not in classes:
         raise SceneError(f"{key}.type: unknown coil type {kind!r} (one of {', '.join(classes)})")
     radius = _quantity(data, "radius", "length", key, positive=True)
     turns = _number(data, "turns", key, positive=True)
@@ -336,11 +345,26 @@ def _parse_coil(data, key: str) -> coils.Field:
             raise SceneError(
                 f"{key}.winding: expected ['width', 'height'], e.g. ['10 mm', '10 mm']"
             )
-        kwargs["winding"] = tuple(
-            parse_quantity(v, "length", f"{key}.winding[{i}]") for i, v in enumerate(w)
-        )
+        try:
+            kwargs["winding"] = tuple(
+                parse_quantity(v, "length", f"{key}.winding[{i}]") for i, v in enumerate(w)
+            )
+        except UnitError as exc:
+            raise SceneError(str(exc)) from None
         if "filaments" in data:
-            kwargs["filaments"] = tuple(int(v) for v in data["filaments"])
+            f = data["filaments"]
+            if (
+                not isinstance(f, list)
+                or len(f) != 2
+                or not all(isinstance(n, int) and not isinstance(n, bool) and n > 0 for n in f)
+            ):
+                raise SceneError(
+                    f"{key}.filaments: expected two positive integers (axial, radial), "
+                    f"e.g. [3, 3]; got {f!r}"
+                )
+            kwargs["filaments"] = tuple(f)
+    elif "filaments" in data:
+        raise SceneError(f"{key}.filaments: filaments model a finite winding; give winding too")
     given = [k for k in ("current", "B", "gradient") if k in data]
     if len(given) != 1:
         raise SceneError(

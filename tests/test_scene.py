@@ -6,6 +6,8 @@ import sys
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import coils
 from coilrod.cli import main, shipped_scenes
@@ -178,3 +180,109 @@ def test_cli_help_teaches():
     assert proc.returncode == 0
     for word in ("demo", "run", "check", "scenes", "40 mm", "examples"):
         assert word in proc.stdout
+
+
+FULL = {
+    "name": "every key",
+    "robot": {
+        "length": "40 mm",
+        "diameter": "2 mm",
+        "youngs_modulus": "1 MPa",
+        "poisson_ratio": 0.45,
+        "magnetization": {
+            "preset": "M4.2",
+            "M0": "640 kA/m",
+            "segment": 1,
+            "segment_angle": "10 deg",
+        },
+    },
+    "field": {
+        "type": "coils",
+        "compare_ideal": True,
+        "coil": [
+            {
+                "type": "helmholtz",
+                "radius": "80 mm",
+                "turns": 200,
+                "B": "15 mT",
+                "axis": "y",
+                "center": ["0 mm", "0 mm", "0 mm"],
+                "winding": ["5 mm", "5 mm"],
+                "filaments": [2, 2],
+                "spacing": "80 mm",
+            }
+        ],
+    },
+    "load": {"steps": 4, "max_scale": 1.0},
+    "models": {"run": ["rod"]},
+    "rod": {"nodes": 32},
+    "fem": {"order": 2, "elements2d": [10, 1], "elements3d": [10, 1, 1]},
+    "output": {"figures": True, "tables": False},
+}
+
+
+def _key_paths(node, prefix=()):
+    if isinstance(node, dict):
+        items = node.items()
+    elif isinstance(node, list):
+        items = enumerate(node)
+    else:
+        return
+    for k, v in items:
+        yield (*prefix, k)
+        yield from _key_paths(v, (*prefix, k))
+
+
+_PATHS = list(_key_paths(FULL))
+_JUNK = [
+    None,
+    0,
+    -1,
+    1.5,
+    float("nan"),
+    float("inf"),
+    "",
+    "abc",
+    "5",
+    "5 mm",
+    "-5 mm",
+    "5 T",
+    [],
+    [1],
+    ["1 mm"],
+    {},
+    {"a": 1},
+    True,
+    "nan mm",
+    "1e400 mm",
+    [0, 0],
+    [-1, 2],
+    "-x",
+]
+
+
+def test_full_scene_is_valid():
+    scene = parse_scene(FULL)
+    assert scene.fields["coils"].winding == (5e-3, 5e-3)
+
+
+@pytest.mark.stress
+@settings(max_examples=400, deadline=None)
+@given(path=st.sampled_from(_PATHS), value=st.sampled_from(_JUNK))
+def test_any_corrupted_value_gives_a_scene_error(path, value):
+    """Whatever a user writes in any key, the answer is a valid scene or a SceneError naming
+    the problem -- never another exception (which the CLI would show as a traceback)."""
+    data = copy.deepcopy(FULL)
+    node = data
+    for k in path[:-1]:
+        node = node[k]
+    if value is None and isinstance(node, dict):
+        del node[path[-1]]
+    else:
+        node[path[-1]] = value
+    try:
+        parse_scene(data)
+        message = "ok"
+    except SceneError as exc:
+        message = str(exc)
+    assert message
