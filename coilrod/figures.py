@@ -94,7 +94,8 @@ def plot_tip_vs_field(result, ax=None):
         shift_ax.set_xlabel(ax.get_xlabel())
         ax.set_xlabel("")
         shift_ax.grid(alpha=0.3)
-        shift_ax.legend(fontsize=8)
+        if shift_ax.get_legend_handles_labels()[0]:
+            shift_ax.legend(fontsize=8)
     return ax
 
 

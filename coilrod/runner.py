@@ -260,6 +260,13 @@ def _solve(job, scene: Scene, field_obj, progress: bool):
     return res.scales, res.tip, res.tip_angle, res
 
 
+def scene_with_scales(scene: Scene, scales) -> Scene:
+    """A copy of ``scene`` with another load path."""
+    import dataclasses
+
+    return dataclasses.replace(scene, scales=np.asarray(scales, dtype=float))
+
+
 def run_scene(
     scene: Scene, *, plan: Plan | None = None, progress: bool | None = None, log=None
 ) -> SceneResult:
@@ -305,15 +312,23 @@ def run_scene(
                 )
             )
         except ConvergenceError as exc:
-            result.runs.append(
-                ModelRun(
-                    job.model,
-                    job.field_label,
-                    np.zeros(0),
-                    np.zeros((0, 3)),
-                    np.zeros(0),
-                    time.perf_counter() - t0,
-                    error=str(exc),
-                )
+            run = ModelRun(
+                job.model,
+                job.field_label,
+                np.zeros(0),
+                np.zeros((0, 3)),
+                np.zeros(0),
+                time.perf_counter() - t0,
+                error=str(exc),
             )
+            # keep the part of the path that was reached (cheap for the rod: solve it again)
+            reachable = scene.scales[scene.scales <= exc.reached]
+            if job.model == "rod" and reachable.size and np.all(np.diff(scene.scales) > 0):
+                partial = scene_with_scales(scene, reachable)
+                try:
+                    scales, tip, angle, res = _solve(job, partial, field_obj, progress)
+                    run.scales, run.tip, run.tip_angle, run.result = scales, tip, angle, res
+                except ConvergenceError:  # pragma: no cover - the reached scales converged
+                    pass
+            result.runs.append(run)
     return result

@@ -203,3 +203,23 @@ def test_runner_reports_buckling_in_both_models():
         rows = [r for r in result.table() if r["model"] == model]
         assert [r["stable"] for r in rows] == [True, False]
     assert result.summary().count("UNSTABLE") == 2
+
+
+@pytest.mark.slow
+def test_unreachable_load_exit_1_keeps_reached_path(tmp_path, capsys):
+    # a Helmholtz pair smaller than the robot: beyond the coils the field turns back and the rod
+    # meets a fold near 0.41 of the load; the run says so, keeps the path up to there, exits 1
+    scene = tmp_path / "small_pair.toml"
+    scene.write_text(
+        '[robot]\nlength = "40 mm"\ndiameter = "2 mm"\nyoungs_modulus = "1 MPa"\n'
+        'magnetization = { preset = "M1" }\n[field]\ntype = "coils"\n'
+        'coil = [ { type = "helmholtz", radius = "30 mm", turns = 200, B = "15 mT", '
+        'axis = "y" } ]\n[load]\nsteps = 5\n[models]\nrun = ["rod"]\n'
+    )
+    assert main(["run", str(scene), "--out", str(tmp_path / "out"), "--quiet"]) == 1
+    out = capsys.readouterr().out
+    assert "FAILED" in out
+    assert "limit point" in out
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    run = next(r for r in summary["runs"] if r["field"] == "coils")
+    assert run["scales_reached"] == 2  # 0.2 and 0.4 of the load, before the fold
