@@ -1,0 +1,32 @@
+"""The README's library example runs as written, and its numbers hold up."""
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+def test_library_example_runs(capsys):
+    text = README.read_text(encoding="utf-8")
+    block = re.search(r"```python\n(.*?)```", text, re.S).group(1)
+    namespace: dict = {}
+    exec(compile(block, "README.md", "exec"), namespace)  # noqa: S102
+    L = namespace["rod"].length
+    real, ideal, fem = namespace["real"], namespace["ideal"], namespace["fem"]
+    # the real pair moves the tip (R = 2 L: more than 1% of L) and the FEM agrees with the rod
+    assert np.linalg.norm(real.tip[-1] - ideal.tip[-1]) > 0.01 * L
+    assert np.linalg.norm(fem.tip[-1] - real.tip[-1]) < 0.01 * L
+    assert "within 1% of ideal" in capsys.readouterr().out
+
+
+def test_quick_start_test_command_is_what_ci_runs():
+    text = README.read_text(encoding="utf-8")
+    quick = re.search(r"## Quick start\n\n```bash\n(.*?)```", text, re.S).group(1).splitlines()
+    assert len(quick) == 2
+    ci = (README.parent / ".ci" / "run").read_text()
+    test_command = quick[1].split("&&")[-1].strip()
+    assert test_command == "python -m pytest"
+    assert ci.strip().splitlines()[-1].strip() == test_command
+    assert 'pip install -e ".[test]"' in ci
