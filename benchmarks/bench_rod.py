@@ -8,7 +8,7 @@ Prints (and writes to benchmarks/results/rod.md):
    elastica (coilrod.elastica); the time ratio;
 2. time against error as the node count grows (one mesh and Richardson-extrapolated);
 3. the cost of a real-coil solve (Helmholtz and Maxwell pairs, Biot-Savart with exact gradients
-   and finite-difference Hessians) against the solve in the pair's ``ideal()`` field.
+   and closed-form Hessians) against the solve in the pair's ``ideal()`` field.
 
 Run:  python benchmarks/bench_rod.py
 """

@@ -143,10 +143,11 @@ def solve_rod(
         Show a tqdm progress bar.
     hessian_lag : float
         Quasi-Newton option for fields with a non-constant gradient: reuse the field's second
-        derivatives (``field.hessian``, six gradient evaluations for a coil) in the Jacobian
-        while the centreline stays within ``hessian_lag * L`` of where they were evaluated.
-        0 (default): exact Jacobian at every iterate.  The converged states do not depend on
-        it (only the Jacobian does); ``1e-3`` roughly halves the cost of a coil-field solve.
+        derivatives (``field.hessian``, closed form for coils, about the cost of one gradient
+        evaluation) in the Jacobian while the centreline stays within ``hessian_lag * L`` of
+        where they were evaluated.  0 (default): exact Jacobian at every iterate.  The converged
+        states do not depend on it (only the Jacobian does); ``1e-3`` saves about 10% of a
+        coil-field solve.
 
     Returns
     -------

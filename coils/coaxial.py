@@ -12,7 +12,7 @@ from scipy.constants import mu_0
 
 from ._validate import as_axis, as_vector
 from .field import CHUNK, Field, FieldSum, ScaledField
-from .loop import loop_B_and_gradient_local
+from .loop import SYMMETRIC_EXPANSION, loop_B_and_gradient_local, loop_hessian_local
 
 __all__ = ["CoaxialCoils", "frame_from_axis", "coaxial_parts", "winding_mask"]
 
@@ -46,6 +46,12 @@ class CoaxialCoils(Field):
         Common centre, m.
     windings : sequence of (z0, radius, width, height), optional
         Winding cross-sections (m) inside which the field is not evaluated.
+
+    Notes
+    -----
+    B, the gradient and the hessian are all exact closed forms (elliptic integrals, with power
+    series near the axis; :mod:`coils.loop`), evaluated in the coils' frame and rotated to the
+    global one with one matrix product per chunk of points.
     """
 
     def __init__(self, filaments, axis="z", center=(0.0, 0.0, 0.0), windings=()):
@@ -93,6 +99,16 @@ class CoaxialCoils(Field):
                         f"radius {a} m): the filament model does not hold there"
                     )
 
+    def _local_kernel(self, pts: np.ndarray, kernel, *args):
+        """Run ``kernel(local, filaments, *args, nearest)`` on one chunk of global points and
+        check that no point is on a winding; returns the kernel's result (local frame)."""
+        local = self.to_local(pts)
+        nearest = np.empty(local.shape[0])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out = kernel(local, self.filaments, *args, nearest)
+        self._check_not_on_winding(local, nearest)
+        return out
+
     def _evaluate(self, pts: np.ndarray, with_gradient: bool):
         n = pts.shape[0]
         B = np.empty((n, 3))
@@ -101,15 +117,26 @@ class CoaxialCoils(Field):
         RR = np.kron(R, R)  # G_global = R g R^T as one (n x 9) @ (9 x 9) product
         for start in range(0, n, CHUNK):
             sl = slice(start, min(start + CHUNK, n))
-            local = self.to_local(pts[sl])
-            nearest = np.empty(local.shape[0])
-            with np.errstate(divide="ignore", invalid="ignore"):
-                b, g = loop_B_and_gradient_local(local, self.filaments, with_gradient, nearest)
-            self._check_not_on_winding(local, nearest)
+            b, g = self._local_kernel(pts[sl], loop_B_and_gradient_local, with_gradient)
             B[sl] = (_MU0_SCALE * b) @ R.T
             if with_gradient:
                 G[sl] = (g.reshape(-1, 9) @ (_MU0_SCALE * RR.T)).reshape(-1, 3, 3)
         return B, G
+
+    def _hessian(self, pts: np.ndarray) -> np.ndarray:
+        """Closed-form hessian (n, 3, 3, 3), T/m^2: see :func:`coils.loop.loop_hessian_local`."""
+        n = pts.shape[0]
+        H = np.empty((n, 3, 3, 3))
+        R = self.rotation
+        # H_IJL = R_Ii R_Jj R_Ll h_ijl, from the 10 distinct local entries: one (n x 10) @ (10 x 27)
+        RRR = _MU0_SCALE * np.einsum("ai,bj,cl->ijlabc", R, R, R).reshape(27, 27)
+        to_global = SYMMETRIC_EXPANSION @ RRR
+        step = max(1, CHUNK // len(self.filaments))  # the kernel's temporaries are (chunk, f)
+        for start in range(0, n, step):
+            sl = slice(start, min(start + step, n))
+            h = self._local_kernel(pts[sl], _hessian_unique)
+            H[sl] = (h @ to_global).reshape(-1, 3, 3, 3)
+        return H
 
     # -- tier 3 entry points (validated by Field) -------------------------------------------
     def _B(self, pts):
@@ -148,6 +175,11 @@ class CoaxialCoils(Field):
         from .ideal import linearize
 
         return linearize(self, self.center, zero_tol)
+
+
+def _hessian_unique(local, filaments, nearest):
+    """The 10 distinct hessian entries in the local frame (see :func:`loop_hessian_local`)."""
+    return loop_hessian_local(local, filaments, nearest, unique_only=True)
 
 
 def coaxial_parts(field: Field):

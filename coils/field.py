@@ -72,7 +72,10 @@ class Field(ABC):
     def hessian(self, points) -> np.ndarray:
         """Second derivatives ``H[k, i, j, l] = d2B_i/(dx_j dx_l)``, shape (n, 3, 3, 3), T/m^2.
 
-        Zero for linear fields.  Sources without a closed form use a central difference of
+        Zero for linear fields.  Coils (:class:`coils.coaxial.CoaxialCoils`: single coils,
+        Helmholtz and Maxwell pairs, also inside sums and scalings) give it in exact closed
+        form, symmetric in all three indices and traceless to rounding; a gridded field gives
+        the second derivatives of its interpolant.  Other sources use a central difference of
         their exact gradient (step ``1e-4`` of the source's length scale), accurate to about
         ``1e-8`` relative; it is used only in Newton tangents, where it costs no accuracy of the
         converged state.

@@ -22,7 +22,7 @@ one ghost layer of nodes outside the box so the differences are central at the b
 the cross-derivative basis functions, so the interpolation error stays ``O(h^4)`` for B and
 ``O(h^3)`` for the gradient (``O(h^2)`` for the hessian), the orders of tricubic Hermite
 interpolation with exact data.  ``cross="hessian"`` takes the second mixed derivatives from
-``field.hessian`` instead (six extra gradient evaluations per node, same order).
+``field.hessian`` instead (closed form for coils; same order).
 """
 
 from __future__ import annotations
