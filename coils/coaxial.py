@@ -87,17 +87,24 @@ class CoaxialCoils(Field):
                 f"point {k} lies on a coil winding (within {ON_WIRE_TOL:g} radius of a "
                 f"filament): the field is singular there"
             )
-        if len(self.windings):
-            rho = np.hypot(local[:, 0], local[:, 1])
-            z = local[:, 2]
-            for z0, a, w, h in self.windings:
-                inside = (np.abs(z - z0) < 0.5 * w) & (np.abs(rho - a) < 0.5 * h)
-                if np.any(inside):
-                    k = int(np.argmax(inside))
-                    raise ValueError(
-                        f"point {k} lies inside a coil winding ({w} m x {h} m section at "
-                        f"radius {a} m): the filament model does not hold there"
-                    )
+        for (_z0, a, w, h), inside in zip(self.windings, self._inside_windings(local), strict=True):
+            if np.any(inside):
+                k = int(np.argmax(inside))
+                raise ValueError(
+                    f"point {k} lies inside a coil winding ({w} m x {h} m section at "
+                    f"radius {a} m): the filament model does not hold there"
+                )
+
+    def _inside_windings(self, local: np.ndarray, closed: bool = False):
+        """Yield, per winding cross-section, a bool mask of the local points (n, 3) inside it
+        (``closed``: boundary included)."""
+        if not len(self.windings):
+            return
+        rho = np.hypot(local[:, 0], local[:, 1])
+        z = local[:, 2]
+        less = np.less_equal if closed else np.less
+        for z0, a, w, h in self.windings:
+            yield less(np.abs(z - z0), 0.5 * w) & less(np.abs(rho - a), 0.5 * h)
 
     def _local_kernel(self, pts: np.ndarray, kernel, *args):
         """Run ``kernel(local, filaments, *args, nearest)`` on one chunk of global points and
@@ -201,6 +208,6 @@ def winding_mask(field: Field, pts: np.ndarray, margin: float) -> np.ndarray:
         rho = np.hypot(local[:, 0], local[:, 1])
         for z0, a, _ in part.filaments:
             mask |= np.hypot(rho - a, local[:, 2] - z0) < margin * a
-        for z0, a, w, h in part.windings:
-            mask |= (np.abs(local[:, 2] - z0) <= 0.5 * w) & (np.abs(rho - a) <= 0.5 * h)
+        for inside in part._inside_windings(local, closed=True):
+            mask |= inside
     return mask
