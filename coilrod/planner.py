@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 import coils
+from coils.coaxial import coaxial_parts, winding_mask
 
 from .scene import Scene
 
@@ -77,8 +78,6 @@ def _expected_queries(scene: Scene) -> int:
 
 
 def _box_clear_of_windings(field: coils.Field, box) -> bool:
-    from coils.coaxial import winding_mask
-
     lo, hi = box
     corners = np.array(np.meshgrid(*zip(lo, hi, strict=True), indexing="ij")).reshape(3, -1).T
     grid = (
@@ -116,7 +115,7 @@ def plan_scene(scene: Scene, *, cache: bool | None = None) -> Plan:
         plan.decisions.append("no FEM model requested: scikit-fem is not imported")
     real = scene.fields.get("coils")
     if real is not None:
-        n_fil = sum(len(p.filaments) for p in _coaxial(real))
+        n_fil = sum(len(p.filaments) for p in coaxial_parts(real))
         plan.decisions.append(
             f"coil field: Biot-Savart of {n_fil} filaments (closed form, exact gradient)"
         )
@@ -160,9 +159,3 @@ def plan_scene(scene: Scene, *, cache: bool | None = None) -> Plan:
                 note = " (constant gradient)"
             plan.jobs.append(Job(model, label, fld, note))
     return plan
-
-
-def _coaxial(field):
-    from coils.coaxial import coaxial_parts
-
-    return list(coaxial_parts(field))

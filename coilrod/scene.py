@@ -125,10 +125,7 @@ def _quantity(
                 f"{full}: missing required key ({dimension}, e.g. '{EXAMPLES[dimension]}')"
             )
         return default
-    try:
-        value = parse_quantity(data[name], dimension, full)
-    except UnitError as exc:
-        raise SceneError(str(exc)) from None
+    value = _si(data[name], dimension, full)
     if positive and value <= 0:
         raise SceneError(f"{full}: must be positive; got {data[name]}")
     return value
@@ -178,18 +175,20 @@ def _axis(value, key: str) -> np.ndarray:
         ) from None
 
 
+def _si(value, dimension: str, key: str) -> float:
+    """``parse_quantity`` with its UnitError reported as a SceneError (same message)."""
+    try:
+        return parse_quantity(value, dimension, key)
+    except UnitError as exc:
+        raise SceneError(str(exc)) from None
+
+
 def _vector(value, dimension: str, key: str) -> np.ndarray:
     if not isinstance(value, list) or len(value) != 3:
         raise SceneError(
             f"{key}: expected a list of 3 quantities, e.g. ['0 mm', '0 mm', '0 mm']; got {value!r}"
         )
-    out = []
-    for i, v in enumerate(value):
-        try:
-            out.append(parse_quantity(v, dimension, f"{key}[{i}]"))
-        except UnitError as exc:
-            raise SceneError(str(exc)) from None
-    return np.array(out)
+    return np.array([_si(v, dimension, f"{key}[{i}]") for i, v in enumerate(value)])
 
 
 # -- sections of the scene ---------------------------------------------------------------------
@@ -345,12 +344,7 @@ def _parse_coil(data, key: str) -> coils.Field:
             raise SceneError(
                 f"{key}.winding: expected ['width', 'height'], e.g. ['10 mm', '10 mm']"
             )
-        try:
-            kwargs["winding"] = tuple(
-                parse_quantity(v, "length", f"{key}.winding[{i}]") for i, v in enumerate(w)
-            )
-        except UnitError as exc:
-            raise SceneError(str(exc)) from None
+        kwargs["winding"] = tuple(_si(v, "length", f"{key}.winding[{i}]") for i, v in enumerate(w))
         if "filaments" in data:
             f = data["filaments"]
             if (
@@ -384,9 +378,9 @@ def _parse_coil(data, key: str) -> coils.Field:
 
             current = current_for_gradient(unit, _quantity(data, "gradient", "gradient", key))
         return classes[kind](radius, turns, current, **kwargs)
-    except UnitError as exc:
-        raise SceneError(str(exc)) from None
-    except ValueError as exc:
+    except SceneError:
+        raise  # already names its key
+    except ValueError as exc:  # from the coil classes and design helpers
         raise SceneError(f"{key}: {exc}") from None
 
 
