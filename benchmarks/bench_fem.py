@@ -31,10 +31,10 @@ from _machine import machine_info  # noqa: E402
 import coilrod  # noqa: E402
 import coils  # noqa: E402
 from coilrod import presets  # noqa: E402
-from coilrod.elastica import elastica  # noqa: E402
 from coilrod.fem.assembly import Assembler  # noqa: E402
 from coilrod.fem.material import moduli  # noqa: E402
 from coilrod.fem.mesh import rod_mesh  # noqa: E402
+from coilrod.rod.elastica import elastica  # noqa: E402
 
 L = 0.04
 D = L / 20

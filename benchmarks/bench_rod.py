@@ -27,7 +27,7 @@ from scipy.integrate import solve_bvp
 
 import coils
 from coilrod import Circle, Magnetization, Rod, presets, solve_rod
-from coilrod.elastica import elastica
+from coilrod.rod.elastica import elastica
 
 sys.path.insert(0, str(Path(__file__).parent))
 from _machine import best_wall  # noqa: E402

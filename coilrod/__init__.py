@@ -1,14 +1,16 @@
-"""coilrod: magnetic soft continuum robots in real coil fields (rod and FEM models)."""
+"""coilrod: magnetic soft continuum robots in real coil fields (rod and FEM models).
 
-from . import elastica, presets
-from .continuation import RodPath, trace_rod
+The folders name the architecture: ``robot`` (what the robot is) -> ``rod`` and ``fem`` (the
+models) driven by ``path`` (the one path-following engine) -> results; ``design`` and ``scene``
+(TOML scenes, planner, runner, figures, CLI) sit on top.
+"""
+
+from . import _moved  # noqa: F401  (old 0.1 module paths stay importable)
 from .errors import ConvergenceError
 from .fem import solve_fem  # scikit-fem itself is imported lazily, inside the call
-from .magnetization import Magnetization
-from .rod import Rod
-from .rod_result import RodResult, StabilityWarning
-from .rod_solver import solve_rod
-from .sections import Circle, Rectangle
+from .path.events import StabilityWarning
+from .robot import Circle, Magnetization, Rectangle, Rod, presets
+from .rod import RodPath, RodResult, elastica, solve_rod, trace_rod
 
 __all__ = [
     "Rod",

@@ -15,10 +15,10 @@ import pytest
 from rod_bvp_reference import bvp_tip_continued
 
 from coilrod import elastica
-from coilrod.cli import main, shipped_scenes
-from coilrod.planner import plan_scene
-from coilrod.runner import field_strength, run_scene
 from coilrod.scene import load_scene
+from coilrod.scene.cli import main, shipped_scenes
+from coilrod.scene.planner import plan_scene
+from coilrod.scene.runner import field_strength, run_scene
 
 
 @pytest.fixture(scope="module")
@@ -49,8 +49,8 @@ def test_demo_ideal_run_matches_closed_form_elastica(demo_out):
 def test_demo_coil_run_matches_independent_bvp(demo_out):
     _, out = demo_out
     summary = json.loads((out / "M1" / "summary.json").read_text())
-    from coilrod.cli import DEMO_SCENES, _demo_scene
     from coilrod.scene import parse_scene
+    from coilrod.scene.cli import DEMO_SCENES, _demo_scene
 
     scene = parse_scene(_demo_scene("M1", DEMO_SCENES["M1"]))
     tip = bvp_tip_continued(scene.rod, scene.fields["coils"], np.linspace(0.1, 1.0, 10))
@@ -78,7 +78,7 @@ def test_planner_skips_what_is_not_needed():
 def test_rod_only_scene_never_imports_scikit_fem(tmp_path):
     code = (
         "import sys\n"
-        "from coilrod.cli import main\n"
+        "from coilrod.scene.cli import main\n"
         f"rc = main(['run', 'helmholtz_vs_ideal', '--out', r'{tmp_path}', '--quiet',"
         " '--no-progress'])\n"
         "assert rc == 0, rc\n"

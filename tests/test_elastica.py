@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_bvp
 
-from coilrod.elastica import (
+from coilrod.rod.elastica import (
     BUCKLING_LAMBDA,
     elastica,
     elastica_branch,

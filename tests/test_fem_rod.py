@@ -121,7 +121,7 @@ def test_config_B_M3_matches_elastica(dim, elements):
 
 def test_config_A_M1_closed_form_elastica():
     """Second, closed-form reference for M(1): coilrod.elastica (elliptic integrals)."""
-    from coilrod.elastica import elastica
+    from coilrod.rod.elastica import elastica
 
     rod = coilrod.Rod(L, 1e6, coilrod.Rectangle(D, D), presets.M1())
     field = coils.UniformField((0.0, rod.field_for_lambda(1.0), 0.0))

@@ -60,7 +60,7 @@ def test_coil_design_notebook():
 
 def test_ideal_vs_real_notebook():
     from coilrod import presets
-    from coilrod.studies import make_pair
+    from coilrod.design.studies import make_pair
 
     r = execute("ideal_vs_real.ipynb")
     # field theory: a Helmholtz pair's first departure from uniformity is 4th order in r/R,

@@ -25,8 +25,8 @@ from rod_bvp_reference import solve_bvp_rod
 
 import coils
 from coilrod import Circle, Magnetization, Rod, presets, solve_rod
-from coilrod.elastica import elastica
-from coilrod.rod_solver import build_problem, make_mesh
+from coilrod.rod.elastica import elastica
+from coilrod.rod.solve import build_problem, make_mesh
 
 UNIT_ROD = Rod(1.0, 1.0, Circle(1.0), Magnetization(1.0, 0.0))
 

@@ -34,7 +34,7 @@ from coilrod import (
     solve_rod,
     trace_rod,
 )
-from coilrod.elastica import BUCKLING_LAMBDA, elastica, elastica_fold
+from coilrod.rod.elastica import BUCKLING_LAMBDA, elastica, elastica_fold
 
 UNIT_ROD = Rod(1.0, 1.0, Circle(1.0), Magnetization(1.0, 0.0))
 

@@ -10,9 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import coils
-from coilrod.cli import main, shipped_scenes
 from coilrod.scene import SceneError, load_scene, parse_scene
-from coilrod.units import parse_quantity
+from coilrod.scene.cli import main, shipped_scenes
+from coilrod.scene.units import parse_quantity
 
 BASE = {
     "name": "test",
@@ -163,7 +163,7 @@ def test_cli_console_script_no_traceback(tmp_path):
         'magnetization = { preset = "M1" }\n[field]\ntype = "uniform"\nB = "5 mT"\n'
     )
     proc = subprocess.run(
-        [sys.executable, "-m", "coilrod.cli", "run", str(bad)],
+        [sys.executable, "-m", "coilrod", "run", str(bad)],
         capture_output=True,
         text=True,
         timeout=120,
@@ -175,7 +175,7 @@ def test_cli_console_script_no_traceback(tmp_path):
 
 def test_cli_help_teaches():
     proc = subprocess.run(
-        [sys.executable, "-m", "coilrod.cli", "--help"], capture_output=True, text=True, timeout=120
+        [sys.executable, "-m", "coilrod", "--help"], capture_output=True, text=True, timeout=120
     )
     assert proc.returncode == 0
     for word in ("demo", "run", "check", "scenes", "40 mm", "examples"):

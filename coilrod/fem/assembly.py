@@ -15,12 +15,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import magnetic as mag
+from .linalg import factorize
 from .material import isochoric, jacobian_derivatives, neo_hookean, plane_stress
 
 __all__ = ["Assembler", "Evaluation", "INTORDER"]
-
-#: SuperLU options of the tangent factorisation (the tangent is symmetric).
-LU_OPTIONS = {"permc_spec": "COLAMD"}
 
 #: Gauss rule (exact polynomial degree) per element order: 2 and 3 points per direction.
 INTORDER = {1: 3, 2: 5}
@@ -281,10 +279,7 @@ class Assembler:
     # -- linear algebra of a Newton step ----------------------------------------------------
     def factorize(self, ev: Evaluation):
         """Sparse LU of the (condensed) tangent of ``ev``."""
-        from scipy.sparse.linalg import splu
-
-        # the tangent is symmetric: its CSR arrays are its CSC arrays (no conversion)
-        return splu(ev.tangent.T, **LU_OPTIONS)
+        return factorize(ev.tangent)
 
     def _recover(self, ev: Evaluation, du: np.ndarray, ra) -> np.ndarray:
         """Append the element pressure increments ``K Minv (ra + B du)`` to ``du``."""

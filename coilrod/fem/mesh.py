@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from coilrod.sections import Circle, Rectangle
+from coilrod.robot.sections import Circle, Rectangle
 
 __all__ = [
     "rectangle_mesh",

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from coilrod.rod import Rod
-from coilrod.sections import Circle
+from coilrod.robot.rod import Rod
+from coilrod.robot.sections import Circle
 from coils._validate import finite_scalar
 from coils.field import Field
 
@@ -210,7 +210,7 @@ def _report_stability_changes(result) -> None:
     the solver stays on its branch, so a bifurcation is reported, never crossed silently."""
     import warnings
 
-    from coilrod.rod_result import StabilityWarning
+    from coilrod.path.events import StabilityWarning
 
     st = result.stable
     for k in range(1, len(st)):

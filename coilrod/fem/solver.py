@@ -25,7 +25,9 @@ import numpy as np
 
 from coilrod.errors import ConvergenceError
 
-__all__ = ["NewtonOptions", "SolveStats", "continuation", "determinant_sign"]
+from .linalg import determinant_sign
+
+__all__ = ["NewtonOptions", "SolveStats", "continuation"]
 
 
 @dataclass(frozen=True)
@@ -66,29 +68,6 @@ class SolveStats:
     factorizations: int = 0
     cuts: int = 0
     steps: int = 0
-
-
-def _permutation_parity(perm: np.ndarray) -> int:
-    """Parity (0 even, 1 odd) of a permutation: (n - number of cycles) mod 2."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    n = perm.size
-    graph = coo_matrix((np.ones(n), (np.arange(n), perm)), shape=(n, n))
-    cycles = connected_components(graph, directed=True, connection="weak")[0]
-    return (n - cycles) % 2
-
-
-def determinant_sign(lu) -> int:
-    """Sign (+1 or -1) of the determinant of the matrix factorised by ``scipy splu``.
-
-    ``Pr A Pc = L U`` with unit-diagonal L: the sign is that of prod(diag U) times the
-    parities of the two permutations.  For a symmetric tangent, a change of sign along the
-    path means an odd number of eigenvalues crossed zero: a loss (or gain) of stability.
-    """
-    negative = int(np.count_nonzero(lu.U.diagonal() < 0))
-    odd = (negative + _permutation_parity(lu.perm_r) + _permutation_parity(lu.perm_c)) % 2
-    return -1 if odd else 1
 
 
 #: A full Newton step is accepted if it raises the residual norm by at most this factor.

@@ -9,12 +9,13 @@ import numpy as np
 from coils._validate import as_vector, finite_scalar
 from coils.field import Field
 
-from .errors import ConvergenceError
-from .rod import Rod
-from .rod_discrete import DiscreteRod
-from .rod_mesh import RodMesh
-from .rod_newton import NewtonOptions, _near_fold, newton, step_to
-from .rod_result import RodResult, StabilityWarning
+from ..errors import ConvergenceError
+from ..path.events import StabilityWarning
+from ..path.newton import NewtonOptions, _near_fold, newton, step_to
+from ..robot.rod import Rod
+from .mesh import RodMesh
+from .planar import DiscreteRod
+from .result import RodResult
 
 __all__ = ["solve_rod", "DEFAULT_SEGMENTS"]
 
@@ -379,7 +380,7 @@ def _chunk(problem, u, previous, history, tangent, chunk, opts, stability, prev_
 
 def _tangent_at(problem, u, scale):
     """du/dscale at a converged state (None if the Jacobian is singular)."""
-    from .rod_newton import _tangent
+    from ..path.newton import _tangent
 
     return _tangent(problem, u, scale)
 
@@ -481,7 +482,7 @@ def _advance(problem, u, previous, target, opts, tangent, k, substeps=1, events=
 def _snap(problem, step, target, opts):
     """From a state stuck at a fold, follow the path around it until it is stable again at a
     scale beyond the fold; ``(u, scale)`` or None (not a fold, or the path does not return)."""
-    from .arclength import ArcLength
+    from ..path.arclength import ArcLength
 
     if not _near_fold(problem, step.u, step.reached):
         return None

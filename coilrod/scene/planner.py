@@ -14,7 +14,7 @@ import numpy as np
 import coils
 from coils.coaxial import coaxial_parts, winding_mask
 
-from .scene import Scene
+from .parse import Scene
 
 __all__ = ["Plan", "Job", "plan_scene", "robot_reach_box"]
 

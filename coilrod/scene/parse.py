@@ -4,7 +4,7 @@ A scene is validated completely before anything runs; every problem is reported 
 :class:`SceneError` naming the key and the reason, e.g.
 ``robot.length: must be positive; got -40 mm`` or ``field.coil[0].radius: missing unit``.
 
-Example (``coilrod/scenes/helmholtz_vs_ideal.toml``)::
+Example (``coilrod/scene/examples/helmholtz_vs_ideal.toml``)::
 
     name = "Helmholtz pair vs ideal uniform field, M(1)"
 
@@ -38,10 +38,10 @@ import numpy as np
 
 import coils
 
-from . import presets
-from .magnetization import Magnetization
-from .rod import Rod
-from .sections import Circle, Rectangle
+from ..robot import presets
+from ..robot.magnetization import Magnetization
+from ..robot.rod import Rod
+from ..robot.sections import Circle, Rectangle
 from .units import EXAMPLES, UnitError, parse_quantity
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "MODELS", "PRESETS"]

@@ -13,7 +13,7 @@ import numpy as np
 
 import coils
 
-from .rod import Rod
+from ..robot.rod import Rod
 
 __all__ = ["coil_shift", "shift_vs_radius", "shift_vs_placement", "plot_shift", "make_pair"]
 
@@ -61,7 +61,7 @@ def coil_shift(
         ``tip_real``, ``tip_ideal`` (m, shape (3,)), ``tip_shift`` (m), ``tip_shift_over_L``,
         ``angle_shift`` (rad, real minus ideal), at the last scale.
     """
-    from .rod_solver import solve_rod
+    from ..rod import solve_rod
 
     scales = np.linspace(0.1, 1.0, 10) if scales is None else np.asarray(scales, dtype=float)
     ideal = field.ideal() if ideal is None else ideal

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .rod_newton import NewtonOptions
+from .newton import NewtonOptions
 
 __all__ = ["ArcLength"]
 

@@ -6,11 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["RodResult", "StabilityWarning"]
-
-
-class StabilityWarning(UserWarning):
-    """An equilibrium branch followed by the solver lost (or regained) stability."""
+__all__ = ["RodResult"]
 
 
 @dataclass

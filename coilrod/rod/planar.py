@@ -34,7 +34,7 @@ from scipy.linalg import eigh, eigvalsh_tridiagonal, solve_banded
 from scipy.linalg.lapack import dgtsv as _gtsv
 from scipy.linalg.lapack import dstebz as _stebz
 
-from .rod_mesh import RodMesh
+from .mesh import RodMesh
 
 __all__ = ["RodMesh", "DiscreteRod"]  # RodMesh re-exported from coilrod.rod_mesh
 

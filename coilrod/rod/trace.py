@@ -8,10 +8,10 @@ import numpy as np
 
 from coils._validate import finite_scalar
 
-from .arclength import ArcLength
-from .errors import ConvergenceError
-from .rod_newton import NewtonOptions, newton
-from .rod_solver import _check_inputs, build_problem, make_mesh
+from ..errors import ConvergenceError
+from ..path.arclength import ArcLength
+from ..path.newton import NewtonOptions, newton
+from .solve import _check_inputs, build_problem, make_mesh
 
 __all__ = ["trace_rod", "RodPath"]
 

@@ -62,8 +62,8 @@ def _demo_scene(name: str, magnetization: dict) -> dict:
 
 
 def shipped_scenes() -> dict[str, Path]:
-    """Name -> path of the scenes shipped in ``coilrod/scenes``."""
-    folder = resources.files("coilrod") / "scenes"
+    """Name -> path of the scenes shipped in ``coilrod/scene/examples``."""
+    folder = resources.files("coilrod.scene") / "examples"
     return {Path(p.name).stem: Path(str(p)) for p in folder.iterdir() if p.name.endswith(".toml")}
 
 
@@ -162,7 +162,7 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:  # argparse exits 2 on usage errors, 0 on --help
         return int(exc.code or 0)
 
-    from .scene import SceneError, load_scene, parse_scene
+    from .parse import SceneError, load_scene, parse_scene
 
     if args.command is None:
         parser.print_help()

@@ -13,9 +13,9 @@ import numpy as np
 
 import coils
 
-from .errors import ConvergenceError
+from ..errors import ConvergenceError
+from .parse import Scene
 from .planner import Plan, plan_scene
-from .scene import Scene
 
 __all__ = ["ModelRun", "SceneResult", "run_scene", "field_strength"]
 
@@ -243,11 +243,11 @@ class SceneResult:
 def _solve(job, scene: Scene, field_obj, progress: bool):
     scales = scene.scales
     if job.model == "rod":
-        from .rod_solver import solve_rod
+        from ..rod import solve_rod
 
         res = solve_rod(scene.rod, field_obj, scales, progress=progress, **scene.rod_options)
         return res.scales, res.tip, res.tip_angle, res
-    from .fem import solve_fem
+    from ..fem import solve_fem
 
     dim = 2 if job.model == "fem2d" else 3
     opts = {"order": scene.fem_options.get("order", 2)}
