@@ -62,7 +62,6 @@ def test_nan_from_a_magnetization_profile_names_it():
         ({"clamp_angle": float("nan")}, "clamp_angle"),
         ({"field": np.zeros(3)}, "field"),
         ({"rod": "rod"}, "rod"),
-        ({"hessian_lag": -1.0}, "hessian_lag"),
         ({"tol": float("nan")}, "tol"),
     ],
 )

@@ -54,7 +54,9 @@ def test_antiparallel_field_buckles_at_pi_squared_over_four(uniform):
         res = solve_rod(UNIT_ROD, field, lams)
     assert res.stable.tolist() == [True, True, True, False, False]
     # the symmetric state is not left silently: it stays straight and is reported unstable
-    assert np.allclose(res.tip_angle, 0.0, atol=1e-12)
+    # (the steps that locate the bifurcation come within ~1e-5 of it, where the state is
+    # determined only to tol / |mu| ~ 1e-9 rad)
+    assert np.allclose(res.tip_angle, 0.0, atol=1e-8)
     # coarse-mesh eigenvalue (second order); for uniform fields it is extrapolated near the
     # critical scale (|mu| < mu0 / 2, here lambda >= 2), which sharpens the estimate
     exact = BUCKLING_LAMBDA - lams

@@ -1,4 +1,15 @@
-"""Damped Newton iteration and load stepping for a :class:`~coilrod.rod_discrete.DiscreteRod`."""
+"""Newton's method with a backtracking line search, for one state or a stack of states.
+
+The iteration is the same for every model: solve ``dR/du du = -R`` with the model's tangent,
+shorten the step to the model's :meth:`~coilrod.path.protocol.PathProblem.step_limit`, and
+backtrack (halving) until the model's :meth:`~coilrod.path.protocol.PathProblem.error`
+decreases -- a full step may also raise it by up to ``full_step_growth`` (large rotations do).
+A state is converged when its error is at most 1; an iteration that stagnates (the error falls
+by less than half three times running) stops early so that the caller can shorten the load step.
+
+Batched models (``problem.batched``) are iterated on a stack of independent states at once,
+each member with its own step length, backtracking and convergence; converged members drop out.
+"""
 
 from __future__ import annotations
 
@@ -6,207 +17,237 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["NewtonOptions", "newton", "step_to"]
+from .protocol import Linearization, PathProblem
+
+__all__ = ["NewtonOptions", "NewtonResult", "newton", "as_batched"]
 
 
 @dataclass(frozen=True)
 class NewtonOptions:
-    """Newton settings (non-dimensional).
+    """Newton settings.
 
     Attributes
     ----------
-    tol : float
-        Converged when the scaled residual max-norm (moment per length in EI/L^2, position
-        mismatch per length, force per length in EI/L^3) is below ``tol``.
     max_iter : int
-        Newton iterations per attempt.
-    max_rotation : float
-        Largest change of any node angle in one Newton step, rad (longer steps are shortened).
-    min_step : float
-        Smallest load sub-step, as a fraction of the requested step, before giving up.
-    max_correction : float
-        Largest change of any node angle between the tangent prediction and the converged
-        state of a load step, rad.  A larger correction means the step may have jumped to
-        another branch (over a fold): the step is shortened instead.
+        Newton iterations per attempt (>= 1).
+    backtracks : int
+        Halvings of a step in the line search before the attempt fails.
+    stagnation : int
+        Consecutive iterations whose error falls by less than half before the attempt stops.
     """
 
-    tol: float = 1e-9
     max_iter: int = 15
-    max_rotation: float = 0.5
-    min_step: float = 1e-6
-    max_correction: float = 0.25
+    backtracks: int = 6
+    stagnation: int = 3
 
-
-def _finite(a: np.ndarray) -> bool:
-    """True if every entry is finite (one reduction: a sum is NaN/inf iff an entry is, short
-    of overflow, which is rejected too)."""
-    return bool(np.isfinite(np.sum(a)))
-
-
-_RAISE = {"over": "raise", "invalid": "raise", "divide": "raise", "under": "ignore"}
-
-
-def _evaluate(problem, u, scale):
-    """(residual, Jacobian, scaled residual norm); norm inf if the field cannot be evaluated."""
-    try:
-        with np.errstate(**_RAISE):
-            r, jac = problem.evaluate(u, scale)
-            res = problem.residual_norm(r)
-    except (ValueError, FloatingPointError):
-        return None, None, float("inf")
-    if not np.isfinite(res):  # the max-norm is finite iff every entry is
-        return None, None, float("inf")
-    return r, jac, res
-
-
-def newton(problem, u0: np.ndarray, scale: float, opts: NewtonOptions):
-    """Solve ``problem.residual(u, scale) = 0`` from ``u0``.
-
-    Each iterate is evaluated once (residual and Jacobian together); the step is shortened so
-    that no node angle turns by more than ``opts.max_rotation`` and backtracked until the
-    residual decreases.
-
-    Returns
-    -------
-    u : ndarray
-        The last iterate.
-    ok : bool
-        True if the scaled residual reached ``opts.tol`` (or the problem's round-off floor
-        ``problem.tol_floor`` if larger).
-    res : float
-        Scaled residual norm of ``u`` (inf if the iteration produced non-finite numbers).
-    iterations : int
-    jac : object or None
-        The Jacobian at ``u`` (for a tangent or a stability check).
-    """
-    u = u0.copy()
-    tol = max(opts.tol, problem.tol_floor)
-    r, jac, res = _evaluate(problem, u, scale)
-    if r is None:
-        return u, False, res, 0, None
-    slow = 0
-    for it in range(1, opts.max_iter + 1):
-        if res <= tol:
-            return u, True, res, it - 1, jac
-        try:
-            with np.errstate(**_RAISE):
-                du = -problem.solve(jac, r)
-        except (np.linalg.LinAlgError, FloatingPointError, ValueError):
-            return u, False, res, it, jac
-        rot = np.max(np.abs(problem.theta(du)))
-        if not (np.isfinite(rot) and _finite(du)):
-            return u, False, res, it, jac
-        t = min(1.0, opts.max_rotation / rot) if rot > 0 else 1.0
-        for _ in range(6):  # backtracking on the residual norm
-            trial = u + t * du
-            r_new, jac_new, res_new = _evaluate(problem, trial, scale)
-            if r_new is not None and (res_new < res or res_new <= tol):
-                break
-            t *= 0.5
-        else:
-            return u, False, res, it, jac
-        slow = slow + 1 if res_new > 0.5 * res else 0
-        u, r, jac, res = trial, r_new, jac_new, res_new
-        if slow >= 3 and res > tol:  # stagnating: let the caller shorten the load step
-            return u, False, res, it, jac
-    return u, res <= tol, res, opts.max_iter, jac
+    def __post_init__(self):
+        for name in ("max_iter", "backtracks", "stagnation"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+                raise ValueError(f"{name} must be a positive integer; got {value!r}")
 
 
 @dataclass
-class StepResult:
-    """Outcome of one continuation step."""
+class NewtonResult:
+    """Outcome of :func:`newton` (arrays over the stack for a stacked start).
+
+    Attributes
+    ----------
+    u : ndarray, shape (size,) or (k, size)
+        Last iterate(s).
+    ok : bool or ndarray of bool
+        Converged (error <= 1).
+    error : float or ndarray
+        The model's convergence measure at ``u`` (inf where inadmissible).
+    iterations : int or ndarray of int
+        Newton iterations spent.
+    lin : Linearization or None
+        The linearization at ``u`` (with tangent), for predictors and stability.
+    """
 
     u: np.ndarray
-    ok: bool
-    residual: float
-    iterations: int
-    reached: float
-    tangent: np.ndarray | None = None
-    jac: object = None  # Jacobian at ``u`` when known
+    ok: bool | np.ndarray
+    error: float | np.ndarray
+    iterations: int | np.ndarray
+    lin: Linearization | None
 
 
-def step_to(
-    problem,
-    u: np.ndarray,
-    scale_from: float,
-    scale_to: float,
-    opts: NewtonOptions,
-    predict: bool = True,
-    tangent: np.ndarray | None = None,
-    previous=None,
-) -> StepResult:
-    """Move a converged state from ``scale_from`` to ``scale_to``, sub-stepping on failure.
+class _OneAtATime(PathProblem):
+    """A model without batched evaluations presented through the batched interface."""
 
-    A tangent predictor ``du/dscale = -J^{-1} dR/dscale`` (if ``predict``) starts each
-    sub-step; with ``previous = (u_prev, scale_prev)``, an earlier state of the same branch,
-    the first attempt adds the quadratic term of the Hermite extrapolation through both
-    states.  The step is halved after each failed attempt (or a correction larger than
-    ``opts.max_correction``) down to ``opts.min_step`` of the full step.
+    batched = True
+
+    def __init__(self, problem: PathProblem):
+        self.problem = problem
+        self.size = problem.size
+        self.max_correction = problem.max_correction
+        self.max_step_change = problem.max_step_change
+        self.full_step_growth = problem.full_step_growth
+
+    def linearize(self, u, scale, tangent=True):
+        parts = [self.problem.linearize(u[j], float(scale[j]), tangent) for j in range(len(u))]
+        return Linearization(
+            u=u,
+            scale=np.asarray(scale, float),
+            residual=np.stack([p.residual for p in parts]),
+            ok=np.array([bool(p.ok) for p in parts]),
+            tangent=parts,
+        )
+
+    def take(self, lin, rows):
+        parts = [lin.tangent[j] for j in rows]
+        return Linearization(
+            lin.u[rows], lin.scale[rows], lin.residual[rows], lin.ok[rows], tangent=parts
+        )
+
+    def solve(self, lin, rhs):
+        out = np.empty_like(rhs)
+        for j, part in enumerate(lin.tangent):
+            try:
+                out[j] = self.problem.solve(part, rhs[j])
+            except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+                out[j] = np.nan
+        return out
+
+    def d_residual_d_scale(self, lin):
+        return np.stack([self.problem.d_residual_d_scale(p) for p in lin.tangent])
+
+    def error(self, lin, du):
+        return np.array(
+            [
+                self.problem.error(p, None if du is None else du[j])
+                for j, p in enumerate(lin.tangent)
+            ]
+        )
+
+    def stability(self, lin, precise=False):
+        return np.array([self.problem.stability(p, precise) for p in lin.tangent])
+
+    def step_limit(self, u, du):
+        return np.array([self.problem.step_limit(u[j], du[j]) for j in range(len(u))])
+
+    def distance(self, du):
+        return np.array([self.problem.distance(d) for d in du])
+
+
+def as_batched(problem: PathProblem) -> PathProblem:
+    """``problem`` itself if it is batched, else an adapter that evaluates states one by one."""
+    return problem if problem.batched else _OneAtATime(problem)
+
+
+def take(problem: PathProblem, lin: Linearization, rows: np.ndarray) -> Linearization:
+    """The members ``rows`` of a stacked linearization (the model's ``take`` if it has one)."""
+    if hasattr(problem, "take"):
+        return problem.take(lin, rows)
+    return problem.linearize(lin.u[rows], np.asarray(lin.scale)[rows])
+
+
+def _errors(problem, lin, du) -> np.ndarray:
+    ok = np.asarray(lin.ok, bool)
+    with np.errstate(all="ignore"):
+        err = np.asarray(problem.error(lin, du), float)
+    return np.where(ok & np.isfinite(err), err, np.inf)
+
+
+def newton(
+    problem: PathProblem, u0: np.ndarray, scale, opts: NewtonOptions | None = None
+) -> NewtonResult:
+    """Solve ``R(u, scale) = 0`` from ``u0`` (one state, or a stack for a batched model).
+
+    Parameters
+    ----------
+    problem : PathProblem
+    u0 : ndarray, shape (size,) or (k, size)
+        Starting state(s); a stack needs a batched model (or is solved one by one).
+    scale : float or ndarray, shape (k,)
+        Load scale(s).
+    opts : NewtonOptions, optional
 
     Returns
     -------
-    StepResult
-        ``ok`` False with ``reached`` the last scale converged if the target was not reached.
+    NewtonResult
+        Shaped like the input (scalars for one state).
     """
-    total = scale_to - scale_from
-    current, reached = u, scale_from
-    step = total
-    iters = 0
-    res = float("inf")
-    failures = 0
-    last_jac = None
-    if predict and tangent is None:
-        tangent = _tangent(problem, u, scale_from)
-    while True:
-        remaining = scale_to - reached
-        if abs(remaining) <= 1e-14 * max(1.0, abs(scale_to)):
-            return StepResult(current, True, res, iters, scale_to, tangent, last_jac)
-        if abs(step) > abs(remaining):
-            step = remaining
-        target = scale_to if step == remaining else reached + step
-        guess = current if tangent is None else current + (target - reached) * tangent
-        if tangent is not None and previous is not None and reached == scale_from:
-            h = scale_from - previous[1]
-            if h != 0 and abs(target - reached) <= 4 * abs(h):
-                curv = (previous[0] - u + tangent * h) / (h * h)
-                guess = guess + curv * (target - reached) ** 2
-        new, ok, res_try, it, jac = newton(problem, guess, target, opts)
-        iters += it
-        if ok and tangent is not None:
-            ok = np.max(np.abs(problem.theta(new) - problem.theta(guess))) <= opts.max_correction
-        if ok:
-            failures = 0
-            if predict:
-                tangent = _tangent(problem, new, target, jac)
-            current, reached, res, last_jac = new, target, res_try, jac
-            step *= 2.0  # grow back after a successful sub-step
-            continue
-        res = res_try
-        step /= 2.0
-        failures += 1
-        if abs(step) < opts.min_step * abs(total) or (
-            failures % 4 == 0 and _near_fold(problem, current, reached)
-        ):
-            return StepResult(current, False, res, iters, reached, tangent)
+    opts = NewtonOptions() if opts is None else opts
+    P = as_batched(problem)
+    single = np.ndim(u0) == 1
+    U = np.array(np.atleast_2d(u0), dtype=float)
+    k = len(U)
+    S = np.broadcast_to(np.asarray(scale, dtype=float), (k,)).copy()
+    lin = P.linearize(U, S)
+    err = _errors(P, lin, None)
+    alive = np.asarray(lin.ok, bool) & np.isfinite(err)
+    iters = np.zeros(k, dtype=int)
+    slow = np.zeros(k, dtype=int)
+    cover = np.arange(k)  # members whose current state ``lin`` describes (in its row order)
+    growth = P.full_step_growth
+    for _ in range(opts.max_iter):
+        act = np.flatnonzero(alive & (err > 1.0))
+        if act.size == 0:
+            break
+        if act.size != cover.size:  # members only drop out: same size means same members
+            lin = take(P, lin, np.searchsorted(cover, act))
+            cover = act
+        with np.errstate(all="ignore"):
+            dU = -P.solve(lin, lin.residual)
+        finite = np.all(np.isfinite(dU), axis=1)
+        alive[act[~finite]] = False
+        if not finite.all():
+            act, dU = act[finite], dU[finite]
+            if act.size == 0:
+                break
+            lin = take(P, lin, np.flatnonzero(finite))
+            cover = act
+        with np.errstate(all="ignore"):
+            full = np.minimum(1.0, np.asarray(P.step_limit(U[act], dU), float))
+        alpha = full.copy()
+        pending = np.ones(act.size, dtype=bool)
+        parts = []  # (positions in act, linearization) of accepted trials
+        for _ in range(opts.backtracks + 1):
+            pos = np.flatnonzero(pending)
+            if pos.size == 0:
+                break
+            step = alpha[pos, None] * dU[pos]
+            trial = U[act[pos]] + step
+            tlin = P.linearize(trial, S[act[pos]])
+            e_new = _errors(P, tlin, step)
+            e_old = err[act[pos]]
+            accept = (e_new < e_old) | (e_new <= 1.0)
+            accept |= (alpha[pos] == full[pos]) & (e_new <= growth * e_old)
+            accept &= np.isfinite(e_new)
+            if accept.any():
+                rows = np.flatnonzero(accept)
+                members = act[pos[rows]]
+                slow[members] = np.where(e_new[rows] > 0.5 * e_old[rows], slow[members] + 1, 0)
+                U[members] = trial[rows]
+                err[members] = e_new[rows]
+                iters[members] += 1
+                parts.append((pos[rows], tlin, rows))
+                pending[pos[rows]] = False
+            alpha[pos[~accept]] *= 0.5
+        failed = act[pending]
+        alive[failed] = False
+        iters[failed] += 1
+        moved = act[~pending]
+        if len(parts) == 1 and parts[0][2].size == parts[0][1].residual.shape[0]:
+            lin, cover = parts[0][1], moved  # every trial of that round was accepted
+        elif moved.size:
+            lin, cover = P.linearize(U[moved], S[moved]), moved
+        else:
+            cover = np.zeros(0, dtype=int)
+        stuck = moved[(slow[moved] >= opts.stagnation) & (err[moved] > 1.0)]
+        alive[stuck] = False
+    ok = np.isfinite(err) & (err <= 1.0)
+    if cover.size != k:
+        lin = P.linearize(U, S)
+    if single:
+        return NewtonResult(U[0], bool(ok[0]), float(err[0]), int(iters[0]), _single(lin))
+    return NewtonResult(U, ok, err, iters, lin)
 
 
-def _near_fold(problem, u: np.ndarray, scale: float) -> bool:
-    """True if the smallest second-variation eigenvalue at ``u`` is below 5 % of the straight
-    rod's: the load steps are failing because the branch turns back (a limit point)."""
-    try:
-        mu = problem.min_eigenvalue(u, scale)
-    except (np.linalg.LinAlgError, ValueError, FloatingPointError):
-        return False
-    return mu < 0.05 * problem.mu0
-
-
-def _tangent(problem, u: np.ndarray, scale: float, jac=None) -> np.ndarray | None:
-    """du/dscale = -J^{-1} dR/dscale at a converged state (None if J is singular)."""
-    try:
-        with np.errstate(**_RAISE):
-            if jac is None:
-                jac = problem.jacobian(u, scale)
-            t = -problem.solve(jac, problem.load_derivative(u, scale))
-    except (np.linalg.LinAlgError, FloatingPointError, ValueError):
-        return None
-    return t if _finite(t) else None
+def _single(lin: Linearization) -> Linearization:
+    """The one-state view of a stacked linearization of one member (the model's own object for
+    a model evaluated one by one)."""
+    if isinstance(lin.tangent, list):  # from _OneAtATime
+        return lin.tangent[0]
+    return lin

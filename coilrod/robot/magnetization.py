@@ -59,6 +59,27 @@ class Magnetization:
         self.breakpoints = tuple(sorted(finite_scalar(b, "breakpoints") for b in breakpoints))
         self.label = label
 
+    def check_length(self, length: float) -> None:
+        """Raise ValueError unless the profile fits a rod of ``length`` (m).
+
+        Breakpoints must lie on the rod, in [0, length]; segments (:meth:`segments`) must add
+        up to the length (to rounding, 1e-9 relative): otherwise the last segment would
+        silently stretch or shrink to the tip.
+        """
+        slack = 1e-9 * length
+        bad = [b for b in self.breakpoints if not -slack <= b <= length + slack]
+        if bad:
+            raise ValueError(
+                f"magnetization breakpoints must lie on the rod (0 to {length:g} m); got "
+                f"{bad[0]:g} m"
+            )
+        edges = getattr(self, "segment_edges", None)
+        if edges is not None and abs(edges[-1] - length) > slack:
+            raise ValueError(
+                f"magnetization segments add up to {edges[-1]:.12g} m but the rod is "
+                f"{length:.12g} m long; the segment lengths must sum to the rod length"
+            )
+
     @property
     def is_constant(self) -> bool:
         """True if both magnitude and angle are constants."""
@@ -108,7 +129,8 @@ class Magnetization:
         Parameters
         ----------
         lengths : sequence of float
-            Segment lengths in metres, from the clamp; their sum should equal the rod length.
+            Segment lengths in metres, from the clamp; their sum must equal the length of the
+            rod the profile is given to (:class:`~coilrod.Rod` checks it, 1e-9 relative).
         magnitudes : sequence of float
             |M| of each segment, A/m.
         angles : sequence of float or float

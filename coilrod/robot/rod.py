@@ -51,6 +51,7 @@ class Rod:
             raise ValueError(
                 f"magnetization must be a coilrod.Magnetization; got {self.magnetization!r}"
             )
+        self.magnetization.check_length(self.length)
 
     @property
     def area(self) -> float:

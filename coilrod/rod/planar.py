@@ -1,56 +1,148 @@
-"""Discrete hard-magnetic elastica: energy, residual, banded Jacobian and second variation.
+"""The planar discrete hard-magnetic elastica as a :class:`~coilrod.path.PathProblem`.
 
 Everything here is non-dimensional: lengths in units of L, moments in EI/L, forces in EI/L^2.
-Nodes ``s_0 = 0 < ... < s_N = 1`` (piecewise uniform, with a node at every magnetization
-breakpoint), segment lengths ``h_i``, trapezoid weights ``w_i``.  The discrete energy is
+Nodes ``s_0 = 0 < ... < s_N = 1`` (:class:`~coilrod.rod.mesh.RodMesh`), segment lengths
+``h_i``, trapezoid weights ``w_i``.  The discrete energy is
 
-    E = sum_i (theta_{i+1} - theta_i)^2 / (2 h_i) - sum_i w_i m_i(theta_i) . b(x_i),
+    E = sum_i (theta_{i+1} - theta_i)^2 / (2 h_i) - c sum_i w_i m_i(theta_i) . b(x_i),
     x_{i+1} = x_i + h_i (t(theta_i) + t(theta_{i+1})) / 2,   t = (cos, sin),
 
-with ``m_i = R(theta_i) mu_i``, ``mu_i = A L^2 |M| / (EI)`` the body-frame magnetization (the
-trapezoid average of its one-sided limits at a node, so jumps are integrated exactly) and ``b``
-the in-plane field.  Its gradient ``g_i = dE/dtheta_i`` is the discrete seed eq. (5):
+with ``c`` the load scale, ``m_i = R(theta_i) mu_i``, ``mu_i = A L^2 |M| / (EI)`` the body-frame
+node magnetization (:func:`~coilrod.rod.mesh.node_magnetization`) and ``b`` the in-plane field.
+Its gradient ``g_i = dE/dtheta_i`` is the discrete seed eq. (5):
 
-    g_i = (theta_i - theta_{i-1}) / h_{i-1} + (theta_i - theta_{i+1}) / h_i - w_i tau_i
-          - t_perp_i . (w_i F_i + (h_{i-1} / 2) w_i f_i),
+    g_i = (theta_i - theta_{i-1}) / h_{i-1} + (theta_i - theta_{i+1}) / h_i - c w_i tau_i
+          - t_perp_i . (w_i F_i + c (h_{i-1} / 2) w_i f_i),
 
-``tau = m x b``, ``f = G^T m``, ``F_i = sum_{j > i} w_j f_j`` the force resultant beyond node i.
-Both schemes are symmetric (trapezoid), so the error expands in even powers of h and
-Richardson extrapolation of two meshes gives fourth order.
+``tau = m x b``, ``f = G^T m``, ``F_i = c sum_{j > i} w_j f_j`` the force resultant beyond node i.
+The scheme is symmetric (trapezoid), so the error expands in even powers of h and Richardson
+extrapolation of two meshes gives fourth order.
 
 Two unknown layouts:
 
 * uniform fields: ``theta`` only; the Jacobian (= Hessian of E) is tridiagonal.
 * otherwise a mixed layout with positions and force resultants as unknowns, five per node
   ``(theta_i, x_i, y_i, Fx_i, Fy_i)`` and equations ``(g_i, position, force)`` in the same
-  order: the Jacobian is banded (7 below, 6 above the diagonal), so a Newton step costs
-  O(N).  Eliminating positions and forces gives back the (dense, symmetric) Hessian of E.
+  order: the Jacobian is banded (7 below, 6 above the diagonal), so a Newton step costs O(N).
+  Eliminating positions and forces gives back the (dense, symmetric) Hessian of E.
+
+Both layouts evaluate stacks of states at once (``batched``): the k Jacobians of a stack form
+one block-diagonal banded matrix, factorised by one LAPACK call (``gttrf``/``gbtrf``) whose
+factors serve every solve at that state (Newton step, path tangent, stability).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import eigh, eigvalsh_tridiagonal, solve_banded
-from scipy.linalg.lapack import dgtsv as _gtsv
+from scipy.linalg import eigvalsh_tridiagonal
+from scipy.linalg.lapack import dgbtrf, dgbtrs, dgttrf, dgttrs
 from scipy.linalg.lapack import dstebz as _stebz
 
+from ..path.protocol import Linearization, PathProblem
 from .mesh import RodMesh
 
-__all__ = ["RodMesh", "DiscreteRod"]  # RodMesh re-exported from coilrod.rod_mesh
+__all__ = ["PlanarRod", "RodTangent"]
 
 _NV = 5  # unknowns per node in the mixed layout
-_LOW, _UP = 7, 6  # bandwidths of the mixed Jacobian
+_KL, _KU = 7, 6  # bandwidths of the mixed Jacobian
+_DIAG = _KL + _KU  # row of the diagonal in LAPACK's factorisation band storage
 #: Free nodes up to which the second variation of the mixed layout is formed densely.
 _DENSE_STABILITY = 96
+#: Multiple of eps times the size of a residual's terms below which it is round-off.
+_FLOOR = 32.0
 
 
 def _rot(theta: np.ndarray, mu: np.ndarray) -> np.ndarray:
-    """m = R(theta) mu for body vectors mu (n, 2): shape (n, 2)."""
+    """m = R(theta) mu for body vectors mu (n, 2) and angles (..., n): shape (..., n, 2)."""
     c, s = np.cos(theta), np.sin(theta)
     return np.stack([c * mu[:, 0] - s * mu[:, 1], s * mu[:, 0] + c * mu[:, 1]], axis=-1)
 
 
-class DiscreteRod:
+class RodTangent:
+    """Jacobian of a stack of k states, factorised on first use.
+
+    Uniform layout: tridiagonal ``(dl, d, du)`` of the stacked (k n) system; mixed layout:
+    LAPACK band storage ``ab`` of the stacked (k 5n) system.  ``bad`` flags members whose
+    Jacobian is singular or not finite (their solves return NaN).
+    """
+
+    def __init__(self, k: int, size: int, uniform: bool, parts, load_rate: np.ndarray):
+        self.k, self.size, self.uniform = k, size, uniform
+        self.parts = parts
+        self.load_rate = load_rate  # dR/dscale, (k, size)
+        self.bad = np.zeros(k, dtype=bool)
+        self._lu = None
+
+    def factor(self):
+        if self._lu is None:
+            self._lu = self._factor_tri() if self.uniform else self._factor_band()
+        return self._lu
+
+    def _factor_tri(self):
+        d, (dl, du) = self.parts
+        d = d.ravel()
+        n = self.size
+        while True:
+            self.bad |= ~np.isfinite(d.reshape(self.k, n)).all(axis=1)
+            if self.bad.any():
+                d, dl, du = d.copy(), dl.copy(), du.copy()
+                for j in np.flatnonzero(self.bad):  # replace by identity blocks
+                    d[j * n : (j + 1) * n] = 1.0
+                    dl[j * n : (j + 1) * n - 1] = 0.0
+                    du[j * n : (j + 1) * n - 1] = 0.0
+            dl2, d2, du2, dw, ipiv, info = dgttrf(dl, d, du)
+            if info == 0:
+                return dl2, d2, du2, dw, ipiv
+            self.bad[(info - 1) // n] = True  # a zero pivot: that member is singular
+
+    def _factor_band(self):
+        ab = self.parts
+        n = self.size
+        while True:
+            cols = ab[_KL:].reshape(_KL + _KU + 1, self.k, n)
+            blocks = ~np.isfinite(cols).all(axis=(0, 2))
+            for j in np.flatnonzero(blocks | self.bad):
+                self.bad[j] = True
+                ab[:, j * n : (j + 1) * n] = 0.0
+                ab[_DIAG, j * n : (j + 1) * n] = 1.0
+            lu, ipiv, info = dgbtrf(ab, _KL, _KU)
+            if info == 0:
+                return lu, ipiv
+            self.bad[(info - 1) // n] = True
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """Solve with every member's Jacobian: rhs (k, size) -> (k, size) (NaN rows for
+        singular members)."""
+        lu = self.factor()
+        b = np.ascontiguousarray(rhs, dtype=float).reshape(-1)
+        if self.uniform:
+            x, info = dgttrs(*lu, b)
+        else:
+            x, info = dgbtrs(lu[0], _KL, _KU, b, lu[1])
+        if info != 0:
+            raise np.linalg.LinAlgError(f"LAPACK solve failed (info {info})")
+        x = x.reshape(self.k, self.size)
+        x[self.bad] = np.nan
+        return x
+
+    def det_signs(self) -> np.ndarray:
+        """Sign of each member's Jacobian determinant, shape (k,) (+-1; 0 where singular)."""
+        lu = self.factor()
+        n = self.size
+        # scipy returns gttrf's pivots 1-based and gbtrf's 0-based
+        if self.uniform:
+            diag, ipiv, base = lu[1], lu[4], 1
+        else:
+            diag, ipiv, base = lu[0][_DIAG], lu[1], 0
+        neg = np.count_nonzero((diag < 0).reshape(self.k, n), axis=1)
+        moved = ipiv != np.arange(base, ipiv.size + base)
+        swaps = np.count_nonzero(moved.reshape(self.k, n), axis=1)
+        out = np.where((neg + swaps) % 2 == 0, 1.0, -1.0)
+        out[self.bad] = 0.0
+        return out
+
+
+class PlanarRod(PathProblem):
     """The discrete problem for one rod, field and mesh (non-dimensional).
 
     Parameters
@@ -59,68 +151,71 @@ class DiscreteRod:
     mu : ndarray, shape (n, 2)
         Node magnetization in the body frame times A L^2 / (EI), 1/T.
     field : coils.Field
-        The applied field (SI).
+        The applied field (SI) at scale 1.
     length : float
         L in m.
     clamp_position : ndarray, shape (3,)
         Clamp position, m.
     clamp_angle : float
         Clamp tangent angle, rad.
+    tol : float
+        Newton tolerance on the scaled residual (non-dimensional): a state is converged when
+        every equation, scaled to a point value (moment per length in EI/L^2, position mismatch
+        per length, force per length in EI/L^3), is below ``tol`` plus its round-off floor.
     """
 
-    def __init__(self, mesh, mu, field, length, clamp_position, clamp_angle):
+    batched = True
+    #: Largest change of any node angle between the predicted and converged state of a step.
+    max_correction = 0.25
+    #: Largest predicted change of any node angle in one load step, rad.
+    max_step_change = 0.15
+    #: Largest change of any node angle in one Newton step, rad.
+    max_rotation = 0.5
+
+    def __init__(self, mesh, mu, field, length, clamp_position, clamp_angle, tol=1e-9):
         self.mesh = mesh
-        self.mu = mu
+        self.mu = np.asarray(mu, float)
         self.field = field
         self.L = float(length)
         self.clamp = np.asarray(clamp_position, float)
         self.theta0 = float(clamp_angle)
+        self.tol = float(tol)
         self.uniform = bool(field.uniform)
         self.linear = bool(field.linear or field.uniform)
-        self.n = mesh.n
-        self.size = self.n if self.uniform else _NV * self.n
-        self._cache = None  # field at the last evaluated centreline (residual then Jacobian)
-        #: Round-off floor of the scaled residual (differences of angles over h, divided by w).
-        self.tol_floor = 64 * np.finfo(float).eps * self.n**2
+        self.n = n = mesh.n
+        self.size = n if self.uniform else _NV * n
+        h, w = mesh.h, mesh.w
+        self._inv_h = 1.0 / h
+        self._inv_w = 1.0 / w
+        self._c = np.concatenate([[0.0], h / 2])  # h_{i-1} / 2
+        # round-off scale of each equation row's terms, per unit state magnitude
+        bend = np.zeros(n)
+        bend[1:] += self._inv_h
+        bend[:-1] += self._inv_h
+        self._bend_scale = bend * self._inv_w
+        self._stab_e = -self._inv_h[1:] / np.sqrt(w[1:-1] * w[2:])
         self._mu0 = None
-        #: Reuse the field's second derivatives in the Jacobian while the centreline stays
-        #: within this distance (units of L) of where they were evaluated (0: always exact).
-        self.hessian_lag = 0.0
-        self._hessian_last = None
+        self._det_ref = None
+        self._band_cache: dict = {}
+        self.last_failure = ""
         if self.uniform:
-            self._b_uniform = field.B(self.clamp)[0, :2].copy()
-            h = mesh.h
-            self._inv_h = 1.0 / h
-            self._wmu = mesh.w[:, None] * mu
-            self._inv_w = 1.0 / mesh.w[1:]
-            bx, by = self._b_uniform
-            mt, mn = self._wmu[:, 0], self._wmu[:, 1]
+            bx, by = field.B(self.clamp)[0, :2]
+            wmu = w[:, None] * self.mu
+            mt, mn = wmu[:, 0], wmu[:, 1]
             self._P1 = mt * by - mn * bx  # w (m x b) and w m.b at theta = 0, scale 1
             self._Q1 = mt * bx + mn * by
-            # off-diagonal of W^(-1/2) H W^(-1/2) (constant: bending only)
-            self._stab_e = -self._inv_h[1:] / np.sqrt(mesh.w[1:-1] * mesh.w[2:])
-            self._k_diag = np.zeros(self.n)
-            self._k_diag[1:] += self._inv_h
-            self._k_diag[:-1] += self._inv_h
             self._k_low = -self._inv_h.copy()  # J[i + 1, i]
             self._k_up = -self._inv_h.copy()  # J[i, i + 1]
             self._k_up[0] = 0.0  # row 0 is the clamp condition
 
-    @property
-    def mu0(self) -> float:
-        """Smallest second-variation eigenvalue of the unloaded straight rod (~ pi^2 / 4)."""
-        if self._mu0 is None:
-            self._mu0 = self.min_eigenvalue(self.straight(), 0.0)
-        return self._mu0
-
-    # -- state helpers --------------------------------------------------------------------------
+    # -- states -----------------------------------------------------------------------------------
     def straight(self) -> np.ndarray:
-        """The straight state along the clamp tangent, unknown vector shape (size,)."""
-        theta = np.full(self.n, self.theta0)
-        return self.from_theta(theta)
+        """The straight unloaded state along the clamp tangent, shape (size,)."""
+        return self.from_theta(np.full(self.n, self.theta0))
 
     def from_theta(self, theta: np.ndarray, scale: float = 0.0) -> np.ndarray:
-        """Unknown vector with positions and forces consistent with ``theta``."""
+        """Unknowns (size,) with positions and force resultants consistent with ``theta``."""
+        theta = np.asarray(theta, float)
         if self.uniform:
             return theta.copy()
         x = self.positions(theta)
@@ -128,441 +223,551 @@ class DiscreteRod:
         u[:, 0] = theta
         u[:, 1:3] = x
         if scale != 0.0:
-            _, f = self._torque_force(theta, x, scale)[:2]
+            b, G, _ = self._field(x[None], False)
+            m = _rot(theta, self.mu)
+            f = scale * np.einsum("nij,ni->nj", G[0], m)
             wf = self.mesh.w[:, None] * f
-            tail = np.cumsum(wf[::-1], axis=0)[::-1]
-            u[:-1, 3:5] = tail[1:]
+            u[:-1, 3:5] = np.cumsum(wf[::-1], axis=0)[::-1][1:]
         return u.ravel()
 
     def theta(self, u: np.ndarray) -> np.ndarray:
-        """Node angles, shape (n,), rad."""
-        return u if self.uniform else u[0::_NV]
+        """Node angles of a state (size,) or stack (k, size): shape (n,) or (k, n), rad."""
+        return u if self.uniform else u[..., 0::_NV]
 
     def positions(self, theta: np.ndarray) -> np.ndarray:
-        """Trapezoid centreline relative to the clamp, shape (n, 2), units of L."""
+        """Trapezoid centreline relative to the clamp, theta (..., n): (..., n, 2), units of L."""
         t = np.stack([np.cos(theta), np.sin(theta)], axis=-1)
-        seg = self.mesh.h[:, None] * (t[:-1] + t[1:]) / 2
-        return np.concatenate([np.zeros((1, 2)), np.cumsum(seg, axis=0)])
-
-    def theta_batch(self, states: np.ndarray) -> np.ndarray:
-        """Node angles of several states (k, size): shape (k, n), rad."""
-        return states if self.uniform else states[:, 0::_NV]
-
-    def positions_batch(self, theta: np.ndarray) -> np.ndarray:
-        """Trapezoid centrelines of several states, theta (k, n): shape (k, n, 2), units of L."""
-        t = np.stack([np.cos(theta), np.sin(theta)], axis=-1)
-        seg = self.mesh.h[None, :, None] * (t[:, :-1] + t[:, 1:]) / 2
+        seg = self.mesh.h[:, None] * (t[..., :-1, :] + t[..., 1:, :]) / 2
         out = np.zeros(t.shape)
-        np.cumsum(seg, axis=1, out=out[:, 1:])
+        np.cumsum(seg, axis=-2, out=out[..., 1:, :])
         return out
 
-    def points_batch(self, x: np.ndarray) -> np.ndarray:
-        """Physical points (k, n, 3) in m from non-dimensional positions (k, n, 2)."""
-        pts = np.empty(x.shape[:2] + (3,))
+    def points(self, x: np.ndarray) -> np.ndarray:
+        """Physical points (..., n, 3) in m from non-dimensional positions (..., n, 2)."""
+        pts = np.empty(x.shape[:-1] + (3,))
         pts[..., :2] = self.clamp[:2] + self.L * x
         pts[..., 2] = self.clamp[2]
         return pts
 
-    def newton_batch(self, thetas: np.ndarray, scales: np.ndarray, opts):
-        """Newton on independent uniform-field problems at once: thetas (k, n), scales (k,).
+    def interpolate_to(self, fine: PlanarRod, u: np.ndarray) -> np.ndarray:
+        """States of this (coarse) mesh on the refined mesh ``fine`` (linear interpolation);
+        u (size,) or (k, size)."""
+        v = np.atleast_2d(u).reshape(-1, self.n, 1 if self.uniform else _NV)
+        out = np.empty((v.shape[0], fine.n, v.shape[2]))
+        for j in range(v.shape[0]):
+            for q in range(v.shape[2]):
+                out[j, :, q] = np.interp(fine.mesh.s, self.mesh.s, v[j, :, q])
+        out = out.reshape(v.shape[0], -1)
+        return out[0] if np.ndim(u) == 1 else out
 
-        The k tridiagonal Jacobians are solved as one block-diagonal tridiagonal system.
+    # -- field ------------------------------------------------------------------------------------
+    def _field(self, x: np.ndarray, hessian: bool):
+        """In-plane b (k, n, 2) T, G (k, n, 2, 2) T per L and H (k, n, 2, 2, 2) T per L^2
+        (None where not needed) at positions x (k, n, 2); raises ValueError from the field."""
+        k = x.shape[0]
+        pts = self.points(x).reshape(-1, 3)
+        H = None
+        if hessian and not self.linear:
+            fused = getattr(self.field, "B_gradient_hessian", None)
+            if fused is not None:
+                B, G, H = fused(pts)
+            else:
+                B, G = self.field.B_and_gradient(pts)
+                H = self.field.hessian(pts)
+            H = (self.L**2) * H[:, :2, :2, :2].reshape(k, self.n, 2, 2, 2)
+        else:
+            B, G = self.field.B_and_gradient(pts)
+        b = B[:, :2].reshape(k, self.n, 2)
+        G = self.L * G[:, :2, :2].reshape(k, self.n, 2, 2)
+        return b, G, H
 
-        Returns
-        -------
-        thetas : ndarray, shape (k, n)
-        ok : ndarray of bool, shape (k,)
-        residual : ndarray, shape (k,)
-        iterations : ndarray of int, shape (k,)
+    def _field_by_member(self, x: np.ndarray, hessian: bool):
+        """Like :meth:`_field`, but members whose field cannot be evaluated get NaN (and the
+        field's message is kept in ``last_failure``)."""
+        try:
+            with np.errstate(all="ignore"):
+                return self._field(x, hessian)
+        except ValueError as exc:
+            self.last_failure = f"the field could not be evaluated at the trial states ({exc})"
+        k = x.shape[0]
+        b = np.full((k, self.n, 2), np.nan)
+        G = np.full((k, self.n, 2, 2), np.nan)
+        H = np.full((k, self.n, 2, 2, 2), np.nan) if hessian and not self.linear else None
+        for j in range(k):
+            try:
+                with np.errstate(all="ignore"):
+                    bj, Gj, Hj = self._field(x[j : j + 1], hessian)
+            except ValueError as exc:
+                self.last_failure = f"the field could not be evaluated at the trial states ({exc})"
+                continue
+            b[j], G[j] = bj[0], Gj[0]
+            if H is not None:
+                H[j] = Hj[0]
+        return b, G, H
+
+    # -- the protocol -----------------------------------------------------------------------------
+    def linearize(self, u, scale, tangent: bool = True) -> Linearization:
+        """Residual (k, size), admissibility (k,) and the tangent of a stack of states."""
+        U = np.atleast_2d(np.asarray(u, float))
+        S = np.broadcast_to(np.asarray(scale, float), (U.shape[0],)).astype(float)
+        with np.errstate(all="ignore"):
+            if self.uniform:
+                R, R1, parts = self._uniform(U, S, tangent)
+            else:
+                R, R1, parts = self._mixed(U, S, tangent)
+            ok = np.all(np.isfinite(R), axis=1)
+        tan = RodTangent(U.shape[0], self.size, self.uniform, parts, R1) if tangent else None
+        if tan is not None:
+            tan.bad |= ~ok
+        lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
+        lin.load_rate = R1
+        return lin
+
+    def solve(self, lin: Linearization, rhs: np.ndarray) -> np.ndarray:
+        return lin.tangent.solve(np.atleast_2d(rhs))
+
+    def residual(self, u: np.ndarray, scale) -> np.ndarray:
+        """``R(u, scale)`` with the shape of ``u`` ((size,) or (k, size))."""
+        return self.linearize(u, scale, tangent=False).residual.reshape(np.shape(u))
+
+    def dense_jacobian(self, u: np.ndarray, scale: float) -> np.ndarray:
+        """The Jacobian of one state as a dense (size, size) array (tests, small problems)."""
+        tan = self.linearize(u, scale).tangent
+        N = self.size
+        J = np.zeros((N, N))
+        if self.uniform:
+            d, (dl, du) = tan.parts
+            return np.diag(d[0]) + np.diag(dl, -1) + np.diag(du, 1)
+        ab = tan.parts
+        for off in range(-_KL, _KU + 1):  # off = column - row
+            diag = ab[_DIAG - off, max(off, 0) : N + min(off, 0)]
+            J += np.diag(diag, off)
+        return J
+
+    def d_residual_d_scale(self, lin: Linearization) -> np.ndarray:
+        return lin.load_rate
+
+    def take(self, lin: Linearization, rows) -> Linearization:
+        """Members ``rows`` of a stacked linearization (the factorisation is sliced, not
+        recomputed: the stacked Jacobian is block diagonal)."""
+        rows = np.asarray(rows, dtype=int)
+        out = Linearization(
+            u=lin.u[rows], scale=lin.scale[rows], residual=lin.residual[rows], ok=lin.ok[rows]
+        )
+        out.load_rate = lin.load_rate[rows]
+        out.tangent = None if lin.tangent is None else _take_tangent(lin.tangent, rows)
+        return out
+
+    def error(self, lin: Linearization, du) -> np.ndarray:
+        """max over equations of |scaled residual| / (tol + its round-off floor), shape (k,)."""
+        R, U = lin.residual, lin.u
+        k = R.shape[0]
+        eps = np.finfo(float).eps
+        with np.errstate(all="ignore"):
+            th = self.theta(U)
+            size_th = 1.0 + np.max(np.abs(th), axis=1, keepdims=True)
+            if self.uniform:
+                floor = _FLOOR * eps * size_th * self._bend_scale[1:]
+                return np.max(np.abs(R[:, 1:] * self._inv_w[1:]) / (self.tol + floor), axis=1)
+            v = R.reshape(k, self.n, _NV)
+            V = U.reshape(k, self.n, _NV)
+            size_x = 1.0 + np.max(np.abs(V[:, :, 1:3]), axis=(1, 2))[:, None]
+            size_F = 1.0 + np.max(np.abs(V[:, :, 3:5]), axis=(1, 2))[:, None]
+            load = np.max(np.abs(V[:, :, 3:5]), axis=(1, 2))[:, None]
+            e_g = (
+                np.abs(v[:, 1:, 0])
+                * self._inv_w[1:]
+                / (self.tol + _FLOOR * eps * (size_th * self._bend_scale[1:] + load))
+            )
+            e_x = (
+                np.abs(v[:, 1:, 1:3])
+                * self._inv_h[None, :, None]
+                / (self.tol + _FLOOR * eps * size_x[:, :, None] * self._inv_h[None, :, None])
+            )
+            e_F = (
+                np.abs(v[:, :-1, 3:5])
+                * self._inv_w[None, 1:, None]
+                / (self.tol + _FLOOR * eps * size_F[:, :, None] * self._inv_w[None, 1:, None])
+            )
+            return np.maximum(
+                np.max(e_g, axis=1), np.maximum(np.max(e_x, axis=(1, 2)), np.max(e_F, axis=(1, 2)))
+            )
+
+    def residual_norm(self, lin: Linearization) -> np.ndarray:
+        """Max-norm of the scaled residual (non-dimensional), shape (k,)."""
+        R = lin.residual
+        if self.uniform:
+            return np.max(np.abs(R[:, 1:] * self._inv_w[1:]), axis=1)
+        v = R.reshape(R.shape[0], self.n, _NV)
+        return np.maximum(
+            np.max(np.abs(v[:, 1:, 0]) * self._inv_w[1:], axis=1),
+            np.maximum(
+                np.max(np.abs(v[:, 1:, 1:3]) * self._inv_h[None, :, None], axis=(1, 2)),
+                np.max(np.abs(v[:, :-1, 3:5]) * self._inv_w[None, 1:, None], axis=(1, 2)),
+            ),
+        )
+
+    def step_limit(self, u, du):
+        """No node angle turns by more than :attr:`max_rotation` in one Newton step."""
+        rot = np.max(np.abs(self.theta(np.atleast_2d(du))), axis=1)
+        with np.errstate(divide="ignore"):
+            return np.where(rot > 0, np.minimum(1.0, self.max_rotation / rot), 1.0)
+
+    def distance(self, du):
+        """Largest change of a node angle, rad, shape (k,)."""
+        return np.max(np.abs(self.theta(np.atleast_2d(du))), axis=1)
+
+    def arclength_weights(self) -> np.ndarray:
+        w = np.zeros(self.size)
+        w[np.arange(self.n) * (self.size // self.n)] = 1.0 / self.n
+        return w
+
+    def stability(self, lin: Linearization, precise: bool = False) -> np.ndarray:
+        """Smallest eigenvalue mu of the second variation ``H z = mu W z`` (W = diag(w)).
+
+        H is the Hessian of the discrete energy in the free angles theta_1..theta_N
+        (positions and forces eliminated); mu approximates the smallest eigenvalue of the
+        continuous second variation per unit length (non-dimensional, EI/L^3 units): the
+        equilibrium is stable iff mu > 0.  Uniform fields: exact, O(N) bisection of the
+        tridiagonal H.  Otherwise the cheap indicator is the sign of det J relative to the
+        straight unloaded rod (+-1: the parity of the number of negative eigenvalues), and
+        ``precise`` forms ``W^1/2 H^-1 W^1/2`` from the banded factors (dense up to
+        ``_DENSE_STABILITY`` free nodes, ARPACK beyond).
         """
-        if not self.uniform:
-            raise ValueError("newton_batch is for uniform fields")
-        k, n = thetas.shape
-        tol = max(opts.tol, self.tol_floor)
-        th = thetas.copy()
-        sc = np.asarray(scales, dtype=float)[:, None]
-        P1, Q1 = self._P1, self._Q1
-        low = np.tile(np.append(self._k_low, 0.0), k)[:-1]  # no coupling between blocks
-        up = np.tile(np.append(self._k_up, 0.0), k)[:-1]
-        iters = np.zeros(k, dtype=int)
-        active = np.ones(k, dtype=bool)
-        res = np.full(k, np.inf)
-        for _ in range(opts.max_iter + 1):
-            c, s = np.cos(th), np.sin(th)
-            r = -sc * (c * P1 - s * Q1)
-            dth = np.diff(th, axis=1) * self._inv_h
-            r[:, 1:] += dth
-            r[:, :-1] -= dth
-            r[:, 0] = th[:, 0] - self.theta0
-            with np.errstate(invalid="ignore", over="ignore"):
-                res = np.max(np.abs(r[:, 1:] * self._inv_w), axis=1)
-            active = ~(res <= tol)
-            if not active.any():
-                break
-            d = self._k_diag + sc * (c * Q1 + s * P1)
-            d[:, 0] = 1.0
-            _, _, _, du, info = _gtsv(low, d.ravel(), up, -r.ravel())
-            if info != 0:
-                break
-            du = du.reshape(k, n)
-            rot = np.max(np.abs(du), axis=1)
-            step = np.minimum(1.0, opts.max_rotation / np.maximum(rot, 1e-300))
-            th[active] += step[active, None] * du[active]
-            iters[active] += 1
-        ok = np.isfinite(res) & (res <= tol)
-        return th, ok, res, iters
+        if self.uniform:
+            return self._stability_tridiagonal(lin)
+        signs = lin.tangent.det_signs() * self.det_reference()
+        if not precise:
+            return signs
+        return self._stability_mixed(lin, signs)
 
-    def min_eigenvalue_batch(self, thetas: np.ndarray, scales: np.ndarray) -> np.ndarray:
-        """:meth:`min_eigenvalue` of several uniform-field states, thetas (k, n): shape (k,)."""
-        if not self.uniform:
-            raise ValueError("min_eigenvalue_batch is for uniform fields")
-        sc = np.asarray(scales, dtype=float)[:, None]
-        c, s = np.cos(thetas[:, 1:]), np.sin(thetas[:, 1:])
-        d = (self._k_diag[1:] + sc * (c * self._Q1[1:] + s * self._P1[1:])) * self._inv_w
-        out = np.empty(len(d))
-        for j, dj in enumerate(d):  # one O(N) bisection per state
-            abstol = 1e-13 * float(np.max(np.abs(dj)))
-            m, ev, _, _, info = _stebz(dj, self._stab_e, 3, 0.0, 0.0, 1, 1, abstol, "E")
+    def near_fold(self, lin: Linearization) -> bool:
+        """True if the smallest second-variation eigenvalue is below 5 % of the straight
+        rod's: failing load steps there mean the branch turns back (a limit point)."""
+        try:
+            mu = float(self.stability(lin, precise=True)[0])
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+            return False
+        return bool(mu < 0.05 * self.mu0)
+
+    def fold_hint(self, lin: Linearization) -> str:
+        """Say whether the state of ``lin`` is close to a limit point (fold)."""
+        try:
+            mu = float(self.stability(lin, precise=True)[0])
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+            return ""
+        if not np.isfinite(mu):
+            return ""
+        if mu < 0.05 * self.mu0:
+            return (
+                f"; the smallest eigenvalue of the second variation there is {mu:.3g}: "
+                "a limit point (fold), the rod snaps through beyond it -- trace it with "
+                "coilrod.trace_rod"
+            )
+        return f"; smallest second-variation eigenvalue there {mu:.3g}"
+
+    @property
+    def mu0(self) -> float:
+        """Smallest second-variation eigenvalue of the straight unloaded rod (~ pi^2 / 4)."""
+        if self._mu0 is None:
+            lin = self.linearize(self.straight(), 0.0)
+            self._mu0 = float(self.stability(lin, precise=True)[0])
+        return self._mu0
+
+    def det_reference(self) -> float:
+        """Sign of det J of the straight unloaded rod (whose second variation is positive)."""
+        if self._det_ref is None:
+            lin = self.linearize(self.straight(), 0.0)
+            self._det_ref = float(lin.tangent.det_signs()[0])
+        return self._det_ref
+
+    # -- uniform layout ---------------------------------------------------------------------------
+    def _uniform(self, th: np.ndarray, S: np.ndarray, tangent: bool):
+        c, s = np.cos(th), np.sin(th)
+        tau1 = c * self._P1 - s * self._Q1  # w tau per unit scale
+        R1 = -tau1
+        R1[:, 0] = 0.0
+        dth = np.diff(th, axis=1) * self._inv_h
+        R = S[:, None] * R1
+        R[:, 1:] += dth
+        R[:, :-1] -= dth
+        R[:, 0] = th[:, 0] - self.theta0
+        if not tangent:
+            return R, R1, None
+        d = S[:, None] * (c * self._Q1 + s * self._P1)  # w m.b
+        d[:, 1:] += self._inv_h
+        d[:, :-1] += self._inv_h
+        d[:, 0] = 1.0
+        return R, R1, (d, self._off_diagonals(th.shape[0]))
+
+    def _off_diagonals(self, k: int):
+        """Sub- and super-diagonals of k stacked tridiagonal Jacobians (constant: bending)."""
+        cached = self._band_cache.get(("tri", k))
+        if cached is None:
+            dl = np.zeros((k, self.n))
+            du = np.zeros((k, self.n))
+            dl[:, :-1] = self._k_low
+            du[:, :-1] = self._k_up
+            cached = self._band_cache[("tri", k)] = (dl.ravel()[:-1], du.ravel()[:-1])
+        return cached
+
+    def _stability_tridiagonal(self, lin: Linearization) -> np.ndarray:
+        d_all = lin.tangent.parts[0]
+        out = np.empty(lin.tangent.k)
+        e = self._stab_e
+        for j in range(lin.tangent.k):
+            d = d_all[j, 1:] * self._inv_w[1:]
+            if not np.all(np.isfinite(d)):
+                out[j] = np.nan
+                continue
+            m, ev, _, _, info = _stebz(d, e, 3, 0.0, 0.0, 1, 1, 0.0, "E")
             out[j] = (
                 ev[0]
                 if info == 0 and m >= 1
-                else eigvalsh_tridiagonal(dj, self._stab_e, select="i", select_range=(0, 0))[0]
+                else eigvalsh_tridiagonal(d, e, select="i", select_range=(0, 0))[0]
             )
         return out
 
-    def points(self, x: np.ndarray) -> np.ndarray:
-        """Physical points (n, 3) in m from non-dimensional positions (n, 2)."""
-        pts = np.empty((x.shape[0], 3))
-        pts[:, :2] = self.clamp[:2] + self.L * x
-        pts[:, 2] = self.clamp[2]
-        return pts
-
-    def interpolate_to(self, fine: DiscreteRod, u: np.ndarray) -> np.ndarray:
-        """Unknowns of this (coarse) state on the refined mesh ``fine`` (linear interpolation)."""
-        if self.uniform:
-            return np.interp(fine.mesh.s, self.mesh.s, u)
-        v = u.reshape(self.n, _NV)
-        out = np.empty((fine.n, _NV))
-        for k in range(_NV):
-            out[:, k] = np.interp(fine.mesh.s, self.mesh.s, v[:, k])
-        return out.ravel()
-
-    # -- field evaluation -----------------------------------------------------------------------
-    def _field(self, x: np.ndarray, scale: float, hessian: bool):
-        """In-plane b (n, 2) T, G (n, 2, 2) T per L, H (n, 2, 2, 2) T per L^2 (or None)."""
-        if self.uniform:
-            return np.broadcast_to(scale * self._b_uniform, (self.n, 2)), None, None
-        pts = self.points(x)
-        cache = self._cache
-        if cache is None or not np.array_equal(cache["pts"], pts):
-            B, G = self.field.B_and_gradient(pts)
-            cache = self._cache = {
-                "pts": pts,
-                "B": B[:, :2].copy(),
-                "G": G[:, :2, :2].copy(),
-                "H": None,
-            }
-        b = scale * cache["B"]
-        Gp = (scale * self.L) * cache["G"]
-        H = None
-        if hessian and not self.linear:
-            if cache["H"] is None:
-                last = self._hessian_last
-                if (
-                    self.hessian_lag > 0
-                    and last is not None
-                    and np.max(np.abs(last[0] - pts)) <= self.hessian_lag * self.L
-                ):
-                    cache["H"] = last[1]  # lagged: the centreline moved less than the lag
-                else:
-                    cache["H"] = self.field.hessian(pts)[:, :2, :2, :2].copy()
-                    self._hessian_last = (pts, cache["H"])
-            H = (scale * self.L**2) * cache["H"]
-        return b, Gp, H
-
-    def _torque_force(self, theta, x, scale, hessian=False):
-        b, G, H = self._field(x, scale, hessian)
-        m = _rot(theta, self.mu)
-        mp = np.stack([-m[:, 1], m[:, 0]], axis=-1)  # dm/dtheta
-        tau = np.einsum("ni,ni->n", mp, b)
-        if G is None:
-            return tau, None, m, mp, b, G, H
-        f = np.einsum("nij,ni->nj", G, m)  # f_j = G_ij m_i
-        return tau, f, m, mp, b, G, H
-
-    # -- residual -------------------------------------------------------------------------------
-    def residual(self, u: np.ndarray, scale: float) -> np.ndarray:
-        """Residual vector, shape (size,), in the unknowns' layout (row order of the Jacobian)."""
-        mesh = self.mesh
-        h, w = mesh.h, mesh.w
-        theta = self.theta(u)
-        bend = np.zeros(self.n)
-        dth = np.diff(theta) / h
-        bend[1:] += dth
-        bend[:-1] -= dth
-        if self.uniform:
-            return self._evaluate_uniform(theta, scale, False)[0]
-        v = u.reshape(self.n, _NV)
-        x, F = v[:, 1:3], v[:, 3:5]
-        tau, f = self._torque_force(theta, x, scale)[:2]
-        tp = np.stack([-np.sin(theta), np.cos(theta)], axis=-1)
-        c = np.concatenate([[0.0], h / 2])
-        r = np.empty((self.n, _NV))
-        r[:, 0] = bend - w * tau - np.einsum("ni,ni->n", tp, w[:, None] * F + (c * w)[:, None] * f)
-        r[0, 0] = theta[0] - self.theta0
-        t = np.stack([np.cos(theta), np.sin(theta)], axis=-1)
-        r[0, 1:3] = x[0]
-        r[1:, 1:3] = x[1:] - x[:-1] - h[:, None] * (t[:-1] + t[1:]) / 2
-        r[-1, 3:5] = F[-1]
-        r[:-1, 3:5] = F[:-1] - F[1:] - w[1:, None] * f[1:]
-        return r.ravel()
-
-    def load_derivative(self, u: np.ndarray, scale: float) -> np.ndarray:
-        """dR/dscale at fixed unknowns (the residual is affine in the scale), shape (size,)."""
-        if self.uniform:
-            out = -self._uniform_parts(u, 1.0)[0]
-            out[0] = 0.0
-            return out
-        return self.residual(u, 1.0) - self.residual(u, 0.0)
-
-    def residual_norm(self, r: np.ndarray) -> float:
-        """Max-norm of the residual with each equation scaled to a point value (non-dim)."""
-        w = self.mesh.w
-        if self.uniform:
-            return float(np.max(np.abs(r[1:] * self._inv_w)))
-        v = r.reshape(self.n, _NV)
-        h = self.mesh.h
-        parts = [
-            np.abs(v[1:, 0] / w[1:]),
-            np.abs(v[1:, 1:3] / h[:, None]).ravel(),
-            np.abs(v[:-1, 3:5] / w[1:, None]).ravel(),
-        ]
-        return float(max(np.max(p) for p in parts))
-
-    # -- uniform fast path ----------------------------------------------------------------------
-    def _uniform_parts(self, theta: np.ndarray, scale: float):
-        """w tau and w m.b at the nodes for a uniform field: with m = R(theta) mu,
-        tau = cos(theta) P - sin(theta) Q and m.b = cos(theta) Q + sin(theta) P."""
-        c, s = np.cos(theta), np.sin(theta)
-        return scale * (c * self._P1 - s * self._Q1), scale * (c * self._Q1 + s * self._P1)
-
-    def _evaluate_uniform(self, theta, scale, jacobian):
-        wtau, wmb = self._uniform_parts(theta, scale)
-        dth = np.diff(theta) * self._inv_h
-        r = -wtau
-        r[1:] += dth
-        r[:-1] -= dth
-        r[0] = theta[0] - self.theta0
-        if not jacobian:
-            return r, None
-        d = self._k_diag + wmb
-        d[0] = 1.0
-        return r, (self._k_low, d, self._k_up)
-
-    def evaluate(self, u: np.ndarray, scale: float, jacobian: bool = True):
-        """Residual, shape (size,), and (if ``jacobian``) the exact Jacobian in the form
-        :meth:`solve` takes: ``(sub, diag, super)`` diagonals for a uniform field, else LAPACK
-        band storage ``(ab, (l, u))``.  One field evaluation serves both."""
-        if self.uniform:
-            return self._evaluate_uniform(u, scale, jacobian)
-        return self.residual(u, scale), (self.jacobian(u, scale) if jacobian else None)
-
-    # -- Jacobian -------------------------------------------------------------------------------
-    def jacobian(self, u: np.ndarray, scale: float):
-        """Exact Jacobian: tridiagonal ``(sub, diag, super)`` for a uniform field, else LAPACK
-        band storage ``(ab, (l, u))`` (7 sub- and 6 super-diagonals)."""
-        if self.uniform:
-            return self._evaluate_uniform(u, scale, True)[1]
-        rows, cols, vals = self._jacobian_triplets(u, scale)
-        ab = np.zeros((_LOW + _UP + 1, self.size))
-        np.add.at(ab, (_UP + rows - cols, cols), vals)
-        return ab, (_LOW, _UP)
-
-    def dense_jacobian(self, u: np.ndarray, scale: float) -> np.ndarray:
-        """The Jacobian as a dense (size, size) array (for tests and small problems)."""
-        if self.uniform:
-            low, diag, up = self.jacobian(u, scale)
-            return np.diag(diag) + np.diag(low, -1) + np.diag(up, 1)
-        ab, (lo, up) = self.jacobian(u, scale)
-        J = np.zeros((self.size, self.size))
-        for d in range(-lo, up + 1):
-            diag = ab[up - d, max(d, 0) : self.size + min(d, 0)]
-            J += np.diag(diag, d)
-        return J
-
-    def _jacobian_triplets(self, u, scale):
-        n, h, w = self.n, self.mesh.h, self.mesh.w
-        v = u.reshape(n, _NV)
-        theta, x, F = v[:, 0], v[:, 1:3], v[:, 3:5]
-        tau, f, m, mp, b, G, H = self._torque_force(theta, x, scale, hessian=True)
-        t = np.stack([np.cos(theta), np.sin(theta)], axis=-1)
-        tp = np.stack([-t[:, 1], t[:, 0]], axis=-1)
-        c = np.concatenate([[0.0], h / 2])
-        Gtmp = np.einsum("nij,ni->nj", G, mp)  # df/dtheta = G^T m_perp, also dtau/dx
+    # -- mixed layout -----------------------------------------------------------------------------
+    def _mixed(self, U: np.ndarray, S: np.ndarray, tangent: bool):
+        k, n = U.shape[0], self.n
+        h, w, c = self.mesh.h, self.mesh.w, self._c
+        V = U.reshape(k, n, _NV)
+        th, x, F = V[:, :, 0], V[:, :, 1:3], V[:, :, 3:5]
+        b, G, H = self._field_by_member(x, tangent)
+        cs, sn = np.cos(th), np.sin(th)
+        t = np.stack([cs, sn], axis=-1)
+        tp = np.stack([-sn, cs], axis=-1)
+        m = _rot(th, self.mu)
+        mp = np.stack([-m[..., 1], m[..., 0]], axis=-1)  # dm/dtheta
+        tau = np.einsum("kni,kni->kn", mp, b)
+        f = np.einsum("knij,kni->knj", G, m)  # f_j = G_ij m_i (per unit scale)
+        Ss = S[:, None]
+        R = np.empty((k, n, _NV))
+        R1 = np.zeros((k, n, _NV))
+        bend = np.zeros((k, n))
+        dth = np.diff(th, axis=1) * self._inv_h
+        bend[:, 1:] += dth
+        bend[:, :-1] -= dth
+        cwf = (c * w)[None, :, None] * f
+        R1[:, :, 0] = -w * tau - np.einsum("kni,kni->kn", tp, cwf)
+        R[:, :, 0] = bend + Ss * R1[:, :, 0] - np.einsum("kni,kni->kn", tp, w[None, :, None] * F)
+        R[:, 0, 0] = th[:, 0] - self.theta0
+        R1[:, 0, 0] = 0.0
+        R[:, 0, 1:3] = x[:, 0]
+        R[:, 1:, 1:3] = x[:, 1:] - x[:, :-1] - h[None, :, None] * (t[:, :-1] + t[:, 1:]) / 2
+        R1[:, :-1, 3:5] = -w[None, 1:, None] * f[:, 1:]
+        R[:, :-1, 3:5] = F[:, :-1] - F[:, 1:] + Ss[:, :, None] * R1[:, :-1, 3:5]
+        R[:, -1, 3:5] = F[:, -1]
+        R, R1 = R.reshape(k, -1), R1.reshape(k, -1)
+        if not tangent:
+            return R, R1, None
+        Gtmp = np.einsum("knij,kni->knj", G, mp)  # df/dtheta = G^T m_perp, also dtau/dx
         if H is None:
-            dfdx = np.zeros((n, 2, 2))
+            dfdx = np.zeros((k, n, 2, 2))
         else:
-            dfdx = np.einsum("nijl,ni->njl", H, m)  # df_j/dx_l
-        idx = np.arange(n)
-        R, C, V = [], [], []
-
-        def add(r, cc, val):
-            R.append(np.asarray(r).ravel())
-            C.append(np.asarray(cc).ravel())
-            V.append(np.broadcast_to(val, np.shape(r)).ravel())
-
-        i = idx[1:]
-        # moment equations g_i, i >= 1
-        add(_NV * i, _NV * (i - 1), -1 / h)
-        add(_NV * idx[1:-1], _NV * (idx[1:-1] + 1), -1 / h[1:])
-        diag = np.zeros(n)
-        diag[1:] += 1 / h
-        diag[:-1] += 1 / h
-        load = w[:, None] * F + (c * w)[:, None] * f
-        diag += (
-            w * np.einsum("ni,ni->n", m, b)
-            + np.einsum("ni,ni->n", t, load)
-            - c * w * np.einsum("ni,ni->n", tp, Gtmp)
+            dfdx = np.einsum("knijl,kni->knjl", H, m)  # df_j/dx_l
+        load = w[None, :, None] * F + Ss[:, :, None] * cwf
+        diag = (
+            self._bend_scale * w
+            + Ss * w * np.einsum("kni,kni->kn", m, b)
+            + np.einsum("kni,kni->kn", t, load)
+            - Ss * c * w * np.einsum("kni,kni->kn", tp, Gtmp)
         )
-        add(_NV * i, _NV * i, diag[1:])
-        dgdx = -w[:, None] * Gtmp - (c * w)[:, None] * np.einsum("nj,njl->nl", tp, dfdx)
-        dgdF = -w[:, None] * tp
-        for a in range(2):
-            add(_NV * i, _NV * i + 1 + a, dgdx[1:, a])
-            add(_NV * i, _NV * i + 3 + a, dgdF[1:, a])
-        add(0, 0, 1.0)
-        # position equations
-        for a in range(2):
-            add(_NV * i + 1 + a, _NV * i + 1 + a, 1.0)
-            add(_NV * i + 1 + a, _NV * (i - 1) + 1 + a, -1.0)
-            add(_NV * i + 1 + a, _NV * (i - 1), -h / 2 * tp[:-1, a])
-            add(_NV * i + 1 + a, _NV * i, -h / 2 * tp[1:, a])
-            add(1 + a, 1 + a, 1.0)
-        # force equations
-        j = idx[:-1]
-        for a in range(2):
-            add(_NV * j + 3 + a, _NV * j + 3 + a, 1.0)
-            add(_NV * j + 3 + a, _NV * (j + 1) + 3 + a, -1.0)
-            add(_NV * j + 3 + a, _NV * (j + 1), -w[1:] * Gtmp[1:, a])
-            for b_ in range(2):
-                add(_NV * j + 3 + a, _NV * (j + 1) + 1 + b_, -w[1:] * dfdx[1:, a, b_])
-            add(_NV * (n - 1) + 3 + a, _NV * (n - 1) + 3 + a, 1.0)
-        return np.concatenate(R), np.concatenate(C), np.concatenate(V)
+        dgdx = -Ss[:, :, None] * (
+            w[None, :, None] * Gtmp + (c * w)[None, :, None] * np.einsum("knj,knjl->knl", tp, dfdx)
+        )
+        dgdF = -w[None, :, None] * tp
+        hp = (h / 2)[None, :, None]
+        sw = Ss[:, :, None] * w[None, 1:, None]
+        values = [
+            diag[:, 1:],  # g_i / theta_i
+            dgdx[:, 1:, 0],
+            dgdx[:, 1:, 1],
+            dgdF[:, 1:, 0],
+            dgdF[:, 1:, 1],
+            (-hp * tp[:, :-1])[..., 0],  # position rows / theta_{i-1}
+            (-hp * tp[:, :-1])[..., 1],
+            (-hp * tp[:, 1:])[..., 0],  # position rows / theta_i
+            (-hp * tp[:, 1:])[..., 1],
+            (-sw * Gtmp[:, 1:])[..., 0],  # force rows / theta_{i+1}
+            (-sw * Gtmp[:, 1:])[..., 1],
+            -sw[..., 0] * dfdx[:, 1:, 0, 0],  # force rows / x_{i+1}
+            -sw[..., 0] * dfdx[:, 1:, 0, 1],
+            -sw[..., 0] * dfdx[:, 1:, 1, 0],
+            -sw[..., 0] * dfdx[:, 1:, 1, 1],
+        ]
+        ab, flat = self._band_template(k)
+        ab.flat[flat] = np.concatenate([v.reshape(k, -1) for v in values], axis=1).ravel()
+        return R, R1, ab
 
-    # -- linear algebra ---------------------------------------------------------------------------
-    def solve(self, jac, rhs: np.ndarray) -> np.ndarray:
-        """Solve J z = rhs (rhs shape (size,) or (size, k)) with the banded LU (LAPACK gtsv
-        for the tridiagonal Jacobian of a uniform field, gbsv otherwise)."""
-        if self.uniform:
-            low, diag, up = jac
-            _, _, _, z, info = _gtsv(
-                low,
-                diag,
-                up,
-                rhs,
-                overwrite_dl=False,
-                overwrite_d=False,
-                overwrite_du=False,
-                overwrite_b=False,
-            )
-            if info != 0:
-                raise np.linalg.LinAlgError(f"singular tridiagonal Jacobian (info {info})")
-            return z
-        ab, lu = jac
-        return solve_banded(lu, ab, rhs, check_finite=False)
+    def _band_template(self, k: int):
+        """Band storage (2 KL + KU + 1, k size) with the constant entries of k stacked
+        Jacobians filled in, and the flat indices of the variable entries (in the order of
+        :meth:`_mixed`'s ``values``)."""
+        cached = self._band_cache.get(k)
+        if cached is None:
+            cached = self._band_cache[k] = self._build_band(k)
+        template, flat = cached
+        return template.copy(), flat
 
-    def min_eigenvalue(self, u: np.ndarray, scale: float, jac=None) -> float:
-        """Smallest eigenvalue mu of the second variation, H z = mu W z (W = diag(w)).
+    def _build_band(self, k: int):
+        n, N = self.n, k * self.size
+        i1 = np.arange(1, n)  # nodes 1..n-1
+        i0 = np.arange(n - 1)  # nodes 0..n-2
+        g, pos, frc = _NV * i1, _NV * i1 + 1, _NV * i0 + 3
 
-        H is the Hessian of the discrete energy in the free angles theta_1..theta_N (positions
-        and forces eliminated); mu approximates the smallest eigenvalue of the continuous
-        second variation (per unit length, non-dimensional): the equilibrium is stable iff
-        mu > 0.  Cost O(N) for uniform fields (tridiagonal); otherwise O(N^3) (dense) up to
-        ``_DENSE_STABILITY`` free nodes and, beyond, a Lanczos iteration on H^-1 whose
-        products are banded solves (O(N) each).
-        """
-        w = self.mesh.w[1:]
-        if jac is None:
-            jac = self.jacobian(u, scale)
-        if self.uniform:
-            d = jac[1][1:] * self._inv_w
-            e = self._stab_e
-            # bisection for the lowest eigenvalue only (LAPACK stebz), O(N)
-            abstol = 1e-13 * float(np.max(np.abs(d)))
-            m, ev, _, _, info = _stebz(d, e, 3, 0.0, 0.0, 1, 1, abstol, "E")
-            if info != 0 or m < 1:
-                return float(eigvalsh_tridiagonal(d, e, select="i", select_range=(0, 0))[0])
-            return float(ev[0])
-        if self.n - 1 > _DENSE_STABILITY:
-            return self._min_eigenvalue_sparse(jac)
-        rhs = np.zeros((self.size, self.n - 1))
-        rhs[_NV * np.arange(1, self.n), np.arange(self.n - 1)] = 1.0
-        Hinv = self.solve(jac, rhs)[_NV * np.arange(1, self.n)]
-        sq = np.sqrt(w)
-        S = sq[:, None] * Hinv * sq[None, :]
-        S = 0.5 * (S + S.T)
-        # mu = 1 / sigma, sigma the eigenvalues of S = W^(1/2) H^-1 W^(1/2)
-        try:
-            np.linalg.cholesky(S)
-        except np.linalg.LinAlgError:
-            neg = eigh(S, eigvals_only=True, subset_by_value=(-np.inf, 0.0), check_finite=False)
-            if neg.size:
-                return float(1.0 / np.max(neg))
-        return float(1.0 / _largest_eigenvalue(S))
+        def th(i):
+            return _NV * i
 
-    def _min_eigenvalue_sparse(self, jac) -> float:
-        """Eigenvalue of H z = mu W z closest to zero, by ARPACK on S = W^(1/2) H^-1 W^(1/2)
-        (largest magnitude), each product one banded solve; the sign of det H (parity of the
-        number of negative eigenvalues, from the banded LU) guards against an unstable state
-        whose closest-to-zero eigenvalue is positive."""
-        from scipy.linalg.lapack import dgbtrf
+        variable = [
+            (g, th(i1)),
+            (g, th(i1) + 1),
+            (g, th(i1) + 2),
+            (g, th(i1) + 3),
+            (g, th(i1) + 4),
+            (pos, th(i1 - 1)),
+            (pos + 1, th(i1 - 1)),
+            (pos, th(i1)),
+            (pos + 1, th(i1)),
+            (frc, th(i0 + 1)),
+            (frc + 1, th(i0 + 1)),
+            (frc, th(i0 + 1) + 1),
+            (frc, th(i0 + 1) + 2),
+            (frc + 1, th(i0 + 1) + 1),
+            (frc + 1, th(i0 + 1) + 2),
+        ]
+        constant = [
+            (g, th(i1 - 1), -self._inv_h),
+            (_NV * np.arange(1, n - 1), th(np.arange(2, n)), -self._inv_h[1:]),
+            (np.array([0]), np.array([0]), 1.0),
+            (pos, pos, 1.0),
+            (pos + 1, pos + 1, 1.0),
+            (pos, pos - _NV, -1.0),
+            (pos + 1, pos + 1 - _NV, -1.0),
+            (np.array([1, 2]), np.array([1, 2]), 1.0),
+            (frc, frc, 1.0),
+            (frc + 1, frc + 1, 1.0),
+            (frc, frc + _NV, -1.0),
+            (frc + 1, frc + 1 + _NV, -1.0),
+            (_NV * (n - 1) + np.array([3, 4]), _NV * (n - 1) + np.array([3, 4]), 1.0),
+        ]
+        offsets = self.size * np.arange(k)[:, None]
+
+        def flat_index(r, cc):
+            rows = (_DIAG + r - cc)[None, :]
+            cols = cc[None, :] + offsets
+            return (rows * N + cols).ravel()  # (k * m,), member-major
+
+        template = np.zeros((2 * _KL + _KU + 1, N))
+        for r, cc, val in constant:
+            idx = flat_index(r, cc)
+            template.flat[idx] = np.broadcast_to(np.asarray(val, float), (k, r.size)).ravel()
+        # variable entries: member-major order matching the concatenated values
+        per = [(_DIAG + r - cc, cc) for r, cc in variable]
+        rows = np.concatenate([p[0] for p in per])
+        cols = np.concatenate([p[1] for p in per])
+        flat = ((rows[None, :] * N) + cols[None, :] + offsets).ravel()
+        return template, flat
+
+    def _stability_mixed(self, lin: Linearization, signs: np.ndarray) -> np.ndarray:
+        k = lin.tangent.k
+        nf = self.n - 1
+        out = np.full(k, np.nan)
+        if nf > _DENSE_STABILITY:
+            for j in range(k):
+                if signs[j] != 0:
+                    out[j] = self._stability_sparse(_take_tangent(lin.tangent, [j]), signs[j])
+            return out
+        rows = _NV * np.arange(1, self.n)
+        rhs = np.zeros((k, self.size, nf))
+        rhs[:, rows, np.arange(nf)] = 1.0
+        lu, ipiv = lin.tangent.factor()
+        x, info = dgbtrs(lu, _KL, _KU, rhs.reshape(k * self.size, nf), ipiv)
+        if info != 0:
+            return out
+        Hinv = x.reshape(k, self.size, nf)[:, rows, :]
+        sq = np.sqrt(self.mesh.w[1:])
+        S = sq[None, :, None] * Hinv * sq[None, None, :]
+        S = 0.5 * (S + S.transpose(0, 2, 1))
+        for j in range(k):
+            if signs[j] == 0 or not np.all(np.isfinite(S[j])):
+                continue
+            out[j] = _lowest_from_inverse(S[j], signs[j] > 0)
+        return out
+
+    def _stability_sparse(self, tan: RodTangent, sign: float) -> float:
+        """Eigenvalue of H z = mu W z closest to zero, by ARPACK on W^1/2 H^-1 W^1/2 (each
+        product one banded solve), with the sign of det H (the parity of the number of
+        negative eigenvalues) guarding against an unstable state whose closest-to-zero
+        eigenvalue is positive."""
         from scipy.sparse.linalg import LinearOperator, eigsh
 
         idx = _NV * np.arange(1, self.n)
         sq = np.sqrt(self.mesh.w[1:])
-        rhs = np.zeros(self.size)
+        rhs = np.zeros((1, self.size))
 
-        def matvec(x):
+        def matvec(v):
             rhs[:] = 0.0
-            rhs[idx] = sq * np.ravel(x)
-            return sq * self.solve(jac, rhs)[idx]
+            rhs[0, idx] = sq * np.ravel(v)
+            return sq * tan.solve(rhs)[0, idx]
 
         op = LinearOperator((self.n - 1, self.n - 1), matvec=matvec, dtype=float)
         sigma = eigsh(op, k=1, which="LM", tol=1e-10, return_eigenvectors=False)[0]
         mu = 1.0 / sigma
-        if mu > 0:  # odd number of negative eigenvalues of H <=> det J changes sign
-            ab, (lo, up) = jac
-            work = np.zeros((2 * lo + up + 1, self.size))
-            work[lo:] = ab
-            lu, piv, info = dgbtrf(work, lo, up)
-            if info == 0:
-                swaps = np.count_nonzero(piv != np.arange(self.size))
-                sign = np.prod(np.sign(lu[lo + up])) * (-1) ** swaps
-                if sign != self._det_sign_reference():
-                    return -abs(mu)  # unstable: report the magnitude with the sign of H
+        if mu > 0 and sign < 0:
+            return -abs(mu)
         return float(mu)
 
-    def _det_sign_reference(self) -> float:
-        """Sign of det J for the straight unloaded rod (H positive definite there)."""
-        if getattr(self, "_det_ref", None) is None:
-            from scipy.linalg.lapack import dgbtrf
 
-            ab, (lo, up) = self.jacobian(self.straight(), 0.0)
-            work = np.zeros((2 * lo + up + 1, self.size))
-            work[lo:] = ab
-            lu, piv, _ = dgbtrf(work, lo, up)
-            swaps = np.count_nonzero(piv != np.arange(self.size))
-            self._det_ref = np.prod(np.sign(lu[lo + up])) * (-1) ** swaps
-        return self._det_ref
+def _take_tangent(tan: RodTangent, rows) -> RodTangent:
+    """Members ``rows`` of a stacked tangent (factors sliced: the blocks are independent)."""
+    rows = np.asarray(rows, dtype=int)
+    n = tan.size
+    cols = (rows[:, None] * n + np.arange(n)[None, :]).ravel()
+    if tan.uniform:
+        d, (dl, du) = tan.parts
+        off = (dl[: rows.size * n - 1], du[: rows.size * n - 1])  # the same for every member
+        out = RodTangent(rows.size, n, True, (d[rows], off), tan.load_rate[rows])
+        out.bad = tan.bad[rows].copy()
+        return out  # refactorised on use (tridiagonal: O(n), cheaper than slicing pivots)
+    out = RodTangent(rows.size, n, False, None, tan.load_rate[rows])
+    out.bad = tan.bad[rows].copy()
+    if tan._lu is not None:
+        lu, ipiv = tan._lu
+        shift = np.repeat(rows * n - np.arange(rows.size) * n, n)
+        out._lu = (np.ascontiguousarray(lu[:, cols]), ipiv[cols] - shift)
+    else:
+        out.parts = np.ascontiguousarray(tan.parts[:, cols])
+    return out
 
 
-def _largest_eigenvalue(S: np.ndarray, rtol: float = 1e-13, max_iter: int = 500) -> float:
-    """Largest eigenvalue of a symmetric positive-definite matrix by power iteration.
+def _lowest_from_inverse(S: np.ndarray, even: bool) -> float:
+    """Smallest eigenvalue mu of H z = mu W z from S = W^1/2 H^-1 W^1/2 (sigma = 1/mu).
 
-    Small dense LAPACK eigensolvers are slow under BLAS thread contention; the spectrum of the
-    inverse second variation is well separated (ratio mu_1 / mu_2 of the rod's lowest modes),
-    so a few dozen matrix-vector products suffice.
+    ``even``: det H > 0 relative to the unloaded rod (an even number of negative eigenvalues,
+    in practice none on a path from the unloaded rod).  Then mu_min = 1 / sigma_max, the
+    dominant eigenvalue of S, by power iteration.  Otherwise the negative sigma closest to
+    zero gives the most negative mu; sigma of |sigma| below 1e-10 sigma_max are round-off
+    (they would be eigenvalues mu beyond any physical load) and are ignored.
     """
+    if even:
+        sigma = _dominant_eigenvalue(S)
+        if sigma > 0:
+            return 1.0 / sigma
+    ev = np.linalg.eigvalsh(S)
+    big = np.max(np.abs(ev))
+    neg = ev[ev < -1e-10 * big]
+    if neg.size:
+        return float(1.0 / np.max(neg))
+    pos = ev[ev > 0]
+    return float(1.0 / np.max(pos)) if pos.size else float("nan")
+
+
+def _dominant_eigenvalue(S: np.ndarray, rtol: float = 1e-13, max_iter: int = 500) -> float:
+    """Dominant eigenvalue (with its sign) of a symmetric matrix by power iteration: the
+    spectrum of the inverse second variation is well separated (ratio mu_1 / mu_2 of the rod's
+    lowest modes), so a few dozen products suffice."""
     x = np.ones(S.shape[0]) / np.sqrt(S.shape[0])
     sigma = 0.0
     for _ in range(max_iter):
@@ -576,3 +781,6 @@ def _largest_eigenvalue(S: np.ndarray, rtol: float = 1e-13, max_iter: int = 500)
             return new
         sigma = new
     return sigma
+
+
+RodMesh = RodMesh  # re-exported for convenience

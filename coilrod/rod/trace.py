@@ -6,12 +6,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from coils._validate import finite_scalar
+from coils._validate import finite_scalar, positive
 
 from ..errors import ConvergenceError
 from ..path.arclength import ArcLength
 from ..path.newton import NewtonOptions, newton
-from .solve import _check_inputs, build_problem, make_mesh
+from .solve import build_problem, check_inputs, make_mesh
 
 __all__ = ["trace_rod", "RodPath"]
 
@@ -102,10 +102,10 @@ def trace_rod(
     direction : {1, -1}
         Initial direction of the scale.
     step : float, optional
-        Initial arc-length step (scale units mixed with rms angle in rad); default 2 % of the
-        scale range.
+        Initial arc-length step (> 0; scale units mixed with rms angle in rad); default 2 % of
+        the scale range.
     max_steps : int
-        Maximum number of path points.
+        Maximum number of path points (>= 1).
     nodes : int, optional
         Segments of the mesh (one mesh, second order, no extrapolation).
     clamp_position, clamp_angle, tol
@@ -122,34 +122,37 @@ def trace_rod(
     """
     lo, hi = sorted(finite_scalar(v, "scale_range") for v in scale_range)
     c0 = finite_scalar(scale_start, "scale_start")
-    _, nodes, clamp, angle = _check_inputs(rod, field, [c0], nodes, clamp_position, clamp_angle)
-    if direction not in (1, -1):
+    _, nodes, clamp, angle, tol = check_inputs(
+        rod, field, [c0], nodes, clamp_position, clamp_angle, tol
+    )
+    if direction not in (1, -1) or isinstance(direction, bool):
         raise ValueError(f"direction must be 1 or -1; got {direction!r}")
     if not lo <= c0 <= hi:
         raise ValueError(f"scale_start {c0} lies outside scale_range ({lo}, {hi})")
+    if isinstance(max_steps, bool) or not isinstance(max_steps, int | np.integer) or max_steps < 1:
+        raise ValueError(f"max_steps must be a positive integer; got {max_steps!r}")
     span = max(hi - lo, 1e-300)
-    ds = 0.02 * span if step is None else finite_scalar(step, "step")
-    opts = NewtonOptions(tol=finite_scalar(tol, "tol"))
-    problem = build_problem(rod, field, make_mesh(rod, nodes), clamp, angle)
+    ds = 0.02 * span if step is None else positive(step, "step")
+    problem = build_problem(rod, field, make_mesh(rod, nodes), clamp, angle, tol)
     theta0 = _initial_theta(problem, rod, initial)
-    u, ok, res, _, _ = newton(problem, problem.from_theta(theta0, c0), c0, opts)
-    if not ok:
+    first = newton(problem, problem.from_theta(theta0, c0), c0, NewtonOptions())
+    if not first.ok:
         raise ConvergenceError(
             f"trace_rod found no equilibrium at scale {c0:g} from the given "
-            f"initial state (residual {res:.3g})",
+            f"initial state (error {first.error:.3g} of the tolerance)",
             reached=float("nan"),
             target=c0,
-            residual=res,
+            residual=first.error,
         )
-    tracer = ArcLength(problem, span, opts, step=ds)
-    pts_u, pts_c, residuals = [u], [c0], [res]
-    for u_new, c_new, res in tracer.follow(u, c0, direction, max_steps - 1):
+    u = first.u
+    tracer = ArcLength(problem, span, step=ds)
+    pts_u, pts_c = [u], [c0]
+    for u_new, c_new, _err, _lin in tracer.follow(u, c0, direction, max_steps - 1, first.lin):
         pts_u.append(u_new)
         pts_c.append(c_new)
-        residuals.append(res)
         if not lo <= c_new <= hi:
             break
-    return _finish(problem, rod, pts_u, pts_c, residuals)
+    return _finish(problem, rod, pts_u, pts_c)
 
 
 def _initial_theta(problem, rod, initial) -> np.ndarray:
@@ -168,11 +171,14 @@ def _initial_theta(problem, rod, initial) -> np.ndarray:
     return theta
 
 
-def _finish(problem, rod, pts_u, pts_c, residuals) -> RodPath:
+def _finish(problem, rod, pts_u, pts_c) -> RodPath:
     scale = np.array(pts_c)
-    thetas = np.array([problem.theta(u) for u in pts_u])
-    points = np.array([problem.points(problem.positions(th)) for th in thetas])
-    mu = np.array([problem.min_eigenvalue(u, c) for u, c in zip(pts_u, pts_c, strict=True)])
+    states = np.array(pts_u)
+    lin = problem.linearize(states, scale)
+    thetas = problem.theta(states)
+    points = problem.points(problem.positions(thetas))
+    mu = np.asarray(problem.stability(lin, precise=True), float)
+    residuals = problem.residual_norm(lin)
     path = RodPath(
         scale=scale,
         tip=points[:, -1].copy(),

@@ -1,0 +1,477 @@
+"""Load stepping along an equilibrium path: predictor, Newton corrector, cuts, events.
+
+:func:`follow_load` continues an equilibrium from a start state (the unloaded model at scale 0)
+through a list of requested load scales, in order.  Every step -- the first one from the start
+included -- is the same:
+
+1. **predict** the state at the trial scale with the path tangent ``du/ds = -J^-1 dR/ds`` plus
+   a second-order (Hermite) term from the previous state;
+2. **correct** with :func:`~coilrod.path.newton.newton`;
+3. **accept** if Newton converged, the correction is within the model's ``max_correction``
+   (a larger one means the step may have jumped to another branch) and the stability did not
+   change -- if it did, the step is **cut** until the change is located within
+   ``bifurcation_tol`` of the requested step: a change that persists at that resolution is a
+   bifurcation on this branch (reported as an event; the solver stays on its branch), while a
+   jump onto another branch (e.g. over the knee of an imperfect bifurcation) disappears as the
+   steps resolve the path;
+4. otherwise **halve** the step (and double it again after easy steps);
+5. a step that cannot be shortened further (``min_step``) means the branch ends: the path is
+   followed around the limit point by pseudo-arclength continuation
+   (:class:`~coilrod.path.arclength.ArcLength`) until it is stable again beyond it -- the
+   snap-through of a quasi-statically loaded structure (an event) -- or, if it does not come
+   back, :class:`~coilrod.errors.ConvergenceError` says how far the load got.
+
+For batched models, smooth stretches are corrected in chunks: the next requested scales are
+predicted together from the branch and corrected in one batched Newton; the leading run that
+converged with small corrections and unchanged stability is accepted, the rest is stepped.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ConvergenceError
+from .arclength import ArcLength
+from .newton import NewtonOptions, as_batched, newton, take
+from .protocol import Linearization, PathProblem
+
+__all__ = ["PathOptions", "PathPoint", "PathRun", "follow_load"]
+
+
+@dataclass(frozen=True)
+class PathOptions:
+    """Settings of the load stepping.
+
+    Attributes
+    ----------
+    newton : NewtonOptions
+    min_step : float
+        Smallest load sub-step, as a fraction of the requested step, before the branch is
+        taken to end (a limit point) or the load to be unreachable.
+    bifurcation_tol : float
+        A change of stability is located to this fraction of the requested step (> min_step).
+    relative_correction : float
+        A step is also rejected (and cut) when the Newton correction exceeds this fraction of
+        the predicted change of the state: on a smooth path the predictor's error is of higher
+        order than the change, while a jump to another branch (over a fold) is not.
+    stability : bool
+        Check the stability of every accepted state (cut steps that change it, report events).
+    chunk : int
+        Batched models: requested scales predicted and corrected together on smooth stretches
+        (1 disables chunking).
+    snaps : int
+        Snap-throughs allowed within one requested step.
+    snap_steps : int
+        Arclength steps allowed to go around one fold.
+    """
+
+    newton: NewtonOptions = field(default_factory=NewtonOptions)
+    min_step: float = 1e-6
+    bifurcation_tol: float = 1e-4
+    relative_correction: float = 0.25
+    stability: bool = True
+    chunk: int = 10
+    snaps: int = 4
+    snap_steps: int = 400
+
+    def __post_init__(self):
+        if not 0 < self.min_step < self.bifurcation_tol < 1:
+            raise ValueError(
+                "need 0 < min_step < bifurcation_tol < 1; got "
+                f"min_step={self.min_step}, bifurcation_tol={self.bifurcation_tol}"
+            )
+        for name in ("chunk", "snaps", "snap_steps"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+                raise ValueError(f"{name} must be a positive integer; got {value!r}")
+
+
+@dataclass
+class PathPoint:
+    """A converged equilibrium on the path.
+
+    Attributes
+    ----------
+    u : ndarray, shape (size,)
+    scale : float
+    error : float
+        The model's convergence measure (<= 1).
+    stability : float
+        The model's cheap stability indicator (> 0 stable).
+    lin : Linearization or None
+        The linearization at the state (stacked, one member), with its tangent (None for the
+        inner states of a batch-corrected chunk, which the path does not continue from).
+    rate : ndarray or None
+        ``du/dscale`` along the path (None where the tangent is singular).
+    """
+
+    u: np.ndarray
+    scale: float
+    error: float
+    stability: float
+    lin: Linearization
+    rate: np.ndarray | None = None
+
+
+@dataclass
+class PathRun:
+    """What :func:`follow_load` returns.
+
+    Attributes
+    ----------
+    points : list of PathPoint
+        One per requested scale, in order.
+    iterations : ndarray of int
+        Newton iterations spent reaching each requested scale from the previous one.
+    events : list of dict
+        Bifurcations and snap-throughs (see :mod:`coilrod.path.events`).
+    start : PathPoint
+        The start state.
+    steps, cuts : int
+        Accepted load sub-steps and rejected attempts (Newton failed, a jump, a change of
+        stability being located).
+    """
+
+    points: list
+    iterations: np.ndarray
+    events: list
+    start: PathPoint
+    steps: int = 0
+    cuts: int = 0
+
+
+class _Tracker:
+    """State of one run (the current and previous points, the counters)."""
+
+    def __init__(self, problem: PathProblem, opts: PathOptions, name: str):
+        self.P = as_batched(problem)
+        self.native = problem.batched
+        self.model = problem
+        self.opts = opts
+        self.name = name
+        self.events: list = []
+        self.steps = 0
+        self.cuts = 0
+
+    # -- small helpers ------------------------------------------------------------------------
+    def point(self, u, scale, error, lin, stab=None) -> PathPoint:
+        if stab is None:
+            stab = float(self.P.stability(lin)[0]) if self.opts.stability else 1.0
+        return PathPoint(u, float(scale), float(error), stab, lin, self.rate(lin))
+
+    def rate(self, lin: Linearization):
+        """du/dscale = -J^-1 dR/dscale at a converged state (None if J is singular)."""
+        with np.errstate(all="ignore"):
+            r = -self.P.solve(lin, self.P.d_residual_d_scale(lin))[0]
+        return r if np.all(np.isfinite(r)) else None
+
+    def predict(self, cur: PathPoint, prev: PathPoint | None, s1: float) -> np.ndarray:
+        ds = s1 - cur.scale
+        if cur.rate is None:
+            return cur.u.copy()
+        guess = cur.u + ds * cur.rate
+        if prev is not None:
+            h = cur.scale - prev.scale
+            if h != 0 and abs(ds) <= 4 * abs(h):
+                curv = (prev.u - cur.u + cur.rate * h) / (h * h)
+                guess = guess + curv * ds * ds
+        return guess
+
+    def stable(self, value: float) -> bool:
+        return bool(value > 0)
+
+    def continuous(self, cur: PathPoint, guess: np.ndarray, u: np.ndarray) -> bool:
+        """The converged ``u`` continues the path from ``cur``: its distance from the
+        prediction ``guess`` is within the model's ``max_correction`` and, where the path
+        tangent is known, within ``relative_correction`` of the predicted change."""
+        dist = self.P.distance
+        correction = float(dist((u - guess)[None])[0])
+        if correction > self.P.max_correction:
+            return False
+        if cur.rate is None:
+            return True
+        change = float(dist((guess - cur.u)[None])[0])
+        return correction <= self.opts.relative_correction * change + 1e-9
+
+    def limit_change(self, cur: PathPoint, h: float) -> float:
+        """``h`` shortened so that the predicted change of the state is at most the model's
+        ``max_step_change``."""
+        limit = self.P.max_step_change
+        if cur.rate is None or not np.isfinite(limit):
+            return h
+        per_unit = float(self.P.distance(cur.rate[None])[0])
+        if per_unit * abs(h) > limit:
+            return float(np.copysign(limit / per_unit, h))
+        return h
+
+    def near_fold(self, cur: PathPoint) -> bool:
+        """The model says ``cur`` is close to a limit point (failing steps then mean a fold)."""
+        hook = getattr(self.model, "near_fold", None)
+        return bool(hook(cur.lin)) if hook is not None else False
+
+    def fail(self, k, target, cur, residual, why="") -> ConvergenceError:
+        hint = getattr(self.model, "fold_hint", None)
+        extra = hint(cur.lin) if hint is not None else ""
+        reason = getattr(self.model, "last_failure", "")
+        if not why:
+            why = (
+                f"error {residual:.3g} of the tolerance"
+                if np.isfinite(residual)
+                else (reason or "the model could not be evaluated at the trial states")
+            )
+        return ConvergenceError(
+            f"{self.name} could not reach scale {target:g} (index {k}); it reached scale "
+            f"{cur.scale:g} ({why}){extra}",
+            reached=cur.scale,
+            target=float(target),
+            residual=float(residual),
+        )
+
+    # -- one requested step ----------------------------------------------------------------------
+    def advance(self, cur: PathPoint, prev, target: float, k: int, first_of: float):
+        """Continue from ``cur`` to ``target``; returns (cur, prev, iterations)."""
+        opts = self.opts
+        full = target - cur.scale
+        if full == 0:
+            return cur, prev, 0
+        h = full
+        iters = 0
+        snaps = 0
+        failures = 0
+        locating = False  # a change of stability lies ahead: bisect, do not grow the step
+        residual = np.inf
+        while True:
+            remaining = target - cur.scale
+            if remaining == 0:
+                return cur, prev, iters
+            h = self.limit_change(cur, h)
+            if abs(h) >= abs(remaining):
+                h, s1 = remaining, target
+            else:
+                s1 = cur.scale + h
+            guess = self.predict(cur, prev, s1)
+            res = newton(self.P, guess[None], np.array([s1]), opts.newton)
+            iters += int(res.iterations[0])
+            ok = bool(res.ok[0])
+            residual = float(res.error[0])
+            stab = 1.0
+            if ok:
+                ok = self.continuous(cur, guess, res.u[0])
+            if ok and opts.stability:
+                stab = float(self.P.stability(res.lin)[0])
+                if self.stable(stab) != self.stable(cur.stability):
+                    if abs(h) > opts.bifurcation_tol * abs(full):
+                        h /= 2.0  # locate the change of stability: shorten the step
+                        self.cuts += 1
+                        locating = True
+                        continue
+                    locating = False
+                    self.record_bifurcation(cur, s1, stab, k, first_of, target)
+            if ok:
+                new = self.point(res.u[0], s1, residual, res.lin, stab)
+                prev, cur = cur, new
+                failures = 0
+                self.steps += 1
+                if res.iterations[0] <= 4 and not locating:
+                    h *= 2.0
+                continue
+            h /= 2.0
+            failures += 1
+            self.cuts += 1
+            near = failures % 4 == 0 and self.near_fold(cur)
+            if near or abs(h) < opts.min_step * abs(full):
+                snaps += 1
+                landing = self.snap(cur, target) if snaps <= opts.snaps else None
+                if landing is None:
+                    raise self.fail(k, target, cur, residual)
+                fold, landed = landing
+                self.events.append(
+                    {
+                        "kind": "snap",
+                        "index": k,
+                        "scale": fold,
+                        "landing": landed.scale,
+                        "stable": True,
+                        "between": (first_of, target),
+                    }
+                )
+                prev, cur = None, landed
+                full = h = target - cur.scale
+
+    def record_bifurcation(self, cur, s1, stab, k, first_of, target):
+        a, b = cur.scale, s1
+        ma, mb = cur.stability, stab
+        # linear interpolation of the stability measure (exact for a linear eigenvalue)
+        crit = a + (b - a) * ma / (ma - mb) if ma != mb else b
+        if not min(a, b) <= crit <= max(a, b):
+            crit = 0.5 * (a + b)
+        self.events.append(
+            {
+                "kind": "bifurcation",
+                "index": k,
+                "scale": float(crit),
+                "stable": self.stable(stab),
+                "between": (first_of, target),
+            }
+        )
+
+    def snap(self, cur: PathPoint, target: float):
+        """Follow the path around a limit point until it is stable beyond ``cur.scale``;
+        ``(fold_scale, landing_point)`` or None."""
+        direction = 1 if target > cur.scale else -1
+        span = max(abs(target - cur.scale), 1e-3 * abs(cur.scale), 1e-300)
+        tracer = ArcLength(self.model, span, self.opts.newton)
+        extreme, turned = cur.scale, False
+        for u, c, err, lin in tracer.follow(cur.u, cur.scale, direction, self.opts.snap_steps):
+            if not turned:
+                if (c - extreme) * direction >= 0:
+                    extreme = c  # still on the old branch, toward the fold
+                else:
+                    turned = True
+            if (c - cur.scale) * direction > 0 and self.stable(float(self.P.stability(lin)[0])):
+                return float(extreme), self.point(u, c, err, lin)
+        return None
+
+    # -- chunks of a smooth stretch (batched models) ---------------------------------------------
+    def chunk(self, cur: PathPoint, prev: PathPoint, targets: np.ndarray):
+        """Correct the next ``targets`` together; returns the accepted leading run as a list of
+        (point, iterations)."""
+        h = cur.scale - prev.scale
+        d = targets - cur.scale
+        if h == 0 or cur.rate is None or np.any(d * h <= 0) or np.any(np.diff(d) * h <= 0):
+            return []
+        curv = (prev.u - cur.u + cur.rate * h) / (h * h)
+        preds = cur.u + d[:, None] * cur.rate + (d * d)[:, None] * curv
+        steps = self.P.distance(np.diff(np.vstack([cur.u[None], preds]), axis=0))
+        m = (
+            len(targets)
+            if np.all(steps <= self.P.max_step_change)
+            else int(np.argmax(steps > self.P.max_step_change))
+        )
+        if m < 2:
+            return []
+        targets, preds, d = targets[:m], preds[:m], d[:m]
+        res = newton(self.P, preds, targets, self.opts.newton)
+        dist = self.P.distance
+        # each member continues the path (its correction against its predicted change from
+        # ``cur``) and no member jumps (its increment from the previous member stays within
+        # twice the predicted increment)
+        correction = dist(res.u - preds)
+        good = res.ok & (correction <= self.P.max_correction)
+        good &= correction <= self.opts.relative_correction * dist(preds - cur.u) + 1e-9
+        good &= dist(np.diff(np.vstack([cur.u[None], res.u]), axis=0)) <= 2.0 * steps[:m] + 1e-9
+        n_good = m if good.all() else int(np.argmin(good))
+        if n_good == 0:
+            return []
+        stab = np.asarray(self.P.stability(res.lin), float) if self.opts.stability else np.ones(m)
+        flips = (stab[:n_good] > 0) != self.stable(cur.stability)
+        if flips.any():  # leave the change of stability to the stepping (it locates it)
+            n_good = int(np.argmax(flips))
+        run = []
+        for j in range(n_good):
+            lin = rate = None
+            if j == n_good - 1:  # the last accepted state carries on the path
+                lin = take(self.P, res.lin, np.array([j]))
+                rate = self.rate(lin)
+            p = PathPoint(
+                res.u[j], float(targets[j]), float(res.error[j]), float(stab[j]), lin, rate
+            )
+            run.append((p, int(res.iterations[j])))
+        return run
+
+
+def follow_load(
+    problem: PathProblem,
+    u0: np.ndarray,
+    scales,
+    opts: PathOptions | None = None,
+    *,
+    start_scale: float = 0.0,
+    name: str = "solve",
+    progress=None,
+) -> PathRun:
+    """Continue the equilibrium at ``(u0, start_scale)`` through ``scales`` in order.
+
+    Parameters
+    ----------
+    problem : PathProblem
+    u0 : ndarray, shape (size,)
+        The start state (an equilibrium at ``start_scale``, e.g. the unloaded model; it is
+        corrected by Newton first).
+    scales : array-like, shape (m,)
+        Requested load scales.
+    opts : PathOptions, optional
+    start_scale : float
+    name : str
+        The solver's name, for error messages.
+    progress : callable, optional
+        Called as ``progress(k, scale)`` after each requested scale converged.
+
+    Returns
+    -------
+    PathRun
+
+    Raises
+    ------
+    ConvergenceError
+        A requested scale could not be reached; ``reached`` is the last converged scale,
+        ``points`` the converged :class:`PathPoint` of the requested scales before it and
+        ``events`` the events so far.
+    """
+    opts = PathOptions() if opts is None else opts
+    scales = np.asarray(scales, dtype=float)
+    t = _Tracker(problem, opts, name)
+    res = newton(t.P, np.asarray(u0, float)[None], np.array([start_scale]), opts.newton)
+    if not res.ok[0]:
+        raise ConvergenceError(
+            f"{name}: the start state at scale {start_scale:g} is not an equilibrium "
+            f"(error {float(res.error[0]):.3g})",
+            reached=float("nan"),
+            target=float(scales[0]) if scales.size else float("nan"),
+            residual=float(res.error[0]),
+        )
+    start = t.point(res.u[0], start_scale, float(res.error[0]), res.lin)
+    cur, prev = start, None
+    points: list = []
+    iterations = np.zeros(scales.size, dtype=int)
+    k = 0
+    try:
+        while k < scales.size:
+            if t.native and opts.chunk > 1 and prev is not None and scales.size - k > 1:
+                wanted = scales[k : k + opts.chunk]
+                run = t.chunk(cur, prev, wanted)
+                t.steps += len(run)
+                for p, its in run:
+                    prev, cur = cur, p
+                    _append(points, p)
+                    iterations[k] = its
+                    if progress is not None:
+                        progress(k, p.scale)
+                    k += 1
+                if len(run) == len(wanted) and cur.rate is not None:
+                    continue  # a smooth stretch: try the next chunk; else one plain step
+            if k >= scales.size:
+                break
+            first_of = cur.scale
+            cur, prev, its = t.advance(cur, prev, float(scales[k]), k, first_of)
+            iterations[k] += its
+            _append(points, cur)
+            if progress is not None:
+                progress(k, cur.scale)
+            k += 1
+    except ConvergenceError as err:
+        err.points = points
+        err.events = t.events
+        err.steps, err.cuts = t.steps, t.cuts
+        raise
+    return PathRun(points, iterations, t.events, start, t.steps, t.cuts)
+
+
+def _append(points: list, p: PathPoint) -> None:
+    """Append ``p``; the previous point no longer needs its linearization (a FEM tangent's
+    factorisation is large): only the current point's is kept."""
+    if points and points[-1] is not p:
+        points[-1].lin = None
+    points.append(p)
