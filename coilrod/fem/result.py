@@ -25,9 +25,10 @@ class FEMResult:
     converged : ndarray, shape (n,)
         True for every returned state (unreachable loads raise ``ConvergenceError``).
     stable : ndarray, shape (n,)
-        False where the (condensed) tangent has an odd number of negative eigenvalues, i.e. an
-        eigenvalue crossed zero since the unloaded state (sign of its determinant from the
-        Newton factorisation).  Two eigenvalues crossing together cancel: a guard, not a proof.
+        False where the (condensed) tangent has negative eigenvalues (none at the unloaded
+        state): counted from the factorisation's inertia where it reveals it, else from the
+        sign of the determinant (an odd number of eigenvalues crossed zero; two crossing
+        together would then cancel).
     iterations : ndarray, shape (n,)
         Newton iterations spent reaching each scale from the previous one.
     mesh : skfem.Mesh
@@ -39,7 +40,7 @@ class FEMResult:
         Counters (evaluations, factorisations, step cuts).
     """
 
-    def __init__(self, assembler, scales, states, stats):
+    def __init__(self, assembler, scales, states, stats, stable):
         self._asm = assembler
         self.scales = np.asarray(scales, dtype=float)
         self._states = list(states)
@@ -51,8 +52,10 @@ class FEMResult:
         self.tip = np.array([assembler.tip(u) for u in self._states]).reshape(-1, 3)
         self.tip_angle = self._tip_angles()
         self.converged = np.ones(len(self._states), dtype=bool)
-        self.stable = np.asarray(stats.det_signs, dtype=int) > 0
+        self.stable = np.asarray(stable, dtype=bool)
         self.iterations = np.asarray(stats.iterations, dtype=int)
+        #: Changes of stability and snap-throughs along the path (see coilrod.path.events).
+        self.instabilities: list = []
 
     def _tip_angles(self) -> np.ndarray:
         X = self.nodes

@@ -9,11 +9,15 @@ from coilrod.robot.sections import Circle
 from coils._validate import finite_scalar
 from coils.field import Field
 
+from ..errors import ConvergenceError
+from ..path.events import warn_events
+from ..path.newton import NewtonOptions
+from ..path.stepping import PathOptions, follow_load
 from .assembly import Assembler
 from .material import moduli
 from .mesh import check_elements, rod_mesh
+from .problem import FEMProblem
 from .result import FEMResult
-from .solver import NewtonOptions, continuation
 
 __all__ = ["solve_fem", "DEFAULT_POISSON_RATIO"]
 
@@ -47,8 +51,6 @@ def solve_fem(
     utol: float = 1e-6,
     max_iterations: int = 25,
     max_cuts: int = 16,
-    predictor: str = "tangent",
-    line_search: bool = True,
     progress=None,
 ) -> FEMResult:
     """Large-deformation equilibria of a hard-magnetic neo-Hookean rod body (FEM).
@@ -90,11 +92,8 @@ def solve_fem(
     rtol, utol : float
         Newton tolerances: residual relative to the force scale, increment relative to L.
     max_iterations, max_cuts : int
-        Newton iterations per step; consecutive step halvings before giving up.
-    predictor : {"tangent", "secant", "none"}
-        Extrapolation to the next load step.
-    line_search : bool
-        Backtracking line search on each Newton update.
+        Newton iterations per step; halvings of a requested load step before giving up
+        (the smallest sub-step is ``2**-max_cuts`` of it).
     progress : bool or callable, optional
         True shows a tqdm progress bar over the scales; a callable is called as
         ``progress(k, scale)`` after each requested scale converges.
@@ -110,7 +109,8 @@ def solve_fem(
     ValueError
         Bad input (the message names the argument).
     coilrod.ConvergenceError
-        A scale could not be reached; ``reached`` is the last converged scale.
+        A scale could not be reached; ``reached`` is the last converged scale and ``result``
+        the :class:`FEMResult` of the requested scales before it (None if none).
 
     Notes
     -----
@@ -123,6 +123,12 @@ def solve_fem(
     (G = grad B); the tangent includes the gradient terms of seed eq. (13) and the field's
     second derivatives ``field.hessian`` for non-linear fields.  For a uniform field the
     magnetic load is dead and the tangent purely elastic.
+
+    The load path is followed by the shared engine :mod:`coilrod.path` (tangent predictor,
+    Newton with a backtracking line search, step cutting, stability checked at every step from
+    the tangent's factorisation -- a change is located and reported, never jumped silently --
+    and pseudo-arclength around folds); see :mod:`coilrod.fem.problem` for the convergence
+    test.
 
     Examples
     --------
@@ -146,17 +152,15 @@ def solve_fem(
         raise ValueError(f"plane must be 'stress' or 'strain'; got {plane!r}")
     if formulation not in ("mixed", "displacement"):
         raise ValueError(f"formulation must be 'mixed' or 'displacement'; got {formulation!r}")
-    if predictor not in ("tangent", "secant", "none"):
-        raise ValueError(f"predictor must be 'tangent', 'secant' or 'none'; got {predictor!r}")
     nu = finite_scalar(poisson_ratio, "poisson_ratio")
     if not -1.0 < nu < 0.5:
         raise ValueError(f"poisson_ratio must lie in (-1, 0.5); got {nu}")
     for name, val in (("rtol", rtol), ("utol", utol)):
         if not finite_scalar(val, name) > 0:
             raise ValueError(f"{name} must be positive; got {val}")
-    for name, val in (("max_iterations", max_iterations), ("max_cuts", max_cuts)):
-        if isinstance(val, bool) or not isinstance(val, int | np.integer) or val < 1:
-            raise ValueError(f"{name} must be a positive integer; got {val!r}")
+    for name, val, high in (("max_iterations", max_iterations, 1000), ("max_cuts", max_cuts, 60)):
+        if isinstance(val, bool) or not isinstance(val, int | np.integer) or not 1 <= val <= high:
+            raise ValueError(f"{name} must be an integer from 1 to {high}; got {val!r}")
     if mesh is None:
         if elements is None:
             elements = (
@@ -170,16 +174,18 @@ def solve_fem(
     G, K = moduli(rod.youngs_modulus, nu)
     asm = Assembler(mesh, order, rod, field, G, K, plane=plane, mixed=formulation == "mixed")
     # the field must be finite on the undeformed body
-    B, Gr, _ = asm.field_at(asm.X.reshape(-1, dim), True, False)
+    try:
+        B, Gr, _ = asm.field_at(asm.X.reshape(-1, dim), True, False)
+    except ValueError as exc:
+        raise ValueError(f"field cannot be evaluated on the undeformed rod body: {exc}") from None
     if not (np.all(np.isfinite(B)) and (Gr is None or np.all(np.isfinite(Gr)))):
         raise ValueError("field must be finite on the rod body; it returned non-finite values")
-    opts = NewtonOptions(
-        rtol=float(rtol),
-        utol=float(utol),
-        max_iterations=int(max_iterations),
-        max_cuts=int(max_cuts),
-        predictor=predictor,
-        line_search=bool(line_search),
+    problem = FEMProblem(asm, rtol, utol)
+    min_step = 2.0 ** -int(max_cuts)
+    opts = PathOptions(
+        newton=NewtonOptions(max_iter=int(max_iterations), backtracks=10),
+        min_step=min_step,
+        bifurcation_tol=min(0.75, max(1e-4, 2.0 * min_step)),
     )
     bar = None
     if progress is True:
@@ -196,36 +202,27 @@ def solve_fem(
     elif not callable(progress):
         raise ValueError(f"progress must be a bool or a callable; got {progress!r}")
     try:
-        states, stats = continuation(asm, scales, opts, progress)
+        run = follow_load(
+            problem, np.zeros(asm.size), scales, opts, name="solve_fem", progress=progress
+        )
+    except ConvergenceError as err:
+        stats = problem.stats
+        stats.steps, stats.cuts = err.steps, err.cuts
+        err.result = _result(asm, err.points, stats) if err.points else None
+        raise
     finally:
         if bar is not None:
             bar.close()
-    result = FEMResult(asm, scales, states, stats)
-    _report_stability_changes(result)
+    stats = problem.stats
+    stats.steps, stats.cuts = run.steps, run.cuts
+    stats.iterations = [int(i) for i in run.iterations]
+    result = _result(asm, run.points, stats)
+    result.instabilities = [dict(e) for e in run.events]
+    warn_events(run.events, "the FEM equilibrium path", stacklevel=3)
     return result
 
 
-def _report_stability_changes(result) -> None:
-    """Warn (StabilityWarning) where the path loses or regains stability between two scales:
-    the solver stays on its branch, so a bifurcation is reported, never crossed silently."""
-    import warnings
-
-    from coilrod.path.events import StabilityWarning
-
-    st = result.stable
-    for k in range(1, len(st)):
-        if st[k] != st[k - 1]:
-            what = "regained" if st[k] else "lost"
-            warnings.warn(
-                f"the FEM equilibrium path {what} stability between scales "
-                f"{result.scales[k - 1]:g} and {result.scales[k]:g} (the tangent's determinant "
-                "changed sign): a bifurcation or limit point",
-                StabilityWarning,
-                stacklevel=3,
-            )
-    if len(st) and not st[0]:
-        warnings.warn(
-            f"the FEM equilibrium at the first scale {result.scales[0]:g} is already unstable",
-            StabilityWarning,
-            stacklevel=3,
-        )
+def _result(asm, points, stats) -> FEMResult:
+    scales = np.array([p.scale for p in points])
+    stable = np.array([p.stability > 0 for p in points], dtype=bool)
+    return FEMResult(asm, scales, [p.u for p in points], stats, stable)

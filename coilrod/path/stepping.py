@@ -54,8 +54,9 @@ class PathOptions:
         A change of stability is located to this fraction of the requested step (> min_step).
     relative_correction : float
         A step is also rejected (and cut) when the Newton correction exceeds this fraction of
-        the predicted change of the state: on a smooth path the predictor's error is of higher
-        order than the change, while a jump to another branch (over a fold) is not.
+        the predicted change of the state (plus 1e-3 of the model's ``max_correction``): on a
+        smooth path the predictor's error is of higher order than the change, while a jump to
+        another branch (over a fold) is not.
     stability : bool
         Check the stability of every accepted state (cut steps that change it, report events).
     chunk : int
@@ -154,6 +155,9 @@ class _Tracker:
         self.events: list = []
         self.steps = 0
         self.cuts = 0
+        #: Corrections below this (1e-3 of the model's max_correction) never signal a jump.
+        limit = self.P.max_correction
+        self.negligible = 1e-3 * limit if np.isfinite(limit) else 0.0
 
     # -- small helpers ------------------------------------------------------------------------
     def point(self, u, scale, error, lin, stab=None) -> PathPoint:
@@ -193,7 +197,7 @@ class _Tracker:
         if cur.rate is None:
             return True
         change = float(dist((guess - cur.u)[None])[0])
-        return correction <= self.opts.relative_correction * change + 1e-9
+        return correction <= self.opts.relative_correction * change + self.negligible
 
     def limit_change(self, cur: PathPoint, h: float) -> float:
         """``h`` shortened so that the predicted change of the state is at most the model's
@@ -360,8 +364,9 @@ class _Tracker:
         # twice the predicted increment)
         correction = dist(res.u - preds)
         good = res.ok & (correction <= self.P.max_correction)
-        good &= correction <= self.opts.relative_correction * dist(preds - cur.u) + 1e-9
-        good &= dist(np.diff(np.vstack([cur.u[None], res.u]), axis=0)) <= 2.0 * steps[:m] + 1e-9
+        tiny = self.negligible
+        good &= correction <= self.opts.relative_correction * dist(preds - cur.u) + tiny
+        good &= dist(np.diff(np.vstack([cur.u[None], res.u]), axis=0)) <= 2.0 * steps[:m] + tiny
         n_good = m if good.all() else int(np.argmin(good))
         if n_good == 0:
             return []
