@@ -120,7 +120,8 @@ def test_compressive_gradient_force_follows_the_stable_branch(rod):
         warnings.simplefilter("error", coilrod.StabilityWarning)  # no change of stability
         res = coilrod.solve_fem(rod, field, scales, dim=2, elements=(20, 1))
         bent = coilrod.solve_rod(rod, field, scales)
-    assert res.stable.all() and bent.stable.all()
+    assert res.stable.all()
+    assert bent.stable.all()
     assert np.all(np.isfinite(res.tip))
     assert res.tip[0, 1] > 0.7 * L  # bent away, far from the near-straight state
     # the same branch as the inextensible rod: within the model difference (axial strain)
