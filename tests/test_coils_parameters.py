@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import coils
-from coils import uniformity
+from coils import GriddedField, uniformity
 from coils._counts import as_count
 from coils.design import winding_power
 from coils.plot import plane_grid, plot_field_map
@@ -91,6 +91,31 @@ def test_winding_power_bad_parameters(kwargs, match):
     for coil in (bare, coils.HelmholtzPair(0.1, 100, 1.0, winding=(0.02, 0.02))):
         with pytest.raises(ValueError, match=match):
             winding_power(coil, 1e-3, **kwargs)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"max_cells": 1.5}, "max_cells must be a positive integer; got 1.5"),
+        ({"max_cells": True}, "max_cells must be a positive integer; got True"),
+        ({"max_cells": "many"}, "max_cells must be a positive integer"),
+        ({"max_cells": np.inf}, "max_cells must be a positive integer"),
+        ({"shape": "abc"}, r"shape must be a scalar or have shape \(3,\)"),
+        ({"shape": (3, np.nan, 3)}, "shape must be integers"),
+        ({"spacing": "abc"}, r"spacing must be a scalar or have shape \(3,\)"),
+    ],
+)
+def test_grid_bad_parameters(pair, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        GriddedField(pair, (-0.01,) * 3, (0.01,) * 3, **kwargs)
+
+
+def test_grid_error_estimate_seed(pair):
+    grid = GriddedField(pair, (-0.01,) * 3, (0.01,) * 3, shape=3)
+    with pytest.raises(ValueError, match="seed must be an integer >= 0; got 0.5"):
+        grid.error_estimate(seed=0.5)
+    with pytest.raises(ValueError, match="seed must be an integer >= 0; got -1"):
+        grid.error_estimate(seed=-1)
 
 
 @pytest.mark.parametrize(
