@@ -1,5 +1,5 @@
 """Exact clearance between boxes or segments and coil windings (coils.clearance), and its users:
-the grid cache (coils.GriddedField; more in test_grid.py).
+the grid cache (coils.GriddedField; more in test_grid.py) and the scene planner.
 
 Cross-checks, each independent of the code under test:
 
@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 import coils
+from coilrod.scene.planner import _box_clear_of_windings
 from coils import FieldSum, GriddedField
 from coils.clearance import (
     Box,
@@ -29,7 +30,7 @@ from coils.clearance import (
     meets_windings,
     winding_contacts,
 )
-from coils.coaxial import ON_WIRE_TOL
+from coils.coaxial import ON_WIRE_TOL, winding_mask
 
 # A coil on the z axis with binary-exact winding: z in [-1/32, 1/32], rho in [5/16, 7/16] (m).
 A, W, H = 0.375, 0.0625, 0.125
@@ -309,3 +310,32 @@ def test_margin_and_shape_validation(coil):
     with pytest.raises(ValueError, match=r"start must have shape \(3,\)"):
         Segment((0, 0), (1, 1, 1))
     check_clear(coil, Box((-0.1,) * 3, (0.1,) * 3))  # clear: returns quietly
+
+
+# -- the scene planner ----------------------------------------------------------------------------
+def _old_planner_check(field, lo, hi):
+    """The planner's former test: 9 samples per axis plus the corners, 5% of R from a wire."""
+    axes = [np.linspace(a, b, 9) for a, b in zip(lo, hi, strict=True)]
+    pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    return not np.any(winding_mask(field, pts, 0.05))
+
+
+def test_planner_sees_a_winding_between_its_old_samples():
+    # a thin coil at z = 0.025, midway between the old sample planes z = 0 and z = 0.05
+    thin = coils.Coil(0.15, 10, 1.0, axis="z", center=(0, 0, 0.025), winding=(0.01, 0.01))
+    lo, hi = np.full(3, -0.2), np.full(3, 0.2)
+    assert _old_planner_check(thin, lo, hi)  # the sampling missed it
+    with pytest.raises(ValueError, match="inside a coil winding"):
+        thin.B([[0.15, 0.002, 0.027]])  # a point of the box
+    assert not _box_clear_of_windings(thin, (lo, hi))
+    # corners at rho = 0.09 sqrt(2) = 0.127 m; innermost filament at rho = 0.15 - 0.0039 m,
+    # 0.019 m > 5% of 0.15 m away
+    assert _box_clear_of_windings(thin, (np.full(3, -0.09), np.full(3, 0.09)))
+    assert not _box_clear_of_windings(thin, (np.full(3, -0.1), np.full(3, 0.1)))  # 0.0047 m
+
+
+def test_planner_keeps_five_percent_of_the_radius_from_a_wire(loop):
+    a = 0.1
+    for gap, clear in ((0.049, False), (0.051, True)):
+        box = (np.array([a * (1 + gap), -0.01, -0.01]), np.array([0.3, 0.01, 0.01]))
+        assert _box_clear_of_windings(loop, box) == clear
