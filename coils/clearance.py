@@ -48,7 +48,7 @@ import numpy as np
 
 from ._validate import as_vector, finite_scalar
 from .coaxial import ON_WIRE_TOL, coaxial_parts
-from .field import Field, FieldSum, ScaledField
+from .field import Field, FieldSum
 
 __all__ = [
     "Box",
@@ -435,17 +435,16 @@ class WindingContact:
 
 
 def _groups(field: Field):
-    """Coaxial groups of ``field``, also inside gridded caches (a cache evaluates its wrapped
-    field outside its own box, and its box is clear of the windings)."""
+    """Coaxial groups of ``field``: :func:`~coils.coaxial.coaxial_parts`, which walks sums and
+    scalings, extended to any wrapper holding its source as ``.field`` -- a gridded cache
+    evaluates its wrapped field outside its own (clear) box."""
     if isinstance(field, FieldSum):
         for p in field.parts:
             yield from _groups(p)
-    elif isinstance(field, ScaledField):
+    elif isinstance(getattr(field, "field", None), Field):  # ScaledField, GriddedField
         yield from _groups(field.field)
-    elif hasattr(field, "filaments"):
+    else:
         yield from coaxial_parts(field)
-    elif isinstance(getattr(field, "field", None), Field):  # GriddedField
-        yield from _groups(field.field)
 
 
 def winding_contacts(field: Field, shape, margin: float = ON_WIRE_TOL) -> list[WindingContact]:

@@ -98,6 +98,11 @@ def _as_triple(value, name: str, kind: type) -> np.ndarray:
     return np.array([positive(v, name) for v in arr])
 
 
+def _cell_count(nodes: np.ndarray) -> float:
+    """Cells of a grid with ``nodes`` (3,) nodes per axis, as a float (inf rather than overflow)."""
+    return math.prod(float(n) - 1.0 for n in nodes)
+
+
 def _size(nbytes: float) -> str:
     """A byte count for humans: '307 MB', '1.5 TB'."""
     for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
@@ -267,7 +272,7 @@ class GriddedField(Field):
 
     def _within_limit(self, nodes: np.ndarray, asked: str) -> np.ndarray:
         """Node counts (3,) as ints, or ValueError if the grid exceeds ``max_cells`` cells."""
-        cells = math.prod(float(n) - 1.0 for n in nodes)
+        cells = _cell_count(nodes)
         if cells > self.max_cells:
             count = f"{cells:.0f}" if cells < 1e15 else f"{cells:.3g}"
             raise ValueError(
@@ -282,7 +287,7 @@ class GriddedField(Field):
         h = np.full(3, extent.max() / 8.0)
         for _ in range(12):
             nodes = self._nodes_for(h)
-            cells = math.prod(float(n) - 1.0 for n in nodes)
+            cells = _cell_count(nodes)
             if cells > self.max_cells:
                 # largest grid of this aspect within the limit, tried once before giving up
                 shrink = (cells / self.max_cells) ** (1.0 / 3.0)
