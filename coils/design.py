@@ -30,6 +30,8 @@ __all__ = [
 COPPER_RESISTIVITY = 1.7241e-8
 #: Temperature coefficient of copper's resistivity near 20 degC, 1/K.
 COPPER_TEMPERATURE_COEFFICIENT = 0.00393
+#: Absolute zero, degC.
+ABSOLUTE_ZERO = -273.15
 
 
 def _centre_values(coil: CoaxialCoils):
@@ -133,30 +135,36 @@ def winding_power(
     resistivity : float
         At 20 degC, ohm m.
     temperature : float
-        Winding temperature, degC; ``rho(T) = rho20 (1 + alpha (T - 20))``.
+        Winding temperature, degC (above -273.15); ``rho(T) = rho20 (1 + alpha (T - 20))``.
     temperature_coefficient : float
         alpha, 1/K.
     packing : float
-        Fill factor of round wire in the winding section (pi/4 for square packing); if the coil
-        has a ``winding`` cross-section, the turns must fit in it.
+        Fill factor of round wire in the winding section, in (0, 1] (pi/4 for square packing);
+        if the coil has a ``winding`` cross-section, the turns must fit in it.
 
     Raises
     ------
     ValueError
-        If the wire does not fit the winding cross-section.
+        If the wire does not fit the winding cross-section, or on a bad parameter (named).
     """
     d = positive(wire_diameter, "wire_diameter")
+    temperature = finite_scalar(temperature, "temperature")
+    if temperature <= ABSOLUTE_ZERO:
+        raise ValueError(
+            f"temperature must be above absolute zero ({ABSOLUTE_ZERO} degC); got {temperature}"
+        )
+    packing = positive(packing, "packing")
+    if packing > 1:
+        raise ValueError(f"packing is a fill factor and must be in (0, 1]; got {packing}")
     rho = positive(resistivity, "resistivity") * (
-        1
-        + finite_scalar(temperature_coefficient, "temperature_coefficient")
-        * (finite_scalar(temperature, "temperature") - 20.0)
+        1 + finite_scalar(temperature_coefficient, "temperature_coefficient") * (temperature - 20.0)
     )
     if rho <= 0:
         raise ValueError("resistivity at that temperature is not positive")
     area = math.pi * d * d / 4
     winding = getattr(coil, "winding", None)
     if winding is not None:
-        capacity = positive(packing, "packing") * winding[0] * winding[1] / area
+        capacity = packing * winding[0] * winding[1] / area
         if coil.turns > capacity:
             raise ValueError(
                 f"{coil.turns:g} turns of {1e3 * d:g} mm wire do not fit a "

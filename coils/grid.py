@@ -31,7 +31,9 @@ import math
 
 import numpy as np
 
+from ._counts import as_count
 from ._validate import as_points, as_vector, positive
+from .clearance import Box, check_clear
 from .field import Field
 
 __all__ = ["GriddedField"]
@@ -42,6 +44,8 @@ GRID_CHUNK = 4096
 CHECK_CELLS = 20000
 #: Local coordinate where the derivative error of a 1D cubic Hermite interpolant peaks.
 _GAUSS_OFFSET = math.sqrt(3.0) / 6.0
+#: Bytes of coefficients per cell (3 components x 64 monomials, float64).
+CELL_BYTES = 3 * 64 * 8
 
 
 def _hermite_matrix() -> np.ndarray:
@@ -74,19 +78,37 @@ _HERMITE_INV = _hermite_matrix()
 
 
 def _as_triple(value, name: str, kind: type) -> np.ndarray:
-    arr = np.asarray(value)
+    """A scalar or 3 values as a float array (3,): node counts (``kind=int``: integral, >= 2;
+    kept as floats so that absurd counts reach the cell limit without overflowing) or spacings
+    (positive)."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a scalar or have shape (3,); got {value!r}") from None
     if arr.ndim == 0:
         arr = np.full(3, arr)
     if arr.shape != (3,):
         raise ValueError(f"{name} must be a scalar or have shape (3,); got {np.shape(value)}")
     if kind is int:
-        if not np.all(np.isfinite(arr.astype(float))) or np.any(arr != np.round(arr)):
+        if not np.all(np.isfinite(arr)) or np.any(arr != np.round(arr)):
             raise ValueError(f"{name} must be integers; got {np.asarray(value).tolist()}")
-        arr = arr.astype(int)
         if np.any(arr < 2):
             raise ValueError(f"{name} needs at least 2 nodes per axis; got {arr.tolist()}")
         return arr
-    return np.array([positive(v, name) for v in arr.astype(float)])
+    return np.array([positive(v, name) for v in arr])
+
+
+def _cell_count(nodes: np.ndarray) -> float:
+    """Cells of a grid with ``nodes`` (3,) nodes per axis, as a float (inf rather than overflow)."""
+    return math.prod(float(n) - 1.0 for n in nodes)
+
+
+def _size(nbytes: float) -> str:
+    """A byte count for humans: '307 MB', '1.5 TB'."""
+    for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if nbytes >= scale:
+            return f"{nbytes / scale:.3g} {unit}"
+    return f"{nbytes:.0f} B"
 
 
 def _powers(t: np.ndarray, order: int) -> np.ndarray:
@@ -137,7 +159,17 @@ class GriddedField(Field):
         Source of the mixed second derivatives at the nodes: central differences of the exact
         gradient along the grid (default, no extra evaluations) or ``field.hessian``.
     max_cells : int
-        Largest grid (cells) the automatic refinement may build; each cell stores 1.5 kB.
+        Largest grid (cells) any construction may build -- explicit ``shape`` or ``spacing``
+        too; each cell stores :data:`CELL_BYTES` = 1.5 kB (a build briefly needs about three
+        times that).  A larger request raises ``ValueError`` before anything is allocated.
+
+    Raises
+    ------
+    ValueError
+        If the box meets a winding cross-section or comes within ``ON_WIRE_TOL`` x radius of a
+        filament of ``field`` (an exact test, :mod:`coils.clearance`, made before any
+        sampling: the direct field is undefined there and a grid could step over a thin
+        winding), if the grid would exceed ``max_cells``, or on bad parameters.
 
     Attributes
     ----------
@@ -213,40 +245,57 @@ class GriddedField(Field):
         self.tol_gradient = (
             self.tol if tol_gradient is None else positive(tol_gradient, "tol_gradient")
         )
-        if isinstance(max_cells, bool) or int(max_cells) != max_cells or max_cells < 1:
-            raise ValueError(f"max_cells must be a positive integer; got {max_cells!r}")
-        self.max_cells = int(max_cells)
+        self.max_cells = as_count(max_cells, "max_cells")
         extent = self.upper - self.lower
         self._slack = 1e-12 * extent
+        nodes = None
         if shape is not None:
-            self._build(_as_triple(shape, "shape", int))
-            self.error_estimate()
+            nodes = _as_triple(shape, "shape", int)
+            nodes = self._within_limit(nodes, f"shape={shape!r}")
         elif spacing is not None:
             h = _as_triple(spacing, "spacing", float)
-            self._build(self._nodes_for(h))
-            self.error_estimate()
-        else:
+            nodes = self._within_limit(self._nodes_for(h), f"spacing={spacing!r} m")
+        # exact geometry, before any sampling: nodes could step over a thin winding
+        check_clear(field, Box(self.lower, self.upper), what="the grid box")
+        if nodes is None:
             self._refine_to_tol()
+        else:
+            self._build(nodes)
+            self.error_estimate()
 
     # -- construction ---------------------------------------------------------------------------
     def _nodes_for(self, h: np.ndarray) -> np.ndarray:
+        """Nodes per axis (floats: a tiny spacing gives a huge count, not an overflow)."""
         extent = self.upper - self.lower
-        return np.maximum(np.ceil(extent / h - 1e-9).astype(int) + 1, 2)
+        with np.errstate(over="ignore"):
+            return np.maximum(np.ceil(extent / h - 1e-9) + 1, 2)
+
+    def _within_limit(self, nodes: np.ndarray, asked: str) -> np.ndarray:
+        """Node counts (3,) as ints, or ValueError if the grid exceeds ``max_cells`` cells."""
+        cells = _cell_count(nodes)
+        if cells > self.max_cells:
+            count = f"{cells:.0f}" if cells < 1e15 else f"{cells:.3g}"
+            raise ValueError(
+                f"{asked} asks for {count} cells ({_size(cells * CELL_BYTES)} of coefficients), "
+                f"above max_cells={self.max_cells} ({_size(self.max_cells * CELL_BYTES)}); "
+                f"use a coarser grid or a smaller box, or raise max_cells"
+            )
+        return nodes.astype(int)
 
     def _refine_to_tol(self) -> None:
         extent = self.upper - self.lower
         h = np.full(3, extent.max() / 8.0)
         for _ in range(12):
             nodes = self._nodes_for(h)
-            cells = int(np.prod(nodes - 1))
+            cells = _cell_count(nodes)
             if cells > self.max_cells:
                 # largest grid of this aspect within the limit, tried once before giving up
                 shrink = (cells / self.max_cells) ** (1.0 / 3.0)
-                nodes = np.maximum(((nodes - 1) / shrink).astype(int) + 1, 2)
+                nodes = np.maximum(np.floor((nodes - 1) / shrink) + 1, 2)
                 at_limit = True
             else:
                 at_limit = False
-            self._build(nodes)
+            self._build(self._within_limit(nodes, "the automatic refinement"))
             eb, eg = self.error_estimate()
             if eb <= self.tol and eg <= self.tol_gradient:
                 return
@@ -373,7 +422,7 @@ class GriddedField(Field):
             over the points).  Also stored as :attr:`error_B` and :attr:`error_gradient` when
             ``points`` is None.
         """
-        rng = np.random.default_rng(seed)
+        rng = np.random.default_rng(as_count(seed, "seed", 0))
         if points is None:
             if self.n_cells <= CHECK_CELLS:
                 cells = np.arange(self.n_cells)

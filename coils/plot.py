@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._counts import as_count
 from ._validate import as_vector, positive
 from .coaxial import coaxial_parts, winding_mask
 from .field import Field
@@ -17,13 +18,32 @@ _PLANES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2), "yx": (1, 0), "zx": (2, 0),
 def plane_grid(plane: str, center, half_width: float, n: int = 121):
     """Points on a square grid in a coordinate plane.
 
-    Returns ``(points (n*n, 3) m, U (n, n) m, V (n, n) m, (i, j) axis indices)``.
+    Parameters
+    ----------
+    plane : str
+        Coordinate plane, e.g. "xy" (first letter horizontal).
+    center : array-like, shape (3,)
+        Centre of the square, m.
+    half_width : float
+        Half its side, m (> 0).
+    n : int
+        Points per side (>= 2).
+
+    Returns
+    -------
+    points : ndarray, shape (n*n, 3)
+        m.
+    U, V : ndarray, shape (n, n)
+        In-plane coordinates, m.
+    (i, j) : tuple of int
+        Indices of the plane's axes.
     """
     if plane not in _PLANES:
         raise ValueError(f"plane must be one of {sorted(_PLANES)}; got {plane!r}")
     i, j = _PLANES[plane]
     c = as_vector(center, "center")
     hw = positive(half_width, "half_width")
+    n = as_count(n, "n", 2)
     u = np.linspace(c[i] - hw, c[i] + hw, n)
     v = np.linspace(c[j] - hw, c[j] + hw, n)
     U, V = np.meshgrid(u, v)
@@ -58,11 +78,11 @@ def plot_field_map(
     half_width : float, optional
         Half the side of the square map, m; default the field's length scale.
     tol : float
-        Relative tolerance of the uniformity contour (drawn in white).
+        Relative tolerance of the uniformity contour (drawn in white), > 0.
     show : {"deviation", "magnitude"}
         Colour: log10 of the relative deviation from ideal, or |B| in mT.
     n : int
-        Grid points per side.
+        Grid points per side (>= 2).
     ax : matplotlib Axes, optional
     streamlines : bool
         Overlay in-plane field lines.
@@ -73,6 +93,9 @@ def plot_field_map(
     """
     import matplotlib.pyplot as plt
 
+    if show not in ("deviation", "magnitude"):
+        raise ValueError(f"show must be 'deviation' or 'magnitude'; got {show!r}")
+    tol = positive(tol, "tol")
     center = getattr(field, "center", np.zeros(3)) if center is None else center
     half_width = field.length_scale if half_width is None else half_width
     pts, U, V, (i, j) = plane_grid(plane, center, half_width, n)
@@ -88,7 +111,7 @@ def plot_field_map(
             data = np.log10(np.maximum(dev, 1e-12)).reshape(U.shape)
         im = ax.pcolormesh(U * 1e3, V * 1e3, data, cmap="viridis", shading="auto", vmin=-6, vmax=0)
         label = "log10 relative deviation from ideal"
-    elif show == "magnitude":
+    else:
         im = ax.pcolormesh(
             U * 1e3,
             V * 1e3,
@@ -97,8 +120,6 @@ def plot_field_map(
             shading="auto",
         )
         label = "|B| (mT)"
-    else:
-        raise ValueError(f"show must be 'deviation' or 'magnitude'; got {show!r}")
     plt.colorbar(im, ax=ax, label=label)
     cs = ax.contour(
         U * 1e3, V * 1e3, dev.reshape(U.shape), levels=[tol], colors="white", linewidths=1.5

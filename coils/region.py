@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import brentq
 
+from ._counts import as_count
 from ._validate import as_axis, as_points, as_vector, positive
 from .coaxial import coaxial_parts
 from .field import Field
@@ -182,9 +183,10 @@ def uniformity(
     max_radius : float, optional
         Search radius, m; default: 0.95 x the distance from the centre to the nearest winding.
     directions : int
-        Directions sampled for the sphere (and the mid-plane) radius.
+        Directions sampled for the sphere (and the mid-plane) radius (>= 1).
     samples : int
-        Samples along each ray before the crossing is refined with Brent's method.
+        Samples along each ray before the crossing is refined with Brent's method (>= 2: the
+        centre and ``max_radius``).
 
     Returns
     -------
@@ -199,6 +201,8 @@ def uniformity(
     (0.314, 0.378)
     """
     tol = positive(tol, "tol")
+    directions = as_count(directions, "directions")
+    samples = as_count(samples, "samples", 2)
     c = as_vector(center if center is not None else getattr(field, "center", np.zeros(3)), "center")
     n = as_axis(axis if axis is not None else getattr(field, "axis", "z"), "axis")
     ideal = linearize(field, c)

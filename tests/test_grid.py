@@ -8,7 +8,9 @@ Cross-checks (every number against something independent of the cache):
 * exact reproduction of a cubic harmonic field B = grad Re (x + i y)^4 (in the tricubic space);
 * exact data at the grid nodes (Hermite interpolation property);
 * finite differences of the interpolant itself (gradient = d(B), hessian = d(gradient));
-* the fitted convergence order against the theory of tricubic Hermite interpolation.
+* the fitted convergence order against the theory of tricubic Hermite interpolation;
+* the direct field refusing a point of a box that the cache refuses (a winding between nodes),
+  and the cell count of a grid by hand (the size limit, checked before anything is sampled).
 """
 
 from __future__ import annotations
@@ -17,7 +19,8 @@ import numpy as np
 import pytest
 
 import coils
-from coils import Field, GriddedField, HelmholtzPair, LinearField, MaxwellPair
+from coils import Field, FieldSum, GriddedField, HelmholtzPair, LinearField, MaxwellPair
+from coils.coaxial import ON_WIRE_TOL, winding_mask
 
 R = 0.1  # coil radius, m
 
@@ -36,6 +39,21 @@ class CubicHarmonic(Field):
         G[:, 0, 1] = G[:, 1, 0] = -24 * x * y
         G[:, 1, 1] = 12 * y**2 - 12 * x**2
         return G
+
+
+class Counting(Field):
+    """A zero field that counts the points it is asked for (to prove nothing was sampled)."""
+
+    def __init__(self):
+        self.points = 0
+
+    def _B(self, p):
+        self.points += len(p)
+        return np.zeros_like(p)
+
+    def _gradient(self, p):
+        self.points += len(p)
+        return np.zeros((len(p), 3, 3))
 
 
 def _rel(a, ref):
@@ -278,3 +296,64 @@ def test_error_estimate_at_given_points(maxwell_grid):
     assert eg == pytest.approx(_rel(G, Gd), rel=1e-12)
     with pytest.raises(ValueError, match="outside the grid box"):
         grid.error_estimate(np.array([[1.0, 0.0, 0.0]]))
+
+
+# -- windings and size: checked exactly, before sampling or allocating ----------------------------
+@pytest.fixture(scope="module")
+def wound_pair():
+    return coils.HelmholtzPair(0.1, 100, 1.0, axis="y", winding=(0.01, 0.01))
+
+
+def test_grid_nodes_stepping_over_a_winding(wound_pair):
+    lower, upper = (-0.12,) * 3, (0.12,) * 3
+    # the 3 x 3 x 3 nodes (and the ghost layer) all miss the windings at y = +-0.05 ...
+    axes = [np.linspace(-0.24, 0.24, 5)] * 3
+    nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    assert not np.any(winding_mask(wound_pair, nodes, ON_WIRE_TOL))
+    # ... but the box holds points where the direct field is undefined
+    with pytest.raises(ValueError, match="inside a coil winding"):
+        wound_pair.B([[0.1, 0.05 + 0.002, 0.002]])
+    counter = Counting()
+    field = FieldSum([wound_pair, counter])
+    for kwargs in ({"shape": 3}, {"spacing": 0.12}, {}):
+        with pytest.raises(ValueError, match=r"grid box .* meets winding 0 .*shrink") as err:
+            GriddedField(field, lower, upper, **kwargs)
+        assert "HelmholtzPair(radius=0.1" in str(err.value)
+    assert counter.points == 0  # raised before sampling anything
+
+
+def test_grid_ghost_layer_may_enter_a_winding(wound_pair):
+    # box clear of the winding (y <= 0.044 < 0.045); its ghost layer y = 0.05 is inside it
+    lower, upper = np.array([0.08, 0.02, -0.01]), np.array([0.1, 0.044, 0.01])
+    with pytest.raises(ValueError, match="inside a coil winding"):
+        wound_pair.B([[0.1, 0.05, 0.005]])  # a ghost node
+    grid = GriddedField(wound_pair, lower, upper, shape=5)
+    assert not grid.ghost  # one-sided differences at the faces, as before
+    ijk = np.stack(np.meshgrid(*[np.arange(5)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    nodes = lower + ijk * grid.spacing
+    B, G = wound_pair.B_and_gradient(nodes)
+    assert np.abs(grid.B(nodes) - B).max() <= 1e-12 * np.abs(B).max()
+    assert np.abs(grid.gradient(nodes) - G).max() <= 1e-11 * np.abs(G).max()
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"shape": 1000}, r"shape=1000 asks for 997002999 cells \(1.53 TB.*max_cells=200000"),
+        ({"shape": (10**30, 2, 2)}, r"asks for 1e\+30 cells"),
+        ({"spacing": 1e-6}, r"spacing=1e-06 m asks for 64000000000000 cells"),
+        ({"spacing": 1e-300}, r"spacing=1e-300 m asks for inf cells"),
+        ({"shape": 5, "max_cells": 63}, r"asks for 64 cells .*max_cells=63"),
+    ],
+)
+def test_grid_size_bounded_before_allocating(wound_pair, kwargs, match):
+    counter = Counting()
+    with pytest.raises(ValueError, match=match):
+        GriddedField(FieldSum([wound_pair, counter]), (-0.02,) * 3, (0.02,) * 3, **kwargs)
+    assert counter.points == 0
+
+
+def test_grid_at_the_cell_limit_builds(wound_pair):
+    grid = GriddedField(wound_pair, (-0.02,) * 3, (0.02,) * 3, shape=5, max_cells=64)
+    assert grid.n_cells == 4**3
+    assert grid.nbytes == 64 * 3 * 64 * 8

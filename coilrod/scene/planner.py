@@ -12,7 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 import coils
-from coils.coaxial import coaxial_parts, winding_mask
+from coils.clearance import Box, winding_contacts
+from coils.coaxial import coaxial_parts
 
 from .parse import Scene
 
@@ -78,16 +79,9 @@ def _expected_queries(scene: Scene) -> int:
 
 
 def _box_clear_of_windings(field: coils.Field, box) -> bool:
-    lo, hi = box
-    corners = np.array(np.meshgrid(*zip(lo, hi, strict=True), indexing="ij")).reshape(3, -1).T
-    grid = (
-        np.array(
-            np.meshgrid(*[np.linspace(a, b, 9) for a, b in zip(lo, hi, strict=True)], indexing="ij")
-        )
-        .reshape(3, -1)
-        .T
-    )
-    return not np.any(winding_mask(field, np.vstack([corners, grid]), 0.05))
+    """True if the closed box stays out of every winding cross-section and more than 5% of the
+    radius away from every filament (exact geometry, :mod:`coils.clearance`)."""
+    return not winding_contacts(field, Box(*box), margin=0.05)
 
 
 def plan_scene(scene: Scene, *, cache: bool | None = None) -> Plan:
