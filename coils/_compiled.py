@@ -26,8 +26,9 @@ For every point, in one loop, without temporaries and with every intermediate in
    ``H_abc = q1 (x_a d_bc + x_b d_ac + x_c d_ab) + q2 x_a x_b x_c``, ``H_zab = b1 d_ab + d1 x_a
    x_b``, ``H_zza = c1 x_a``, ``H_zzz = -2 b1 - d1 u``: no rotation matrices are needed.
 
-Outputs are assigned or accumulated (``factor`` times the field), so a sum of groups fills one
-set of arrays.  Nothing here validates input; :class:`coils.coaxial.CoaxialCoils` does.
+The field (times ``factor``) is added to the output arrays, so a sum of groups fills one set
+of arrays (callers pass zeros for a single group).  Nothing here validates input;
+:class:`coils.coaxial.CoaxialCoils` does.
 """
 
 from __future__ import annotations
@@ -41,9 +42,9 @@ from numba import njit
 from .loop import loop_point
 from .multipole import multipole_point
 
-__all__ = ["coaxial_field", "WANT_B", "WANT_G", "WANT_H", "ACCUMULATE"]
+__all__ = ["coaxial_field", "WANT_B", "WANT_G", "WANT_H"]
 
-WANT_B, WANT_G, WANT_H, ACCUMULATE = 1, 2, 4, 8
+WANT_B, WANT_G, WANT_H = 1, 2, 4
 
 # slots of the error array
 ERR_ON_WIRE, ERR_NOT_FINITE, ERR_OVERFLOW, ERR_WINDING = 0, 1, 2, 3
@@ -108,7 +109,7 @@ def _global(rx, ry, rz, nx, ny, nz, u, Q, Bz, b1, q1, c1, d1, want_B, want_G, wa
     )  # fmt: skip
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"})
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
 def _near(fil, u, rho, zl, tol2, want_B, want_G, want_H):
     """Sum of the filaments' invariants at one point (units of L); ``ok`` is False (and the
     sum incomplete) if the point is within ``sqrt(tol2)`` radius of a filament."""
@@ -129,33 +130,24 @@ def _near(fil, u, rho, zl, tol2, want_B, want_G, want_H):
 
 
 @njit(cache=True, error_model="numpy")
-def _put(out, k, q, x, acc):
-    """``out[k, q] = x`` or ``out[k, q] += x``."""
-    if acc:
-        out[k, q] += x
-    else:
-        out[k, q] = x
-
-
-@njit(cache=True, error_model="numpy")
 def _sc(x, s, ex, far):
     """``x s 2^ex`` (far zone: ``ldexp``, one rounding) or ``x s`` (near zone)."""
     return math.ldexp(x * s, ex) if far else x * s
 
 
-@njit(cache=True, error_model="numpy")
-def _store_point(Bout, Gout, Hout, k, v, sB, sG, sH, eB, eG, eH, far, acc, want_B, want_G, want_H):
-    """Scale the distinct entries ``v`` (19,) and store (or add) them in row ``k`` of the
-    outputs; False if a value is not finite."""
+@njit(cache=True, error_model="numpy", inline="always")
+def _store_point(Bout, Gout, Hout, k, v, sB, sG, sH, eB, eG, eH, far, want_B, want_G, want_H):
+    """Scale the distinct entries ``v`` (19,) and add them to row ``k`` of the outputs; False if
+    a value is not finite."""
     bad = 0.0
     if want_B:
         b0 = _sc(v[0], sB, eB, far)
         b1_ = _sc(v[1], sB, eB, far)
         b2 = _sc(v[2], sB, eB, far)
         bad += (b0 + b1_ + b2) * 0.0
-        _put(Bout, k, 0, b0, acc)
-        _put(Bout, k, 1, b1_, acc)
-        _put(Bout, k, 2, b2, acc)
+        Bout[k, 0] += b0
+        Bout[k, 1] += b1_
+        Bout[k, 2] += b2
     if want_G:
         g00 = _sc(v[3], sG, eG, far)
         g01 = _sc(v[4], sG, eG, far)
@@ -164,15 +156,15 @@ def _store_point(Bout, Gout, Hout, k, v, sB, sG, sH, eB, eG, eH, far, acc, want_
         g12 = _sc(v[7], sG, eG, far)
         g22 = _sc(v[8], sG, eG, far)
         bad += (g00 + g01 + g02 + g11 + g12 + g22) * 0.0
-        _put(Gout, k, 0, g00, acc)
-        _put(Gout, k, 1, g01, acc)
-        _put(Gout, k, 2, g02, acc)
-        _put(Gout, k, 3, g01, acc)
-        _put(Gout, k, 4, g11, acc)
-        _put(Gout, k, 5, g12, acc)
-        _put(Gout, k, 6, g02, acc)
-        _put(Gout, k, 7, g12, acc)
-        _put(Gout, k, 8, g22, acc)
+        Gout[k, 0] += g00
+        Gout[k, 1] += g01
+        Gout[k, 2] += g02
+        Gout[k, 3] += g01
+        Gout[k, 4] += g11
+        Gout[k, 5] += g12
+        Gout[k, 6] += g02
+        Gout[k, 7] += g12
+        Gout[k, 8] += g22
     if want_H:
         h000 = _sc(v[9], sH, eH, far)
         h001 = _sc(v[10], sH, eH, far)
@@ -185,33 +177,33 @@ def _store_point(Bout, Gout, Hout, k, v, sB, sG, sH, eB, eG, eH, far, acc, want_
         h122 = _sc(v[17], sH, eH, far)
         h222 = _sc(v[18], sH, eH, far)
         bad += (h000 + h001 + h011 + h111 + h002 + h012 + h112 + h022 + h122 + h222) * 0.0
-        _put(Hout, k, 0, h000, acc)
-        _put(Hout, k, 1, h001, acc)
-        _put(Hout, k, 2, h002, acc)
-        _put(Hout, k, 3, h001, acc)
-        _put(Hout, k, 4, h011, acc)
-        _put(Hout, k, 5, h012, acc)
-        _put(Hout, k, 6, h002, acc)
-        _put(Hout, k, 7, h012, acc)
-        _put(Hout, k, 8, h022, acc)
-        _put(Hout, k, 9, h001, acc)
-        _put(Hout, k, 10, h011, acc)
-        _put(Hout, k, 11, h012, acc)
-        _put(Hout, k, 12, h011, acc)
-        _put(Hout, k, 13, h111, acc)
-        _put(Hout, k, 14, h112, acc)
-        _put(Hout, k, 15, h012, acc)
-        _put(Hout, k, 16, h112, acc)
-        _put(Hout, k, 17, h122, acc)
-        _put(Hout, k, 18, h002, acc)
-        _put(Hout, k, 19, h012, acc)
-        _put(Hout, k, 20, h022, acc)
-        _put(Hout, k, 21, h012, acc)
-        _put(Hout, k, 22, h112, acc)
-        _put(Hout, k, 23, h122, acc)
-        _put(Hout, k, 24, h022, acc)
-        _put(Hout, k, 25, h122, acc)
-        _put(Hout, k, 26, h222, acc)
+        Hout[k, 0] += h000
+        Hout[k, 1] += h001
+        Hout[k, 2] += h002
+        Hout[k, 3] += h001
+        Hout[k, 4] += h011
+        Hout[k, 5] += h012
+        Hout[k, 6] += h002
+        Hout[k, 7] += h012
+        Hout[k, 8] += h022
+        Hout[k, 9] += h001
+        Hout[k, 10] += h011
+        Hout[k, 11] += h012
+        Hout[k, 12] += h011
+        Hout[k, 13] += h111
+        Hout[k, 14] += h112
+        Hout[k, 15] += h012
+        Hout[k, 16] += h112
+        Hout[k, 17] += h122
+        Hout[k, 18] += h002
+        Hout[k, 19] += h012
+        Hout[k, 20] += h022
+        Hout[k, 21] += h012
+        Hout[k, 22] += h112
+        Hout[k, 23] += h122
+        Hout[k, 24] += h022
+        Hout[k, 25] += h122
+        Hout[k, 26] += h222
     return bad == 0.0
 
 
@@ -232,7 +224,7 @@ def _make_kernel(digest: int):
     def coaxial_field(
         pts, center, axis, fil, wind, beta, n0, params, flags, factor, Bout, Gout, Hout, err
     ):
-        """Field of one coaxial group at many points (assigned or accumulated into the outputs).
+        """Add the field of one coaxial group at many points to the outputs.
 
         Parameters
         ----------
@@ -253,11 +245,11 @@ def _make_kernel(digest: int):
             ``1/L, 1/L (B scale), 1/L^2, 1/L^3, (SWITCH d)^2 [m^2], d [m], kappa,
             ON_WIRE_TOL^2``.
         flags : int
-            ``WANT_B | WANT_G | WANT_H | ACCUMULATE`` bits.
+            ``WANT_B | WANT_G | WANT_H`` bits.
         factor : float
             Multiplies the field (current scaling of a :class:`coils.field.ScaledField`).
         Bout, Gout, Hout : ndarray, shapes (n, 3), (n, 9), (n, 27)
-            Outputs (T, T/m, T/m^2); unused ones may have 0 rows.
+            Outputs (T, T/m, T/m^2), added to; unused ones may have 0 rows.
         err : ndarray of int64, shape (3 + w,)
             Filled with the first offending point index (or -1): on a filament, non-finite
             result, coordinate overflow, then one slot per winding cross-section.
@@ -271,7 +263,6 @@ def _make_kernel(digest: int):
         want_B = (flags & WANT_B) != 0
         want_G = (flags & WANT_G) != 0
         want_H = (flags & WANT_H) != 0
-        acc = (flags & ACCUMULATE) != 0
         inv_L = params[0]
         fB = factor * params[1]
         fG = factor * params[2]
@@ -351,7 +342,7 @@ def _make_kernel(digest: int):
                 sB, sG, sH = fB, fG, fH
                 eB = eG = eH = 0
             if not _store_point(
-                Bout, Gout, Hout, k, v, sB, sG, sH, eB, eG, eH, far, acc, want_B, want_G, want_H
+                Bout, Gout, Hout, k, v, sB, sG, sH, eB, eG, eH, far, want_B, want_G, want_H
             ):
                 if err[ERR_NOT_FINITE] < 0:
                     err[ERR_NOT_FINITE] = k

@@ -24,7 +24,7 @@ __all__ = ["CoaxialCoils", "frame_from_axis", "coaxial_parts", "winding_mask"]
 ON_WIRE_TOL = 1e-9
 
 # flags of the compiled pass (coils._compiled)
-_WANT_B, _WANT_G, _WANT_H, _ACCUMULATE = 1, 2, 4, 8
+_WANT_B, _WANT_G, _WANT_H = 1, 2, 4
 _NO_B = np.empty((0, 3))
 _NO_G = np.empty((0, 9))
 _NO_H = np.empty((0, 27))
@@ -154,8 +154,8 @@ class CoaxialCoils(Field):
         return self._kernel_args
 
     def _run(self, pts, flags, factor, B, G, H):
-        """One compiled pass: fill (or add ``factor`` times the field into) B (n, 3), G (n, 9),
-        H (n, 27); raise ValueError naming the first point on or inside a winding."""
+        """One compiled pass: add ``factor`` times the field to B (n, 3), G (n, 9), H (n, 27);
+        raise ValueError naming the first point on or inside a winding."""
         kernel, args, n_err = self._kernel_args or self._prepare()
         err = np.empty(n_err, dtype=np.int64)
         pts = np.ascontiguousarray(pts)
@@ -188,9 +188,9 @@ class CoaxialCoils(Field):
         """New arrays B (n, 3) T, G (n, 3, 3) T/m, H (n, 3, 3, 3) T/m^2 as asked by ``flags``
         (None for the others)."""
         n = pts.shape[0]
-        B = np.empty((n, 3)) if flags & _WANT_B else _NO_B
-        G = np.empty((n, 9)) if flags & _WANT_G else _NO_G
-        H = np.empty((n, 27)) if flags & _WANT_H else _NO_H
+        B = np.zeros((n, 3)) if flags & _WANT_B else _NO_B
+        G = np.zeros((n, 9)) if flags & _WANT_G else _NO_G
+        H = np.zeros((n, 27)) if flags & _WANT_H else _NO_H
         self._run(pts, flags, 1.0, B, G, H)
         return (
             B if flags & _WANT_B else None,
@@ -200,7 +200,7 @@ class CoaxialCoils(Field):
 
     def _add_to(self, pts, B, G, H, factor):
         n = pts.shape[0]
-        flags = _ACCUMULATE
+        flags = 0
         if B is None:
             B = _NO_B
         else:

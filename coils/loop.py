@@ -35,17 +35,18 @@ Simpson's brackets ``(a^2 - r^2) E + alpha^2 K``, which lose ``(r/a)^2`` relativ
 at 10^8 a in the former kernel).
 
 Two evaluations of ``F`` and its first three derivatives (``phi' = (7 F' + 4 w F'')/4``,
-``phi'' = (11 F'' + 4 w F''')/4``), switched at ``w = W_SERIES = 1/2`` (``t = 0.707``):
+``phi'' = (11 F'' + 4 w F''')/4``), switched at ``w = W_SERIES = 3/4`` (``t = 0.866``):
 
-* ``w < 1/2`` (near the axis, and everywhere beyond ``r = (sqrt 2 + 1) a``): power series.
+* ``w < 3/4`` (near the axis, and everywhere beyond ``r = sqrt(3) a``): power series.
   Below ``W_TAYLOR = 2^-8`` the series about ``w = 0`` (all coefficients positive), with the
   number of terms read from the binary exponent of ``w`` (``SERIES_TERMS``: 9 terms below
-  ``2^-8``, 4 below ``2^-20``); above, the Taylor series about the centre of the quarter
-  (eighth in ``[1/4, 1/2)``) of the binade that holds ``w``, chosen by the exponent and the
-  leading mantissa bits, at most 14 terms.  Every table is cut where its tail, bounded over
-  its interval, is below ``2^-60`` of the smallest value of the series (coefficients from
-  ``F^(j)(w0)/j! = (a)_j (b)_j/((c)_j j!) 2F1(a+j, b+j; c+j; w0)``, sums of positive terms).
-* ``w >= 1/2`` (a torus around the wire, ``m >= 0.83``): closed forms in ``K = K(m)``,
+  ``2^-8``, 4 below ``2^-20``); above, the Taylor series about the centre of the interval that
+  holds ``w`` (1/64 wide in ``[1/2, 3/4)``, eighths of ``[1/4, 1/2)``, quarters of the binades
+  below), chosen from the exponent and the leading mantissa bits of ``w``: at most 15 terms.
+  Every table is cut where its tail, bounded over its interval, is below ``2^-60`` of the
+  smallest value of the series (coefficients ``F^(j)(w0)/j! = (a)_j (b)_j/((c)_j j!)
+  2F1(a+j, b+j; c+j; w0)``, sums of positive terms).
+* ``w >= 3/4`` (a torus around the wire, ``m >= 0.93``): closed forms in ``K = K(m)``,
   ``E = E(m)`` with ``m = 2t/(1 + t)`` and ``1 - m = (1 - t)/(1 + t)``, where
   ``1 - t = alpha^2 / s`` comes from ``alpha^2 = (rho - a)^2 + z^2`` without cancellation
   (the squared distance to the wire)::
@@ -102,7 +103,7 @@ def _float_bits(typingctx, x):
 
 
 #: Power series below this w = t^2 = (2 a rho / s)^2, closed forms in K, E above.
-W_SERIES = 0.5
+W_SERIES = 0.75
 #: Relative truncation error of the series.
 _SERIES_TOL = 2.0**-60
 #: Below this w the series about w = 0 is used; above, expansions about sub-interval centres.
@@ -146,23 +147,30 @@ def _terms_needed(coef: np.ndarray, radius: float) -> int:
     return max(1, int(np.argmax(np.all(tail < _SERIES_TOL * floor, axis=1))))
 
 
-def _series_tables():
-    """Coefficient tables of the series of F, F', F'', F''' (shape (33, n, 4)), their centres
-    w0 (33,) and lengths (33,).  Index ``i < 8`` for ``w`` in the ``i``-th eighth of
-    ``[1/4, 1/2)``; ``8 + 4 (k - 2) + i`` for the ``i``-th quarter of ``[2^-(k+1), 2^-k)``,
-    k = 2 .. 7; 32 for the series about 0 (``w < W_TAYLOR``)."""
-    intervals = [(0.25 * (1.0 + i / 8.0), 0.25 / 16.0) for i in range(8)]
+def _series_intervals():
+    """(low end, half width) of the intervals of w with a table of their own, in table order:
+    sixteen 1/64-wide intervals covering ``[1/2, 3/4)``, the eighths of ``[1/4, 1/2)``, the
+    quarters of ``[2^-(k+1), 2^-k)`` for k = 2 .. 7; the series about 0 follows them."""
+    out = [(0.5 + i / 64.0, 1.0 / 128.0) for i in range(16)]
+    out += [(0.25 * (1.0 + i / 8.0), 0.25 / 16.0) for i in range(8)]
     for k in range(2, 8):
-        intervals += [(2.0 ** (-k - 1) * (1.0 + i / 4.0), 2.0 ** (-k - 4)) for i in range(4)]
+        out += [(2.0 ** (-k - 1) * (1.0 + i / 4.0), 2.0 ** (-k - 4)) for i in range(4)]
+    return out
+
+
+def _series_tables():
+    """Coefficient tables of the series of F, F', F'', F''' (shape (49, n, 4)), their centres
+    w0 (49,) and lengths (49,), in the order of :func:`_series_intervals`; index 48 holds the
+    series about 0 (``w < W_TAYLOR``, length from ``SERIES_TERMS``)."""
     centres, tables, lengths = [], [], []
-    for low, half in intervals:
+    for low, half in _series_intervals():
         coef = _chains(_taylor(low + half))
         centres.append(low + half)
         tables.append(coef)
         lengths.append(_terms_needed(coef, half))
     centres.append(0.0)
     tables.append(_chains(_taylor(0.0)))
-    lengths.append(0)  # from SERIES_TERMS
+    lengths.append(0)
     n = max(max(lengths), _series_terms()[8])
     return (
         np.ascontiguousarray(np.stack([t[:n] for t in tables])),
@@ -220,14 +228,17 @@ def loop_point(a, A, C2, u, rho, z, want_B, want_G, want_H):
         # mantissa bits of w (w in [2^(E-1023), 2^(E-1022)); E = 0 for w = 0)
         bits = _float_bits(w)
         E = bits >> 52
-        if E == 1021:
-            idx = (bits >> 49) & 7
+        if E == 1022:
+            idx = (bits >> 47) & 31
+            n = SERIES_LENGTHS[idx]
+        elif E == 1021:
+            idx = 16 + ((bits >> 49) & 7)
             n = SERIES_LENGTHS[idx]
         elif w >= W_TAYLOR:
-            idx = 8 + 4 * (1020 - E) + ((bits >> 50) & 3)
+            idx = 24 + 4 * (1020 - E) + ((bits >> 50) & 3)
             n = SERIES_LENGTHS[idx]
         else:
-            idx = 32
+            idx = 48
             n = SERIES_TERMS[min(1022 - E, 64)]
         delta = w - SERIES_CENTRES[idx]
         F0 = 0.0
