@@ -215,7 +215,10 @@ def _source_digest() -> int:
     """
     h = hashlib.sha256()
     for name in ("_compiled.py", "loop.py", "multipole.py"):
-        h.update((Path(__file__).parent / name).read_bytes())
+        try:
+            h.update((Path(__file__).parent / name).read_bytes())
+        except OSError:  # sources not shipped (zipped install): numba cannot cache either
+            return 0
     return int.from_bytes(h.digest()[:6], "little")
 
 
