@@ -115,7 +115,7 @@ _N_DERIV = 48
 
 def _taylor(w0: float, n: int = _N_DERIV, m: int = 600) -> np.ndarray:
     """``F^(j)(w0) / j!`` for j < n: ``(a)_j (b)_j / ((c)_j j!) 2F1(a + j, b + j; c + j; w0)``,
-    each a sum of ``m`` positive terms (w0 <= 1/4)."""
+    each a sum of ``m`` positive terms (enough for w0 < 3/4 and j < 48)."""
     j = np.arange(n)[:, None]
     k = np.arange(m - 1)[None, :]
     ratio = (_A + j + k) * (_B + j + k) / ((_C + j + k) * (k + 1.0)) * w0
