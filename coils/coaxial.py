@@ -1,25 +1,33 @@
-"""Coaxial groups of circular filaments (tier 2: frames, winding checks, chunking).
+"""Coaxial groups of circular filaments (tier 2: frames, winding checks, near and far zones).
 
 A :class:`CoaxialCoils` holds filaments sharing one axis and one centre; a single coil, a
 Helmholtz pair and a Maxwell pair are all coaxial groups, so a pair is evaluated in one local
-frame with one rotation.
+frame with one rotation, in one compiled pass over the points (:mod:`coils._compiled`): the
+filaments' closed forms near the group (:mod:`coils.loop`), the group's multipole series beyond
+``coils.multipole.SWITCH`` times its radius (:mod:`coils.multipole`).  numba is imported when a
+group is first evaluated, not when :mod:`coils` is imported.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from scipy.constants import mu_0
 
 from ._validate import as_axis, as_vector
-from .field import CHUNK, Field, FieldSum, ScaledField
-from .loop import SYMMETRIC_EXPANSION, loop_B_and_gradient_local, loop_hessian_local
+from .field import Field, FieldSum, ScaledField
 
 __all__ = ["CoaxialCoils", "frame_from_axis", "coaxial_parts", "winding_mask"]
 
-#: CODATA mu0 over the 4e-7 pi used inside the kernel.
-_MU0_SCALE = mu_0 / (4e-7 * np.pi)
 #: A point closer than this fraction of the radius to a filament is "on the winding".
 ON_WIRE_TOL = 1e-9
+
+# flags of the compiled pass (coils._compiled)
+_WANT_B, _WANT_G, _WANT_H = 1, 2, 4
+_NO_B = np.empty((0, 3))
+_NO_G = np.empty((0, 9))
+_NO_H = np.empty((0, 27))
 
 
 def frame_from_axis(axis: np.ndarray) -> np.ndarray:
@@ -49,13 +57,17 @@ class CoaxialCoils(Field):
 
     Notes
     -----
-    B, the gradient and the hessian are all exact closed forms (elliptic integrals, with power
-    series near the axis; :mod:`coils.loop`), evaluated in the coils' frame and rotated to the
-    global one with one matrix product per chunk of points.
+    B, the gradient and the hessian are exact: closed forms of each filament near the group
+    (elliptic integrals near the wires, their hypergeometric power series near the axis and
+    farther out; :mod:`coils.loop`) and the group's multipole series beyond
+    ``coils.multipole.SWITCH`` times the group radius (:mod:`coils.multipole`), to about
+    ``1e-15`` relative at any distance.  One compiled pass over the points computes whichever
+    of B, gradient and hessian is asked for (:mod:`coils._compiled`); its data are derived
+    from the arrays of the object once, so these are read-only.
     """
 
     def __init__(self, filaments, axis="z", center=(0.0, 0.0, 0.0), windings=()):
-        fil = np.asarray(filaments, dtype=float)
+        fil = np.array(filaments, dtype=float)
         if fil.ndim != 2 or fil.shape[1] != 3 or fil.shape[0] == 0:
             raise ValueError(f"filaments must have shape (f, 3); got {fil.shape}")
         if not np.all(np.isfinite(fil)):
@@ -64,36 +76,31 @@ class CoaxialCoils(Field):
             raise ValueError("filament radii must be positive")
         self.filaments = fil
         self.axis = as_axis(axis)
-        self.center = as_vector(center, "center")
+        self.center = as_vector(center, "center").copy()
         self.rotation = frame_from_axis(self.axis)
-        self.windings = np.asarray(windings, dtype=float).reshape(-1, 4)
+        self.windings = np.array(windings, dtype=float).reshape(-1, 4)
+        for arr in (self.filaments, self.axis, self.center, self.rotation, self.windings):
+            arr.setflags(write=False)
+        self._kernel_args = None
 
     @property
     def length_scale(self) -> float:
         return float(np.min(self.filaments[:, 1]))
 
+    @property
+    def radius_bound(self) -> float:
+        """Largest distance (m) from the centre to a filament or a winding cross-section: the
+        multipole series of the group converges beyond it."""
+        z0, a = self.filaments[:, 0], self.filaments[:, 1]
+        d = float(np.max(np.hypot(a, z0)))
+        for wz, wa, w, h in self.windings:
+            d = max(d, math.hypot(wa + 0.5 * h, abs(wz) + 0.5 * w))
+        return d
+
     # -- tier 2: frames and singularities ------------------------------------------------------
     def to_local(self, pts: np.ndarray) -> np.ndarray:
         """Global points (n, 3) m -> coordinates in the coil frame (axis = local z)."""
         return (pts - self.center) @ self.rotation
-
-    def _check_not_on_winding(self, local: np.ndarray, nearest: np.ndarray) -> None:
-        """Raise if a point is on a filament (``nearest``: min (distance / radius)^2 from the
-        kernel) or inside a finite winding's cross-section."""
-        bad = ~(nearest >= ON_WIRE_TOL**2)  # also catches NaN/inf from a singular evaluation
-        if np.any(bad):
-            k = int(np.argmax(bad))
-            raise ValueError(
-                f"point {k} lies on a coil winding (within {ON_WIRE_TOL:g} radius of a "
-                f"filament): the field is singular there"
-            )
-        for (_z0, a, w, h), inside in zip(self.windings, self._inside_windings(local), strict=True):
-            if np.any(inside):
-                k = int(np.argmax(inside))
-                raise ValueError(
-                    f"point {k} lies inside a coil winding ({w} m x {h} m section at "
-                    f"radius {a} m): the filament model does not hold there"
-                )
 
     def _inside_windings(self, local: np.ndarray, closed: bool = False):
         """Yield, per winding cross-section, a bool mask of the local points (n, 3) inside it
@@ -106,54 +113,125 @@ class CoaxialCoils(Field):
         for z0, a, w, h in self.windings:
             yield less(np.abs(z - z0), 0.5 * w) & less(np.abs(rho - a), 0.5 * h)
 
-    def _local_kernel(self, pts: np.ndarray, kernel, *args):
-        """Run ``kernel(local, filaments, *args, nearest)`` on one chunk of global points and
-        check that no point is on a winding; returns the kernel's result (local frame)."""
-        local = self.to_local(pts)
-        nearest = np.empty(local.shape[0])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            out = kernel(local, self.filaments, *args, nearest)
-        self._check_not_on_winding(local, nearest)
-        return out
+    def _prepare(self):
+        """Arguments of the compiled kernel (built on first use, then cached on the object)."""
+        from . import _compiled
+        from .multipole import SWITCH, group_moments
 
-    def _evaluate(self, pts: np.ndarray, with_gradient: bool):
-        n = pts.shape[0]
-        B = np.empty((n, 3))
-        G = np.empty((n, 3, 3)) if with_gradient else None
-        R = self.rotation
-        RR = np.kron(R, R)  # G_global = R g R^T as one (n x 9) @ (9 x 9) product
-        for start in range(0, n, CHUNK):
-            sl = slice(start, min(start + CHUNK, n))
-            b, g = self._local_kernel(pts[sl], loop_B_and_gradient_local, with_gradient)
-            B[sl] = (_MU0_SCALE * b) @ R.T
-            if with_gradient:
-                G[sl] = (g.reshape(-1, 9) @ (_MU0_SCALE * RR.T)).reshape(-1, 3, 3)
-        return B, G
+        d = self.radius_bound
+        e = math.frexp(d)[1]  # lengths in units of L = 2^e (exact scaling)
+        inv_L = math.ldexp(1.0, -e)
+        z0, a, cur = (self.filaments[:, j] for j in range(3))
+        a_s = a * inv_L
+        fil = np.column_stack(
+            [z0 * inv_L, a_s, mu_0 * cur * a_s * a_s, mu_0 * cur / (2 * math.pi), 1.0 / a_s**2]
+        )
+        wind = (
+            np.column_stack(
+                [
+                    self.windings[:, 0],
+                    self.windings[:, 1],
+                    self.windings[:, 2] / 2,
+                    self.windings[:, 3] / 2,
+                ]
+            )
+            * inv_L
+        )
+        moments = group_moments(self.filaments, mu_0, d)
+        with np.errstate(over="ignore"):  # 1/L^3 of an absurd radius overflows: caught per point
+            scales = np.ldexp(1.0, np.array([-e, -e, -2 * e, -3 * e]))
+        params = np.array([*scales, (SWITCH * d) ** 2, d, moments.kappa, ON_WIRE_TOL**2])
+        args = (
+            np.ascontiguousarray(self.center),
+            np.ascontiguousarray(self.axis),
+            np.ascontiguousarray(fil),
+            np.ascontiguousarray(wind.reshape(-1, 4)),
+            np.ascontiguousarray(moments.beta),
+            moments.n0,
+            params,
+        )
+        self._kernel_args = (_compiled.coaxial_field, args, 3 + len(self.windings))
+        return self._kernel_args
 
-    def _hessian(self, pts: np.ndarray) -> np.ndarray:
-        """Closed-form hessian (n, 3, 3, 3), T/m^2: see :func:`coils.loop.loop_hessian_local`."""
+    def _run(self, pts, flags, factor, B, G, H):
+        """One compiled pass: add ``factor`` times the field to B (n, 3), G (n, 9), H (n, 27);
+        raise ValueError naming the first point on or inside a winding."""
+        kernel, args, n_err = self._kernel_args or self._prepare()
+        err = np.empty(n_err, dtype=np.int64)
+        pts = np.ascontiguousarray(pts)
+        if kernel(pts, *args, flags, factor, B, G, H, err):
+            self._raise_point_error(err)
+
+    def _raise_point_error(self, err: np.ndarray) -> None:
+        if err[0] >= 0:
+            raise ValueError(
+                f"point {err[0]} lies on a coil winding (within {ON_WIRE_TOL:g} radius of a "
+                f"filament): the field is singular there"
+            )
+        for (_z0, a, w, h), k in zip(self.windings, err[3:], strict=True):
+            if k >= 0:
+                raise ValueError(
+                    f"point {k} lies inside a coil winding ({w} m x {h} m section at "
+                    f"radius {a} m): the filament model does not hold there"
+                )
+        if err[2] >= 0:
+            raise ValueError(
+                f"point {err[2]} is too far from the coil centre {self.center.tolist()} m: its "
+                f"coordinates relative to it overflow double precision"
+            )
+        raise ValueError(
+            f"the field at point {err[1]} overflows double precision (coil dimensions or "
+            f"currents out of range)"
+        )
+
+    def _evaluate(self, pts, flags: int):
+        """New arrays B (n, 3) T, G (n, 3, 3) T/m, H (n, 3, 3, 3) T/m^2 as asked by ``flags``
+        (None for the others)."""
         n = pts.shape[0]
-        H = np.empty((n, 3, 3, 3))
-        R = self.rotation
-        # H_IJL = R_Ii R_Jj R_Ll h_ijl, from the 10 distinct local entries: one (n x 10) @ (10 x 27)
-        RRR = _MU0_SCALE * np.einsum("ai,bj,cl->ijlabc", R, R, R).reshape(27, 27)
-        to_global = SYMMETRIC_EXPANSION @ RRR
-        step = max(1, CHUNK // len(self.filaments))  # the kernel's temporaries are (chunk, f)
-        for start in range(0, n, step):
-            sl = slice(start, min(start + step, n))
-            h = self._local_kernel(pts[sl], _hessian_unique)
-            H[sl] = (h @ to_global).reshape(-1, 3, 3, 3)
-        return H
+        B = np.zeros((n, 3)) if flags & _WANT_B else _NO_B
+        G = np.zeros((n, 9)) if flags & _WANT_G else _NO_G
+        H = np.zeros((n, 27)) if flags & _WANT_H else _NO_H
+        self._run(pts, flags, 1.0, B, G, H)
+        return (
+            B if flags & _WANT_B else None,
+            G.reshape(n, 3, 3) if flags & _WANT_G else None,
+            H.reshape(n, 3, 3, 3) if flags & _WANT_H else None,
+        )
+
+    def _add_to(self, pts, B, G, H, factor):
+        n = pts.shape[0]
+        flags = 0
+        if B is None:
+            B = _NO_B
+        else:
+            flags |= _WANT_B
+        if G is None:
+            G = _NO_G
+        else:
+            flags |= _WANT_G
+            G = G.reshape(n, 9)
+        if H is None:
+            H = _NO_H
+        else:
+            flags |= _WANT_H
+            H = H.reshape(n, 27)
+        self._run(pts, flags, factor, B, G, H)
 
     # -- tier 3 entry points (validated by Field) -------------------------------------------
     def _B(self, pts):
-        return self._evaluate(pts, False)[0]
+        return self._evaluate(pts, _WANT_B)[0]
 
     def _gradient(self, pts):
-        return self._evaluate(pts, True)[1]
+        return self._evaluate(pts, _WANT_G)[1]
 
     def _B_and_gradient(self, pts):
-        return self._evaluate(pts, True)
+        return self._evaluate(pts, _WANT_B | _WANT_G)[:2]
+
+    def _hessian(self, pts):
+        return self._evaluate(pts, _WANT_H)[2]
+
+    def _B_gradient_hessian(self, pts):
+        return self._evaluate(pts, _WANT_B | _WANT_G | _WANT_H)
 
     def to_magpylib(self):
         """The filaments as a ``magpylib.Collection`` of ``magpylib.current.Circle`` sources.
@@ -182,11 +260,6 @@ class CoaxialCoils(Field):
         from .ideal import linearize
 
         return linearize(self, self.center, zero_tol)
-
-
-def _hessian_unique(local, filaments, nearest):
-    """The 10 distinct hessian entries in the local frame (see :func:`loop_hessian_local`)."""
-    return loop_hessian_local(local, filaments, nearest, unique_only=True)
 
 
 def coaxial_parts(field: Field):

@@ -4,7 +4,8 @@ Every field maps points ``(n, 3)`` in metres to
 
 * ``B(points)``: flux density, shape ``(n, 3)``, tesla;
 * ``gradient(points)``: ``G[k, i, j] = dB_i/dx_j``, shape ``(n, 3, 3)``, tesla per metre;
-* ``hessian(points)``: ``H[k, i, j, l] = d2B_i/(dx_j dx_l)``, shape ``(n, 3, 3, 3)``, T/m^2.
+* ``hessian(points)``: ``H[k, i, j, l] = d2B_i/(dx_j dx_l)``, shape ``(n, 3, 3, 3)``, T/m^2;
+* ``B_gradient_hessian(points)``: the three at once (one compiled pass per coaxial coil group).
 
 and says what it does not need to compute, so solvers can skip work:
 
@@ -30,8 +31,9 @@ class Field(ABC):
     """Base class of all magnetic field sources (a protocol with shared conveniences).
 
     Subclasses implement ``_B(points)`` and ``_gradient(points)`` on validated ``(n, 3)`` arrays;
-    they may override ``_B_and_gradient`` when the two share work and ``_hessian`` when a closed
-    form exists.  Public methods validate once and dispatch.
+    they may override ``_B_and_gradient`` and ``_B_gradient_hessian`` when the quantities share
+    work, ``_hessian`` when a closed form exists, and ``_add_to`` to accumulate into a sum's
+    arrays without temporaries.  Public methods validate once and dispatch.
     """
 
     #: True if the gradient is identically zero everywhere.
@@ -85,6 +87,38 @@ class Field(ABC):
             return np.zeros((pts.shape[0], 3, 3, 3))
         return self._hessian(pts)
 
+    def B_gradient_hessian(self, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """B, gradient and hessian at ``points`` in one pass.
+
+        Parameters
+        ----------
+        points : array-like, shape (n, 3) or (3,)
+            Positions in metres.
+
+        Returns
+        -------
+        B : ndarray, shape (n, 3)
+            Flux density, T.
+        G : ndarray, shape (n, 3, 3)
+            ``G[k, i, j] = dB_i/dx_j``, T/m.
+        H : ndarray, shape (n, 3, 3, 3)
+            ``H[k, i, j, l] = d2B_i/(dx_j dx_l)``, T/m^2.
+
+        Notes
+        -----
+        The same values as :meth:`B`, :meth:`gradient` and :meth:`hessian` (and the same
+        errors); coils compute the three in one compiled pass over the points, which is what a
+        Newton solver needs per iteration.
+        """
+        pts = as_points(points)
+        n = pts.shape[0]
+        if self.uniform:
+            return self._B(pts), np.zeros((n, 3, 3)), np.zeros((n, 3, 3, 3))
+        if self.linear:
+            B, G = self._B_and_gradient(pts)
+            return B, G, np.zeros((n, 3, 3, 3))
+        return self._B_gradient_hessian(pts)
+
     @property
     def length_scale(self) -> float:
         """A length (m) over which the field varies; used for finite-difference steps."""
@@ -115,6 +149,28 @@ class Field(ABC):
 
     def _B_and_gradient(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return self._B(pts), self._gradient(pts)
+
+    def _B_gradient_hessian(self, pts: np.ndarray):
+        B, G = self._B_and_gradient(pts)
+        return B, G, self._hessian(pts)
+
+    def _add_to(self, pts: np.ndarray, B, G, H, factor: float) -> None:
+        """Add ``factor`` times B, G, H of this field to the arrays given (None: not wanted).
+
+        The arrays are C-contiguous, shapes (n, 3), (n, 3, 3), (n, 3, 3, 3); callers pass
+        ``G = None`` for uniform fields and ``H = None`` for linear ones.
+        """
+        if H is not None:
+            H += factor * self._hessian(pts)
+        if G is not None:
+            if B is not None:
+                b, g = self._B_and_gradient(pts)
+                B += factor * b
+            else:
+                g = self._gradient(pts)
+            G += factor * g
+        elif B is not None:
+            B += factor * self._B(pts)
 
     def _hessian(self, pts: np.ndarray) -> np.ndarray:
         h = 1e-4 * self.length_scale
@@ -155,32 +211,38 @@ class FieldSum(Field):
     def length_scale(self) -> float:
         return min(p.length_scale for p in self.parts)
 
+    def _add_to(self, pts, B, G, H, factor):
+        for p in self.parts:
+            p._add_to(
+                pts,
+                B,
+                None if p.uniform else G,
+                None if (p.uniform or p.linear) else H,
+                factor,
+            )
+
+    def _sum(self, pts, want_B: bool, want_G: bool, want_H: bool):
+        n = pts.shape[0]
+        B = np.zeros((n, 3)) if want_B else None
+        G = np.zeros((n, 3, 3)) if want_G else None
+        H = np.zeros((n, 3, 3, 3)) if want_H else None
+        self._add_to(pts, B, G, H, 1.0)
+        return B, G, H
+
     def _B(self, pts):
-        return sum(p._B(pts) for p in self.parts)
+        return self._sum(pts, True, False, False)[0]
 
     def _gradient(self, pts):
-        return sum(p._gradient(pts) for p in self.parts if not p.uniform) + np.zeros(
-            (pts.shape[0], 3, 3)
-        )
+        return self._sum(pts, False, True, False)[1]
 
     def _B_and_gradient(self, pts):
-        B = np.zeros((pts.shape[0], 3))
-        G = np.zeros((pts.shape[0], 3, 3))
-        for p in self.parts:
-            if p.uniform:
-                B += p._B(pts)
-            else:
-                b, g = p._B_and_gradient(pts)
-                B += b
-                G += g
-        return B, G
+        return self._sum(pts, True, True, False)[:2]
 
     def _hessian(self, pts):
-        H = np.zeros((pts.shape[0], 3, 3, 3))
-        for p in self.parts:
-            if not (p.uniform or p.linear):
-                H += p._hessian(pts)
-        return H
+        return self._sum(pts, False, False, True)[2]
+
+    def _B_gradient_hessian(self, pts):
+        return self._sum(pts, True, True, True)
 
     def __repr__(self):
         return f"{type(self).__name__}({self.parts!r})"
@@ -201,18 +263,31 @@ class ScaledField(Field):
     def length_scale(self) -> float:
         return self.field.length_scale
 
+    def _scaled(self, pts, want_B: bool, want_G: bool, want_H: bool):
+        n = pts.shape[0]
+        B = np.zeros((n, 3)) if want_B else None
+        G = np.zeros((n, 3, 3)) if want_G else None
+        H = np.zeros((n, 3, 3, 3)) if want_H else None
+        self.field._add_to(pts, B, G, H, self.factor)
+        return B, G, H
+
     def _B(self, pts):
-        return self.factor * self.field._B(pts)
+        return self._scaled(pts, True, False, False)[0]
 
     def _gradient(self, pts):
-        return self.factor * self.field._gradient(pts)
+        return self._scaled(pts, False, True, False)[1]
 
     def _B_and_gradient(self, pts):
-        b, g = self.field._B_and_gradient(pts)
-        return self.factor * b, self.factor * g
+        return self._scaled(pts, True, True, False)[:2]
 
     def _hessian(self, pts):
-        return self.factor * self.field._hessian(pts)
+        return self._scaled(pts, False, False, True)[2]
+
+    def _B_gradient_hessian(self, pts):
+        return self._scaled(pts, True, True, True)
+
+    def _add_to(self, pts, B, G, H, factor):
+        self.field._add_to(pts, B, G, H, factor * self.factor)
 
     def __repr__(self):
         return f"{self.factor!r} * {self.field!r}"

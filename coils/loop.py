@@ -1,442 +1,357 @@
-"""Closed-form field and exact gradient of a circular current loop (tier 1: pure kernels).
+"""Field of one circular current loop near its wire: closed form, compiled (tier 1).
 
 A filament of radius ``a`` in the plane ``z = 0``, centred on the origin, carries current ``I``
-counter-clockwise about +z.  With ``alpha^2 = a^2 + rho^2 + z^2 - 2 a rho``,
-``beta^2 = a^2 + rho^2 + z^2 + 2 a rho``, ``m = k^2 = 1 - alpha^2/beta^2`` and
-``C = mu0 I / pi`` (Simpson, Lane, Immer, Youngquist, NASA 2001):
+counter-clockwise about +z.  Everything is a function of ``u = rho^2`` and ``z`` through
 
-    B_rho = C z / (2 alpha^2 beta rho) [(a^2 + rho^2 + z^2) E(m) - alpha^2 K(m)]
-    B_z   = C     / (2 alpha^2 beta)     [(a^2 - rho^2 - z^2) E(m) + alpha^2 K(m)]
+    s = a^2 + u + z^2,    t = 2 a rho / s  (0 <= t <= 1, 1 on the wire),    w = t^2,
 
-The gradient needs only ``dB_z/dz``, ``dB_z/drho`` and ``B_rho/rho``: ``curl B = 0`` gives
-``dB_rho/dz = dB_z/drho`` and ``div B = 0`` gives ``dB_rho/drho = -B_rho/rho - dB_z/dz``.
-``dB_z/d(.)`` is differentiated in closed form with ``dK/dm = g(m) / (2 (1 - m))`` and
-``dE/dm = -D(m) / 2``, where ``D = (K - E)/m`` and ``g = (E - (1 - m) K)/m``.
+and the field follows from six *invariants*, each regular on the axis and summed over coaxial
+filaments, from which :mod:`coils._compiled` assembles B, its gradient and its hessian:
 
-Near the axis (m -> 0) the brackets cancel catastrophically; ``D``, ``g`` and
-``F = ((1 - m/2) E - (1 - m) K)/m^2`` are then taken from their hypergeometric power series,
-so the kernel keeps full relative precision on and near the axis.  Near the wire (m -> 1) ``K``
-is evaluated from ``1 - m`` directly (``scipy.special.ellipkm1``).
+    Q  = B_rho / rho,   Bz                       (B)
+    b1 = dQ/dz,         q1 = (dQ/drho) / rho     (gradient, with Q)
+    c1 = d2Q/dz2,       d1 = dq1/dz              (hessian, with b1 and q1)
 
-The hessian uses ``u = rho^2``, ``s = a^2 + u + z^2`` and ``w = (2 a rho / s)^2`` (even in rho):
-by a quadratic transformation of the hypergeometric forms of ``K`` and ``E``,
+(the hessian's last radial derivative ``(dq1/drho)/rho = -(4 q1 + c1)/rho^2`` follows from
+Laplace's equation, which keeps the computed hessian traceless to rounding).
 
-    Q = B_rho / rho = mu0 I a^2 z s^(-5/2) phi(w),
-    phi(w) = (e(w) / (1 - w) - k(w)) / w,
+Field of the loop
+-----------------
+Expanding ``1 / |x - x'|`` in the Biot-Savart vector potential in powers of ``t cos(phi')``
+gives ``A_phi = rho psi`` with
 
-with ``k = 2F1(1/4, 3/4; 1; w)`` and ``e = 2F1(-1/4, 1/4; 1; w)``.  ``Q`` is regular in
-``(u, z)``, and (B is the gradient of a harmonic potential, so the hessian is fully symmetric and
-traceless) four derivatives of it give every second derivative of B: ``Q_z``, ``Q_zz``,
-``2 Q_u = (dQ/drho)/rho`` and ``2 Q_uz``.  ``phi``, ``phi'`` and ``phi''`` come from their power
-series in ``w`` near the axis and from ``K``, ``E`` (with ``t = sqrt(w)``, ``1 - t = alpha^2/s``)
-elsewhere.
+    psi(u, z) = (mu0 I a^2 / 4) s^(-3/2) F(w),    F = 2F1(3/4, 5/4; 2; w),
 
-These functions perform no input checks (tier 1); :mod:`coils.coaxial` handles frames, winding
-checks and validation.
+so that ``Q = -d psi/dz`` and ``Bz = 2 d(u psi)/du``:
+
+    Q  = mu0 I a^2 z s^(-5/2) phi(w),                  phi = (3 F + 4 w F') / 4,
+    Bz = (mu0 I a^2 / 2) s^(-3/2) [(1 - 3u/(2s)) F + w (h/s) F'],   h = a^2 + z^2 - u.
+
+``b1, q1, c1, d1`` are derivatives of ``Q`` in ``(u, z)`` (``q1 = 2 dQ/du``), written out in
+:func:`loop_point` with ``P = s^(-5/2) phi(w)`` and the chain rule through
+``w(u, z) = 4 a^2 u / s^2``.  Nothing in these expressions cancels except at genuine zeros of
+the result, and far from the loop (``w -> 0``) they keep full relative precision, unlike
+Simpson's brackets ``(a^2 - r^2) E + alpha^2 K``, which lose ``(r/a)^2`` relative (``Bz = 0``
+at 10^8 a in the former kernel).
+
+Two evaluations of ``F`` and its first three derivatives (``phi' = (7 F' + 4 w F'')/4``,
+``phi'' = (11 F'' + 4 w F''')/4``), switched at ``w = W_SERIES = 3/4`` (``t = 0.866``):
+
+* ``w < 3/4`` (near the axis, and everywhere beyond ``r = sqrt(3) a``): power series.
+  Below ``W_TAYLOR = 2^-8`` the series about ``w = 0`` (all coefficients positive), with the
+  number of terms read from the binary exponent of ``w`` (``SERIES_TERMS``: 9 terms below
+  ``2^-8``, 4 below ``2^-20``); above, the Taylor series about the centre of the interval that
+  holds ``w`` (1/64 wide in ``[1/2, 3/4)``, eighths of ``[1/4, 1/2)``, quarters of the binades
+  below), chosen from the exponent and the leading mantissa bits of ``w``: at most 15 terms.
+  Every table is cut where its tail, bounded over its interval, is below ``2^-60`` of the
+  smallest value of the series (coefficients ``F^(j)(w0)/j! = (a)_j (b)_j/((c)_j j!)
+  2F1(a+j, b+j; c+j; w0)``, sums of positive terms).
+* ``w >= 3/4`` (a torus around the wire, ``m >= 0.93``): closed forms in ``K = K(m)``,
+  ``E = E(m)`` with ``m = 2t/(1 + t)`` and ``1 - m = (1 - t)/(1 + t)``, where
+  ``1 - t = alpha^2 / s`` comes from ``alpha^2 = (rho - a)^2 + z^2`` without cancellation
+  (the squared distance to the wire)::
+
+      phi   = 2 (E/v - K) / (pi t^2 p^(1/2))                                    (v = 1 - t,
+      phi'  = ((2 - 5 t^2/2) K + 2 (2 t^2 - 1) E/v) / (pi v t^4 p^(3/2))          p = 1 + t)
+      phi'' = ((93 t^4 - 93 t^2 + 32) E/v - (45 t^4 - 69 t^2 + 32) K) / (8 pi v^2 t^6 p^(5/2))
+      Bz    = (mu0 I / 2 pi) [((a - rho)(a + rho) - z^2) E + alpha^2 K] / (alpha^2 beta)
+
+  (the last is Simpson, Lane, Immer, Youngquist, NASA 2001; ``beta^2 = s + 2 a rho``).
+  ``K`` and ``E`` are scipy's own C functions (``scipy.special.cython_special.ellipkm1`` and
+  ``ellipe``, Cephes, 2e-16 relative), linked into the compiled code by symbol name (so that
+  numba can cache it): the values agree with ``scipy.special`` to the last bit, and ``K`` is
+  evaluated from ``1 - m`` directly.
+
+Far from a coaxial *group* of filaments the group's multipole series takes over
+(:mod:`coils.multipole`); this module serves the near zone.  The functions are compiled with
+numba on first use (``cache=True``); :mod:`coils.coaxial` imports this module only when a coil
+is evaluated.
 """
 
 from __future__ import annotations
 
 import math
 
+import llvmlite.binding as _llvm
 import numpy as np
-from scipy.special import ellipe, ellipkm1
+from llvmlite import ir
+from numba import njit, types
+from numba.extending import get_cython_function_address, intrinsic
 
-__all__ = [
-    "loop_field_cyl",
-    "loop_B_and_gradient_local",
-    "loop_hessian_cyl",
-    "loop_hessian_local",
-]
+__all__ = ["W_SERIES", "W_TAYLOR", "SERIES_TERMS", "loop_point", "loop_invariants"]
 
-#: Below this modulus m the series forms of D, g and F are used (error < 1e-16 with 24 terms).
-_M_SERIES = 0.1
-_N_TERMS = 24
-
-
-def _series_coefficients(n_terms: int = _N_TERMS):
-    """Power-series coefficients (highest power first, for np.polyval) of D, g and F in m."""
-    n = np.arange(n_terms + 3)
-    a = np.ones(n.size)
-    for i in range(1, n.size):  # a_n = ((2n)! / (4^n n!^2))^2
-        a[i] = a[i - 1] * ((2 * i - 1) / (2 * i)) ** 2
-    k = math.pi / 2 * a  # K(m) = sum k_n m^n
-    e = math.pi / 2 * a / (1 - 2 * n)  # E(m) = sum e_n m^n
-    d = (k - e)[1 : n_terms + 1]  # D = (K - E)/m
-    g = -d + k[:n_terms]  # g = K - D
-    f1 = e[2:] - e[1:-1] / 2 - k[2:] + k[1:-1]  # coefficients of m^2.. of (1-m/2)E-(1-m)K
-    f = f1[:n_terms]
-    return d[::-1].copy(), g[::-1].copy(), f[::-1].copy()
+# -- K(m) and E(m): scipy's C implementations, linked by symbol name (cacheable) ----------------
+for _name in ("ellipkm1", "ellipe"):
+    _llvm.add_symbol(
+        "coils_" + _name, get_cython_function_address("scipy.special.cython_special", _name)
+    )
+#: K(m) from ``1 - m`` (scipy.special.ellipkm1).
+ellipkm1 = types.ExternalFunction("coils_ellipkm1", types.float64(types.float64))
+#: E(m) (scipy.special.ellipe).
+ellipe = types.ExternalFunction("coils_ellipe", types.float64(types.float64))
 
 
-_D_SERIES, _G_SERIES, _F_SERIES = _series_coefficients()
+@intrinsic
+def _float_bits(typingctx, x):
+    """The IEEE-754 bits of a float64 as an int64 (inlined bit cast)."""
+    sig = types.int64(types.float64)
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.IntType(64))
+
+    return sig, codegen
 
 
-def _elliptic_parts(m: np.ndarray, m1: np.ndarray):
-    """K, E and the cancellation-free combinations D, g, F at modulus m (m1 = 1 - m)."""
-    K = ellipkm1(m1)
-    E = ellipe(m)
-    small = m < _M_SERIES
-    big = ~small
-    D = np.empty_like(m)
-    g = np.empty_like(m)
-    F = np.empty_like(m)
-    if np.any(small):
-        ms = m[small]
-        D[small] = np.polyval(_D_SERIES, ms)
-        g[small] = np.polyval(_G_SERIES, ms)
-        F[small] = np.polyval(_F_SERIES, ms)
-    if np.any(big):
-        mb, Kb, Eb, m1b = m[big], K[big], E[big], m1[big]
-        D[big] = (Kb - Eb) / mb
-        g[big] = (Eb - m1b * Kb) / mb
-        F[big] = ((1 - 0.5 * mb) * Eb - m1b * Kb) / (mb * mb)
-    return K, E, D, g, F
+#: Power series below this w = t^2 = (2 a rho / s)^2, closed forms in K, E above.
+W_SERIES = 0.75
+#: Relative truncation error of the series.
+_SERIES_TOL = 2.0**-60
+#: Below this w the series about w = 0 is used; above, expansions about sub-interval centres.
+W_TAYLOR = 2.0**-8
+# F = 2F1(a, b; c; w)
+_A, _B, _C = 0.75, 1.25, 2.0
+_N_DERIV = 48
 
 
-def loop_field_cyl(rho: np.ndarray, z: np.ndarray, a: float, current: float = 1.0):
-    """Field of one loop in cylindrical components, with the gradient invariants.
-
-    Parameters
-    ----------
-    rho, z : ndarray, shape (n,)
-        Cylindrical coordinates of the points in the loop frame, metres (rho >= 0).
-    a : float
-        Loop radius, metres.
-    current : float
-        Current in amperes (counter-clockwise about +z).
-
-    Returns
-    -------
-    Q : ndarray, shape (n,)
-        ``B_rho / rho`` in T/m (finite on the axis).
-    Bz : ndarray, shape (n,)
-        Axial flux density, T.
-    dBz_dz, dBz_drho : ndarray, shape (n,)
-        Derivatives of ``B_z``, T/m.
-    alpha2 : ndarray, shape (n,)
-        Squared distance to the wire, m^2.
-
-    Notes
-    -----
-    Points on the wire (rho = a, z = 0) give inf; callers exclude them.
-    """
-    C = 4e-7 * current  # mu0 I / pi with mu0 = 4e-7 pi (CODATA scaling applied by caller)
-    rho2 = rho * rho
-    r2 = rho2 + z * z
-    s = a * a + r2
-    two_a_rho = 2.0 * a * rho
-    alpha2 = (rho - a) ** 2 + z * z  # = s - 2 a rho, without cancellation near the wire
-    beta2 = s + two_a_rho
-    beta = np.sqrt(beta2)
-    m1 = alpha2 / beta2
-    m = two_a_rho * 2.0 / beta2
-    K, E, D, g, F = _elliptic_parts(m, m1)
-
-    inv_a2b = 1.0 / (alpha2 * beta)
-    a2_minus_r2 = (a - rho) * (a + rho) - z * z  # without cancellation near the wire
-    Pz = a2_minus_r2 * E + alpha2 * K
-    Bz = 0.5 * C * Pz * inv_a2b
-    # B_rho / rho = C z beta F m^2 / (2 alpha^2 rho^2), with m^2 / rho^2 = 16 a^2 / beta^4
-    Q = 8.0 * C * z * a * a * F * inv_a2b / beta2
-
-    # derivatives of m: dm = -(d(alpha^2) beta^2 - alpha^2 d(beta^2)) / beta^4
-    dm_dz = -8.0 * a * rho * z / (beta2 * beta2)
-    dm_drho = -2.0 * ((rho - a) * beta2 - (rho + a) * alpha2) / (beta2 * beta2)
-    # dPz = -d(r^2) E - (a^2 - r^2) D/2 dm + d(alpha^2) K + beta^2 g dm / 2
-    common = -0.5 * a2_minus_r2 * D + 0.5 * beta2 * g
-    dPz_dz = -2.0 * z * E + common * dm_dz + 2.0 * z * K
-    dPz_drho = -2.0 * rho * E + common * dm_drho + 2.0 * (rho - a) * K
-    # Bz = C/2 Pz alpha^-2 beta^-1
-    dBz_dz = 0.5 * C * inv_a2b * (dPz_dz - Pz * (2.0 * z / alpha2 + z / beta2))
-    dBz_drho = 0.5 * C * inv_a2b * (dPz_drho - Pz * (2.0 * (rho - a) / alpha2 + (rho + a) / beta2))
-    return Q, Bz, dBz_dz, dBz_drho, alpha2
+def _taylor(w0: float, n: int = _N_DERIV, m: int = 600) -> np.ndarray:
+    """``F^(j)(w0) / j!`` for j < n: ``(a)_j (b)_j / ((c)_j j!) 2F1(a + j, b + j; c + j; w0)``,
+    each a sum of ``m`` positive terms (enough for w0 < 3/4 and j < 48)."""
+    j = np.arange(n)[:, None]
+    k = np.arange(m - 1)[None, :]
+    ratio = (_A + j + k) * (_B + j + k) / ((_C + j + k) * (k + 1.0)) * w0
+    hyp = 1.0 + np.cumprod(ratio, axis=1).sum(axis=1)
+    jj = np.arange(n - 1)
+    pre = np.concatenate([[1.0], np.cumprod((_A + jj) * (_B + jj) / ((_C + jj) * (jj + 1.0)))])
+    return pre * hyp
 
 
-def loop_B_and_gradient_local(
-    p: np.ndarray,
-    filaments: np.ndarray,
-    with_gradient: bool = True,
-    nearest: np.ndarray | None = None,
-):
-    """B and gradient of coaxial filaments, in their common local frame (axis = local z).
-
-    Parameters
-    ----------
-    p : ndarray, shape (n, 3)
-        Points in the local frame, metres.
-    filaments : ndarray, shape (f, 3)
-        Rows ``(z_offset, radius, current)``: loop plane at local ``z = z_offset`` (m),
-        radius (m) and ampere-turns carried (A).
-    with_gradient : bool
-        If False, only B is computed (the gradient array is None).
-    nearest : ndarray, shape (n,), optional
-        If given, filled with ``min over filaments of (distance to the wire / radius)^2``, so the
-        caller can detect points on a winding without recomputing distances.
-
-    Returns
-    -------
-    B : ndarray, shape (n, 3)
-        T, scaled for mu0 = 4e-7 pi (the caller rescales to CODATA mu0).
-    G : ndarray, shape (n, 3, 3) or None
-        ``G[k, i, j] = dB_i/dx_j`` in T/m, same scaling.
-    """
-    x, y = p[:, 0], p[:, 1]
-    rho = np.hypot(x, y)
-    Q = np.zeros_like(rho)
-    Bz = np.zeros_like(rho)
-    Gzz = np.zeros_like(rho)
-    Gzr = np.zeros_like(rho)
-    if nearest is not None:
-        nearest.fill(np.inf)
-    for z0, a, cur in filaments:
-        q, bz, gzz, gzr, alpha2 = loop_field_cyl(rho, p[:, 2] - z0, a, cur)
-        if nearest is not None:
-            np.minimum(nearest, alpha2 / (a * a), out=nearest)
-        Q += q
-        Bz += bz
-        if with_gradient:
-            Gzz += gzz
-            Gzr += gzr
-    B = np.empty_like(p)
-    B[:, 0] = Q * x
-    B[:, 1] = Q * y
-    B[:, 2] = Bz
-    if not with_gradient:
-        return B, None
-    # unit radial vector (any direction on the axis: the terms it multiplies vanish there)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ex = np.where(rho > 0, x / rho, 1.0)
-        ey = np.where(rho > 0, y / rho, 0.0)
-    # dB_rho/drho = -Q - dBz/dz;  dB_i/dx_j (i,j in x,y) = Brr e_i e_j + Q (delta_ij - e_i e_j)
-    Brr_minus_Q = -2.0 * Q - Gzz
-    G = np.empty((p.shape[0], 3, 3))
-    G[:, 0, 0] = Q + Brr_minus_Q * ex * ex
-    G[:, 1, 1] = Q + Brr_minus_Q * ey * ey
-    G[:, 0, 1] = G[:, 1, 0] = Brr_minus_Q * ex * ey
-    G[:, 0, 2] = G[:, 2, 0] = Gzr * ex
-    G[:, 1, 2] = G[:, 2, 1] = Gzr * ey
-    G[:, 2, 2] = Gzz
-    return B, G
+def _chains(d: np.ndarray) -> np.ndarray:
+    """Coefficients, shape (n - 3, 4), of F and its first three derivatives in powers of
+    ``w - w0``, from the Taylor coefficients ``d_j`` of F about ``w0``."""
+    j = np.arange(len(d) - 3, dtype=float)
+    return np.column_stack(
+        [
+            d[:-3],
+            (j + 1) * d[1:-2],
+            (j + 1) * (j + 2) * d[2:-1],
+            (j + 1) * (j + 2) * (j + 3) * d[3:],
+        ]
+    )
 
 
-#: Below this t = 2 a rho / s (w = t^2 < 0.25) phi and its derivatives come from their series.
-_T_SERIES = 0.5
-_N_PHI = 40
+def _terms_needed(coef: np.ndarray, radius: float) -> int:
+    """Smallest N whose tail ``sum_{j >= N} |c_j| radius^j`` is below ``_SERIES_TOL`` times the
+    smallest value of every chain (its value at w = 0: the chains increase with w)."""
+    floor = _chains(_taylor(0.0))[0]
+    tail = np.cumsum((np.abs(coef) * radius ** np.arange(len(coef))[:, None])[::-1], axis=0)[::-1]
+    return max(1, int(np.argmax(np.all(tail < _SERIES_TOL * floor, axis=1))))
 
 
-def _phi_series_coefficients(n_terms: int = _N_PHI) -> np.ndarray:
-    """Series coefficients of phi(w), phi'(w), phi''(w): column j holds the j-th derivative's
-    coefficients of w^0 .. w^(n_terms - 1), shape (n_terms, 3)."""
-    n = np.arange(n_terms + 1)
-    e = np.ones(n.size)  # 2F1(-1/4, 1/4; 1; w)
-    k = np.ones(n.size)  # 2F1(1/4, 3/4; 1; w)
-    for i in range(1, n.size):
-        e[i] = e[i - 1] * (i - 1.25) * (i - 0.75) / (i * i)
-        k[i] = k[i - 1] * (i - 0.75) * (i - 0.25) / (i * i)
-    phi = (np.cumsum(e) - k)[1:]  # e/(1-w) has the partial sums of e as coefficients
-    j = np.arange(n_terms, dtype=float)
-    out = np.zeros((n_terms, 3))
-    out[:, 0] = phi
-    out[:-1, 1] = phi[1:] * j[1:]
-    out[:-2, 2] = phi[2:] * j[2:] * j[1:-1]
+def _series_intervals():
+    """(low end, half width) of the intervals of w with a table of their own, in table order:
+    sixteen 1/64-wide intervals covering ``[1/2, 3/4)``, the eighths of ``[1/4, 1/2)``, the
+    quarters of ``[2^-(k+1), 2^-k)`` for k = 2 .. 7; the series about 0 follows them."""
+    out = [(0.5 + i / 64.0, 1.0 / 128.0) for i in range(16)]
+    out += [(0.25 * (1.0 + i / 8.0), 0.25 / 16.0) for i in range(8)]
+    for k in range(2, 8):
+        out += [(2.0 ** (-k - 1) * (1.0 + i / 4.0), 2.0 ** (-k - 4)) for i in range(4)]
     return out
 
 
-_PHI_SERIES = _phi_series_coefficients()
+def _series_tables():
+    """Coefficient tables of the series of F, F', F'', F''' (shape (49, n, 4)), their centres
+    w0 (49,) and lengths (49,), in the order of :func:`_series_intervals`; index 48 holds the
+    series about 0 (``w < W_TAYLOR``, length from ``SERIES_TERMS``)."""
+    centres, tables, lengths = [], [], []
+    for low, half in _series_intervals():
+        coef = _chains(_taylor(low + half))
+        centres.append(low + half)
+        tables.append(coef)
+        lengths.append(_terms_needed(coef, half))
+    centres.append(0.0)
+    tables.append(_chains(_taylor(0.0)))
+    lengths.append(0)
+    n = max(max(lengths), _series_terms()[8])
+    return (
+        np.ascontiguousarray(np.stack([t[:n] for t in tables])),
+        np.array(centres),
+        np.array(lengths, dtype=np.int64),
+    )
 
 
-def _phi_and_derivatives(t: np.ndarray, v: np.ndarray, p: np.ndarray, m: np.ndarray):
-    """phi(w), phi'(w), phi''(w) at w = t^2 (v = 1 - t, p = 1 + t, m = 2 t / p, all given).
-
-    Away from the axis (``t >= _T_SERIES``), with ``K = K(m)``, ``E = E(m)`` (differentiated with
-    ``dK/dm``, ``dE/dm`` of the module docstring and ``dm/dw = 1 / (t p^2)``)::
-
-        phi   = 2 (E/v - K) / (pi t^2 p^(1/2))
-        phi'  = ((2 - 5 t^2 / 2) K + 2 (2 t^2 - 1) E/v) / (pi v t^4 p^(3/2))
-        phi'' = ((93 t^4 - 93 t^2 + 32) E/v - (45 t^4 - 69 t^2 + 32) K) / (8 pi v^2 t^6 p^(5/2))
-
-    Near the axis the power series of phi (40 terms; truncation below 1e-19 at the switch).
-    """
-    f0 = np.empty_like(t)
-    f1 = np.empty_like(t)
-    f2 = np.empty_like(t)
-    small = t < _T_SERIES
-    big = ~small
-    if np.any(small):
-        w = t[small] ** 2
-        powers = np.empty((_N_PHI, w.size))  # w^0 .. w^(N-1): all terms positive, no cancellation
-        powers[0] = 1.0
-        for j in range(1, _N_PHI):
-            np.multiply(powers[j - 1], w, out=powers[j])
-        f0[small], f1[small], f2[small] = _PHI_SERIES.T @ powers
-    if np.any(big):
-        tb, vb, pb = t[big], v[big], p[big]
-        K = ellipkm1(vb / pb)  # 1 - m = (1 - t) / (1 + t)
-        E = ellipe(m[big])
-        t2 = tb * tb
-        Ev = E / vb
-        sp = np.sqrt(pb)
-        f0[big] = (2.0 / math.pi) * (Ev - K) / (t2 * sp)
-        f1[big] = ((2.0 - 2.5 * t2) * K + 2.0 * (2.0 * t2 - 1.0) * Ev) / (
-            math.pi * vb * t2 * t2 * pb * sp
-        )
-        f2[big] = (
-            (93.0 * t2 * (t2 - 1.0) + 32.0) * Ev - (45.0 * t2 * t2 - 69.0 * t2 + 32.0) * K
-        ) / (8.0 * math.pi * vb * vb * t2 * t2 * t2 * pb * pb * sp)
-    return f0, f1, f2
+def _series_terms(max_exponent: int = 64) -> np.ndarray:
+    """Terms of the series about 0 needed for ``w < 2^-k``, k = 0 .. max_exponent."""
+    coef = _chains(_taylor(0.0))
+    return np.array([_terms_needed(coef, 2.0**-k) for k in range(max_exponent + 1)], dtype=np.int64)
 
 
-def loop_hessian_cyl(rho: np.ndarray, z: np.ndarray, a: float, current: float = 1.0):
-    """The four derivatives of ``Q = B_rho / rho`` from which the hessian of one loop follows.
+#: SERIES_TERMS[k]: terms of the series about w = 0 used when w < 2^-k (k capped at 64).
+SERIES_TERMS = _series_terms()
+SERIES, SERIES_CENTRES, SERIES_LENGTHS = _series_tables()
+
+_INV_PI = 1.0 / math.pi
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"})
+def loop_point(a, A, C2, u, rho, z, want_B, want_G, want_H):
+    """Invariants of one filament at one point (scalar; compiled, no checks).
 
     Parameters
     ----------
-    rho, z : ndarray, shape (n,)
-        Cylindrical coordinates of the points in the loop frame, metres (rho >= 0).
-    a : float or ndarray
-        Loop radius, metres.
-    current : float or ndarray
-        Current in amperes (counter-clockwise about +z).  ``rho``, ``z``, ``a`` and
-        ``current`` broadcast together (e.g. (n, 1), (n, f), (f,), (f,) for f loops); the
-        outputs then have the broadcast shape instead of (n,).
+    a : float
+        Loop radius (any length unit L).
+    A, C2 : float
+        ``mu0 I a^2`` and ``mu0 I / (2 pi)`` (T L^3 and T L; I in A, counter-clockwise about +z).
+    u, rho, z : float
+        ``rho^2``, ``rho`` and ``z`` of the point in the loop frame (L^2, L, L).
+    want_B, want_G, want_H : bool
+        Which of B, gradient, hessian the caller needs (unneeded invariants are returned as 0).
 
     Returns
     -------
-    b1 : ndarray, shape (n,)
-        ``dQ/dz = (dB_z/drho)/rho``, T/m^2.
-    c1 : ndarray, shape (n,)
-        ``d2Q/dz2``, T/m^3.
-    q1 : ndarray, shape (n,)
-        ``(dQ/drho)/rho``, T/m^3.
-    d1 : ndarray, shape (n,)
-        ``d q1/dz``, T/m^4.
-    alpha2 : ndarray, shape (n,)
-        Squared distance to the wire, m^2.
-
-    Notes
-    -----
-    All four are regular on the axis (functions of ``u = rho^2`` and ``z``); see the module
-    docstring for the closed form.  Scaled for mu0 = 4e-7 pi, like :func:`loop_field_cyl`.
+    Q, Bz, b1, q1, c1, d1 : float
+        The invariants of the module docstring, in T/L, T, T/L^2, T/L^3, T/L^3, T/L^4.
+    alpha2 : float
+        Squared distance to the wire, L^2.
     """
-    A = 4e-7 * math.pi * current * a * a  # C pi a^2 with C = mu0 I / pi
-    u = rho * rho
     z2 = z * z
-    s = a * a + u + z2
-    two_a_rho = 2.0 * a * rho
-    alpha2 = (rho - a) ** 2 + z2
-    t = np.minimum(two_a_rho / s, 1.0)  # <= 1 exactly; rounding must not push m above 1
-    v = alpha2 / s  # 1 - t without cancellation near the wire
-    p = 1.0 + t
-    m = 2.0 * t / p
-    f0, f1, f2 = _phi_and_derivatives(t, v, p, m)
-
-    inv_s = 1.0 / s
     a2 = a * a
-    h = (a - rho) * (a + rho) + z2  # a^2 + z^2 - u, without cancellation near the wire
-    # w = 4 a^2 u / s^2 and its derivatives in u and z
-    w_u = 4.0 * a2 * h * inv_s**3
-    w_z = -16.0 * a2 * u * z * inv_s**3
-    w_uz = 8.0 * a2 * z * (4.0 * u - 2.0 * (a2 + z2)) * inv_s**4
-    w_zz = -16.0 * a2 * u * (s - 6.0 * z2) * inv_s**4
-    # S = s^(-5/2) and its derivatives
-    S = inv_s * inv_s * np.sqrt(inv_s)
+    s = a2 + u + z2
+    inv_s = 1.0 / s
+    alpha2 = (rho - a) * (rho - a) + z2
+    t = min(2.0 * a * rho * inv_s, 1.0)
+    w = t * t
+    h = (a - rho) * (a + rho) + z2  # a^2 + z^2 - u without cancellation near the wire
+    Bz = 0.0
+    if w < W_SERIES:
+        # F, F', F'', F''' from a table chosen by the binary exponent E and the leading
+        # mantissa bits of w (w in [2^(E-1023), 2^(E-1022)); E = 0 for w = 0)
+        bits = _float_bits(w)
+        E = bits >> 52
+        if E == 1022:
+            idx = (bits >> 47) & 31
+            n = SERIES_LENGTHS[idx]
+        elif E == 1021:
+            idx = 16 + ((bits >> 49) & 7)
+            n = SERIES_LENGTHS[idx]
+        elif w >= W_TAYLOR:
+            idx = 24 + 4 * (1020 - E) + ((bits >> 50) & 3)
+            n = SERIES_LENGTHS[idx]
+        else:
+            idx = 48
+            n = SERIES_TERMS[min(1022 - E, 64)]
+        delta = w - SERIES_CENTRES[idx]
+        F0 = 0.0
+        F1 = 0.0
+        F2 = 0.0
+        F3 = 0.0
+        if want_H:
+            for j in range(n - 1, -1, -1):
+                F0 = F0 * delta + SERIES[idx, j, 0]
+                F1 = F1 * delta + SERIES[idx, j, 1]
+                F2 = F2 * delta + SERIES[idx, j, 2]
+                F3 = F3 * delta + SERIES[idx, j, 3]
+        else:
+            for j in range(n - 1, -1, -1):
+                F0 = F0 * delta + SERIES[idx, j, 0]
+                F1 = F1 * delta + SERIES[idx, j, 1]
+                F2 = F2 * delta + SERIES[idx, j, 2]
+        f0 = 0.75 * F0 + w * F1  # phi = (3 F + 4 w F') / 4 and its first two derivatives
+        f1 = 1.75 * F1 + w * F2
+        f2 = 2.75 * F2 + w * F3
+        if want_B:
+            Bz = (
+                0.5
+                * A
+                * inv_s
+                * math.sqrt(inv_s)
+                * ((1.0 - 1.5 * u * inv_s) * F0 + w * h * inv_s * F1)
+            )
+    else:
+        v = alpha2 * inv_s  # 1 - t without cancellation near the wire
+        p = 1.0 + t
+        K = ellipkm1(v / p)
+        E = ellipe(2.0 * t / p)
+        Ev = E / v
+        sp = math.sqrt(p)
+        f0 = 2.0 * _INV_PI * (Ev - K) / (w * sp)
+        f1 = ((2.0 - 2.5 * w) * K + 2.0 * (2.0 * w - 1.0) * Ev) * _INV_PI / (v * w * w * p * sp)
+        f2 = 0.0
+        if want_H:
+            f2 = ((93.0 * w * (w - 1.0) + 32.0) * Ev - (45.0 * w * w - 69.0 * w + 32.0) * K) / (
+                8.0 * math.pi * v * v * w * w * w * p * p * sp
+            )
+        if want_B:
+            Bz = (
+                C2
+                * (((a - rho) * (a + rho) - z2) * E + alpha2 * K)
+                / (alpha2 * math.sqrt(s + 2.0 * a * rho))
+            )
+    # P = S phi(w) with S = s^(-5/2); w_u = dw/du etc.
+    inv_s3 = inv_s * inv_s * inv_s
+    S = inv_s * inv_s * math.sqrt(inv_s)
     S7 = S * inv_s
-    S9 = S7 * inv_s
+    P = S * f0
+    Q = A * z * P
+    if not (want_G or want_H):
+        return Q, Bz, 0.0, 0.0, 0.0, 0.0, alpha2
+    w_u = 4.0 * a2 * h * inv_s3
+    w_z = -16.0 * a2 * u * z * inv_s3
     S_u = -2.5 * S7
     S_z = -5.0 * z * S7
-    S_zz = -5.0 * S7 + 35.0 * z2 * S9
-    S_uz = 17.5 * z * S9
-    # Q = A z P with P = S phi(w)
-    P = S * f0
     P_u = S_u * f0 + S * f1 * w_u
     P_z = S_z * f0 + S * f1 * w_z
-    P_zz = S_zz * f0 + 2.0 * S_z * f1 * w_z + S * (f2 * w_z * w_z + f1 * w_zz)
-    P_uz = S_uz * f0 + S_u * f1 * w_z + S_z * f1 * w_u + S * (f2 * w_u * w_z + f1 * w_uz)
     b1 = A * (P + z * P_z)
-    c1 = A * (2.0 * P_z + z * P_zz)
     q1 = 2.0 * A * z * P_u
-    d1 = 2.0 * A * (P_u + z * P_uz)
-    return b1, c1, q1, d1, alpha2
+    c1 = 0.0
+    d1 = 0.0
+    if want_H:
+        S9 = S7 * inv_s
+        inv_s4 = inv_s3 * inv_s
+        w_uz = 16.0 * a2 * z * (2.0 * u - a2 - z2) * inv_s4
+        w_zz = -16.0 * a2 * u * (s - 6.0 * z2) * inv_s4
+        S_zz = -5.0 * S7 + 35.0 * z2 * S9
+        S_uz = 17.5 * z * S9
+        P_zz = S_zz * f0 + 2.0 * S_z * f1 * w_z + S * (f2 * w_z * w_z + f1 * w_zz)
+        P_uz = S_uz * f0 + S_u * f1 * w_z + S_z * f1 * w_u + S * (f2 * w_u * w_z + f1 * w_uz)
+        c1 = A * (2.0 * P_z + z * P_zz)
+        d1 = 2.0 * A * (P_u + z * P_uz)
+    return Q, Bz, b1, q1, c1, d1, alpha2
 
 
-def loop_hessian_local(
-    p: np.ndarray,
-    filaments: np.ndarray,
-    nearest: np.ndarray | None = None,
-    unique_only: bool = False,
-) -> np.ndarray:
-    """Hessian of B of coaxial filaments, in their common local frame (axis = local z).
+@njit(cache=True, error_model="numpy")
+def _invariants(rho, z, a, current, mu0, out):
+    A = mu0 * current * a * a
+    C2 = mu0 * current / (2.0 * math.pi)
+    for k in range(rho.shape[0]):
+        r = rho[k]
+        res = loop_point(a, A, C2, r * r, r, z[k], True, True, True)
+        for j in range(7):
+            out[k, j] = res[j]
+
+
+def loop_invariants(rho, z, a: float, current: float = 1.0, mu0: float = 4e-7 * math.pi):
+    """The invariants of one loop at many points (for tests and inspection).
 
     Parameters
     ----------
-    p : ndarray, shape (n, 3)
-        Points in the local frame, metres.
-    filaments : ndarray, shape (f, 3)
-        Rows ``(z_offset, radius, current)`` as in :func:`loop_B_and_gradient_local`.
-    nearest : ndarray, shape (n,), optional
-        If given, filled with ``min over filaments of (distance to the wire / radius)^2``.
-    unique_only : bool
-        If True, return only the 10 distinct entries, shape (n, 10), in the order of the rows
-        of ``SYMMETRIC_EXPANSION`` (``H.reshape(n, 27) = unique @ SYMMETRIC_EXPANSION``).
+    rho, z : array-like, shape (n,)
+        Cylindrical coordinates in the loop frame, m (rho >= 0, points off the wire).
+    a : float
+        Loop radius, m.
+    current : float
+        Current, A (counter-clockwise about +z).
+    mu0 : float
+        Vacuum permeability used, T m / A.
 
     Returns
     -------
-    H : ndarray, shape (n, 3, 3, 3)
-        ``H[k, i, j, l] = d2B_i/(dx_j dx_l)`` in T/m^2, scaled for mu0 = 4e-7 pi.
-
-    Notes
-    -----
-    With ``B = (Q x, Q y, B_z)`` and greek indices over (x, y):
-    ``H_abc = q1 (x_a d_bc + x_b d_ac + x_c d_ab) + q2 x_a x_b x_c`` with
-    ``rho^2 q2 = -4 q1 - c1`` (Laplace), ``H_zab = b1 d_ab + d1 x_a x_b``, ``H_zza = c1 x_a``
-    and ``H_zzz = -2 b1 - rho^2 d1`` (div B = 0); the other entries follow by symmetry.
-    The filaments are evaluated together: temporaries hold ``n * f`` values (callers chunk).
+    ndarray, shape (n, 7)
+        Columns ``Q`` (T/m), ``Bz`` (T), ``b1`` (T/m^2), ``q1``, ``c1`` (T/m^3), ``d1`` (T/m^4)
+        and ``alpha2`` (squared distance to the wire, m^2).
     """
-    x, y = p[:, 0], p[:, 1]
-    u = x * x + y * y
-    rho = np.sqrt(u)
-    # all filaments at once: arrays (n, f), summed over the filaments
-    z0, a, cur = filaments[:, 0], filaments[:, 1], filaments[:, 2]
-    b1, c1, q1, d1, alpha2 = loop_hessian_cyl(rho[:, None], p[:, 2:3] - z0, a, cur)
-    if nearest is not None:
-        np.min(alpha2 / (a * a), axis=1, out=nearest)
-    b1, c1, q1, d1 = (v.sum(axis=1) for v in (b1, c1, q1, d1))
-    # q2 x_a x_b x_c = (rho^2 q2) x_a x_b x_c / rho^2, which is O(rho): zero on the axis
-    with np.errstate(invalid="ignore", divide="ignore"):
-        r = np.where(u > 0, (-4.0 * q1 - c1) / u, 0.0)
-    rx, ry = r * x, r * y
-    unique = np.stack(
-        [
-            3.0 * q1 * x + rx * x * x,  # xxx
-            q1 * y + rx * x * y,  # xxy
-            q1 * x + ry * x * y,  # xyy
-            3.0 * q1 * y + ry * y * y,  # yyy
-            b1 + d1 * x * x,  # xxz
-            d1 * x * y,  # xyz
-            b1 + d1 * y * y,  # yyz
-            c1 * x,  # xzz
-            c1 * y,  # yzz
-            -2.0 * b1 - u * d1,  # zzz
-        ],
-        axis=1,
-    )
-    if not unique_only:
-        return (unique @ SYMMETRIC_EXPANSION).reshape(-1, 3, 3, 3)
-    return unique
-
-
-def _symmetric_expansion() -> np.ndarray:
-    """0/1 matrix (10, 27) mapping the 10 distinct entries of a fully symmetric 3x3x3 tensor
-    (sorted index triples xxx, xxy, xyy, yyy, xxz, xyz, yyz, xzz, yzz, zzz) to all 27."""
-    order = [(0, 0, 0), (0, 0, 1), (0, 1, 1), (1, 1, 1), (0, 0, 2)]
-    order += [(0, 1, 2), (1, 1, 2), (0, 2, 2), (1, 2, 2), (2, 2, 2)]
-    out = np.zeros((10, 27))
-    for flat in range(27):
-        idx = tuple(sorted((flat // 9, flat // 3 % 3, flat % 3)))
-        out[order.index(idx), flat] = 1.0
+    rho = np.ascontiguousarray(rho, dtype=float)
+    z = np.ascontiguousarray(np.broadcast_to(z, rho.shape), dtype=float)
+    out = np.empty((rho.shape[0], 7))
+    _invariants(rho, z, float(a), float(current), float(mu0), out)
     return out
-
-
-#: (10, 27) map from the distinct entries of a symmetric 3x3x3 tensor to all of them.
-SYMMETRIC_EXPANSION = _symmetric_expansion()

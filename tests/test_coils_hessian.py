@@ -17,7 +17,6 @@ import pytest
 from scipy.constants import mu_0
 
 import coils
-from coils.loop import _T_SERIES, loop_hessian_cyl
 
 
 def richardson_hessian(field, pts, h):
@@ -149,19 +148,6 @@ def test_near_wire_matches_mpmath(angle, direction, tol):
     H = loop.hessian([point])[0]
     ref = mp_hessian(point)
     assert np.abs(H - ref).max() < tol * np.abs(ref).max()
-
-
-@pytest.mark.stress
-@pytest.mark.parametrize("z", [0.0, 0.3, 1.0, 1.7])
-def test_continuous_across_series_switch(z):
-    # t = 2 a rho / (a^2 + rho^2 + z^2) crosses the series threshold: both branches must agree
-    a = 1.0
-    rho = a / _T_SERIES - np.sqrt((a / _T_SERIES) ** 2 - a * a - z * z)
-    r = rho * (1 + np.array([-1e-15, 1e-15]))
-    t = 2 * a * r / (a * a + r * r + z * z)
-    assert t[0] < _T_SERIES <= t[1]
-    out = np.array(loop_hessian_cyl(r, np.full(2, z), a)[:4])
-    assert np.abs(out[:, 0] - out[:, 1]).max() < 1e-12 * np.abs(out).max()
 
 
 @pytest.mark.parametrize("name", FIELDS)

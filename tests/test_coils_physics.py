@@ -6,7 +6,10 @@ Cross-checks, each against something independent of our kernel:
 - magpylib: B of every source (its own Bulirsch-cel kernel) and the gradient by Richardson
   finite differences of magpylib's B, at random points, for arbitrary axes and centres;
 - Maxwell equations in free space: the gradient is symmetric and traceless;
-- far field: a loop tends to the dipole field of moment I pi a^2;
+- far field: B, gradient and hessian of a loop tend to the dipole's closed forms (moment
+  I pi a^2) out to 10^12 R; div B = 0 and curl B = 0 hold far away (G and H symmetric and
+  traceless) for a Helmholtz and a Maxwell pair (accuracy against mpmath far away is in
+  test_coils_stability.py);
 - superposition: a system equals the sum of its parts, scaling is linear in the current;
 - ideal vs computed: the Helmholtz 1% region (|z| < 0.314 R on axis, rho < 0.378 R in the
   mid-plane), the Maxwell gradient along the axis against the two-loop closed form.
@@ -120,21 +123,80 @@ class TestAgainstMagpylib:
         np.testing.assert_allclose(np.trace(G, axis1=1, axis2=2), 0, atol=1e-14 * scale)
 
 
+def dipole_field(p, moment):
+    """B (n, 3), G (n, 3, 3), H (n, 3, 3, 3) of a point dipole at the origin (closed forms).
+
+    ``B = k (3 r (m.r) / r^5 - m / r^3)`` with ``k = mu0 / 4 pi``, and its derivatives
+    ``G_ij = 3k/r^5 [m_i r_j + m_j r_i + (m.r) d_ij - 5 (m.r) r_i r_j / r^2]``,
+    ``H_ijl = 3k [(d_ij m_l + d_il m_j + d_jl m_i)/r^5 - 5 r_l X_ij / r^7
+    - 5 (m_l r_i r_j + (m.r)(d_il r_j + d_jl r_i)) / r^7 + 35 (m.r) r_i r_j r_l / r^9]``
+    with ``X_ij = (m.r) d_ij + r_i m_j + m_i r_j``.
+    """
+    k = mu_0 / (4 * math.pi)
+    r = np.linalg.norm(p, axis=1)[:, None]
+    mr = (p @ moment)[:, None]
+    eye = np.eye(3)
+    B = k * (3 * p * mr / r**5 - moment / r**3)
+    X = mr[:, :, None] * eye + p[:, :, None] * moment + moment[:, None] * p[:, None, :]
+    r3 = r[:, :, None]
+    G = 3 * k * (X / r3**5 - 5 * mr[:, :, None] * p[:, :, None] * p[:, None, :] / r3**7)
+    r4 = r[:, :, None, None]
+    mr4 = mr[:, :, None, None]
+    H = (
+        3
+        * k
+        * (
+            (np.einsum("ij,l->ijl", eye, moment) + np.einsum("il,j->ijl", eye, moment))[None]
+            / r4**5
+            + np.einsum("jl,i->ijl", eye, moment)[None] / r4**5
+            - 5 * np.einsum("kl,kij->kijl", p, X) / r4**7
+            - 5 * np.einsum("l,ki,kj->kijl", moment, p, p) / r4**7
+            - 5
+            * mr4
+            * (np.einsum("il,kj->kijl", eye, p) + np.einsum("jl,ki->kijl", eye, p))
+            / r4**7
+            + 35 * mr4 * np.einsum("ki,kj,kl->kijl", p, p, p) / r4**9
+        )
+    )
+    return B, G, H
+
+
 class TestFarField:
-    def test_tends_to_dipole(self, rng):
+    @pytest.mark.parametrize("distance", [1e2, 1e3, 1e5, 1e8, 1e12])
+    def test_tends_to_dipole(self, distance, rng):
+        # B, gradient and hessian of a loop tend to those of a dipole of moment I pi a^2; the
+        # quadrupole vanishes, so the relative corrections are O((a/r)^2)
         a, current = 0.01, 2.0
         coil = coils.Coil(a, 1, current, axis="z")
         d = rng.normal(size=(50, 3))
         d /= np.linalg.norm(d, axis=1)[:, None]
-        moment = np.array([0, 0, current * math.pi * a**2])
-        for r, tol in ((100 * a, 3e-4), (1000 * a, 3e-6)):
-            p = r * d
-            rn = np.linalg.norm(p, axis=1)[:, None]
-            dip = mu_0 / (4 * math.pi) * (3 * p * (p @ moment)[:, None] / rn**5 - moment / rn**3)
-            B = coil.B(p)
-            err = np.linalg.norm(B - dip, axis=1) / np.linalg.norm(dip, axis=1)
-            # the quadrupole vanishes; corrections are O((a/r)^2)
+        d = np.vstack([d, [[0, 0, 1], [0, 0, -1], [1, 0, 0], [0, -0.6, 0.8]]])
+        p = distance * a * d
+        ref = dipole_field(p, np.array([0.0, 0.0, current * math.pi * a**2]))
+        tol = 5 / distance**2 + 1e-14
+        for x, r in zip(coil.B_gradient_hessian(p), ref, strict=True):
+            axes = tuple(range(1, x.ndim))
+            err = np.sqrt(np.sum((x - r) ** 2, axis=axes) / np.sum(r**2, axis=axes))
             assert err.max() < tol
+
+    @pytest.mark.parametrize("distance", [10.0, 1e4, 1e8, 1e20])
+    def test_maxwell_equations_far_away(self, distance, rng):
+        # div B = 0 and curl B = 0: G symmetric and traceless, H symmetric in all indices and
+        # traceless in each pair, to rounding of each, also where the pair's dipoles cancel
+        for field in (
+            coils.HelmholtzPair(0.1, 100, 2.0, axis=(0.3, -0.5, 0.8)),
+            coils.MaxwellPair(0.1, 100, 2.0, axis="y", center=(0.1, 0.0, 0.0)),
+        ):
+            d = rng.normal(size=(30, 3))
+            p = field.center + distance * 0.1 * d / np.linalg.norm(d, axis=1)[:, None]
+            _, G, H = field.B_gradient_hessian(p)
+            g = np.linalg.norm(G, axis=(1, 2))[:, None, None]
+            assert np.all(np.abs(G - G.transpose(0, 2, 1)) <= 1e-14 * g)
+            assert np.all(np.abs(np.trace(G, axis1=1, axis2=2)) <= 1e-14 * g[:, 0, 0])
+            h = np.sqrt(np.sum(H**2, axis=(1, 2, 3)))[:, None, None, None]
+            for perm in [(0, 2, 1, 3), (0, 3, 2, 1), (0, 1, 3, 2)]:
+                assert np.all(np.abs(H - H.transpose(perm)) <= 1e-14 * h)
+            assert np.all(np.abs(np.einsum("kijj->ki", H)) <= 1e-14 * h[:, :, 0, 0])
 
 
 class TestSuperposition:

@@ -1,0 +1,170 @@
+"""The fused ``B_gradient_hessian`` and the compiled kernel behind every coil.
+
+Cross-checks:
+- against independent references: a system of differently oriented pairs, a scaled pair and a
+  uniform field, with B from magpylib, the gradient from Richardson differences of magpylib's
+  B and the hessian from the mpmath Biot-Savart integral (tests/_mp_loop_ref.py);
+- the protocol: the fused method returns what B, gradient and hessian return (every source,
+  sums and scalings), with the same errors naming the same point;
+- numba is imported when a coil is first evaluated, never by ``import coils`` or by ideal
+  fields (checked in a fresh interpreter).
+"""
+
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from _magpylib_ref import magpylib_B, magpylib_gradient
+from _mp_loop_ref import loops
+
+import coils
+
+
+def reference_hessian(field, point):
+    """H (3, 3, 3) of every coaxial group in ``field`` at ``point`` from the mpmath integral
+    (group frame -> global: ``H_IJL = R_Ii R_Jj R_Ll h_ijl``)."""
+    from coils.coaxial import coaxial_parts
+
+    H = np.zeros((3, 3, 3))
+    for part in coaxial_parts(field):
+        R = part.rotation
+        _, _, h = loops((point - part.center) @ R, part.filaments)
+        scale = field.factor if isinstance(field, coils.ScaledField) else 1.0
+        H += scale * np.einsum("Ii,Jj,Ll,ijl->IJL", R, R, R, h)
+    return H
+
+
+def test_system_against_independent_references(rng):
+    helmholtz = coils.HelmholtzPair(0.1, 100, 2.0, axis="y")
+    maxwell = coils.MaxwellPair(0.12, 80, -1.5, axis=(0.3, -0.5, 0.8), center=(0.01, 0, 0.02))
+    uniform = coils.UniformField((1e-3, 0.0, -2e-3))
+    system = coils.CoilSystem([helmholtz, maxwell, uniform])
+    pts = rng.uniform(-0.04, 0.04, (60, 3))
+    B, G, H = system.B_gradient_hessian(pts)
+    coils_only = coils.CoilSystem([helmholtz, maxwell])
+    Bm = magpylib_B(coils_only, pts) + uniform.B0
+    np.testing.assert_allclose(B, Bm, rtol=0, atol=1e-13 * np.abs(Bm).max())
+    Gm = magpylib_gradient(coils_only, pts, step=1e-4 * system.length_scale)
+    np.testing.assert_allclose(G, Gm, rtol=0, atol=1e-10 * np.abs(Gm).max())
+    for k in (0, 17, 59):
+        Hr = reference_hessian(coils_only, pts[k])
+        assert np.abs(H[k] - Hr).max() < 1e-13 * np.abs(Hr).max()
+
+
+def test_scaled_pair_against_reference():
+    pair = coils.MaxwellPair(0.1, 50, 2.0, axis="z")
+    scaled = -2.5 * pair
+    point = np.array([0.013, -0.02, 0.031])
+    B, G, H = scaled.B_gradient_hessian(point)
+    Br, Gr, Hr = loops(point, pair.filaments)
+    np.testing.assert_allclose(B[0], -2.5 * Br, rtol=1e-14, atol=1e-14 * np.abs(Br).max())
+    np.testing.assert_allclose(G[0], -2.5 * Gr, rtol=0, atol=1e-14 * np.abs(Gr).max())
+    np.testing.assert_allclose(H[0], -2.5 * Hr, rtol=0, atol=1e-14 * np.abs(Hr).max())
+
+
+FIELDS = {
+    "coil": lambda: coils.Coil(0.05, 30, -1.5, axis=(0.3, -0.5, 0.8), center=(0.01, 0.02, -0.03)),
+    "helmholtz winding": lambda: coils.HelmholtzPair(
+        0.08, 200, 1.0, axis="x", winding=(0.02, 0.015), filaments=(3, 2)
+    ),
+    "system": lambda: coils.CoilSystem(
+        [coils.HelmholtzPair(0.1, 100, 2.0, axis="y"), coils.MaxwellPair(0.1, 100, 1.0, axis="z")]
+    ),
+    "sum with linear": lambda: (
+        coils.MaxwellPair(0.1, 100, 1.0)
+        + coils.LinearField(B0=(0, 1e-3, 0), gradient=np.diag([1.0, -0.5, -0.5]))
+        + 0.5 * coils.HelmholtzPair(0.2, 10, 1.0, axis="x")
+    ),
+    "scaled sum": lambda: 3.0 * (coils.Coil(0.1, 5, 1.0) + coils.UniformField((0, 0, 1e-3))),
+    "uniform": lambda: coils.UniformField((0, 5e-3, 0)),
+    "linear": lambda: coils.LinearField(B0=(1e-3, 0, 0), gradient=np.diag([-0.5, 1.0, -0.5])),
+}
+
+
+@pytest.mark.parametrize("name", FIELDS)
+def test_fused_equals_separate_methods(name, rng):
+    # a protocol guarantee: one pass returns exactly what the three methods return
+    field = FIELDS[name]()
+    pts = rng.uniform(-0.04, 0.04, (50, 3))
+    B, G, H = field.B_gradient_hessian(pts)
+    assert B.shape == (50, 3)
+    assert G.shape == (50, 3, 3)
+    assert H.shape == (50, 3, 3, 3)
+    np.testing.assert_array_equal(B, field.B(pts))
+    np.testing.assert_array_equal(G, field.gradient(pts))
+    np.testing.assert_array_equal(H, field.hessian(pts))
+    B2, G2 = field.B_and_gradient(pts)
+    np.testing.assert_array_equal(B2, B)
+    np.testing.assert_array_equal(G2, G)
+
+
+def test_single_point_and_lists():
+    pair = coils.HelmholtzPair(0.1, 100, 2.0, axis="y")
+    B, G, H = pair.B_gradient_hessian([0.01, 0.0, 0.02])
+    assert B.shape == (1, 3)
+    assert G.shape == (1, 3, 3)
+    assert H.shape == (1, 3, 3, 3)
+
+
+@pytest.mark.parametrize(
+    ("field", "point", "match"),
+    [
+        (coils.Coil(0.1, 1, 1.0, axis="z"), [0.0, 0.1, 0.0], "point 2 lies on a coil winding"),
+        (
+            coils.Coil(0.1, 50, 1.0, axis="y", winding=(0.01, 0.01)),
+            [0.1, 0.002, 0.0],
+            r"point 2 lies inside a coil winding \(0.01 m x 0.01 m section",
+        ),
+        (
+            coils.CoilSystem([coils.UniformField((0, 1, 0)), coils.MaxwellPair(0.1, 10, 1.0)]),
+            [0.1, 0.1 * np.sqrt(3) / 2, 0.0],
+            "point 2 lies on a coil winding",
+        ),
+    ],
+)
+def test_errors_name_the_point(field, point, match):
+    pts = np.array([[0.0, 0.0, 0.01], [0.02, 0.0, 0.0], point, [0.0, 0.1, 0.0]])
+    for method in (field.B_gradient_hessian, field.B, field.gradient, field.hessian):
+        with pytest.raises(ValueError, match=match):
+            method(pts)
+
+
+def test_bad_points():
+    pair = coils.HelmholtzPair(0.1, 100, 2.0)
+    with pytest.raises(ValueError, match="points must be finite; row 1"):
+        pair.B_gradient_hessian([[0, 0, 0], [0, np.nan, 0]])
+    with pytest.raises(ValueError, match=r"points must have shape \(n, 3\)"):
+        pair.B_gradient_hessian(np.zeros((3, 2)))
+
+
+def test_coil_arrays_are_read_only():
+    # the compiled kernel's data are derived once from them
+    coil = coils.Coil(0.1, 10, 1.0)
+    with pytest.raises(ValueError, match="read-only"):
+        coil.filaments[0, 2] = 5.0
+    center = np.array([0.0, 0.0, 1.0])
+    coils.Coil(0.1, 10, 1.0, center=center)
+    center[0] = 1.0  # the caller's array stays writable
+
+
+def test_numba_is_imported_only_when_a_coil_is_evaluated():
+    code = textwrap.dedent(
+        """
+        import sys
+        import coils
+        u = coils.UniformField((0, 1e-3, 0))
+        lin = coils.LinearField(B0=(0, 0, 0), gradient=coils.maxwell_gradient(1.0))
+        s = u + lin
+        s.B([[0.0, 0.1, 0.0]]); s.B_gradient_hessian([[0.0, 0.1, 0.0]]); lin.hessian([0, 0, 0])
+        pair = coils.HelmholtzPair(0.1, 100, 2.0) + u
+        print("numba" in sys.modules)
+        pair.B([[0.0, 0.0, 0.0]])
+        print("numba" in sys.modules)
+        """
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=600
+    )
+    assert out.stdout.split() == ["False", "True"]
