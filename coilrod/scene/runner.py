@@ -11,11 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
-import coils
-
 from ..errors import ConvergenceError
+from .figures import plot_scene_shapes, plot_tip_vs_field
 from .parse import Scene
 from .planner import Plan, plan_scene
+from .strength import field_strength
 
 __all__ = ["ModelRun", "SceneResult", "run_scene", "field_strength"]
 
@@ -55,25 +55,6 @@ class ModelRun:
         """Stability flag per reached scale, shape (k,) (True where the model does not say)."""
         flags = getattr(self.result, "stable", None)
         return np.ones(len(self.scales), bool) if flags is None else np.asarray(flags, bool)
-
-
-def field_strength(scene: Scene) -> tuple[float, str, float]:
-    """Reference strength of the scene's field at scale 1 and the magneto-elastic number.
-
-    Returns ``(value, label, number)``: |B| at the field's centre in T (label "B") and
-    lambda = |M| |B| A L^2 / (E I); or, for a pure-gradient field, the axial gradient in T/m
-    (label "gradient") and gamma = |M| g A L^3 / (E I).
-    """
-    rod = scene.rod
-    ideal = scene.fields.get("ideal")
-    if ideal is None:
-        ideal = coils.linearize(scene.fields["coils"], scene.fields["coils"].center)
-    b = float(np.linalg.norm(ideal.B0))
-    M = rod.magnetization.max_magnitude(rod.length)
-    if b > 0:
-        return b, "B", rod.magnetoelastic_number(b)
-    g = float(np.abs(np.linalg.eigvalsh(0.5 * (ideal.G + ideal.G.T))).max())
-    return g, "gradient", M * g * rod.area * rod.length**3 / rod.bending_stiffness
 
 
 @dataclass
@@ -225,8 +206,6 @@ class SceneResult:
             written.append(path)
         if self.scene.outputs.get("figures", True):
             import matplotlib.pyplot as plt
-
-            from .figures import plot_scene_shapes, plot_tip_vs_field
 
             for name, fn in (
                 ("tip_vs_field.png", plot_tip_vs_field),
