@@ -13,6 +13,7 @@ import numpy as np
 
 from ..errors import ConvergenceError
 from .figures import plot_scene_shapes, plot_tip_vs_field
+from .outputs import prepare_output_dir
 from .parse import Scene
 from .planner import Plan, plan_scene
 from .strength import field_strength
@@ -166,9 +167,24 @@ class SceneResult:
         return "\n".join(lines)
 
     def write(self, out_dir: str | Path) -> list[Path]:
-        """Write tables (CSV, JSON) and figures (PNG) as the scene's outputs request."""
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
+        """Write tables (CSV, JSON) and figures (PNG) as the scene's outputs request.
+
+        Parameters
+        ----------
+        out_dir : str or Path
+            The folder (created if missing).
+
+        Returns
+        -------
+        list of Path
+            The files written.
+
+        Raises
+        ------
+        SceneError
+            If ``out_dir`` is a file or cannot be created or written (one line).
+        """
+        out = prepare_output_dir(out_dir, key="output folder")
         written = []
         if self.scene.outputs.get("tables", True):
             rows = self.table()
