@@ -316,6 +316,15 @@ def run_scene(
                 time.perf_counter() - t0,
                 error=str(exc),
             )
+            partial = getattr(exc, "result", None)
+            if partial is not None and len(getattr(partial, "scales", ())):
+                # the solver handed over the states it reached
+                run.scales = np.asarray(partial.scales)
+                run.tip = np.asarray(partial.tip)
+                run.tip_angle = np.asarray(partial.tip_angle)
+                run.result = partial
+                result.runs.append(run)
+                continue
             # keep the part of the path that was reached (cheap for the rod: solve it again)
             reachable = scene.scales[scene.scales <= exc.reached]
             if job.model == "rod" and reachable.size and np.all(np.diff(scene.scales) > 0):
