@@ -272,3 +272,11 @@ def test_console_script_bad_bytes_and_directory(tmp_path):
         assert "Traceback" not in proc.stderr
         assert len(proc.stderr.strip().splitlines()) == 1
         assert proc.stderr.startswith(f"coilrod: error: {target}: ")
+
+
+def test_integer_too_long_for_python(tmp_path, capsys):
+    # tomllib raises a plain ValueError for integers beyond Python's 4300-digit limit
+    path = write(tmp_path, GOOD.replace("steps = 2", "steps = 1" + "0" * 5000))
+    assert main(["check", str(path)]) == 2
+    (line,) = errors(capsys)
+    assert line.startswith(f"{path}: not valid TOML (Exceeds the limit (4300 digits)")

@@ -1,6 +1,7 @@
 """Scene files: validation names the key and the reason; the CLI exits 2 without a traceback."""
 
 import copy
+import datetime
 import subprocess
 import sys
 
@@ -236,6 +237,8 @@ def _key_paths(node, prefix=()):
 _PATHS = list(_key_paths(FULL))
 _JUNK = [
     None,
+    10**400,
+    datetime.date(2024, 1, 1),
     0,
     -1,
     1.5,

@@ -164,7 +164,7 @@ def test_target_field_or_gradient_must_exist_at_the_centre():
     ]
     coil = {k: v for k, v in HELMHOLTZ.items() if k != "B"}
     lines = problems_of(coil_scene({**coil, "gradient": "0.1 T/m"}))
-    assert lines[0].startswith("field.coil[0].gradient: a helmholtz has no gradient")
+    assert lines[0].startswith("field.coil[0].gradient: a Helmholtz pair has no gradient")
 
 
 # -- segments span the robot, exactly -----------------------------------------------------------
@@ -421,9 +421,21 @@ def test_zero_magnetization_is_nothing_to_solve():
 
 def test_field_out_of_the_bending_plane_is_an_error_for_planar_models():
     lines = problems_of(scene_with(field__direction="z"))
-    assert lines[0].startswith("field.direction: the ideal field has no component in the bending")
+    assert lines[0].startswith("field.direction: the field has no component in the bending")
     scene = parse_scene(scene_with(field__direction="z", models={"run": ["fem3d"]}))
     assert scene.models == ("fem3d",)
+    # a coil with its axis along z: in its own plane its field is along z only
+    coil = {"type": "coil", "radius": "60 mm", "turns": 100, "current": "5 A", "axis": "z"}
+    coil["center"] = ["20 mm", "0 mm", "0 mm"]
+    lines = problems_of(coil_scene(coil))
+    assert lines[0].startswith("field.coil[0].current: the field has no component in the bending")
+    # 10 mm out of its plane the real field has a radial part that bends the rod (its ideal
+    # field, taken at the centre, is still along z): the comparison is meaningful, so accepted
+    coil["center"] = ["20 mm", "0 mm", "10 mm"]
+    scene = parse_scene(coil_scene(coil))
+    B = scene.fields["coils"].B([[0.035, 0.0, 0.0]])[0]
+    assert abs(B[0]) > 1e-3 * abs(B[2])
+    np.testing.assert_allclose(scene.fields["ideal"].B0[:2], 0, atol=1e-15)
 
 
 def test_fem_must_resolve_the_magnetization_segments():
@@ -458,3 +470,34 @@ def test_gradient_scene_lambda_limit_uses_gamma():
     ok = parse_scene(scene_with(field={"type": "gradient", "gradient": "1 T/m"}))
     assert ok.field_kind == "gradient"
     assert math.isfinite(ok.scales[-1])
+
+
+def test_coils_centre_on_a_winding_is_an_error_not_a_crash():
+    # two coils whose mean centre (where the ideal field and the reference strength are taken)
+    # lies on both of their filaments
+    a = {"type": "coil", "radius": "20 mm", "turns": 10, "current": "1 A", "axis": "z"}
+    left = {**a, "center": ["-20 mm", "0 mm", "5 mm"]}
+    right = {**a, "center": ["20 mm", "0 mm", "5 mm"]}
+    for compare in (True, False):
+        data = coil_scene(left, right)
+        data["field"]["compare_ideal"] = compare
+        lines = problems_of(data)
+        assert len(lines) == 1
+        assert lines[0].startswith("field.coil: the coils' centre (0 mm, 0 mm, 5 mm), where their")
+
+
+def test_huge_values_give_short_lines():
+    lines = problems_of(scene_with(load__steps=10**400))
+    assert lines == [
+        "load.steps: must be from 1 to 1000 (load steps; more would take hours); got an integer "
+        "of about 401 digits"
+    ]
+    lines = problems_of(scene_with(robot__length="1" * 100_000 + " mm"))
+    assert len(lines) == 1
+    assert lines[0].startswith("robot.length: ")
+    assert len(lines[0]) <= 400
+    lines = problems_of(scene_with(robot__length=10**400))
+    assert lines == [
+        "robot.length: missing unit in an integer of about 401 digits; write it as a string with "
+        "a unit, e.g. '40 mm'"
+    ]

@@ -91,28 +91,30 @@ def _zero_field(scene, coil_keys, strength_key) -> list[str]:
 
 
 def _in_plane(scene, strength_key) -> list[str]:
+    """The planar models (rod, fem2d) see only B_x, B_y and their x-y derivatives: a scene in
+    which no field has any of them along the robot gives them nothing to solve."""
     planar = [m for m in scene.models if m in ("rod", "fem2d")]
     if not planar:
         return []
     pts = centerline_points(scene.rod.length, FIELD_SAMPLES)
-    key = {"uniform": "field.direction", "gradient": "field.axis"}.get(
-        scene.field_kind, strength_key
-    )
-    for label, fld in scene.fields.items():
+    L = scene.rod.length
+    for fld in scene.fields.values():
         try:
             B, G = fld.B_and_gradient(pts)
         except ValueError:  # on a winding: reported by the clearance check
-            continue
-        L = scene.rod.length
+            return []
         total = np.abs(B).max() + L * np.abs(G).max()
         plane = np.abs(B[:, :2]).max() + L * np.abs(G[:, :2, :2]).max()
-        if total > 0 and plane <= 1e-12 * total:
-            return [
-                f"{key}: the {label} field has no component in the bending plane (x-y) along "
-                f"the robot, so the planar models ({', '.join(planar)}) would see no load; "
-                "turn the field into the x-y plane or run fem3d only"
-            ]
-    return []
+        if plane > 1e-12 * total:
+            return []  # this field bends the rod in its plane
+    key = {"uniform": "field.direction", "gradient": "field.axis"}.get(
+        scene.field_kind, strength_key
+    )
+    return [
+        f"{key}: the field has no component in the bending plane (x-y) along the robot, so the "
+        f"planar models ({', '.join(planar)}) would see no load; turn the field into the x-y "
+        "plane or run fem3d only"
+    ]
 
 
 def _magnetoelastic(scene, strength_key) -> list[str]:

@@ -49,7 +49,7 @@ from ..robot.magnetization import Magnetization
 from ..robot.rod import Rod
 from ..robot.sections import Circle, Rectangle
 from . import limits
-from .units import EXAMPLES, UnitError, parse_quantity
+from .units import EXAMPLES, UnitError, parse_quantity, short_int
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "MODELS", "PRESETS"]
 
@@ -68,6 +68,11 @@ PRESET_PARAMETERS = {
 }
 _PRESET_KEYS = ("M0", "phi", "slope", "segment", "segment_angle")
 _COIL_TYPES = {"helmholtz": coils.HelmholtzPair, "maxwell": coils.MaxwellPair, "coil": coils.Coil}
+_COIL_NAMES = {"helmholtz": "Helmholtz pair", "maxwell": "Maxwell pair", "coil": "single coil"}
+
+
+#: Longest problem line (a value pasted by mistake is cut, not printed in full).
+_MAX_LINE = 400
 
 
 class SceneError(ValueError):
@@ -76,7 +81,8 @@ class SceneError(ValueError):
     Parameters
     ----------
     problems : str or list of str
-        One problem (``"key: reason"``) or several; each is kept on one line.
+        One problem (``"key: reason"``) or several; each is kept on one line (whitespace runs
+        become single spaces, lines beyond 400 characters are cut).
 
     Attributes
     ----------
@@ -97,6 +103,7 @@ class SceneError(ValueError):
         if isinstance(problems, str):
             problems = [problems]
         lines = [" ".join(str(p).split()) for p in problems]
+        lines = [ln if len(ln) <= _MAX_LINE else ln[: _MAX_LINE - 6] + " [...]" for ln in lines]
         self.problems = list(dict.fromkeys(line for line in lines if line))
         super().__init__("\n".join(self.problems))
 
@@ -196,11 +203,14 @@ def _unknown_keys(data: dict, key: str, allowed) -> None:
 
 
 def _show(value) -> str:
-    """A value as the user wrote it, for messages (TOML spelling of booleans)."""
+    """A value as the user wrote it, for messages (TOML spelling of booleans, long integers
+    shortened)."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, dict):
         return "a table"
+    if isinstance(value, int) and abs(value) >= 10**15:
+        return short_int(value)
     return repr(value)
 
 
@@ -267,17 +277,19 @@ def _plain(value, full, *, positive=False, integer=False, low=None, high=None, w
     if isinstance(value, bool) or not isinstance(value, int | float):
         kind = "an integer" if integer else "a number"
         raise SceneError(f"{full}: expected {kind}; got {_show(value)}")
-    if not math.isfinite(value):
+    if isinstance(value, float) and not math.isfinite(value):
         raise SceneError(f"{full}: must be finite; got {value!r}")
     if integer and int(value) != value:
         raise SceneError(f"{full}: expected an integer; got {value!r}")
     if positive and value <= 0:
-        raise SceneError(f"{full}: must be positive; got {value!r}")
+        raise SceneError(f"{full}: must be positive; got {_show(value)}")
     if (low is not None and value < low) or (high is not None and value > high):
         lo = "" if low is None else f"{low:g}"
         hi = "" if high is None else f"{high:g}"
         span = f"from {lo} to {hi}" if lo and hi else (f"at least {lo}" if lo else f"at most {hi}")
-        raise SceneError(f"{full}: must be {span}{f' ({what})' if what else ''}; got {value!r}")
+        raise SceneError(
+            f"{full}: must be {span}{f' ({what})' if what else ''}; got {_show(value)}"
+        )
     return int(value) if integer else float(value)
 
 
@@ -317,6 +329,8 @@ def _axis(value, key: str) -> np.ndarray:
         and len(value) == 3
         and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
     ):
+        if any(isinstance(v, int) and abs(v) > 10**15 for v in value):
+            raise SceneError(f"{key}: the components must be numbers of moderate size")
         vec = np.array(value, dtype=float)
         if not np.all(np.isfinite(vec)):
             raise SceneError(f"{key}: the components must be finite; got {value!r}")
@@ -374,7 +388,7 @@ def _parse_magnetization(data, length, key: str, p: _Problems):
     """The Magnetization of ``robot.magnetization`` (``length`` may be _BAD: then the checks
     that need it are skipped)."""
     data = _table(data, key)
-    _unknown_keys(data, key, {"preset", "magnitude", "angle", "segments", *_PRESET_KEYS})
+    p.take(_unknown_keys, data, key, {"preset", "magnitude", "angle", "segments", *_PRESET_KEYS})
     if "preset" in data:
         return _parse_preset(data, length, key, p)
     if "segments" in data:
@@ -736,8 +750,8 @@ def _parse_coil(data, key: str, p: _Problems):
         strength = p.take(_quantity, data, "gradient", "gradient", key, kind="gradient")
         if _ok(kind) and kind != "maxwell":
             p.add(
-                f"{key}.gradient: a {kind} has no gradient at its centre (by symmetry); give "
-                "its field B, or use a maxwell pair"
+                f"{key}.gradient: a {_COIL_NAMES[kind]} has no gradient at its centre (by "
+                "symmetry); give its field B, or use a maxwell pair"
             )
             strength = _BAD
     if not _ok(kind, radius, turns, strength, *kwargs.values()):
@@ -828,9 +842,17 @@ def _parse_field(data, p: _Problems):
         if not _ok(compare, *built):
             return _BAD
         real = built[0].coil if len(built) == 1 else coils.CoilSystem([b.coil for b in built])
+        try:  # the reference strength (and the ideal field) is taken at the coils' centre
+            ideal = real.ideal()
+        except ValueError as exc:
+            p.add(
+                f"{key}.coil: the coils' centre ({', '.join(_mm(c) for c in real.center)}), "
+                f"where their ideal field is taken, lies on a winding ({exc}); move the coils"
+            )
+            return _BAD
         fields = {"coils": real}
         if compare:
-            fields["ideal"] = real.ideal()
+            fields["ideal"] = ideal
         strength_key = built[0].strength_key if len(built) == 1 else f"{key}.coil"
         return _FieldInfo(fields, "coils", built, strength_key)
     if kind is _MISSING:
@@ -1104,6 +1126,6 @@ def load_scene(path: str | Path) -> Scene:
         ) from None
     try:
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
+    except ValueError as exc:  # TOMLDecodeError, or an integer too long for Python
         raise SceneError(f"{path}: not valid TOML ({exc})") from None
     return parse_scene(data, source=str(path))
