@@ -1,6 +1,7 @@
 """Scene files: validation names the key and the reason; the CLI exits 2 without a traceback."""
 
 import copy
+import datetime
 import subprocess
 import sys
 
@@ -236,6 +237,8 @@ def _key_paths(node, prefix=()):
 _PATHS = list(_key_paths(FULL))
 _JUNK = [
     None,
+    10**400,
+    datetime.date(2024, 1, 1),
     0,
     -1,
     1.5,
@@ -266,23 +269,184 @@ def test_full_scene_is_valid():
     assert scene.fields["coils"].winding == (5e-3, 5e-3)
 
 
-@pytest.mark.stress
-@settings(max_examples=400, deadline=None)
-@given(path=st.sampled_from(_PATHS), value=st.sampled_from(_JUNK))
-def test_any_corrupted_value_gives_a_scene_error(path, value):
-    """Whatever a user writes in any key, the answer is a valid scene or a SceneError naming
-    the problem -- never another exception (which the CLI would show as a traceback)."""
+def _key(path) -> str:
+    """('field', 'coil', 0, 'radius') -> 'field.coil[0].radius' (the scene's own spelling)."""
+    out = ""
+    for k in path:
+        out += f"[{k}]" if isinstance(k, int) else (f".{k}" if out else k)
+    return out
+
+
+def _same(a, b) -> bool:
+    """Equality that tells True from 1 and 0.0 from False."""
+    return type(a) is type(b) and a == b
+
+
+# The oracle, written from the scene format's rules and independent of the parser: for each key
+# of FULL, the junk values that are in fact valid there (everything else must be rejected).
+# Contextual cases are spelled out: "5 mm" is a valid coil radius (winding height 5 mm < 2 R),
+# but not a valid spacing (it must exceed the 5 mm winding width); "5 T" keeps lambda = 4096
+# below the 1e4 limit; turns must be whole; "-x" turns the pair's axis along the robot, which
+# stays clear of the windings.
+_STRINGS = [v for v in _JUNK if isinstance(v, str)]
+VALID_JUNK = {
+    "name": _STRINGS,
+    "robot.length": ["5 mm"],
+    "robot.diameter": ["5 mm"],
+    "robot.poisson_ratio": [0],
+    "robot.magnetization.segment": [0, -1],
+    "robot.magnetization.segment_angle": [0],
+    "field.compare_ideal": [True],
+    "field.coil[0].radius": ["5 mm"],
+    "field.coil[0].B": ["5 T"],
+    "field.coil[0].axis": ["-x"],
+    "field.coil[0].center[0]": ["5 mm", "-5 mm"],
+    "field.coil[0].center[1]": ["5 mm", "-5 mm"],
+    "field.coil[0].center[2]": ["5 mm", "-5 mm"],
+    "field.coil[0].winding[0]": ["5 mm"],
+    "field.coil[0].winding[1]": ["5 mm"],
+    "load": [{}],
+    "load.max_scale": [1.5],
+    "rod": [{}],
+    "fem": [{}],
+    "output": [{}],
+    "output.figures": [True],
+    "output.tables": [True],
+}
+# Keys that may be left out, and whether leaving them out changes the scene (False: the default
+# is FULL's value).
+OPTIONAL = {
+    "name": True,
+    "robot.poisson_ratio": True,
+    "robot.magnetization.M0": False,
+    "robot.magnetization.segment": True,
+    "robot.magnetization.segment_angle": True,
+    "field.compare_ideal": False,
+    "field.coil[0].axis": False,
+    "field.coil[0].center": False,
+    "field.coil[0].filaments": True,
+    "field.coil[0].spacing": False,
+    "load": True,
+    "load.steps": True,
+    "load.max_scale": False,
+    "models": False,
+    "rod": True,
+    "rod.nodes": True,
+    "fem": True,
+    "fem.order": True,
+    "fem.elements2d": True,
+    "fem.elements3d": True,
+    "output": True,
+    "output.figures": False,
+    "output.tables": True,
+}
+_PROBES = np.array([[0.01, 0.004, 0.001], [0.03, -0.01, 0.002]])
+
+
+def _fingerprint(scene) -> tuple:
+    """Everything a run depends on, as plain numbers and strings."""
+    s = np.linspace(0.0, scene.rod.length, 41)
+    mag = scene.rod.magnetization
+    parts = [
+        scene.name,
+        scene.rod.length,
+        scene.rod.youngs_modulus,
+        repr(scene.rod.section),
+        tuple(mag.magnitude(s)),
+        tuple(mag.angle(s)),
+        scene.poisson_ratio,
+        tuple(scene.scales),
+        scene.models,
+        tuple(sorted(scene.rod_options.items())),
+        tuple(sorted(scene.fem_options.items())),
+        tuple(sorted(scene.outputs.items())),
+    ]
+    for label, fld in sorted(scene.fields.items()):
+        parts += [label, repr(fld), tuple(fld.B(_PROBES).ravel())]
+        parts.append(tuple(np.ravel(getattr(fld, "filaments", ()))))
+    return tuple(parts)
+
+
+_FULL_FINGERPRINT = _fingerprint(parse_scene(FULL))
+
+
+def _names(line: str, key: str) -> bool:
+    return any(line.startswith(key + end) for end in (":", ".", "["))
+
+
+def check_corruption(path, value):
+    """Corrupt one key of FULL: a valid value must be accepted (and, unless it is FULL's own
+    value, change the scene); any other must give a SceneError whose every line names the
+    corrupted key (or, for a removed key, its table)."""
     data = copy.deepcopy(FULL)
     node = data
     for k in path[:-1]:
         node = node[k]
-    if value is None and isinstance(node, dict):
-        del node[path[-1]]
+    key = _key(path)
+    removed = value is None and isinstance(node, dict)
+    if removed:
+        original = node.pop(path[-1])
+        valid, changes = key in OPTIONAL, OPTIONAL.get(key, True)
     else:
+        original = node[path[-1]]
         node[path[-1]] = value
+        valid = any(_same(value, v) for v in VALID_JUNK.get(key, []))
+        changes = not _same(value, original)
     try:
-        parse_scene(data)
-        message = "ok"
+        scene, problems = parse_scene(data), None
     except SceneError as exc:
-        message = str(exc)
-    assert message
+        scene, problems = None, exc.problems
+    if problems is not None:
+        assert not valid, f"{key} = {value!r} is valid but was rejected: {problems}"
+        assert problems, "a SceneError without problems"
+        allowed = [key] + ([_key(path[:-1])] if removed and len(path) > 1 else [])
+        for line in problems:
+            assert any(_names(line, k) for k in allowed), f"{key} = {value!r}: {line!r}"
+        return
+    assert valid, f"{key} = {value!r} was silently accepted"
+    if changes:
+        assert _fingerprint(scene) != _FULL_FINGERPRINT, f"{key} = {value!r} changed nothing"
+
+
+@pytest.mark.stress
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(path=st.sampled_from(_PATHS), value=st.sampled_from(_JUNK))
+def test_any_corrupted_value_gives_a_scene_error(path, value):
+    """Whatever a user writes in any key, the answer is the scene they meant or a SceneError
+    naming that key -- never another exception (a traceback in the CLI), never a wrong value
+    taken silently."""
+    check_corruption(path, value)
+
+
+@pytest.mark.parametrize(
+    ("path", "value"),
+    [
+        (("output", "figures"), "no"),
+        (("output", "tables"), 0),
+        (("field", "compare_ideal"), "false"),
+        (("field", "coil", 0, "turns"), True),
+        (("field", "coil", 0, "turns"), 1.5),
+        (("field", "coil", 0, "axis"), "--z"),
+        (("field", "coil", 0, "spacing"), "5 mm"),
+        (("load", "steps"), 1e20),
+        (("robot", "length"), "1e300 m"),
+        (("rod", "nodes"), 10**9),
+        (("robot", "magnetization", "segment"), 4),
+        (("name",), 5),
+    ],
+)
+def test_known_silent_misreads_are_errors(path, value):
+    # values the scene once read silently (or crashed on): each is now an error naming its key
+    check_corruption(path, value)
+
+
+def test_the_oracle_accepts_what_it_should():
+    # the fuzz test's oracle against itself: every listed valid value parses and changes the
+    # scene (a typo in VALID_JUNK would make the fuzz test reject good values)
+    for key, values in VALID_JUNK.items():
+        path = next(p for p in _PATHS if _key(p) == key)
+        for value in values:
+            check_corruption(path, value)
+    for key in OPTIONAL:
+        path = next(p for p in _PATHS if _key(p) == key)
+        check_corruption(path, None)

@@ -1,6 +1,11 @@
 """The ``coilrod`` command line: run scenes, check them, list the shipped ones, run the demo.
 
-Exit codes: 0 success, 1 a solver could not reach its load, 2 invalid scene or usage.
+``check`` and ``run`` share one validation path (:func:`prepare`): the scene file is read and
+validated completely (every problem at once, each on its own line), and the output folder is
+checked (``run``: created and test-written) before anything is solved.
+
+Exit codes: 0 success, 1 a solver could not reach its load, 2 invalid scene, unusable output
+folder or usage; 130 interrupted.
 """
 
 from __future__ import annotations
@@ -12,7 +17,7 @@ import time
 from importlib import resources
 from pathlib import Path
 
-__all__ = ["main", "shipped_scenes", "DEMO_SCENES"]
+__all__ = ["main", "prepare", "shipped_scenes", "DEMO_SCENES"]
 
 DESCRIPTION = """\
 coilrod: how far do real Helmholtz and Maxwell coil pairs move a magnetic soft continuum
@@ -29,6 +34,7 @@ examples:
   coilrod scenes                       list the shipped scenes
   coilrod scenes --show helmholtz_vs_ideal > my.toml   copy one to edit
   coilrod check my.toml                validate a scene and print what would run
+  coilrod check my.toml --out results  ... and that the results can be written there
   coilrod run my.toml --out results    run it: tables (CSV, JSON), figures (PNG), summary
 """
 
@@ -79,6 +85,55 @@ def _resolve_scene(arg: str) -> Path:
 
 def _print_err(msg: str) -> None:
     print(f"coilrod: error: {msg}", file=sys.stderr)
+
+
+def _default_out(scene) -> Path:
+    return Path("coilrod-out") / Path(scene.source).stem
+
+
+def prepare(scene_arg: str, out: Path | None, *, create_out: bool):
+    """The one validation path of ``check`` and ``run``: the scene, then the output folder.
+
+    Parameters
+    ----------
+    scene_arg : str
+        A scene file or the name of a shipped scene.
+    out : Path or None
+        The output folder; None: ``coilrod-out/<scene file stem>`` when ``create_out`` (run),
+        no folder check otherwise (check without ``--out``).
+    create_out : bool
+        Create the folder and test-write it (run) or only check that this would work (check).
+
+    Returns
+    -------
+    (Scene, Path or None)
+
+    Raises
+    ------
+    SceneError
+        Every problem of the scene and of the folder, one line each.
+    """
+    from .outputs import prepare_output_dir
+    from .parse import SceneError, load_scene
+
+    problems = []
+    scene = None
+    try:
+        scene = load_scene(_resolve_scene(scene_arg))
+    except SceneError as exc:
+        problems += exc.problems
+    if out is None and create_out and scene is not None:
+        out = _default_out(scene)
+    if out is not None:
+        try:
+            prepare_output_dir(out, create=False)
+        except SceneError as exc:
+            problems += exc.problems
+    if problems:
+        raise SceneError(problems)
+    if out is not None and create_out:
+        prepare_output_dir(out, create=True)
+    return scene, out
 
 
 def _run(scene, out: Path | None, quiet: bool, no_cache: bool, progress: bool | None) -> int:
@@ -149,6 +204,12 @@ def main(argv: list[str] | None = None) -> int:
         "is skipped, without solving.",
     )
     p_check.add_argument("scene", help="scene file (.toml) or the name of a shipped scene")
+    p_check.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="also check that results could be written to this folder (nothing is created)",
+    )
 
     p_list = sub.add_parser(
         "scenes",
@@ -168,42 +229,58 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        if args.command == "scenes":
-            shipped = shipped_scenes()
-            if args.show:
-                if args.show not in shipped:
-                    _print_err(f"no shipped scene {args.show!r}; see 'coilrod scenes'")
-                    return 2
-                print(shipped[args.show].read_text(), end="")
-                return 0
-            for name, path in sorted(shipped.items()):
-                scene = load_scene(path)
-                print(f"{name:22s} {scene.name}")
-            return 0
-        if args.command == "check":
-            from .planner import plan_scene
-
-            scene = load_scene(_resolve_scene(args.scene))
-            print(f"{scene.source}: valid scene '{scene.name}'")
-            if scene.description:
-                print(textwrap.indent(textwrap.fill(scene.description, 90), "  "))
-            print(plan_scene(scene))
-            return 0
-        if args.command == "run":
-            scene = load_scene(_resolve_scene(args.scene))
-            out = args.out or Path("coilrod-out") / Path(scene.source).stem
-            return _run(scene, out, args.quiet, args.no_cache, False if args.no_progress else None)
-        if args.command == "demo":
-            code = 0
-            for name, mag in DEMO_SCENES.items():
-                scene = parse_scene(_demo_scene(name, mag), source=f"demo-{name}")
-                if not args.quiet:
-                    print(f"== {scene.name}")
-                code = max(code, _run(scene, args.out / name, args.quiet, False, None))
-            return code
+        return _command(args, load_scene, parse_scene)
     except SceneError as exc:
-        _print_err(str(exc))
+        for line in exc.problems:
+            _print_err(line)
         return 2
+    except KeyboardInterrupt:
+        print("coilrod: interrupted", file=sys.stderr)
+        return 130
+
+
+def _command(args, load_scene, parse_scene) -> int:
+    if args.command == "scenes":
+        shipped = shipped_scenes()
+        if args.show:
+            if args.show not in shipped:
+                _print_err(f"no shipped scene {args.show!r}; see 'coilrod scenes'")
+                return 2
+            print(shipped[args.show].read_text(encoding="utf-8"), end="")
+            return 0
+        for name, path in sorted(shipped.items()):
+            scene = load_scene(path)
+            print(f"{name:22s} {scene.name}")
+        return 0
+    if args.command == "check":
+        from .planner import plan_scene
+
+        scene, out = prepare(args.scene, args.out, create_out=False)
+        print(f"{scene.source}: valid scene '{scene.name}'")
+        if scene.description:
+            print(textwrap.indent(textwrap.fill(scene.description, 90), "  "))
+        if out is not None:
+            print(f"results can be written to {out}")
+        print(plan_scene(scene))
+        return 0
+    if args.command == "run":
+        scene, out = prepare(args.scene, args.out, create_out=True)
+        return _run(scene, out, args.quiet, args.no_cache, False if args.no_progress else None)
+    if args.command == "demo":
+        from .outputs import prepare_output_dir
+
+        scenes = {
+            name: parse_scene(_demo_scene(name, mag), source=f"demo-{name}")
+            for name, mag in DEMO_SCENES.items()
+        }
+        for name in scenes:  # every output folder before the first solve
+            prepare_output_dir(args.out / name)
+        code = 0
+        for name, scene in scenes.items():
+            if not args.quiet:
+                print(f"== {scene.name}")
+            code = max(code, _run(scene, args.out / name, args.quiet, False, None))
+        return code
     return 2
 
 

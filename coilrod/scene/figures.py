@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .strength import field_strength
+
 __all__ = ["plot_tip_vs_field", "plot_scene_shapes", "centerline_of"]
 
 _STYLE = {"coils": "-", "ideal": "--"}
@@ -35,8 +37,6 @@ def plot_tip_vs_field(result, ax=None):
     Solid lines: real coils; dashed: the ideal field.  Returns the Axes.
     """
     import matplotlib.pyplot as plt
-
-    from .runner import field_strength
 
     value, kind, number = field_strength(result.scene)
     pairs = [

@@ -1,8 +1,13 @@
 """Scene files (TOML): the robot, the field, the load path, the models to run and the outputs.
 
-A scene is validated completely before anything runs; every problem is reported as a
-:class:`SceneError` naming the key and the reason, e.g.
+A scene is validated completely before anything runs, and every problem is reported at once:
+a :class:`SceneError` lists one line per problem, each naming the key and the reason, e.g.
 ``robot.length: must be positive; got -40 mm`` or ``field.coil[0].radius: missing unit``.
+Nothing is read loosely: booleans must be TOML booleans, integers integers, quantities carry
+their unit, keys that do not apply (a ``magnitude`` next to a ``preset``) are errors, and every
+number must lie in the ranges of :mod:`coilrod.scene.limits`.  Once the scene is well formed,
+:mod:`coilrod.scene.checks` makes sure it can be solved (a field that is not zero, a robot
+clear of the coil windings, FEM meshes that resolve the magnetization and fit in memory).
 
 Example (``coilrod/scene/examples/helmholtz_vs_ideal.toml``)::
 
@@ -29,6 +34,7 @@ Example (``coilrod/scene/examples/helmholtz_vs_ideal.toml``)::
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,7 +48,8 @@ from ..robot import presets
 from ..robot.magnetization import Magnetization
 from ..robot.rod import Rod
 from ..robot.sections import Circle, Rectangle
-from .units import EXAMPLES, UnitError, parse_quantity
+from . import limits
+from .units import EXAMPLES, UnitError, parse_quantity, short_int
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "MODELS", "PRESETS"]
 
@@ -50,10 +57,58 @@ __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "MODELS", "PRESET
 MODELS = ("rod", "fem2d", "fem3d")
 #: Magnetization presets (see :mod:`coilrod.presets`).
 PRESETS = ("M1", "M2a", "M2b", "M3", "M4.1", "M4.2")
+#: The parameters each preset takes (besides ``preset``).
+PRESET_PARAMETERS = {
+    "M1": ("M0", "phi"),
+    "M2a": ("M0", "phi"),
+    "M2b": ("M0", "phi"),
+    "M3": ("M0", "slope"),
+    "M4.1": ("M0",),
+    "M4.2": ("M0", "segment", "segment_angle"),
+}
+_PRESET_KEYS = ("M0", "phi", "slope", "segment", "segment_angle")
+_COIL_TYPES = {"helmholtz": coils.HelmholtzPair, "maxwell": coils.MaxwellPair, "coil": coils.Coil}
+_COIL_NAMES = {"helmholtz": "Helmholtz pair", "maxwell": "Maxwell pair", "coil": "single coil"}
+
+
+#: Longest problem line (a value pasted by mistake is cut, not printed in full).
+_MAX_LINE = 400
 
 
 class SceneError(ValueError):
-    """A scene file is invalid; the message names the key and the reason."""
+    """A scene is invalid.
+
+    Parameters
+    ----------
+    problems : str or list of str
+        One problem (``"key: reason"``) or several; each is kept on one line (whitespace runs
+        become single spaces, lines beyond 400 characters are cut).
+
+    Attributes
+    ----------
+    problems : list of str
+        Every problem found, one line each, in the order of the scene.  The message is these
+        lines joined by newlines.
+
+    Examples
+    --------
+    >>> err = SceneError(["robot.length: must be positive; got -40 mm", "load.steps: ..."])
+    >>> err.problems[0]
+    'robot.length: must be positive; got -40 mm'
+    >>> len(str(err).splitlines())
+    2
+    """
+
+    def __init__(self, problems: str | list[str]):
+        if isinstance(problems, str):
+            problems = [problems]
+        lines = [" ".join(str(p).split()) for p in problems]
+        lines = [ln if len(ln) <= _MAX_LINE else ln[: _MAX_LINE - 6] + " [...]" for ln in lines]
+        self.problems = list(dict.fromkeys(line for line in lines if line))
+        super().__init__("\n".join(self.problems))
+
+    def __reduce__(self):
+        return (type(self), (self.problems,))
 
 
 @dataclass
@@ -95,40 +150,104 @@ class Scene:
     poisson_ratio: float | None = None
 
 
-# -- small validation helpers --------------------------------------------------------------------
+# -- collecting problems -------------------------------------------------------------------------
+class _Bad:
+    """Marks a value that failed validation (its problem is already recorded)."""
+
+    def __repr__(self):
+        return "<invalid>"
+
+
+_BAD = _Bad()
+_MISSING = object()
+
+
+def _ok(*values) -> bool:
+    return not any(v is _BAD for v in values)
+
+
+class _Problems:
+    """The problems found so far; ``take`` runs a validator and records its SceneError."""
+
+    def __init__(self):
+        self.lines: list[str] = []
+
+    def add(self, line: str) -> None:
+        self.lines.append(line)
+
+    def take(self, fn, *args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except SceneError as exc:
+            self.lines.extend(exc.problems)
+            return _BAD
+
+
+# -- small validators (each raises a SceneError naming the key) ----------------------------------
 def _table(data: Any, key: str) -> dict:
     if not isinstance(data, dict):
-        raise SceneError(f"{key}: expected a table; got {type(data).__name__}")
+        raise SceneError(f"{key}: expected a table; got {_show(data)}")
     return data
 
 
-def _check_keys(data: dict, key: str, allowed: set[str], required: set[str] = frozenset()):
-    unknown = sorted(set(data) - allowed)
+def _unknown_keys(data: dict, key: str, allowed) -> None:
+    unknown = sorted(set(data) - set(allowed), key=str)
     if unknown:
         where = f"{key}." if key else ""
         raise SceneError(
-            f"{where}{unknown[0]}: unknown key (allowed here: {', '.join(sorted(allowed))})"
+            [
+                f"{where}{u}: unknown key (allowed here: {', '.join(sorted(allowed))})"
+                for u in unknown
+            ]
         )
-    missing = sorted(required - set(data))
-    if missing:
-        where = f"{key}." if key else ""
-        raise SceneError(f"{where}{missing[0]}: missing required key")
+
+
+def _show(value) -> str:
+    """A value as the user wrote it, for messages (TOML spelling of booleans, long integers
+    shortened)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, int) and abs(value) >= 10**15:
+        return short_int(value)
+    return repr(value)
+
+
+def _in_range(value: float, kind: str, full: str, raw) -> float:
+    rng = limits.RANGES[kind]
+    size = abs(value)
+    if size > rng.high or (rng.low > 0 and size < rng.low):
+        raise SceneError(f"{full}: must be {rng.text} ({rng.why}); got {raw}")
+    return value
 
 
 def _quantity(
-    data: dict, name: str, dimension: str, key: str, *, positive: bool = False, default=None
+    data: dict,
+    name: str,
+    dimension: str,
+    key: str,
+    *,
+    kind: str,
+    positive: bool = False,
+    default=_MISSING,
 ) -> float:
     full = f"{key}.{name}"
     if name not in data:
-        if default is None:
+        if default is _MISSING:
             raise SceneError(
                 f"{full}: missing required key ({dimension}, e.g. '{EXAMPLES[dimension]}')"
             )
         return default
-    value = _si(data[name], dimension, full)
+    return _value(data[name], dimension, full, kind=kind, positive=positive)
+
+
+def _value(raw, dimension: str, full: str, *, kind: str, positive: bool = False) -> float:
+    """One quantity with its unit, in SI, checked against the range of ``kind``."""
+    value = _si(raw, dimension, full)
     if positive and value <= 0:
-        raise SceneError(f"{full}: must be positive; got {data[name]}")
-    return value
+        raise SceneError(f"{full}: must be positive; got {raw}")
+    return _in_range(value, kind, full, raw)
 
 
 def _number(
@@ -138,41 +257,88 @@ def _number(
     *,
     positive: bool = False,
     integer: bool = False,
-    default=None,
+    default=_MISSING,
     low=None,
     high=None,
+    what: str = "",
 ) -> float:
     full = f"{key}.{name}"
     if name not in data:
-        if default is None:
+        if default is _MISSING:
             raise SceneError(f"{full}: missing required key")
         return default
-    value = data[name]
+    return _plain(
+        data[name], full, positive=positive, integer=integer, low=low, high=high, what=what
+    )
+
+
+def _plain(value, full, *, positive=False, integer=False, low=None, high=None, what=""):
+    """A plain number (no unit): type, finiteness, integrality and range."""
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise SceneError(f"{full}: expected a number; got {value!r}")
-    if not math.isfinite(value):
+        kind = "an integer" if integer else "a number"
+        raise SceneError(f"{full}: expected {kind}; got {_show(value)}")
+    if isinstance(value, float) and not math.isfinite(value):
         raise SceneError(f"{full}: must be finite; got {value!r}")
     if integer and int(value) != value:
         raise SceneError(f"{full}: expected an integer; got {value!r}")
     if positive and value <= 0:
-        raise SceneError(f"{full}: must be positive; got {value!r}")
-    if low is not None and value < low:
-        raise SceneError(f"{full}: must be at least {low}; got {value!r}")
-    if high is not None and value > high:
-        raise SceneError(f"{full}: must be at most {high}; got {value!r}")
+        raise SceneError(f"{full}: must be positive; got {_show(value)}")
+    if (low is not None and value < low) or (high is not None and value > high):
+        lo = "" if low is None else f"{low:g}"
+        hi = "" if high is None else f"{high:g}"
+        span = f"from {lo} to {hi}" if lo and hi else (f"at least {lo}" if lo else f"at most {hi}")
+        raise SceneError(
+            f"{full}: must be {span}{f' ({what})' if what else ''}; got {_show(value)}"
+        )
     return int(value) if integer else float(value)
 
 
-def _axis(value, key: str) -> np.ndarray:
-    try:
-        from coils._validate import as_axis
-
-        return as_axis(value, key)
-    except (ValueError, TypeError):
+def _boolean(data: dict, name: str, key: str, default: bool) -> bool:
+    full = f"{key}.{name}"
+    value = data.get(name, default)
+    if not isinstance(value, bool):
         raise SceneError(
-            f"{key}: expected 'x', 'y', 'z' (optionally signed, e.g. '-x') or a list of 3 "
-            f"numbers; got {value!r}"
-        ) from None
+            f"{full}: expected true or false (a TOML boolean, without quotes); got {_show(value)}"
+        )
+    return value
+
+
+def _text(data: dict, name: str, key: str, default: str) -> str:
+    full = f"{key}.{name}" if key else name
+    value = data.get(name, default)
+    if not isinstance(value, str):
+        raise SceneError(f"{full}: expected a string; got {_show(value)}")
+    return value
+
+
+_AXIS_RE = re.compile(r"^\s*([+-]?)\s*([xyz])\s*$", re.IGNORECASE)
+_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
+
+
+def _axis(value, key: str) -> np.ndarray:
+    """A unit vector from 'x', 'y', 'z' with an optional sign, or a list of 3 numbers."""
+    hint = "expected 'x', 'y', 'z' (optionally signed, e.g. '-x') or a list of 3 numbers"
+    if isinstance(value, str):
+        match = _AXIS_RE.match(value)
+        if not match:
+            raise SceneError(f"{key}: {hint}; got {value!r}")
+        sign = -1.0 if match[1] == "-" else 1.0
+        return sign * np.array(_AXES[match[2].lower()])
+    if (
+        isinstance(value, list)
+        and len(value) == 3
+        and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+    ):
+        if any(isinstance(v, int) and abs(v) > 10**15 for v in value):
+            raise SceneError(f"{key}: the components must be numbers of moderate size")
+        vec = np.array(value, dtype=float)
+        if not np.all(np.isfinite(vec)):
+            raise SceneError(f"{key}: the components must be finite; got {value!r}")
+        norm = float(np.linalg.norm(vec))
+        if norm == 0:
+            raise SceneError(f"{key}: a direction cannot be the zero vector")
+        return vec / norm
+    raise SceneError(f"{key}: {hint}; got {_show(value)}")
 
 
 def _si(value, dimension: str, key: str) -> float:
@@ -183,89 +349,212 @@ def _si(value, dimension: str, key: str) -> float:
         raise SceneError(str(exc)) from None
 
 
-def _vector(value, dimension: str, key: str) -> np.ndarray:
+def _vector(value, dimension: str, key: str, kind: str) -> np.ndarray:
     if not isinstance(value, list) or len(value) != 3:
+        unit = EXAMPLES[dimension].split()[1]
         raise SceneError(
-            f"{key}: expected a list of 3 quantities, e.g. ['0 mm', '0 mm', '0 mm']; got {value!r}"
+            f"{key}: expected a list of 3 quantities, e.g. ['0 {unit}', '0 {unit}', '0 {unit}']; "
+            f"got {_show(value)}"
         )
-    return np.array([_si(v, dimension, f"{key}[{i}]") for i, v in enumerate(value)])
+    p = _Problems()
+    out = [p.take(_value, v, dimension, f"{key}[{i}]", kind=kind) for i, v in enumerate(value)]
+    if p.lines:
+        raise SceneError(p.lines)
+    return np.array(out)
+
+
+def _counts(value, key: str, n: int, high: int, example: str) -> tuple[int, ...]:
+    """A list of ``n`` positive integers, each at most ``high``."""
+    if not isinstance(value, list) or len(value) != n:
+        raise SceneError(
+            f"{key}: expected a list of {n} positive integers, e.g. {example}; got {_show(value)}"
+        )
+    p = _Problems()
+    out = [
+        p.take(_plain, v, f"{key}[{i}]", integer=True, positive=True, high=high)
+        for i, v in enumerate(value)
+    ]
+    if p.lines:
+        raise SceneError(p.lines)
+    return tuple(out)
+
+
+def _mm(x: float) -> str:
+    return f"{1e3 * x:.12g} mm"
 
 
 # -- sections of the scene ---------------------------------------------------------------------
-def _parse_magnetization(data, length: float, key: str) -> Magnetization:
+def _parse_magnetization(data, length, key: str, p: _Problems):
+    """The Magnetization of ``robot.magnetization`` (``length`` may be _BAD: then the checks
+    that need it are skipped)."""
     data = _table(data, key)
-    _check_keys(
-        data,
-        key,
-        {
-            "preset",
-            "M0",
-            "phi",
-            "magnitude",
-            "angle",
-            "segments",
-            "slope",
-            "segment",
-            "segment_angle",
-        },
-    )
+    p.take(_unknown_keys, data, key, {"preset", "magnitude", "angle", "segments", *_PRESET_KEYS})
     if "preset" in data:
-        preset = data["preset"]
-        if preset not in PRESETS:
-            raise SceneError(
-                f"{key}.preset: unknown preset {preset!r} (one of {', '.join(PRESETS)})"
-            )
-        M0 = _quantity(data, "M0", "magnetization", key, positive=True, default=presets.SEED_M0)
-        if preset in ("M1", "M2a", "M2b"):
-            phi = _number(data, "phi", key, positive=True, default=0.2, high=1.0)
-            if preset == "M1":
-                return presets.M1(M0=M0, phi=phi)
-            return presets.M2(length, variant=preset[-1], M0=M0, phi=phi)
-        if preset == "M3":
-            slope = _number(data, "slope", key, positive=True, default=0.4, high=1.0)
-            return presets.M3(length, M0=M0, slope=slope)
-        if preset == "M4.1":
-            return presets.M41(length, M0=M0)
-        segment = _number(data, "segment", key, integer=True, default=-1)
-        n_seg = len(presets.EXAMPLE_M41_LAYOUT["fractions"])
-        if not -n_seg <= segment < n_seg:
-            raise SceneError(
-                f"{key}.segment: the M(4.x) layout has {n_seg} segments (index 0 at the clamp, "
-                f"-1 at the tip); got {segment}"
-            )
-        angle = _quantity(data, "segment_angle", "angle", key, default=-math.pi / 4)
-        return presets.M42(length, M0=M0, segment=segment, angle=angle)
+        return _parse_preset(data, length, key, p)
     if "segments" in data:
-        segs = data["segments"]
-        if not isinstance(segs, list) or not segs:
-            raise SceneError(
-                f"{key}.segments: expected a non-empty list of tables "
-                "{ length = '10 mm', magnitude = '64 kA/m', angle = '0 deg' }"
+        for k in ("magnitude", "angle", *_PRESET_KEYS):
+            if k in data:
+                why = (
+                    "each segment has its own magnitude and angle"
+                    if k in ("magnitude", "angle")
+                    else "it is a parameter of the presets"
+                )
+                p.add(f"{key}.{k}: not used with segments ({why}); remove it")
+        return _parse_segments(data["segments"], length, f"{key}.segments", p)
+    for k in _PRESET_KEYS:
+        if k in data:
+            p.add(
+                f"{key}.{k}: only used with a preset (one of {', '.join(PRESETS)}); "
+                "remove it or give the preset"
             )
-        lengths, mags, angles = [], [], []
-        for i, seg in enumerate(segs):
-            sk = f"{key}.segments[{i}]"
-            seg = _table(seg, sk)
-            _check_keys(seg, sk, {"length", "magnitude", "angle"}, {"length", "magnitude"})
-            lengths.append(_quantity(seg, "length", "length", sk, positive=True))
-            mags.append(_quantity(seg, "magnitude", "magnetization", sk))
-            angles.append(_quantity(seg, "angle", "angle", sk, default=0.0))
-        total = sum(lengths)
-        if abs(total - length) > 1e-9 * length:
-            raise SceneError(
-                f"{key}.segments: lengths add up to {1e3 * total:g} mm; the robot "
-                f"is {1e3 * length:g} mm long"
-            )
-        return Magnetization.segments(lengths, mags, angles, label="custom segments")
-    magnitude = _quantity(data, "magnitude", "magnetization", key)
-    angle = _quantity(data, "angle", "angle", key, default=0.0)
+    if "magnitude" not in data:
+        p.add(
+            f"{key}.magnitude: missing required key (a magnetization such as '128 kA/m'; or "
+            f"give a preset, one of {', '.join(PRESETS)}, or segments)"
+        )
+        return _BAD
+    magnitude = p.take(_quantity, data, "magnitude", "magnetization", key, kind="magnetization")
+    angle = p.take(_quantity, data, "angle", "angle", key, kind="angle", default=0.0)
+    if magnitude is not _BAD and magnitude == 0:
+        p.add(
+            f"{key}.magnitude: is zero: a rod without magnetization feels no field (nothing "
+            "to solve)"
+        )
+        return _BAD
+    if not _ok(magnitude, angle):
+        return _BAD
     return Magnetization(magnitude, angle, label=f"uniform {magnitude:g} A/m")
 
 
-def _parse_robot(data) -> tuple[Rod, float | None]:
+def _parse_preset(data: dict, length, key: str, p: _Problems):
+    preset = data["preset"]
+    for k in ("magnitude", "angle", "segments"):
+        if k in data:
+            p.add(
+                f"{key}.{k}: not used with a preset (the preset sets the magnetization); "
+                "give either a preset or magnitude and angle or segments"
+            )
+    if not isinstance(preset, str) or preset not in PRESETS:
+        p.add(f"{key}.preset: unknown preset {_show(preset)} (one of {', '.join(PRESETS)})")
+        return _BAD
+    params = PRESET_PARAMETERS[preset]
+    for k in _PRESET_KEYS:
+        if k in data and k not in params:
+            p.add(
+                f"{key}.{k}: not a parameter of preset {preset} (its parameters: "
+                f"{', '.join(params)})"
+            )
+    M0 = p.take(
+        _quantity,
+        data,
+        "M0",
+        "magnetization",
+        key,
+        kind="magnetization",
+        positive=True,
+        default=presets.SEED_M0,
+    )
+    values: dict[str, Any] = {"M0": M0}
+    if "phi" in params:
+        values["phi"] = p.take(
+            _number,
+            data,
+            "phi",
+            key,
+            positive=True,
+            high=1.0,
+            default=0.2,
+            what="a particle volume fraction",
+        )
+    if "slope" in params:
+        values["slope"] = p.take(
+            _number,
+            data,
+            "slope",
+            key,
+            positive=True,
+            high=1.0,
+            default=0.4,
+            what="the particle fraction at the tip",
+        )
+    if "segment" in params:
+        n_seg = len(presets.EXAMPLE_M41_LAYOUT["fractions"])
+        values["segment"] = p.take(
+            _number,
+            data,
+            "segment",
+            key,
+            integer=True,
+            default=-1,
+            low=-n_seg,
+            high=n_seg - 1,
+            what=f"the M(4.x) layout has {n_seg} segments: 0 at the clamp, -1 at the tip",
+        )
+        values["segment_angle"] = p.take(
+            _quantity, data, "segment_angle", "angle", key, kind="angle", default=-math.pi / 4
+        )
+    if not _ok(*values.values()) or length is _BAD:
+        return _BAD
+    if preset == "M1":
+        return presets.M1(M0=M0, phi=values["phi"])
+    if preset in ("M2a", "M2b"):
+        return presets.M2(length, variant=preset[-1], M0=M0, phi=values["phi"])
+    if preset == "M3":
+        return presets.M3(length, M0=M0, slope=values["slope"])
+    if preset == "M4.1":
+        return presets.M41(length, M0=M0)
+    return presets.M42(length, M0=M0, segment=values["segment"], angle=values["segment_angle"])
+
+
+def _parse_segments(segs, length, key: str, p: _Problems):
+    if not isinstance(segs, list) or not segs:
+        p.add(
+            f"{key}: expected a non-empty list of tables "
+            "{ length = '10 mm', magnitude = '64 kA/m', angle = '0 deg' }"
+        )
+        return _BAD
+    if len(segs) > limits.MAX_SEGMENTS:
+        p.add(f"{key}: at most {limits.MAX_SEGMENTS} segments; got {len(segs)}")
+        return _BAD
+    lengths, mags, angles = [], [], []
+    for i, seg in enumerate(segs):
+        sk = f"{key}[{i}]"
+        seg = p.take(_table, seg, sk)
+        if seg is _BAD:
+            lengths.append(_BAD)
+            continue
+        p.take(_unknown_keys, seg, sk, {"length", "magnitude", "angle"})
+        lengths.append(
+            p.take(_quantity, seg, "length", "length", sk, kind="robot length", positive=True)
+        )
+        mags.append(p.take(_quantity, seg, "magnitude", "magnetization", sk, kind="magnetization"))
+        angles.append(p.take(_quantity, seg, "angle", "angle", sk, kind="angle", default=0.0))
+    if not _ok(*lengths, *mags, *angles):
+        return _BAD
+    if length is not _BAD:
+        # exact to rounding: each length carries at most two roundings (decimal, unit factor)
+        total = math.fsum(lengths)
+        if abs(total - length) > 8 * (len(lengths) + 1) * np.finfo(float).eps * length:
+            p.add(
+                f"{key}: lengths add up to {_mm(total)}; the robot is {_mm(length)} long "
+                "(robot.length)"
+            )
+            return _BAD
+    if not any(mags):
+        p.add(
+            f"{key}: every segment has zero magnitude: a rod without magnetization feels no "
+            "field (nothing to solve)"
+        )
+        return _BAD
+    return Magnetization.segments(lengths, mags, angles, label="custom segments")
+
+
+def _parse_robot(data, p: _Problems):
+    """(Rod, poisson ratio or None), or _BAD."""
     key = "robot"
     data = _table(data, key)
-    _check_keys(
+    p.take(
+        _unknown_keys,
         data,
         key,
         {
@@ -277,37 +566,81 @@ def _parse_robot(data) -> tuple[Rod, float | None]:
             "poisson_ratio",
             "magnetization",
         },
-        {"length", "youngs_modulus", "magnetization"},
     )
-    length = _quantity(data, "length", "length", key, positive=True)
-    E = _quantity(data, "youngs_modulus", "pressure", key, positive=True)
+    length = p.take(_quantity, data, "length", "length", key, kind="robot length", positive=True)
+    E = p.take(
+        _quantity, data, "youngs_modulus", "pressure", key, kind="youngs_modulus", positive=True
+    )
+
+    def size(name):
+        value = p.take(_quantity, data, name, "length", key, kind="section", positive=True)
+        if _ok(value, length) and value >= length:
+            p.add(
+                f"{key}.{name}: must be smaller than robot.length ({_mm(length)}) for a rod; "
+                f"got {data[name]}"
+            )
+            return _BAD
+        return value
+
+    section = _BAD
     if "diameter" in data:
         if "width" in data or "thickness" in data:
-            raise SceneError(
+            p.add(
                 "robot.diameter: give either diameter (circle) or width and "
                 "thickness (rectangle), not both"
             )
-        section = Circle(_quantity(data, "diameter", "length", key, positive=True))
+        else:
+            d = size("diameter")
+            section = Circle(d) if _ok(d) else _BAD
     elif "width" in data or "thickness" in data:
-        section = Rectangle(
-            _quantity(data, "width", "length", key, positive=True),
-            _quantity(data, "thickness", "length", key, positive=True),
-        )
+        w, t = size("width"), size("thickness")
+        section = Rectangle(w, t) if _ok(w, t) else _BAD
     else:
-        raise SceneError(
+        p.add(
             "robot.diameter: missing required key (or width and thickness for a "
             "rectangular section)"
         )
     nu = None
     if "poisson_ratio" in data:
-        nu = _number(data, "poisson_ratio", key, low=-0.99, high=0.4999999)
-    mag = _parse_magnetization(data["magnetization"], length, f"{key}.magnetization")
-    return Rod(length, E, section, mag), nu
+        nu = p.take(
+            _number,
+            data,
+            "poisson_ratio",
+            key,
+            low=-0.99,
+            high=0.4999999,
+            what="0.5 is incompressible, which the FEM cannot take",
+        )
+    if "magnetization" in data:
+        mag = p.take(_parse_magnetization, data["magnetization"], length, f"{key}.magnetization", p)
+    else:
+        p.add(
+            "robot.magnetization: missing required key (e.g. { preset = 'M1' } or "
+            "{ magnitude = '128 kA/m', angle = '0 deg' })"
+        )
+        mag = _BAD
+    if not _ok(length, E, section, nu, mag):
+        return _BAD
+    try:
+        return Rod(length, E, section, mag), nu
+    except ValueError as exc:  # the library's own checks (e.g. segments spanning the rod)
+        p.add(f"{key}: {exc}")
+        return _BAD
 
 
-def _parse_coil(data, key: str) -> coils.Field:
+@dataclass
+class _Coil:
+    """A parsed coil and the scene keys that describe it."""
+
+    key: str
+    coil: coils.Field
+    strength_key: str
+
+
+def _parse_coil(data, key: str, p: _Problems):
     data = _table(data, key)
-    _check_keys(
+    p.take(
+        _unknown_keys,
         data,
         key,
         {
@@ -323,208 +656,476 @@ def _parse_coil(data, key: str) -> coils.Field:
             "winding",
             "filaments",
         },
-        {"type", "radius", "turns"},
     )
-    kind = data["type"]
-    classes = {"helmholtz": coils.HelmholtzPair, "maxwell": coils.MaxwellPair, "coil": coils.Coil}
-    if not isinstance(kind, str) or kind not in classes:
-        raise SceneError(f"{key}.type: unknown coil type {kind!r} (one of {', '.join(classes)})")
-    radius = _quantity(data, "radius", "length", key, positive=True)
-    turns = _number(data, "turns", key, positive=True)
-    axis = _axis(data.get("axis", "y"), f"{key}.axis")
-    center = _vector(data["center"], "length", f"{key}.center") if "center" in data else np.zeros(3)
+    kind = data.get("type", _MISSING)
+    if kind is _MISSING:
+        p.add(f"{key}.type: missing required key (one of {', '.join(_COIL_TYPES)})")
+        kind = _BAD
+    elif not isinstance(kind, str) or kind not in _COIL_TYPES:
+        p.add(f"{key}.type: unknown coil type {_show(kind)} (one of {', '.join(_COIL_TYPES)})")
+        kind = _BAD
+    radius = p.take(_quantity, data, "radius", "length", key, kind="coil size", positive=True)
+    turns = p.take(
+        _number,
+        data,
+        "turns",
+        key,
+        integer=True,
+        positive=True,
+        high=1e6,
+        what="turns of one coil",
+    )
+    axis = p.take(_axis, data.get("axis", "y"), f"{key}.axis")
+    center = (
+        p.take(_vector, data["center"], "length", f"{key}.center", "position")
+        if "center" in data
+        else np.zeros(3)
+    )
     kwargs: dict[str, Any] = {"axis": axis, "center": center}
     if "spacing" in data:
         if kind == "coil":
-            raise SceneError(f"{key}.spacing: a single coil has no spacing")
-        kwargs["spacing"] = _quantity(data, "spacing", "length", key, positive=True)
+            p.add(f"{key}.spacing: a single coil has no spacing")
+            kwargs["spacing"] = _BAD
+        else:
+            kwargs["spacing"] = p.take(
+                _quantity, data, "spacing", "length", key, kind="coil size", positive=True
+            )
     if "winding" in data:
         w = data["winding"]
         if not isinstance(w, list) or len(w) != 2:
-            raise SceneError(
-                f"{key}.winding: expected ['width', 'height'], e.g. ['10 mm', '10 mm']"
+            p.add(
+                f"{key}.winding: expected ['width', 'height'], e.g. ['10 mm', '10 mm']; "
+                f"got {_show(w)}"
             )
-        kwargs["winding"] = tuple(_si(v, "length", f"{key}.winding[{i}]") for i, v in enumerate(w))
-        if "filaments" in data:
-            f = data["filaments"]
-            if (
-                not isinstance(f, list)
-                or len(f) != 2
-                or not all(isinstance(n, int) and not isinstance(n, bool) and n > 0 for n in f)
-            ):
-                raise SceneError(
-                    f"{key}.filaments: expected two positive integers (axial, radial), "
-                    f"e.g. [3, 3]; got {f!r}"
-                )
-            kwargs["filaments"] = tuple(f)
-    elif "filaments" in data:
-        raise SceneError(f"{key}.filaments: filaments model a finite winding; give winding too")
-    given = [k for k in ("current", "B", "gradient") if k in data]
-    if len(given) != 1:
-        raise SceneError(
-            f"{key}: give exactly one of current, B (target centre field) or "
-            f"gradient (target centre gradient); got {given or 'none'}"
-        )
-    try:
-        unit = classes[kind](radius, turns, 1.0, **kwargs)
-        if "current" in data:
-            current = _quantity(data, "current", "current", key)
-        elif "B" in data:
-            from coils.design import current_for_field
-
-            current = current_for_field(unit, _quantity(data, "B", "flux density", key))
+            kwargs["winding"] = _BAD
         else:
-            from coils.design import current_for_gradient
+            width, height = (
+                p.take(_value, v, "length", f"{key}.winding[{i}]", kind="coil size", positive=True)
+                for i, v in enumerate(w)
+            )
+            if _ok(height, radius) and height >= 2 * radius:
+                p.add(
+                    f"{key}.winding[1]: the winding height {w[1]} must be below twice the "
+                    f"radius ({_mm(2 * radius)})"
+                )
+                height = _BAD
+            if _ok(width, kind) and kind != "coil":
+                spacing = kwargs.get("spacing")
+                if spacing is None and _ok(radius):
+                    default = radius * _COIL_TYPES[kind].default_spacing_factor
+                    if width >= default:
+                        p.add(
+                            f"{key}.winding[0]: the winding width {w[0]} must be below the "
+                            f"spacing of the pair (default {_mm(default)}); give a spacing"
+                        )
+                        width = _BAD
+                elif _ok(spacing) and spacing is not None and width >= spacing:
+                    p.add(
+                        f"{key}.spacing: must exceed the winding width {w[0]} (the two "
+                        f"windings would overlap); got {data['spacing']}"
+                    )
+                    kwargs["spacing"] = _BAD
+            kwargs["winding"] = (width, height) if _ok(width, height) else _BAD
+        if "filaments" in data:
+            kwargs["filaments"] = p.take(
+                _counts, data["filaments"], f"{key}.filaments", 2, limits.MAX_FILAMENTS, "[3, 3]"
+            )
+    elif "filaments" in data:
+        p.add(f"{key}.filaments: filaments model a finite winding; give winding too")
+    given = [k for k in ("current", "B", "gradient") if k in data]
+    strength = _BAD
+    if len(given) != 1:
+        p.add(
+            f"{key}: give exactly one of current, B (target centre field) or "
+            f"gradient (target centre gradient); got {', '.join(given) or 'none'}"
+        )
+    elif given == ["current"]:
+        strength = p.take(_quantity, data, "current", "current", key, kind="current")
+    elif given == ["B"]:
+        strength = p.take(_quantity, data, "B", "flux density", key, kind="flux density")
+        if _ok(kind) and kind == "maxwell":
+            p.add(f"{key}.B: a Maxwell pair has no field at its centre; give its gradient")
+            strength = _BAD
+    else:
+        strength = p.take(_quantity, data, "gradient", "gradient", key, kind="gradient")
+        if _ok(kind) and kind != "maxwell":
+            p.add(
+                f"{key}.gradient: a {_COIL_NAMES[kind]} has no gradient at its centre (by "
+                "symmetry); give its field B, or use a maxwell pair"
+            )
+            strength = _BAD
+    if not _ok(kind, radius, turns, strength, *kwargs.values()):
+        return _BAD
+    strength_key = f"{key}.{given[0]}"
+    cls = _COIL_TYPES[kind]
+    try:
+        unit = cls(radius, turns, 1.0, **kwargs)
+    except ValueError as exc:  # the coil classes' own checks
+        p.add(f"{key}: {exc}")
+        return _BAD
+    if given == ["current"]:
+        current = strength
+    else:
+        from coils.design import current_for_field, current_for_gradient
 
-            current = current_for_gradient(unit, _quantity(data, "gradient", "gradient", key))
-        return classes[kind](radius, turns, current, **kwargs)
-    except SceneError:
-        raise  # already names its key
-    except ValueError as exc:  # from the coil classes and design helpers
-        raise SceneError(f"{key}: {exc}") from None
+        to_current = current_for_field if given == ["B"] else current_for_gradient
+        try:
+            current = to_current(unit, strength)
+        except ValueError as exc:
+            p.add(f"{strength_key}: {exc}")
+            return _BAD
+        high = limits.RANGES["current"].high
+        if not abs(current) <= high:
+            p.add(
+                f"{strength_key}: needs {abs(current):.3g} A per turn in this coil, more than "
+                f"the {high:g} A allowed; use more turns or another size; got {data[given[0]]}"
+            )
+            return _BAD
+    return _Coil(key, cls(radius, turns, current, **kwargs), strength_key)
 
 
-def _parse_field(data, rod: Rod) -> tuple[dict[str, coils.Field], str]:
+@dataclass
+class _FieldInfo:
+    """What the checks need to know about the parsed field."""
+
+    fields: dict[str, coils.Field]
+    kind: str
+    coils: list[_Coil]
+    strength_key: str
+
+
+def _parse_field(data, p: _Problems):
     key = "field"
     data = _table(data, key)
-    kind = data.get("type")
+    kind = data.get("type", _MISSING)
     if kind == "uniform":
-        _check_keys(data, key, {"type", "B", "direction"}, {"B"})
-        B = _quantity(data, "B", "flux density", key)
-        direction = _axis(data.get("direction", "y"), f"{key}.direction")
-        return {"ideal": coils.UniformField(B * direction)}, "uniform"
+        p.take(_unknown_keys, data, key, {"type", "B", "direction"})
+        B = p.take(_quantity, data, "B", "flux density", key, kind="flux density")
+        direction = p.take(_axis, data.get("direction", "y"), f"{key}.direction")
+        if not _ok(B, direction):
+            return _BAD
+        return _FieldInfo({"ideal": coils.UniformField(B * direction)}, "uniform", [], "field.B")
     if kind == "gradient":
-        _check_keys(data, key, {"type", "gradient", "axis", "B0", "origin"}, {"gradient"})
-        g = _quantity(data, "gradient", "gradient", key)
-        axis = _axis(data.get("axis", "y"), f"{key}.axis")
-        G = g * (np.outer(axis, axis) - 0.5 * (np.eye(3) - np.outer(axis, axis)))
-        B0 = _vector(data["B0"], "flux density", f"{key}.B0") if "B0" in data else np.zeros(3)
-        origin = (
-            _vector(data["origin"], "length", f"{key}.origin") if "origin" in data else np.zeros(3)
+        p.take(_unknown_keys, data, key, {"type", "gradient", "axis", "B0", "origin"})
+        g = p.take(_quantity, data, "gradient", "gradient", key, kind="gradient")
+        axis = p.take(_axis, data.get("axis", "y"), f"{key}.axis")
+        B0 = (
+            p.take(_vector, data["B0"], "flux density", f"{key}.B0", "flux density")
+            if "B0" in data
+            else np.zeros(3)
         )
-        return {"ideal": coils.LinearField(B0, G, origin)}, "gradient"
+        origin = (
+            p.take(_vector, data["origin"], "length", f"{key}.origin", "position")
+            if "origin" in data
+            else np.zeros(3)
+        )
+        if not _ok(g, axis, B0, origin):
+            return _BAD
+        G = g * (np.outer(axis, axis) - 0.5 * (np.eye(3) - np.outer(axis, axis)))
+        return _FieldInfo(
+            {"ideal": coils.LinearField(B0, G, origin)}, "gradient", [], "field.gradient"
+        )
     if kind == "coils":
-        _check_keys(data, key, {"type", "coil", "compare_ideal"}, {"coil"})
-        parts = data["coil"]
+        p.take(_unknown_keys, data, key, {"type", "coil", "compare_ideal"})
+        compare = p.take(_boolean, data, "compare_ideal", key, True)
+        parts = data.get("coil", _MISSING)
+        if parts is _MISSING:
+            p.add(f"{key}.coil: missing required key (a list of coil tables)")
+            return _BAD
         if not isinstance(parts, list) or not parts:
-            raise SceneError(f"{key}.coil: expected a non-empty list of coil tables")
-        built = [_parse_coil(c, f"{key}.coil[{i}]") for i, c in enumerate(parts)]
-        real = built[0] if len(built) == 1 else coils.CoilSystem(built)
+            p.add(f"{key}.coil: expected a non-empty list of coil tables; got {_show(parts)}")
+            return _BAD
+        if len(parts) > limits.MAX_COILS:
+            p.add(f"{key}.coil: at most {limits.MAX_COILS} coils; got {len(parts)}")
+            return _BAD
+        built = [p.take(_parse_coil, c, f"{key}.coil[{i}]", p) for i, c in enumerate(parts)]
+        if not _ok(compare, *built):
+            return _BAD
+        real = built[0].coil if len(built) == 1 else coils.CoilSystem([b.coil for b in built])
+        try:  # the reference strength (and the ideal field) is taken at the coils' centre
+            ideal = real.ideal()
+        except ValueError as exc:
+            p.add(
+                f"{key}.coil: the coils' centre ({', '.join(_mm(c) for c in real.center)}), "
+                f"where their ideal field is taken, lies on a winding ({exc}); move the coils"
+            )
+            return _BAD
         fields = {"coils": real}
-        compare = data.get("compare_ideal", True)
-        if not isinstance(compare, bool):
-            raise SceneError(f"{key}.compare_ideal: expected true or false; got {compare!r}")
         if compare:
-            fields["ideal"] = real.ideal()
-        return fields, "coils"
-    raise SceneError(f"{key}.type: expected 'uniform', 'gradient' or 'coils'; got {kind!r}")
+            fields["ideal"] = ideal
+        strength_key = built[0].strength_key if len(built) == 1 else f"{key}.coil"
+        return _FieldInfo(fields, "coils", built, strength_key)
+    if kind is _MISSING:
+        raise SceneError(f"{key}.type: missing required key ('uniform', 'gradient' or 'coils')")
+    raise SceneError(f"{key}.type: expected 'uniform', 'gradient' or 'coils'; got {_show(kind)}")
 
 
-def _parse_load(data) -> np.ndarray:
+def _parse_load(data, p: _Problems):
     key = "load"
     data = _table(data, key)
-    _check_keys(data, key, {"steps", "scales", "max_scale"})
+    p.take(_unknown_keys, data, key, {"steps", "scales", "max_scale"})
     if "scales" in data:
-        if "steps" in data:
-            raise SceneError("load.scales: give either scales or steps, not both")
+        for k in ("steps", "max_scale"):
+            if k in data:
+                p.add(f"load.{k}: give either scales or steps and max_scale, not both")
         sc = data["scales"]
-        if (
-            not isinstance(sc, list)
-            or not sc
-            or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in sc)
-        ):
-            raise SceneError("load.scales: expected a non-empty list of numbers")
-        scales = np.array(sc, dtype=float)
-        if not np.all(np.isfinite(scales)):
-            raise SceneError("load.scales: must be finite")
-        return scales
-    steps = _number(data, "steps", key, integer=True, positive=True, default=10)
-    top = _number(data, "max_scale", key, default=1.0)
+        if not isinstance(sc, list) or not sc:
+            p.add(f"load.scales: expected a non-empty list of numbers; got {_show(sc)}")
+            return _BAD
+        if len(sc) > limits.MAX_STEPS:
+            p.add(
+                f"load.scales: at most {limits.MAX_STEPS} load steps (more would take hours); "
+                f"got {len(sc)}"
+            )
+            return _BAD
+        values = [
+            p.take(
+                _plain,
+                v,
+                f"load.scales[{i}]",
+                low=-limits.MAX_SCALE,
+                high=limits.MAX_SCALE,
+                what="multiples of the scene's field",
+            )
+            for i, v in enumerate(sc)
+        ]
+        if not _ok(*values):
+            return _BAD
+        if not any(values):
+            p.add("load.scales: every scale is 0: the field is never applied (nothing to solve)")
+            return _BAD
+        return np.array(values, dtype=float)
+    steps = p.take(
+        _number,
+        data,
+        "steps",
+        key,
+        integer=True,
+        positive=True,
+        default=10,
+        low=1,
+        high=limits.MAX_STEPS,
+        what="load steps; more would take hours",
+    )
+    top = p.take(
+        _number,
+        data,
+        "max_scale",
+        key,
+        positive=True,
+        default=1.0,
+        low=0,
+        high=limits.MAX_SCALE,
+        what="a multiple of the scene's field",
+    )
+    if not _ok(steps, top):
+        return _BAD
     return top * np.arange(1, steps + 1) / steps
+
+
+def _parse_models(data, p: _Problems):
+    data = _table(data, "models")
+    p.take(_unknown_keys, data, "models", {"run"})
+    if "run" not in data:
+        p.add(f"models.run: missing required key (a list from {list(MODELS)})")
+        return _BAD
+    run = data["run"]
+    if not isinstance(run, list) or not run:
+        p.add(f"models.run: expected a non-empty list from {list(MODELS)}; got {_show(run)}")
+        return _BAD
+    ok = True
+    for i, m in enumerate(run):
+        if not isinstance(m, str) or m not in MODELS:
+            p.add(f"models.run[{i}]: unknown model {_show(m)} (one of {', '.join(MODELS)})")
+            ok = False
+        elif m in run[:i]:
+            p.add(f"models.run[{i}]: {m!r} is listed twice")
+            ok = False
+    return tuple(run) if ok else _BAD
+
+
+def _parse_rod_options(data, p: _Problems):
+    data = _table(data, "rod")
+    p.take(_unknown_keys, data, "rod", {"nodes"})
+    if "nodes" not in data:
+        return {}
+    nodes = p.take(
+        _number,
+        data,
+        "nodes",
+        "rod",
+        integer=True,
+        low=limits.MIN_NODES,
+        high=limits.MAX_NODES,
+        what="segments of the rod mesh",
+    )
+    return {"nodes": nodes} if _ok(nodes) else _BAD
+
+
+def _parse_fem_options(data, p: _Problems):
+    data = _table(data, "fem")
+    p.take(_unknown_keys, data, "fem", {"order", "elements2d", "elements3d"})
+    out: dict[str, Any] = {}
+    if "order" in data:
+        out["order"] = p.take(
+            _number,
+            data,
+            "order",
+            "fem",
+            integer=True,
+            low=1,
+            high=2,
+            what="linear or quadratic elements",
+        )
+    high = max(limits.MAX_FEM_ELEMENTS.values())
+    if "elements2d" in data:
+        out["elements2d"] = p.take(
+            _counts, data["elements2d"], "fem.elements2d", 2, high, "[40, 2]"
+        )
+    if "elements3d" in data:
+        out["elements3d"] = p.take(
+            _counts, data["elements3d"], "fem.elements3d", 3, high, "[40, 2, 1]"
+        )
+    return out if _ok(*out.values()) else _BAD
+
+
+def _parse_outputs(data, p: _Problems):
+    data = _table(data, "output")
+    p.take(_unknown_keys, data, "output", {"figures", "tables"})
+    figures = p.take(_boolean, data, "figures", "output", True)
+    tables = p.take(_boolean, data, "tables", "output", True)
+    return {"figures": figures, "tables": tables} if _ok(figures, tables) else _BAD
 
 
 def parse_scene(data: dict, source: str = "<embedded>") -> Scene:
     """Validate a scene given as a dict (as read from TOML) and build its objects.
 
+    Every key is checked (type, unit, range, and whether it applies), then the scene as a
+    whole (:func:`coilrod.scene.checks.scene_problems`: a non-zero field, a robot clear of the
+    coil windings, FEM meshes that resolve the magnetization and fit the limits).
+
+    Parameters
+    ----------
+    data : dict
+        The scene, as :func:`tomllib.loads` returns it.
+    source : str
+        Where the scene came from (a path, or "<embedded>"); its stem is the default name.
+
+    Returns
+    -------
+    Scene
+
     Raises
     ------
     SceneError
-        Naming the first invalid key and the reason.
-    """
+        Listing every problem found, one line each (``problems``).
+
+    Examples
+    --------
+    >>> scene = parse_scene({
+    ...     "robot": {"length": "40 mm", "diameter": "2 mm", "youngs_modulus": "1 MPa",
+    ...               "magnetization": {"preset": "M1"}},
+    ...     "field": {"type": "uniform", "B": "5 mT"},
+    ...     "load": {"steps": 4}})
+    >>> scene.scales.tolist(), scene.models
+    ([0.25, 0.5, 0.75, 1.0], ('rod',))
+    >>> try:
+    ...     parse_scene({"robot": {"length": "-40 mm"}, "field": {"type": "uniform"}})
+    ... except SceneError as exc:
+    ...     print(exc)
+    robot.length: must be positive; got -40 mm
+    robot.youngs_modulus: missing required key (pressure, e.g. '1 MPa')
+    robot.diameter: missing required key (or width and thickness for a rectangular section)
+    robot.magnetization: missing required key (e.g. { preset = 'M1' } or { magnitude = '128 kA/m', angle = '0 deg' })
+    field.B: missing required key (flux density, e.g. '5 mT')
+    """  # noqa: E501
+    p = _Problems()
     data = _table(data, "scene")
-    _check_keys(
+    p.take(
+        _unknown_keys,
         data,
         "",
         {"name", "description", "robot", "field", "load", "models", "rod", "fem", "output"},
-        {"robot", "field"},
     )
-    name = data.get("name", Path(source).stem)
-    rod, nu = _parse_robot(data["robot"])
-    fields, kind = _parse_field(data["field"], rod)
-    scales = _parse_load(data.get("load", {}))
-    models_tbl = _table(data.get("models", {"run": ["rod"]}), "models")
-    _check_keys(models_tbl, "models", {"run"}, {"run"})
-    run = models_tbl["run"]
-    if not isinstance(run, list) or not run:
-        raise SceneError(f"models.run: expected a non-empty list from {list(MODELS)}")
-    for m in run:
-        if m not in MODELS:
-            raise SceneError(f"models.run: unknown model {m!r} (one of {', '.join(MODELS)})")
-    rod_opts = _table(data.get("rod", {}), "rod")
-    _check_keys(rod_opts, "rod", {"nodes"})
-    rod_options = {}
-    if "nodes" in rod_opts:
-        rod_options["nodes"] = _number(rod_opts, "nodes", "rod", integer=True, low=4)
-    fem_opts = _table(data.get("fem", {}), "fem")
-    _check_keys(fem_opts, "fem", {"order", "elements2d", "elements3d"})
-    fem_options: dict[str, Any] = {}
-    if "order" in fem_opts:
-        fem_options["order"] = _number(fem_opts, "order", "fem", integer=True, low=1, high=2)
-    for k in ("elements2d", "elements3d"):
-        if k in fem_opts:
-            v = fem_opts[k]
-            n = 2 if k == "elements2d" else 3
-            if (
-                not isinstance(v, list)
-                or len(v) != n
-                or not all(isinstance(x, int) and not isinstance(x, bool) and x > 0 for x in v)
-            ):
-                raise SceneError(f"fem.{k}: expected {n} positive integers; got {v!r}")
-            fem_options[k] = tuple(v)
-    out = _table(data.get("output", {}), "output")
-    _check_keys(out, "output", {"figures", "tables"})
-    outputs = {"figures": bool(out.get("figures", True)), "tables": bool(out.get("tables", True))}
-    return Scene(
-        name=str(name),
+    name = p.take(_text, data, "name", "", Path(source).stem)
+    description = p.take(_text, data, "description", "", "")
+    robot = _BAD
+    if "robot" in data:
+        robot = p.take(_parse_robot, data["robot"], p)
+    else:
+        p.add("robot: missing required table (length, diameter, youngs_modulus, magnetization)")
+    info = _BAD
+    if "field" in data:
+        info = p.take(_parse_field, data["field"], p)
+    else:
+        p.add("field: missing required table (type = 'uniform', 'gradient' or 'coils')")
+    scales = p.take(_parse_load, data.get("load", {}), p)
+    models = p.take(_parse_models, data.get("models", {"run": ["rod"]}), p)
+    rod_options = p.take(_parse_rod_options, data.get("rod", {}), p)
+    fem_options = p.take(_parse_fem_options, data.get("fem", {}), p)
+    outputs = p.take(_parse_outputs, data.get("output", {}), p)
+    if p.lines or not _ok(robot, info, scales, models, rod_options, fem_options, outputs):
+        raise SceneError(p.lines or ["scene: invalid"])
+    rod, nu = robot
+    scene = Scene(
+        name=name,
         rod=rod,
-        fields=fields,
-        field_kind=kind,
+        fields=info.fields,
+        field_kind=info.kind,
         scales=scales,
-        models=tuple(dict.fromkeys(run)),
+        models=models,
         rod_options=rod_options,
         fem_options=fem_options,
         outputs=outputs,
-        description=str(data.get("description", "")),
+        description=description,
         source=source,
         poisson_ratio=nu,
     )
+    from .checks import scene_problems
+
+    problems = scene_problems(scene, coil_keys=info.coils, strength_key=info.strength_key)
+    if problems:
+        raise SceneError(problems)
+    return scene
 
 
 def load_scene(path: str | Path) -> Scene:
     """Read and validate a TOML scene file.
 
+    Parameters
+    ----------
+    path : str or Path
+        A UTF-8 TOML file.
+
+    Returns
+    -------
+    Scene
+
     Raises
     ------
     SceneError
-        If the file is missing, is not valid TOML, or fails validation.
+        If the file cannot be read (missing, a directory, no permission, not UTF-8), is not
+        valid TOML, or fails validation; one line per problem, each naming the file or the key.
     """
     path = Path(path)
+    if path.is_dir():
+        raise SceneError(f"{path}: is a directory, not a scene file (give a .toml file)")
     try:
-        text = path.read_text(encoding="utf-8")
+        raw = path.read_bytes()
     except OSError as exc:
-        raise SceneError(f"{path}: cannot read the scene file ({exc.strerror})") from None
+        raise SceneError(
+            f"{path}: cannot read the scene file ({exc.strerror or type(exc).__name__})"
+        ) from None
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        raise SceneError(
+            f"{path}: not UTF-8 text (byte 0x{raw[exc.start]:02x} on line {line}); save the "
+            "scene file as UTF-8"
+        ) from None
     try:
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
+    except ValueError as exc:  # TOMLDecodeError, or an integer too long for Python
         raise SceneError(f"{path}: not valid TOML ({exc})") from None
     return parse_scene(data, source=str(path))

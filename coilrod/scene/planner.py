@@ -84,6 +84,18 @@ def _box_clear_of_windings(field: coils.Field, box) -> bool:
     return not winding_contacts(field, Box(*box), margin=0.05)
 
 
+def _unused_options(scene: Scene) -> list[str]:
+    """Notes on options the scene sets for models it does not run (they have no effect)."""
+    notes = []
+    if scene.rod_options and "rod" not in scene.models:
+        notes.append("rod.nodes is set but the rod model is not run: it has no effect")
+    for name in sorted(scene.fem_options):
+        model = {"elements2d": ["fem2d"], "elements3d": ["fem3d"]}.get(name, ["fem2d", "fem3d"])
+        if not any(m in scene.models for m in model):
+            notes.append(f"fem.{name} is set but {' or '.join(model)} is not run: it has no effect")
+    return notes
+
+
 def plan_scene(scene: Scene, *, cache: bool | None = None) -> Plan:
     """Plan the solves of ``scene``.
 
@@ -107,6 +119,7 @@ def plan_scene(scene: Scene, *, cache: bool | None = None) -> Plan:
     fem = [m for m in scene.models if m.startswith("fem")]
     if not fem:
         plan.decisions.append("no FEM model requested: scikit-fem is not imported")
+    plan.decisions += _unused_options(scene)
     real = scene.fields.get("coils")
     if real is not None:
         n_fil = sum(len(p.filaments) for p in coaxial_parts(real))

@@ -11,11 +11,12 @@ from pathlib import Path
 
 import numpy as np
 
-import coils
-
 from ..errors import ConvergenceError
+from .figures import plot_scene_shapes, plot_tip_vs_field
+from .outputs import prepare_output_dir
 from .parse import Scene
 from .planner import Plan, plan_scene
+from .strength import field_strength
 
 __all__ = ["ModelRun", "SceneResult", "run_scene", "field_strength"]
 
@@ -55,25 +56,6 @@ class ModelRun:
         """Stability flag per reached scale, shape (k,) (True where the model does not say)."""
         flags = getattr(self.result, "stable", None)
         return np.ones(len(self.scales), bool) if flags is None else np.asarray(flags, bool)
-
-
-def field_strength(scene: Scene) -> tuple[float, str, float]:
-    """Reference strength of the scene's field at scale 1 and the magneto-elastic number.
-
-    Returns ``(value, label, number)``: |B| at the field's centre in T (label "B") and
-    lambda = |M| |B| A L^2 / (E I); or, for a pure-gradient field, the axial gradient in T/m
-    (label "gradient") and gamma = |M| g A L^3 / (E I).
-    """
-    rod = scene.rod
-    ideal = scene.fields.get("ideal")
-    if ideal is None:
-        ideal = coils.linearize(scene.fields["coils"], scene.fields["coils"].center)
-    b = float(np.linalg.norm(ideal.B0))
-    M = rod.magnetization.max_magnitude(rod.length)
-    if b > 0:
-        return b, "B", rod.magnetoelastic_number(b)
-    g = float(np.abs(np.linalg.eigvalsh(0.5 * (ideal.G + ideal.G.T))).max())
-    return g, "gradient", M * g * rod.area * rod.length**3 / rod.bending_stiffness
 
 
 @dataclass
@@ -185,9 +167,24 @@ class SceneResult:
         return "\n".join(lines)
 
     def write(self, out_dir: str | Path) -> list[Path]:
-        """Write tables (CSV, JSON) and figures (PNG) as the scene's outputs request."""
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
+        """Write tables (CSV, JSON) and figures (PNG) as the scene's outputs request.
+
+        Parameters
+        ----------
+        out_dir : str or Path
+            The folder (created if missing).
+
+        Returns
+        -------
+        list of Path
+            The files written.
+
+        Raises
+        ------
+        SceneError
+            If ``out_dir`` is a file or cannot be created or written (one line).
+        """
+        out = prepare_output_dir(out_dir, key="output folder")
         written = []
         if self.scene.outputs.get("tables", True):
             rows = self.table()
@@ -225,8 +222,6 @@ class SceneResult:
             written.append(path)
         if self.scene.outputs.get("figures", True):
             import matplotlib.pyplot as plt
-
-            from .figures import plot_scene_shapes, plot_tip_vs_field
 
             for name, fn in (
                 ("tip_vs_field.png", plot_tip_vs_field),
@@ -321,6 +316,15 @@ def run_scene(
                 time.perf_counter() - t0,
                 error=str(exc),
             )
+            partial = getattr(exc, "result", None)
+            if partial is not None and len(getattr(partial, "scales", ())):
+                # the solver handed over the states it reached
+                run.scales = np.asarray(partial.scales)
+                run.tip = np.asarray(partial.tip)
+                run.tip_angle = np.asarray(partial.tip_angle)
+                run.result = partial
+                result.runs.append(run)
+                continue
             # keep the part of the path that was reached (cheap for the rod: solve it again)
             reachable = scene.scales[scene.scales <= exc.reached]
             if job.model == "rod" and reachable.size and np.all(np.diff(scene.scales) > 0):

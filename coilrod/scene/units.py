@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 import re
 
-__all__ = ["UnitError", "parse_quantity", "DIMENSIONS"]
+__all__ = ["UnitError", "parse_quantity", "DIMENSIONS", "short_int"]
 
 
 class UnitError(ValueError):
@@ -62,6 +62,11 @@ def parse_quantity(value, dimension: str, key: str = "value") -> float:
     if isinstance(value, int | float):
         if dimension == "angle" and value == 0:
             return 0.0
+        if isinstance(value, int) and abs(value) >= 10**15:
+            raise UnitError(
+                f"{key}: missing unit in {short_int(value)}; write it as a string with a "
+                f"unit, e.g. '{_example(dimension)}'"
+            )
         raise UnitError(
             f"{key}: missing unit in {value!r}; write it as a string with a unit, "
             f"e.g. '{value} {next(iter(units))}' ({dimension}: {', '.join(units)})"
@@ -100,6 +105,12 @@ EXAMPLES = {
     "current": "2 A",
     "angle": "90 deg",
 }
+
+
+def short_int(value: int) -> str:
+    """A long integer for a message, e.g. "an integer of about 400 digits" (no str(), which
+    Python refuses beyond 4300 digits)."""
+    return f"an integer of about {math.ceil(value.bit_length() * math.log10(2))} digits"
 
 
 def _example(dimension: str) -> str:

@@ -1,0 +1,275 @@
+"""Checks of a well-formed scene as a whole: can it be solved, and within the limits?
+
+Everything a run would trip over is found here, before any solve, so that ``coilrod check``
+and ``coilrod run`` stop at the same problems (:func:`coilrod.scene.parse_scene` calls
+:func:`scene_problems` last):
+
+- the field is not zero, and the planar models (rod, fem2d) see some of it in their plane;
+- the magneto-elastic number at the top load stays within :data:`limits.MAX_MAGNETOELASTIC`;
+- the clamp and the undeformed robot keep clear of every coil winding, and the real field is
+  finite on the undeformed centreline (the problem names the coil);
+- FEM meshes resolve the magnetization segments and stay within the element limits.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from coils.coaxial import coaxial_parts
+
+from ..robot.sections import Circle
+from . import limits
+from .strength import field_strength
+
+__all__ = ["scene_problems", "centerline_points", "body_radius", "FEM_DEFAULT_ELEMENTS"]
+
+#: Points sampled along the undeformed centreline (the closest approach is then refined).
+CENTERLINE_SAMPLES = 2001
+#: Points of the undeformed centreline where the field itself is evaluated.
+FIELD_SAMPLES = 201
+#: ``solve_fem``'s default elements along the length, in 2D and 3D.
+FEM_DEFAULT_ELEMENTS = {2: (20, 1), 3: (20, 1, 1), "3circle": (20, 2, 1)}
+
+
+def centerline_points(length: float, n: int = CENTERLINE_SAMPLES) -> np.ndarray:
+    """Points (n, 3) in m of the undeformed centreline, from the clamp (origin) along +x."""
+    pts = np.zeros((n, 3))
+    pts[:, 0] = np.linspace(0.0, length, n)
+    return pts
+
+
+def body_radius(rod) -> float:
+    """Radius (m) of the smallest cylinder about the centreline containing the rod's body."""
+    sec = rod.section
+    if isinstance(sec, Circle):
+        return 0.5 * sec.diameter
+    return 0.5 * math.hypot(sec.width, sec.thickness)
+
+
+def _mm(x: float) -> str:
+    return f"{1e3 * x:.4g} mm"
+
+
+def _fem_elements(scene, dim: int) -> tuple[tuple[int, ...], bool]:
+    """(elements, given): the scene's FEM elements for ``dim`` or solve_fem's default."""
+    given = scene.fem_options.get(f"elements{dim}d")
+    if given is not None:
+        return tuple(given), True
+    if dim == 3 and isinstance(scene.rod.section, Circle):
+        return FEM_DEFAULT_ELEMENTS["3circle"], False
+    return FEM_DEFAULT_ELEMENTS[dim], False
+
+
+def fem_cells(scene, dim: int, elements) -> int:
+    """Number of elements of the FEM mesh ``elements`` builds (see ``coilrod.fem.rod_mesh``)."""
+    if dim == 2:
+        return elements[0] * elements[1]
+    if isinstance(scene.rod.section, Circle):  # O-grid: core square and four ring blocks
+        n, core, ring = elements
+        return n * (core * core + 4 * core * ring)
+    return elements[0] * elements[1] * elements[2]
+
+
+# -- the checks ---------------------------------------------------------------------------------
+def _zero_field(scene, coil_keys, strength_key) -> list[str]:
+    if scene.field_kind == "coils":
+        if all(c.coil.current == 0 for c in coil_keys):
+            what = "the coil carries" if len(coil_keys) == 1 else "every coil carries"
+            return [f"{strength_key}: {what} no current: the field is zero (nothing to solve)"]
+        return []
+    ideal = scene.fields["ideal"]
+    if not np.any(ideal.B0) and not np.any(ideal.G):
+        if scene.field_kind == "uniform":
+            return [f"{strength_key}: the field is zero (nothing to solve); give e.g. '5 mT'"]
+        return [
+            f"{strength_key}: the gradient is zero and there is no B0: the field is zero "
+            "(nothing to solve)"
+        ]
+    return []
+
+
+def _in_plane(scene, strength_key) -> list[str]:
+    """The planar models (rod, fem2d) see only B_x, B_y and their x-y derivatives: a scene in
+    which no field has any of them along the robot gives them nothing to solve."""
+    planar = [m for m in scene.models if m in ("rod", "fem2d")]
+    if not planar:
+        return []
+    pts = centerline_points(scene.rod.length, FIELD_SAMPLES)
+    L = scene.rod.length
+    for fld in scene.fields.values():
+        try:
+            B, G = fld.B_and_gradient(pts)
+        except ValueError:  # on a winding: reported by the clearance check
+            return []
+        total = np.abs(B).max() + L * np.abs(G).max()
+        plane = np.abs(B[:, :2]).max() + L * np.abs(G[:, :2, :2]).max()
+        if plane > 1e-12 * total:
+            return []  # this field bends the rod in its plane
+    key = {"uniform": "field.direction", "gradient": "field.axis"}.get(
+        scene.field_kind, strength_key
+    )
+    return [
+        f"{key}: the field has no component in the bending plane (x-y) along the robot, so the "
+        f"planar models ({', '.join(planar)}) would see no load; turn the field into the x-y "
+        "plane or run fem3d only"
+    ]
+
+
+def _magnetoelastic(scene, strength_key) -> list[str]:
+    _, label, number = field_strength(scene)
+    top = float(np.max(np.abs(scene.scales))) * number
+    if not top <= limits.MAX_MAGNETOELASTIC:
+        sym = "lambda = |M| |B| A L^2 / (E I)" if label == "B" else "gamma = |M| g A L^3 / (E I)"
+        return [
+            f"{strength_key}: at the top load the magneto-elastic number {sym} is {top:.3g}, "
+            f"more than the {limits.MAX_MAGNETOELASTIC:g} coilrod solves (the rod would just "
+            "line up with the field); lower the field, the magnetization or the load"
+        ]
+    return []
+
+
+def _closest(dist, length: float) -> tuple[float, float]:
+    """(s, d): the arc length in [0, length] where ``dist(s)`` (vectorised) is smallest."""
+    from scipy.optimize import minimize_scalar
+
+    s = np.linspace(0.0, length, CENTERLINE_SAMPLES)
+    d = dist(s)
+    k = int(np.argmin(d))
+    best = (float(s[k]), float(d[k]))
+    lo, hi = s[max(k - 1, 0)], s[min(k + 1, len(s) - 1)]
+    if hi > lo:
+        res = minimize_scalar(
+            lambda x: float(dist(np.array([x]))[0]),
+            bounds=(lo, hi),
+            method="bounded",
+            options={"xatol": 1e-12 * length},
+        )
+        if res.fun < best[1]:
+            best = (float(res.x), float(res.fun))
+    return best
+
+
+def _clearance(scene, coil_keys) -> list[str]:
+    """The clamp and the undeformed body against every filament and winding of every coil."""
+    problems = []
+    L = scene.rod.length
+    r = body_radius(scene.rod)
+    for c in coil_keys:
+        worst = None  # (gap, s)
+        for part in coaxial_parts(c.coil):
+
+            def local(s, part=part):
+                pts = np.zeros((len(s), 3))
+                pts[:, 0] = s
+                loc = part.to_local(pts)
+                return np.hypot(loc[:, 0], loc[:, 1]), loc[:, 2]
+
+            # a finite winding's section (rho, z) holds its filaments; else the filaments
+            boxes = [tuple(b) for b in part.windings] or [
+                (z0, a, 0.0, 0.0) for z0, a, _ in part.filaments
+            ]
+            for z0, a, w, h in boxes:
+
+                def dist(s, z0=z0, a=a, w=w, h=h):
+                    rho, z = local(s)
+                    dr = np.maximum(np.abs(rho - a) - 0.5 * h, 0.0)
+                    dz = np.maximum(np.abs(z - z0) - 0.5 * w, 0.0)
+                    return np.hypot(dr, dz)
+
+                s, d = _closest(dist, L)
+                if worst is None or d - r < worst[0]:
+                    worst = (d - r, s)
+        if worst is not None and worst[0] <= 0:
+            s = worst[1]
+            where = (
+                "the clamp (the robot's base, at the origin)"
+                if s <= 1e-9 * L
+                else f"the undeformed robot, at s = {_mm(s)} from the clamp,"
+            )
+            problems.append(
+                f"{c.key}: {where} touches the winding of this coil (the robot's body reaches "
+                f"{_mm(r)} from its centreline); move the coil (center, radius, spacing) or "
+                "change the robot"
+            )
+            continue
+        # the real field on the undeformed centreline, as the solvers will first evaluate it
+        try:
+            B, G = c.coil.B_and_gradient(centerline_points(L, FIELD_SAMPLES))
+        except ValueError as exc:
+            problems.append(f"{c.key}: the field cannot be evaluated on the robot ({exc})")
+            continue
+        if not (np.all(np.isfinite(B)) and np.all(np.isfinite(G))):
+            problems.append(f"{c.key}: the field is not finite on the undeformed robot")
+    return problems
+
+
+def _fem(scene) -> list[str]:
+    problems = []
+    steps = len(scene.scales)
+    L = scene.rod.length
+    edges = getattr(scene.rod.magnetization, "segment_edges", None)
+    for model in scene.models:
+        if not model.startswith("fem"):
+            continue
+        dim = 2 if model == "fem2d" else 3
+        key = f"fem.elements{dim}d"
+        elements, given = _fem_elements(scene, dim)
+        what = f"{list(elements)}" if given else f"the default {list(elements)} of {model}"
+        cells = fem_cells(scene, dim, elements)
+        if cells > limits.MAX_FEM_ELEMENTS[dim]:
+            problems.append(
+                f"{key}: {what} makes {cells} elements; at most "
+                f"{limits.MAX_FEM_ELEMENTS[dim]} in {dim}D (about 2 GB of memory)"
+            )
+        elif cells * steps > limits.MAX_FEM_ELEMENT_STEPS[dim]:
+            problems.append(
+                f"{key}: {what} makes {cells} elements, times {steps} load steps "
+                f"= {cells * steps} element-steps; at most {limits.MAX_FEM_ELEMENT_STEPS[dim]} "
+                f"in {dim}D (about 20 minutes per field): use fewer elements or load steps"
+            )
+        if edges is not None:
+            shortest = float(np.min(np.diff(edges)))
+            n = elements[0]
+            if L / n > shortest * (1 + 1e-9):
+                need = math.ceil(L / shortest * (1 - 1e-9))
+                fix = (
+                    f"use at least {need}"
+                    if given
+                    else f"give {key} = [{need}, {', '.join(map(str, elements[1:]))}]"
+                )
+                problems.append(
+                    f"{key}[0]: {what}: {n} elements along the robot are {_mm(L / n)} long, "
+                    f"longer than its shortest magnetization segment ({_mm(shortest)}), "
+                    f"which the mesh cannot resolve; {fix}"
+                )
+    return problems
+
+
+def scene_problems(scene, coil_keys=(), strength_key: str = "field") -> list[str]:
+    """Every reason a well-formed ``scene`` cannot be solved (empty: it can).
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene whose keys are valid one by one.
+    coil_keys : sequence
+        The parsed coils with their scene keys (``key``, ``coil``, ``strength_key``).
+    strength_key : str
+        The key that sets the field's strength (``field.B``, ``field.coil[0].current``, ...).
+
+    Returns
+    -------
+    list of str
+        One line per problem, each starting with the key to change.
+    """
+    zero = _zero_field(scene, list(coil_keys), strength_key)
+    if zero:
+        return zero
+    problems = _clearance(scene, list(coil_keys))
+    if not problems:  # the field along the robot is known only once it is clear of the coils
+        problems += _in_plane(scene, strength_key)
+    problems += _magnetoelastic(scene, strength_key)
+    problems += _fem(scene)
+    return problems

@@ -1,0 +1,79 @@
+"""The output folder of a run, checked (and created) before anything is solved."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+from .parse import SceneError
+
+__all__ = ["prepare_output_dir"]
+
+
+def _nearest_existing(path: Path) -> Path:
+    anc = path
+    while not anc.exists() and anc != anc.parent:
+        anc = anc.parent
+    return anc
+
+
+def prepare_output_dir(path: str | Path, *, create: bool = True, key: str = "--out") -> Path:
+    """Make sure the results can be written to the folder ``path``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The output folder; it may not exist yet.
+    create : bool
+        Create the folder (and its parents) and try writing a file in it (True), or only check
+        that it could be created and written (False: nothing on disk changes).
+    key : str
+        The name of the setting, for the message (the CLI option ``--out``).
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    SceneError
+        One line naming ``key``, the folder and the reason: an existing file, a parent that is
+        a file, no permission to create or write.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> with tempfile.TemporaryDirectory() as root:
+    ...     prepare_output_dir(pathlib.Path(root) / "results" / "run1").is_dir()
+    True
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise SceneError(
+            f"{key}: {path} is an existing file, not a folder; give a folder (new or existing) "
+            "for the results"
+        )
+    anc = _nearest_existing(path)
+    if not anc.is_dir():
+        raise SceneError(f"{key}: cannot create the folder {path}: {anc} is a file")
+    if not create:
+        if not os.access(anc, os.W_OK | os.X_OK):
+            what = "write in" if anc == path else "create folders in"
+            raise SceneError(f"{key}: cannot {what} {anc} (permission denied)")
+        return path
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SceneError(
+            f"{key}: cannot create the folder {path} ({exc.strerror or type(exc).__name__})"
+        ) from None
+    try:
+        with tempfile.NamedTemporaryFile(dir=path, prefix=".coilrod-write-test-"):
+            pass
+    except OSError as exc:
+        raise SceneError(
+            f"{key}: cannot write in {path} ({exc.strerror or type(exc).__name__})"
+        ) from None
+    return path
