@@ -15,7 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import magnetic as mag
-from .linalg import factorize
+from .linalg import SymmetricFactorizer
 from .material import isochoric, jacobian_derivatives, neo_hookean, plane_stress
 
 __all__ = ["Assembler", "Evaluation", "INTORDER"]
@@ -189,6 +189,7 @@ class Assembler:
             self.Minv = np.linalg.inv(self.Mp)
             self.volumes = self.w.sum(axis=1)
         self._lam3 = None
+        self._factorizer = SymmetricFactorizer()
 
     # -- sparsity ---------------------------------------------------------------------------
     def _build_pattern(self, fixed: np.ndarray) -> None:
@@ -278,8 +279,15 @@ class Assembler:
 
     # -- linear algebra of a Newton step ----------------------------------------------------
     def factorize(self, ev: Evaluation):
-        """Sparse LU of the (condensed) tangent of ``ev``."""
-        return factorize(ev.tangent)
+        """Factorisation of the (condensed, symmetric) tangent of ``ev``.
+
+        Returns a :class:`coilrod.fem.linalg.Factorization`: ``factor.solve(b)`` for ``b`` of
+        shape (n_free,) or (n_free, k); :func:`~coilrod.fem.linalg.determinant_sign` and
+        :func:`~coilrod.fem.linalg.negative_eigenvalues` read its sign and inertia.  The
+        fill-reducing ordering of the fixed sparsity pattern is computed at the first call
+        and reused.
+        """
+        return self._factorizer(ev.tangent)
 
     def _recover(self, ev: Evaluation, du: np.ndarray, ra) -> np.ndarray:
         """Append the element pressure increments ``K Minv (ra + B du)`` to ``du``."""

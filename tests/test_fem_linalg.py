@@ -1,0 +1,170 @@
+"""FEM linear algebra: factorisation, solves, determinant sign and inertia of the tangent.
+
+Cross-checks (each against an independent reference):
+
+* solves with one and several right-hand sides against ``scipy.sparse.linalg.spsolve``;
+* the number of negative eigenvalues (Sylvester inertia of the LDL^T in a symmetric
+  ordering) against ``numpy.linalg.eigvalsh`` of the dense tangent: a straight rod past its
+  Euler load in an antiparallel field (3D square section: the two bending eigenvalues are
+  negative together, which the determinant's sign cannot see), a rod in a compressive
+  field gradient, the unloaded (positive definite) rod;
+* the determinant's sign against ``numpy.linalg.slogdet``;
+* zero and tiny diagonal pivots: the factorisation falls back to off-diagonal pivots, the
+  solve stays accurate and the inertia is reported as unknown (None) or correct;
+* a second matrix of the same pattern reuses the ordering, a new pattern is re-analysed.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy.sparse.linalg import spsolve
+
+import coilrod
+import coils
+from coilrod import presets
+from coilrod.fem.linalg import (
+    SymmetricFactorizer,
+    determinant_sign,
+    factorize,
+    fill_reducing_ordering,
+    negative_eigenvalues,
+)
+
+L = 0.04
+D = L / 20
+
+
+def _dense_negatives(K) -> int:
+    ev = np.linalg.eigvalsh(K.toarray())
+    # the count is only meaningful if no eigenvalue sits at round-off level
+    assert np.abs(ev).min() > 1e-12 * np.abs(ev).max()
+    return int(np.count_nonzero(ev < 0))
+
+
+def _equilibria(rod, field, scales, dim, elements):
+    """The assembler and its evaluations at the converged states of ``scales``."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", coilrod.StabilityWarning)
+        res = coilrod.solve_fem(rod, field, scales, dim=dim, elements=elements)
+    asm = res._asm
+    return asm, [asm.evaluate(z, s) for z, s in zip(res._states, scales, strict=True)]
+
+
+def _random_symmetric(n, negatives, seed=0, density=0.05):
+    """Sparse symmetric matrix with a chosen number of negative eigenvalues."""
+    rng = np.random.default_rng(seed)
+    A = sp.random(n, n, density=density, random_state=rng)
+    A = A + A.T
+    ev = np.linalg.eigvalsh(A.toarray())
+    # shift so that exactly `negatives` eigenvalues lie below zero, away from it
+    shift = -0.5 * (ev[negatives - 1] + ev[negatives]) if negatives else 1.0 - ev[0]
+    return sp.csr_matrix(A + shift * sp.eye(n))
+
+
+def test_solve_matches_spsolve_one_and_many_rhs():
+    K = _random_symmetric(200, 7, seed=1)
+    rng = np.random.default_rng(2)
+    b, B = rng.normal(size=200), rng.normal(size=(200, 3))
+    f = SymmetricFactorizer()(K)
+    np.testing.assert_allclose(f.solve(b), spsolve(K.tocsc(), b), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(f.solve(B), spsolve(K.tocsc(), B), rtol=1e-9, atol=1e-12)
+    assert f.solve(B).shape == (200, 3)
+    # the stateless general LU agrees
+    np.testing.assert_allclose(factorize(K).solve(B), spsolve(K.tocsc(), B), rtol=1e-9)
+
+
+@pytest.mark.parametrize("negatives", [0, 1, 2, 13])
+def test_inertia_and_sign_of_random_symmetric_matrices(negatives):
+    K = _random_symmetric(150, negatives, seed=negatives)
+    f = SymmetricFactorizer()(K)
+    assert negative_eigenvalues(f) == _dense_negatives(K) == negatives
+    assert determinant_sign(f) == np.linalg.slogdet(K.toarray())[0]
+
+
+@pytest.mark.parametrize("method", ["rcm", "mmd"])
+def test_orderings_are_permutations_that_keep_the_inertia(method):
+    K = _random_symmetric(120, 3, seed=5)
+    p = fill_reducing_ordering(K, method)
+    np.testing.assert_array_equal(np.sort(p), np.arange(120))
+    f = SymmetricFactorizer(methods=(method,))(K)
+    assert f.perm is not None
+    assert negative_eigenvalues(f) == 3
+
+
+def test_square_section_past_euler_load_has_two_negative_eigenvalues():
+    """M along +x, B along -x: the straight rod is an equilibrium at every load; past the
+    clamped-free Euler load lambda = pi^2/4 both bending modes of the square section are
+    unstable.  Two eigenvalues cross zero together: det keeps its sign, the inertia does not."""
+    rod = coilrod.Rod(L, 1e6, coilrod.Rectangle(D, D), presets.M1())
+    field = coils.UniformField((-rod.field_for_lambda(1.0), 0.0, 0.0))
+    asm, (ev_low, ev_high) = _equilibria(rod, field, [2.0, 3.5], 3, (8, 1, 1))
+    low, high = asm.factorize(ev_low), asm.factorize(ev_high)
+    K_low, K_high = ev_low.tangent, ev_high.tangent
+    assert negative_eigenvalues(low) == _dense_negatives(K_low) == 0
+    assert negative_eigenvalues(high) == _dense_negatives(K_high) == 2
+    sign = np.linalg.slogdet(K_high.toarray())[0]
+    assert determinant_sign(high) == determinant_sign(low) == sign == 1
+
+
+def test_inertia_in_a_compressive_field_gradient():
+    """Maxwell gradient with B antiparallel to M: the near-straight state is unstable."""
+    rod = coilrod.Rod(L, 1e6, coilrod.Rectangle(D, D), presets.M1())
+    g = 10 * rod.bending_stiffness / (rod.magnetization.max_magnitude(L) * rod.area * L**3)
+    field = coils.LinearField(
+        (0.0, 1e-2 * rod.field_for_lambda(1.0), 0.0), coils.maxwell_gradient(g), (0.0, 0.0, 0.0)
+    )
+    asm, evs = _equilibria(rod, field, [0.05, 2.0, 4.0], 2, (10, 1))
+    counts = []
+    for ev in evs:
+        K, f = ev.tangent, asm.factorize(ev)
+        counts.append(negative_eigenvalues(f))
+        assert counts[-1] == _dense_negatives(K)
+        assert determinant_sign(f) == np.linalg.slogdet(K.toarray())[0]
+    assert counts[0] == 0
+    assert counts[-1] >= 1
+
+
+def test_zero_diagonal_pivot_falls_back_to_off_diagonal_pivots():
+    # [[0, 1], [1, 0]] blocks: every diagonal pivot is zero; eigenvalues +-1
+    K = sp.csr_matrix(sp.kron(sp.eye(5), np.array([[0.0, 1.0], [1.0, 0.0]])))
+    f = SymmetricFactorizer()(K)
+    b = np.arange(1.0, 11.0)
+    np.testing.assert_allclose(f.solve(b), spsolve(K.tocsc(), b), rtol=1e-12)
+    assert negative_eigenvalues(f) in (None, 5)  # None: the pivots left the diagonal
+    assert determinant_sign(f) == np.linalg.slogdet(K.toarray())[0] == -1
+
+
+def test_tiny_diagonal_pivots_are_refactorised_with_threshold_pivoting():
+    # [[e, 1], [1, e]] blocks, e = 1e-20: well conditioned (eigenvalues ~ +-1), but LDL^T with
+    # diagonal pivots computes d2 = e - 1/e and loses the solution entirely
+    K = sp.csr_matrix(sp.kron(sp.eye(5), np.array([[1e-20, 1.0], [1.0, 1e-20]])))
+    f = SymmetricFactorizer()(K)
+    diagonal = f.lu
+    b = np.tile([1.0, 2.0], 5)
+    x = f.solve(b)
+    assert f.lu is not diagonal  # refactorised
+    np.testing.assert_allclose(x, np.linalg.solve(K.toarray(), b), rtol=1e-12)
+    assert np.abs(K @ x - b).max() < 1e-12
+    assert negative_eigenvalues(f) in (None, 5)
+    assert determinant_sign(f) == np.linalg.slogdet(K.toarray())[0] == -1
+
+
+def test_same_pattern_reuses_the_ordering_new_pattern_is_analysed():
+    K1 = _random_symmetric(100, 2, seed=8)
+    factorizer = SymmetricFactorizer()
+    factorizer(K1)
+    perm = factorizer.perm
+    K2 = sp.csr_matrix((K1.data * 1.5 + 0.1, K1.indices, K1.indptr), shape=K1.shape)
+    f2 = factorizer(K2)
+    assert factorizer.perm is perm
+    b = np.ones(100)
+    np.testing.assert_allclose(f2.solve(b), spsolve(K2.tocsc(), b), rtol=1e-9, atol=1e-12)
+    K3 = _random_symmetric(100, 4, seed=9)
+    f3 = factorizer(K3)
+    assert factorizer.perm is not perm
+    np.testing.assert_allclose(f3.solve(b), spsolve(K3.tocsc(), b), rtol=1e-9, atol=1e-12)
+    assert negative_eigenvalues(f3) == 4
