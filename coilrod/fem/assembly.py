@@ -195,7 +195,11 @@ class Assembler:
             self.Minv = np.linalg.inv(self.Mp)
             self.volumes = self.w.sum(axis=1)
         self._lam3 = None
-        self._factorizer = SymmetricFactorizer()
+        # factorisations: levels of the block Cholesky grow from the clamped end
+        x_free = self.nodes[0][self.free // dim]
+        self._factorizer = SymmetricFactorizer(
+            start=np.flatnonzero(x_free <= x_free.min() + 1e-9 * self.length)
+        )
 
     # -- sparsity ---------------------------------------------------------------------------
     def _build_pattern(self, fixed: np.ndarray) -> None:
