@@ -369,8 +369,10 @@ class SymmetricFactorizer:
 
     When a level structure from ``start`` makes the matrix block tridiagonal with a cheap
     enough dense factorisation (:data:`BLOCK_FLOP_RATIO`), positive definite matrices are
-    factorised by :class:`BlockCholesky`; the others (and any matrix after a failed
-    Cholesky, for the next :attr:`retry` calls) by SuperLU in symmetric mode.
+    factorised by :class:`BlockCholesky`; the others by SuperLU in symmetric mode.  An
+    isolated indefinite matrix (a Newton iterate off the path) costs one failed Cholesky;
+    after two failures in a row (an unstable branch) SuperLU is used directly for the next
+    :attr:`retry` calls.
 
     Parameters
     ----------
@@ -390,8 +392,8 @@ class SymmetricFactorizer:
     (True, 1)
     """
 
-    #: After a failed block Cholesky (an indefinite matrix), SuperLU is used directly for
-    #: this many calls before the Cholesky is tried again.
+    #: After two failed block Choleskys in a row (indefinite matrices), SuperLU is used
+    #: directly for this many calls before the Cholesky is tried again.
     retry = 4
 
     def __init__(self, methods=("rcm", "mmd"), start=None, block: bool = True):
@@ -401,7 +403,7 @@ class SymmetricFactorizer:
         self.perm = None
         self.method = None
         self.block = None
-        self._skip = 0
+        self._skip = self._failures = 0
         self._pattern = None
         self._map = None
         self._indptr = self._indices = None
@@ -440,7 +442,7 @@ class SymmetricFactorizer:
         self._indptr, self._indices = Kp.indptr, Kp.indices
         self._pattern = (K.indptr, K.indices)
         self.perm = p
-        self.block, self._skip = None, 0
+        self.block, self._skip, self._failures = None, 0, 0
         if self.allow_block:
             self.block = self._block_analysis(K, best[0])
 
@@ -481,8 +483,11 @@ class SymmetricFactorizer:
             else:
                 factor = self.block.factor(K)
                 if factor is not None:
+                    self._failures = 0
                     return factor
-                self._skip = self.retry
+                self._failures += 1
+                if self._failures >= 2:
+                    self._skip, self._failures = self.retry, 0
         Kp = self.permuted(K)
         try:
             lu = _superlu(Kp, SYMMETRIC_OPTIONS)
