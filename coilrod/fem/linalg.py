@@ -16,9 +16,10 @@ backward error above :data:`BACKWARD_ERROR_LIMIT`) is replaced by threshold pivo
 Slender bodies (the rod meshes) have a level structure: ordered by breadth-first levels from
 the clamped end, ``K`` is block tridiagonal and each level couples forward only through its
 last rows.  :class:`BlockCholesky` factorises such a matrix level by level with dense LAPACK
-(``potrf``, ``trsm``, ``syrk``), several times faster than SuperLU's sparse LU there; it
-applies when the tangent is positive definite (a stable state: no negative eigenvalue) and
-the factorizer falls back to the SuperLU LDL^T otherwise.
+(``potrf``, ``trsm``, ``syrk``), several times faster than SuperLU's sparse LU there.  The
+factorizer tries it first when the pattern suits it: it succeeds exactly when the tangent is
+positive definite (a stable state: no negative eigenvalue) and the SuperLU LDL^T takes over
+otherwise, so every factor reveals the inertia unless SuperLU had to pivot off the diagonal.
 """
 
 from __future__ import annotations
@@ -28,7 +29,9 @@ import numpy as np
 __all__ = [
     "BACKWARD_ERROR_LIMIT",
     "BLOCK_FLOP_RATIO",
+    "BLOCK_MAX_LEVEL",
     "BlockCholesky",
+    "BlockCholeskyFactor",
     "LU_OPTIONS",
     "SYMMETRIC_OPTIONS",
     "Factorization",
@@ -423,14 +426,21 @@ class SymmetricFactorizer:
         K.sort_indices()
         best = None
         for method in self.methods:
-            p = fill_reducing_ordering(K, method)
             try:
-                lu = _superlu(sp.csc_matrix(K[p][:, p]), SYMMETRIC_OPTIONS)
+                if method == "mmd":  # one factorisation gives the ordering and its cost
+                    options = dict(SYMMETRIC_OPTIONS, permc_spec="MMD_AT_PLUS_A")
+                    lu = _superlu(sp.csc_matrix(K), options)
+                    p = np.argsort(lu.perm_c)
+                else:
+                    p = fill_reducing_ordering(K, method)
+                    lu = _superlu(sp.csc_matrix(K[p][:, p]), SYMMETRIC_OPTIONS)
+                cost = _cholesky_flops(lu)
             except RuntimeError:  # exactly singular in this ordering: not a candidate
-                lu = None
-            cost = _cholesky_flops(lu) if lu is not None else np.inf
+                continue
             if best is None or cost < best[0]:
                 best = (cost, method, p)
+        if best is None:
+            best = (np.inf, "rcm", fill_reducing_ordering(K, "rcm"))
         _, self.method, p = best
         # index map: data of K (CSR) -> data of K[p][:, p] (CSC; symmetric pattern)
         index = sp.csr_matrix(
