@@ -197,6 +197,17 @@ def _slender_laplacian(nx=30, ny=3, nz=3, shift=0.0):
     return Kp, start
 
 
+@pytest.fixture
+def always_block(monkeypatch):
+    """Make the factorizer choose the block Cholesky whenever the levels allow it (the cost
+    model would give small test matrices to SuperLU)."""
+    from coilrod.fem import linalg
+
+    monkeypatch.setattr(linalg, "BLOCK_FLOP_RATIO", np.inf)
+    monkeypatch.setattr(linalg, "BLOCK_LEVEL_COST", 0.0)
+
+
+@pytest.mark.usefixtures("always_block")
 def test_block_cholesky_of_a_slender_positive_definite_matrix():
     K, start = _slender_laplacian(shift=0.1)
     block = BlockCholesky(K, start)
@@ -216,6 +227,7 @@ def test_block_cholesky_of_a_slender_positive_definite_matrix():
     np.testing.assert_allclose(g.solve(b), spsolve(K.tocsc(), b), rtol=1e-10, atol=1e-12)
 
 
+@pytest.mark.usefixtures("always_block")
 def test_block_cholesky_falls_back_to_ldlt_for_indefinite_matrices():
     K, start = _slender_laplacian(shift=-1.5)  # lowest Laplacian eigenvalue ~ 1.18
     factorizer = SymmetricFactorizer(start=start)
@@ -244,6 +256,7 @@ def test_block_cholesky_falls_back_to_ldlt_for_indefinite_matrices():
 
 
 def test_fem_tangent_uses_the_block_cholesky_at_a_stable_state():
+    # (chosen by the cost model itself: a 3D Q2 rod mesh)
     rod = coilrod.Rod(L, 1e6, coilrod.Rectangle(D, D), presets.M1())
     field = coils.UniformField((0.0, rod.field_for_lambda(1.0), 0.0))
     asm, (ev,) = _equilibria(rod, field, [3.0], 3, (6, 1, 1))

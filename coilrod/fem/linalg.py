@@ -29,7 +29,9 @@ import numpy as np
 __all__ = [
     "BACKWARD_ERROR_LIMIT",
     "BLOCK_FLOP_RATIO",
+    "BLOCK_LEVEL_COST",
     "BLOCK_MAX_LEVEL",
+    "SPARSE_DOF_COST",
     "BlockCholesky",
     "BlockCholeskyFactor",
     "LU_OPTIONS",
@@ -66,9 +68,14 @@ _THRESHOLD_OPTIONS = {
 #: pivoting.
 BACKWARD_ERROR_LIMIT = 1e-9
 
-#: The level-by-level dense Cholesky is used when its operation count is at most this many
-#: times that of the sparse factor (dense BLAS-3 runs several times faster per operation).
-BLOCK_FLOP_RATIO = 4.0
+#: Cost model of the choice between the level-by-level dense Cholesky and SuperLU, in units
+#: of one SuperLU operation (measured on a 2-core AMD EPYC, single-threaded OpenBLAS): dense
+#: BLAS-3 runs this many times faster per operation, ...
+BLOCK_FLOP_RATIO = 6.0
+#: ... each level costs about this much in call overhead (factorisation and one solve), ...
+BLOCK_LEVEL_COST = 6e4
+#: ... and SuperLU about this much per dof besides its operations.
+SPARSE_DOF_COST = 2.7e3
 
 #: Largest level (dofs) of the block Cholesky: bounds the dense blocks' memory and time.
 BLOCK_MAX_LEVEL = 4000
@@ -371,7 +378,8 @@ class SymmetricFactorizer:
     data; later calls with the same pattern only gather and factorise.
 
     When a level structure from ``start`` makes the matrix block tridiagonal with a cheap
-    enough dense factorisation (:data:`BLOCK_FLOP_RATIO`), positive definite matrices are
+    enough dense factorisation (:data:`BLOCK_FLOP_RATIO`, :data:`BLOCK_LEVEL_COST`,
+    :data:`SPARSE_DOF_COST`: a model of the time of each), positive definite matrices are
     factorised by :class:`BlockCholesky`; the others by SuperLU in symmetric mode.  An
     isolated indefinite matrix (a Newton iterate off the path) costs one failed Cholesky;
     after two failures in a row (an unstable branch) SuperLU is used directly for the next
@@ -466,7 +474,9 @@ class SymmetricFactorizer:
             block = BlockCholesky(K, start)
         except ValueError:  # not connected
             return None
-        if block.sizes.max() > BLOCK_MAX_LEVEL or block.flops > BLOCK_FLOP_RATIO * sparse_flops:
+        block_cost = block.flops / BLOCK_FLOP_RATIO + BLOCK_LEVEL_COST * block.sizes.size
+        sparse_cost = sparse_flops + SPARSE_DOF_COST * K.shape[0]
+        if block.sizes.max() > BLOCK_MAX_LEVEL or block_cost > sparse_cost:
             return None
         return block
 
