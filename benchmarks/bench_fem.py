@@ -3,8 +3,10 @@
 Prints (and writes to benchmarks/results/fem.md), with the machine:
 
 1. one Newton iteration on a 3D quadratic (Q2, mixed) box mesh of >= 20,000 dofs: the
-   vectorised assembly of residual + tangent against the sparse LU factorisation + solve
-   (SuperLU) of the same tangent;
+   vectorised assembly of residual + tangent (now: dyadic tangent; before: the dense
+   3x3x3x3 tangent) against the factorisation + solve of the same tangent (before: SuperLU LU
+   with COLAMD; SuperLU LDL^T in a fixed RCM or minimum-degree ordering; now:
+   ``Assembler.factorize``, the level-by-level block Cholesky on this slender mesh);
 2. the 3D order-2 20x1x1 box rod, M(1) in a uniform field, lambda to 10 in 20 load steps:
    total time and Newton iterations, against the time of 10 assemblies of the same
    (displacement-form) neo-Hookean tangent written as a plain scikit-fem ``BilinearForm``;
@@ -55,35 +57,87 @@ def uniform(rod, lam=1.0):
     return coils.UniformField((0.0, rod.field_for_lambda(lam), 0.0))
 
 
+def _dense_tangent_evaluate(asm, z, scale):
+    """The assembly as before the dyadic kernel: the (n, 3, 3, 3, 3) tangent formed point by
+    point (two matrix inverses) and contracted by the dense kernel (mixed u-p, uniform
+    field).  Returns the evaluation and the element matrices of the elastic part, next to
+    those of the dyadic kernel for comparison."""
+    from coilrod.fem.material import isochoric, jacobian_derivatives
+
+    d, nel, nq, nb = asm.dim, asm.nel, asm.nq, asm.nb
+    ev = asm.evaluate(z, scale, tangent=False)  # residual part (as before)
+    ue = asm.full(z)[asm.edofs].reshape(nel, nb, d)
+    F = np.matmul(asm._dN_qJ_a, ue).reshape(nel, nq, d, d).transpose(0, 1, 3, 2) + np.eye(d)
+    Ff = F.reshape(-1, d, d)
+    inv = (np.linalg.inv(Ff), np.linalg.det(Ff))
+    _, _, A = isochoric(Ff, asm.shear, inv=inv)
+    _, _, d2J = jacobian_derivatives(Ff, inv=(np.linalg.inv(Ff), inv[1]))
+    p = asm.pressure(z).reshape(-1)
+    A = A + p[:, None, None, None, None] * d2J
+    Ke = asm._elastic_kernel(A.reshape(nel, nq, d, d, d, d))
+    Ke += np.matmul(
+        np.swapaxes(ev.constraint_matrix, 1, 2),
+        asm.bulk * np.einsum("eij,ejb->eib", asm.Minv, ev.constraint_matrix),
+    )
+    ev.tangent = asm._sparse(Ke)
+    return ev
+
+
 def section_assembly_vs_solve():
+    from scipy.sparse.linalg import splu
+
+    from coilrod.fem.linalg import SYMMETRIC_OPTIONS, SymmetricFactorizer, negative_eigenvalues
+
     rod = box_rod()
     G, K = moduli(rod.youngs_modulus, 0.4995)
     mesh = rod_mesh(rod, 3, (40, 4, 5))
     asm = Assembler(mesh, 2, rod, uniform(rod, 2.0), G, K)
-    # a smooth bent state (cantilever-like) to assemble at
-    X = asm.nodes
-    u = np.zeros_like(X)
-    u[1] = 0.2 * X[0] ** 2 / L
-    u[0] = -0.2 * X[1] * 2 * X[0] / L
-    z = np.zeros(asm.size)
-    z[: asm.nfree] = u.T.ravel()[asm.free]
-    z = asm.with_consistent_pressure(z)
+    # a mildly bent state with a positive definite tangent: the linear response to 1/200 of
+    # the load, with consistent pressures (at larger fractions of the linear response the
+    # spurious volume change of the unrotated bending field, times K/G = 1000, makes the
+    # tangent indefinite: the LDL^T inertia counts the negative eigenvalues)
+    ev0 = asm.evaluate(np.zeros(asm.size), 0.0)
+    z = asm.with_consistent_pressure(0.005 * asm.load_tangent(ev0, asm.factorize(ev0)))
     t_asm, ev = best(lambda: asm.evaluate(z, 1.0, tangent=True))
-    t_fac, lu = best(lambda: asm.factorize(ev), repeat=2)
+    t_dense, ev_dense = best(lambda: _dense_tangent_evaluate(asm, z, 1.0), repeat=2)
+    same = abs(ev_dense.tangent - ev.tangent).max() / abs(ev.tangent).max()
+    Kt = ev.tangent
+    rows = []  # (name, factorise, solve)
+    t_fac, lu = best(lambda: splu(Kt.T, permc_spec="COLAMD"), repeat=2)
     t_sol, _ = best(lambda: lu.solve(ev.residual))
+    rows.append(("SuperLU LU, COLAMD, partial pivoting (before)", t_fac, t_sol))
+    for method in ("rcm", "mmd"):
+        fz = SymmetricFactorizer(methods=(method,), block=False)
+        fz(Kt)
+        t_fac, f = best(lambda fz=fz: fz(Kt), repeat=2)
+        t_sol, _ = best(lambda f=f: f.solve(ev.residual))
+        rows.append((f"SuperLU LDL^T ({method.upper()} once, symmetric mode)", t_fac, t_sol))
+    negatives = negative_eigenvalues(f)
+    asm.factorize(ev)  # analysis of the pattern (orderings, levels), once per solve
+    t_fac, f = best(lambda: asm.factorize(ev), repeat=2)
+    t_sol, _ = best(lambda: f.solve(ev.residual))
+    kind = type(f).__name__.replace("BlockCholeskyFactor", "block Cholesky")
+    rows.append((f"Assembler.factorize: {kind} (now)", t_fac, t_sol))
     emit("## 1. One Newton iteration, 3D Q2 box 40x4x5 (mixed u-p)")
     emit()
     emit(
         f"free displacement dofs: {asm.nfree}, element pressures: {asm.size - asm.nfree}, "
-        f"tangent nnz: {ev.tangent.nnz}"
+        f"tangent nnz: {ev.tangent.nnz}; negative eigenvalues (LDL^T inertia): {negatives}; "
+        f"SuperLU options {SYMMETRIC_OPTIONS['options']}"
     )
     emit()
     emit("| step | time (s) |")
     emit("|---|---|")
-    emit(f"| assembly: residual + tangent (vectorised) | {t_asm:.3f} |")
-    emit(f"| sparse LU factorisation (SuperLU, COLAMD) | {t_fac:.3f} |")
-    emit(f"| triangular solves | {t_sol:.3f} |")
-    emit(f"| ratio assembly / (factorisation + solve) | {t_asm / (t_fac + t_sol):.2f} |")
+    emit(f"| assembly: residual + tangent (vectorised, dyadic tangent; now) | {t_asm:.3f} |")
+    emit(
+        f"| assembly: residual + tangent with the dense 3x3x3x3 tangent (before; same matrix "
+        f"to {same:.0e}) | {t_dense:.3f} |"
+    )
+    for name, tf, ts in rows:
+        emit(f"| factorisation: {name} | {tf:.3f} |")
+        emit(f"| solve: {name} | {ts:.4f} |")
+    t_fac, t_sol = rows[-1][1], rows[-1][2]
+    emit(f"| ratio assembly / (factorisation + solve), now | {t_asm / (t_fac + t_sol):.2f} |")
     emit()
 
 

@@ -15,8 +15,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import magnetic as mag
-from .linalg import factorize
-from .material import isochoric, jacobian_derivatives, neo_hookean, plane_stress
+from .linalg import SymmetricFactorizer
+from .material import (
+    inverse_and_determinant,
+    isochoric,
+    jacobian_derivatives,
+    neo_hookean,
+    plane_stress,
+)
 
 __all__ = ["Assembler", "Evaluation", "INTORDER"]
 
@@ -189,6 +195,11 @@ class Assembler:
             self.Minv = np.linalg.inv(self.Mp)
             self.volumes = self.w.sum(axis=1)
         self._lam3 = None
+        # factorisations: levels of the block Cholesky grow from the clamped end
+        x_free = self.nodes[0][self.free // dim]
+        self._factorizer = SymmetricFactorizer(
+            start=np.flatnonzero(x_free <= x_free.min() + 1e-9 * self.length)
+        )
 
     # -- sparsity ---------------------------------------------------------------------------
     def _build_pattern(self, fixed: np.ndarray) -> None:
@@ -198,20 +209,25 @@ class Assembler:
         re = red[self.edofs]  # (e, n)
         rows = np.broadcast_to(re[:, :, None], (self.nel,) + (re.shape[1],) * 2).ravel()
         cols = np.broadcast_to(re[:, None, :], (self.nel,) + (re.shape[1],) * 2).ravel()
-        keep = (rows >= 0) & (cols >= 0)
-        self._keep = np.flatnonzero(keep)
+        keep = np.flatnonzero((rows >= 0) & (cols >= 0))
         key = rows[keep].astype(np.int64) * self.nfree + cols[keep]
-        uniq, self._inv = np.unique(key, return_inverse=True)
-        self._inv = self._inv.ravel()
+        uniq, inv = np.unique(key, return_inverse=True)
         r, c = np.divmod(uniq, self.nfree)
         self._indices = c.astype(np.int32)
         self._indptr = np.concatenate(
             [[0], np.cumsum(np.bincount(r, minlength=self.nfree))]
         ).astype(np.int32)
         self.nnz = uniq.size
+        # scatter matrix: tangent data = S @ Ke.ravel() (row = stored entry, columns = the
+        # element-matrix entries that add up to it, in element order)
+        self._scatter = sp.csr_matrix(
+            (np.ones(keep.size), (inv.ravel(), keep)), shape=(self.nnz, rows.size)
+        )
+        self._scatter.sort_indices()
 
     def _sparse(self, Ke: np.ndarray) -> sp.csr_matrix:
-        data = np.bincount(self._inv, weights=Ke.reshape(-1)[self._keep], minlength=self.nnz)
+        """Global tangent on the free dofs from element matrices ``Ke`` (e, nb*d, nb*d)."""
+        data = self._scatter @ Ke.reshape(-1)
         return sp.csr_matrix((data, self._indices, self._indptr), shape=(self.nfree,) * 2)
 
     def _vector(self, re: np.ndarray) -> np.ndarray:
@@ -278,8 +294,15 @@ class Assembler:
 
     # -- linear algebra of a Newton step ----------------------------------------------------
     def factorize(self, ev: Evaluation):
-        """Sparse LU of the (condensed) tangent of ``ev``."""
-        return factorize(ev.tangent)
+        """Factorisation of the (condensed, symmetric) tangent of ``ev``.
+
+        Returns a :class:`coilrod.fem.linalg.Factorization`: ``factor.solve(b)`` for ``b`` of
+        shape (n_free,) or (n_free, k); :func:`~coilrod.fem.linalg.determinant_sign` and
+        :func:`~coilrod.fem.linalg.negative_eigenvalues` read its sign and inertia.  The
+        fill-reducing ordering of the fixed sparsity pattern is computed at the first call
+        and reused.
+        """
+        return self._factorizer(ev.tangent)
 
     def _recover(self, ev: Evaluation, du: np.ndarray, ra) -> np.ndarray:
         """Append the element pressure increments ``K Minv (ra + B du)`` to ``du``."""
@@ -315,7 +338,10 @@ class Assembler:
         ue = u[self.edofs].reshape(nel, nb, d)
         F = np.matmul(self._dN_qJ_a, ue).reshape(nel, nq, d, d).transpose(0, 1, 3, 2) + np.eye(d)
         Ff = F.reshape(-1, d, d)
-        J = np.linalg.det(Ff)
+        if d == 3:
+            Fi3, J = inverse_and_determinant(Ff)
+        else:
+            J = Ff[:, 0, 0] * Ff[:, 1, 1] - Ff[:, 0, 1] * Ff[:, 1, 0]
         minJ = float(J.min()) if np.all(np.isfinite(J)) else -np.inf
         if not minJ > 0:
             return Evaluation(ok=False, min_jacobian=minJ)
@@ -331,7 +357,7 @@ class Assembler:
         w = self.w.reshape(-1)
         Mf = self.M.reshape(-1, d)
         ev = Evaluation(ok=True, min_jacobian=minJ)
-        # elastic part
+        # elastic part: A is a dense (n, d, d, d, d) tangent (plane stress) or a DyadicTangent
         A = None
         r_extra = None
         if self.plane_stress:
@@ -339,12 +365,19 @@ class Assembler:
             W, P, A, self._lam3 = plane_stress(Ff, self.shear, self.bulk, lam0, tangent)
             energy = float(w @ W)
         else:
-            F3 = Ff if d == 3 else np.pad(Ff, ((0, 0), (0, 1), (0, 1)))
-            if d == 2:
+            if d == 3:
+                F3, inv = Ff, (Fi3, J)
+            else:  # plane strain: F33 = 1
+                F3 = np.pad(Ff, ((0, 0), (0, 1), (0, 1)))
                 F3[:, 2, 2] = 1.0
+                Fi3 = np.zeros_like(F3)
+                Fi3[:, 0, 0], Fi3[:, 1, 1] = Ff[:, 1, 1] / J, Ff[:, 0, 0] / J
+                Fi3[:, 0, 1], Fi3[:, 1, 0] = -Ff[:, 0, 1] / J, -Ff[:, 1, 0] / J
+                Fi3[:, 2, 2] = 1.0
+                inv = (Fi3, J)
             if self.mixed:
-                W, P, A = isochoric(F3, self.shear, tangent)
-                J3, dJ, d2J = jacobian_derivatives(F3, tangent)
+                W, P, A = isochoric(F3, self.shear, tangent, dyadic=True, inv=inv)
+                J3, dJ, d2J = jacobian_derivatives(F3, tangent, dyadic=True, inv=inv)
                 a = z[self.nfree :].reshape(nel, -1)
                 p = np.einsum("ei,eqi->eq", a, self.phi).reshape(-1)
                 g = np.einsum("eq,eqi->ei", self.w * (J3 - 1.0).reshape(nel, nq), self.phi)
@@ -366,13 +399,11 @@ class Assembler:
                 ev.constraint_residual = ra
                 ev.constraint_norm = float(np.max(np.abs(ra) / self.volumes[:, None]))
                 if tangent:
-                    A = A + p[:, None, None, None, None] * d2J
+                    A = A + d2J.scaled(p)
             else:
-                W, P, A = neo_hookean(F3, self.shear, self.bulk, tangent)
+                W, P, A = neo_hookean(F3, self.shear, self.bulk, tangent, dyadic=True, inv=inv)
                 energy = float(w @ W)
             P = P[:, :d, :d]
-            if tangent:
-                A = A[:, :d, :d, :d, :d]
         # elastic and magnetic (per unit scale) stresses tested with grad(du) in one matmul
         Pm = mag.magnetic_stress(Mf, B)
         PP = np.concatenate([P, Pm], axis=1) * w[:, None, None]  # (n, 2d, d): [i or d+i, J]
@@ -392,7 +423,10 @@ class Assembler:
             ev.residual += self._vector(r_extra)
         ev.load_rate = rm
         if tangent:
-            Ke = self._elastic_kernel(A.reshape(nel, nq, d, d, d, d))
+            if self.plane_stress:
+                Ke = self._elastic_kernel(A.reshape(nel, nq, d, d, d, d))
+            else:
+                Ke = self._dyadic_kernel(A)
             if self.mixed and not self.plane_stress:
                 Ke += np.matmul(np.swapaxes(Bm, 1, 2), KMB)
             if G is not None and scale != 0.0:
@@ -416,6 +450,57 @@ class Assembler:
             Y = np.matmul(AJ, wdNT).reshape(ne, nq * d, d * d * nb)  # (e,(q,J),(i,k,b))
             K = np.matmul(self._dN_a_qJ[sl], Y).reshape(ne, nb, d, d, nb)  # (e,a,i,k,b)
             out[sl] = K.transpose(0, 1, 2, 4, 3).reshape(ne, nb * d, nb * d)
+        return out
+
+    def _dyadic_kernel(self, T, chunk: int = 16) -> np.ndarray:
+        """The elastic kernel of a :class:`~coilrod.fem.material.DyadicTangent`, without
+        forming the tangent array; shape (e, nb*d, nb*d).
+
+        With ``phi_ai = dN_aJ F_iJ`` and ``psi_ai = dN_aJ Fi_Ji`` (``Fi = F^-1``) at each
+        quadrature point, ``K[a,i,b,k] = sum_q w [ identity (dN_a . dN_b) d_ik
+        + mixed (phi_ai psi_bk + psi_ai phi_bk) + inverse psi_ai psi_bk
+        + cross psi_ak psi_bi ]``: one batched matmul over ``(q, 2)`` for the mixed and inverse
+        terms, one over ``q`` for the cross term (added with ``i`` and ``k`` swapped) and one
+        over ``(q, J)`` for the identity term (added on the diagonal ``i = k``).
+        """
+        d, nq, nb, nel = self.dim, self.nq, self.nb, self.nel
+        nd = nb * d
+        # in 2D only the in-plane block of F and F^-T enters (plane strain: F33 = 1)
+        FT = np.ascontiguousarray(np.swapaxes(T.F[:, :d, :d], 1, 2)).reshape(nel, nq, d, d)
+        Fi = np.ascontiguousarray(np.swapaxes(T.FiT[:, :d, :d], 1, 2)).reshape(nel, nq, d, d)
+        w = self.w.reshape(-1)
+        c_id, c_mix, c_inv, c_cross = (
+            (w * getattr(T, name)).reshape(nel, nq, 1, 1)
+            for name in ("identity", "mixed", "inverse", "cross")
+        )
+        out = np.empty((nel, nd, nd))
+        for s in range(0, nel, chunk):
+            sl = slice(s, s + chunk)
+            dN = self.dN[sl]
+            ne = dN.shape[0]
+            U = np.empty((ne, nq, 2, nb, d))  # [e, q, s, a, i], s: phi, psi
+            phi, psi = U[:, :, 0], U[:, :, 1]
+            np.matmul(dN, FT[sl], out=phi)  # phi_ai = dN_aJ F_iJ
+            np.matmul(dN, Fi[sl], out=psi)  # psi_ai = dN_aJ Fi_Ji
+            V = np.empty_like(U)
+            np.multiply(c_mix[sl], psi, out=V[:, :, 0])
+            np.multiply(c_mix[sl], phi, out=V[:, :, 1])
+            V[:, :, 1] += c_inv[sl] * psi
+            K = out[sl]
+            np.matmul(
+                np.swapaxes(U.reshape(ne, nq * 2, nd), 1, 2), V.reshape(ne, nq * 2, nd), out=K
+            )
+            K5 = K.reshape(ne, nb, d, nb, d)
+            # cross: C[e, (a,k), (b,i)] = sum_q w c psi_ak psi_bi, added at [a, i, b, k]
+            Pq = np.ascontiguousarray(psi).reshape(ne, nq, nd)
+            C5 = np.matmul(np.swapaxes(Pq, 1, 2), (c_cross[sl][:, :, 0] * Pq)).reshape(K5.shape)
+            # identity: g_ab = sum_q w c dN_a . dN_b on the diagonal i = k
+            wdN = (c_id[sl] * dN).transpose(0, 1, 3, 2).reshape(ne, nq * d, nb)
+            g = np.matmul(self._dN_a_qJ[sl], wdN)
+            for i in range(d):
+                K5[:, :, i, :, i] += g
+                for k in range(d):
+                    K5[:, :, i, :, k] += C5[:, :, k, :, i]
         return out
 
     def _magnetic_kernel(self, Ff, Mf, G, Hs) -> np.ndarray:
