@@ -40,10 +40,13 @@ class SolveStats:
 
 
 class _Tangent:
-    """The evaluation at a state and its tangent's factorisation (made on first use)."""
+    """An evaluation whose tangent is (or will be, on first use) factorised; ``u`` and
+    ``scale`` locate it (a chord iteration pairs a newer state with an older tangent)."""
 
-    def __init__(self, ev):
+    def __init__(self, ev, u, scale):
         self.ev = ev
+        self.u = u
+        self.scale = float(scale)
         self.factor = None
 
 
@@ -102,13 +105,15 @@ class FEMProblem(PathProblem):
             parts.append(ev.constraint_residual.ravel())
         residual = np.concatenate(parts) if len(parts) > 1 else ev.residual
         ok = bool(np.all(np.isfinite(residual)))
-        return Linearization(z, scale, residual, ok, _Tangent(ev))
+        lin = Linearization(z, scale, residual, ok, _Tangent(ev, z, scale))
+        lin.ev = ev  # this state's evaluation (the tangent may come from an earlier one)
+        return lin
 
     def _factor(self, lin: Linearization):
         tan = lin.tangent
         if tan.factor is None:
             if tan.ev.tangent is None:  # evaluated without tangent: evaluate again with it
-                tan.ev = self.asm.evaluate(lin.u, float(lin.scale), tangent=True)
+                tan.ev = self.asm.evaluate(tan.u, tan.scale, tangent=True)
                 self.stats.evaluations += 1
             tan.factor = self.asm.factorize(tan.ev)
             self.stats.factorizations += 1
@@ -129,14 +134,14 @@ class FEMProblem(PathProblem):
 
     def d_residual_d_scale(self, lin: Linearization) -> np.ndarray:
         out = np.zeros(self.size)
-        out[: self.asm.nfree] = lin.tangent.ev.load_rate
+        out[: self.asm.nfree] = lin.ev.load_rate
         return out
 
     def error(self, lin: Linearization, du) -> float:
         """Convergence measure (<= 1 converged; see the module docstring)."""
         if not lin.ok:
             return math.inf
-        ev = lin.tangent.ev
+        ev = lin.ev
         rnorm = float(np.linalg.norm(ev.residual))
         fref = max(ev.internal_norm, abs(float(lin.scale)) * float(np.linalg.norm(ev.load_rate)))
         e_res = rnorm / (self.rtol * fref + self.atol)

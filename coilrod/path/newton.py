@@ -34,17 +34,26 @@ class NewtonOptions:
         Halvings of a step in the line search before the attempt fails.
     stagnation : int
         Consecutive iterations whose error falls by less than half before the attempt stops.
+    chord : float
+        Modified Newton in the quadratic regime: once an iteration has cut the error of every
+        member by this factor or more, the following trials are evaluated without a new
+        tangent and solved with the last factorisation, for as long as each such chord step
+        keeps cutting the error by the same factor (0 disables).  The converged state then
+        carries that factorisation (of an iterate within the last, small, increment).
     """
 
     max_iter: int = 15
     backtracks: int = 6
     stagnation: int = 3
+    chord: float = 0.125
 
     def __post_init__(self):
         for name in ("max_iter", "backtracks", "stagnation"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
                 raise ValueError(f"{name} must be a positive integer; got {value!r}")
+        if not 0.0 <= self.chord < 1.0:
+            raise ValueError(f"chord must lie in [0, 1); got {self.chord!r}")
 
 
 @dataclass
@@ -83,6 +92,12 @@ class _OneAtATime(PathProblem):
         self.max_correction = problem.max_correction
         self.max_step_change = problem.max_step_change
         self.full_step_growth = problem.full_step_growth
+
+    def with_tangent(self, lin, other):
+        parts = [
+            self.problem.with_tangent(a, b) for a, b in zip(lin.tangent, other.tangent, strict=True)
+        ]
+        return Linearization(lin.u, lin.scale, lin.residual, lin.ok, tangent=parts)
 
     def linearize(self, u, scale, tangent=True):
         parts = [self.problem.linearize(u[j], float(scale[j]), tangent) for j in range(len(u))]
@@ -150,7 +165,12 @@ def _errors(problem, lin, du) -> np.ndarray:
 
 
 def newton(
-    problem: PathProblem, u0: np.ndarray, scale, opts: NewtonOptions | None = None
+    problem: PathProblem,
+    u0: np.ndarray,
+    scale,
+    opts: NewtonOptions | None = None,
+    *,
+    tangent_at_end: bool = True,
 ) -> NewtonResult:
     """Solve ``R(u, scale) = 0`` from ``u0`` (one state, or a stack for a batched model).
 
@@ -162,6 +182,9 @@ def newton(
     scale : float or ndarray, shape (k,)
         Load scale(s).
     opts : NewtonOptions, optional
+    tangent_at_end : bool
+        The returned linearization carries a tangent (for predictors and stability); False
+        returns residuals only where the last evaluation did not cover every member.
 
     Returns
     -------
@@ -181,6 +204,7 @@ def newton(
     slow = np.zeros(k, dtype=int)
     cover = np.arange(k)  # members whose current state ``lin`` describes (in its row order)
     growth = P.full_step_growth
+    ratio = np.ones(k)  # error contraction of each member's last iteration
     for _ in range(opts.max_iter):
         act = np.flatnonzero(alive & (err > 1.0))
         if act.size == 0:
@@ -203,13 +227,14 @@ def newton(
         alpha = full.copy()
         pending = np.ones(act.size, dtype=bool)
         parts = []  # (positions in act, linearization) of accepted trials
+        chord = opts.chord > 0 and bool(np.all(ratio[act] <= opts.chord))
         for _ in range(opts.backtracks + 1):
             pos = np.flatnonzero(pending)
             if pos.size == 0:
                 break
             step = alpha[pos, None] * dU[pos]
             trial = U[act[pos]] + step
-            tlin = P.linearize(trial, S[act[pos]])
+            tlin = P.linearize(trial, S[act[pos]], tangent=not chord)
             e_new = _errors(P, tlin, step)
             e_old = err[act[pos]]
             accept = (e_new < e_old) | (e_new <= 1.0)
@@ -219,6 +244,8 @@ def newton(
                 rows = np.flatnonzero(accept)
                 members = act[pos[rows]]
                 slow[members] = np.where(e_new[rows] > 0.5 * e_old[rows], slow[members] + 1, 0)
+                with np.errstate(all="ignore"):
+                    ratio[members] = np.where(e_old[rows] > 0, e_new[rows] / e_old[rows], 0.0)
                 U[members] = trial[rows]
                 err[members] = e_new[rows]
                 iters[members] += 1
@@ -229,8 +256,10 @@ def newton(
         alive[failed] = False
         iters[failed] += 1
         moved = act[~pending]
-        if len(parts) == 1 and parts[0][2].size == parts[0][1].residual.shape[0]:
-            lin, cover = parts[0][1], moved  # every trial of that round was accepted
+        if len(parts) == 1 and parts[0][2].size == act.size:
+            # every trial was accepted in the first round: the trials are the new states
+            new = parts[0][1]
+            lin, cover = (P.with_tangent(new, lin) if chord else new), moved
         elif moved.size:
             lin, cover = P.linearize(U[moved], S[moved]), moved
         else:
@@ -239,7 +268,7 @@ def newton(
         alive[stuck] = False
     ok = np.isfinite(err) & (err <= 1.0)
     if cover.size != k:
-        lin = P.linearize(U, S)
+        lin = P.linearize(U, S, tangent=tangent_at_end)
     if single:
         return NewtonResult(U[0], bool(ok[0]), float(err[0]), int(iters[0]), _single(lin))
     return NewtonResult(U, ok, err, iters, lin)

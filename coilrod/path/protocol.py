@@ -14,6 +14,7 @@ smooth path; the independent refined-mesh solves of a Richardson extrapolation).
 
 from __future__ import annotations
 
+import copy
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
@@ -125,6 +126,13 @@ class PathProblem(ABC):
     def arclength_weights(self) -> np.ndarray:
         """Weights ``w`` of the state part of the arclength norm ``sqrt(sum w du^2 + ...)``."""
         return np.full(self.size, 1.0 / self.size)
+
+    def with_tangent(self, lin: Linearization, other: Linearization) -> Linearization:
+        """``lin`` (a state evaluated without tangent) paired with the tangent of ``other``
+        (for chord iterations of :func:`~coilrod.path.newton.newton`); same members."""
+        out = copy.copy(lin)
+        out.tangent = other.tangent
+        return out
 
     # -- conveniences (the protocol's named quantities at one state) --------------------------
     def residual(self, u: np.ndarray, scale: float) -> np.ndarray:

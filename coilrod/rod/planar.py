@@ -72,6 +72,7 @@ class RodTangent:
         self.load_rate = load_rate  # dR/dscale, (k, size)
         self.bad = np.zeros(k, dtype=bool)
         self._lu = None
+        self._per_member = False
 
     def factor(self):
         if self._lu is None:
@@ -96,24 +97,31 @@ class RodTangent:
             self.bad[(info - 1) // n] = True  # a zero pivot: that member is singular
 
     def _factor_band(self):
-        ab = self.parts
-        n = self.size
-        while True:
-            cols = ab[_KL:].reshape(_KL + _KU + 1, self.k, n)
-            blocks = ~np.isfinite(cols).all(axis=(0, 2))
-            for j in np.flatnonzero(blocks | self.bad):
-                self.bad[j] = True
-                ab[:, j * n : (j + 1) * n] = 0.0
-                ab[_DIAG, j * n : (j + 1) * n] = 1.0
-            lu, ipiv, info = dgbtrf(ab, _KL, _KU)
-            if info == 0:
-                return lu, ipiv
-            self.bad[(info - 1) // n] = True
+        """LU of the stacked band, in place (the band storage becomes the factors).  A member
+        that is flagged bad (inadmissible) is replaced by an identity block first; a member
+        found singular (an exactly zero pivot; LAPACK completes the factorisation) is flagged,
+        and :meth:`solve` then solves member by member so that it cannot spoil the others."""
+        ab, n = self.parts, self.size
+        for j in np.flatnonzero(self.bad):
+            ab[:, j * n : (j + 1) * n] = 0.0
+            ab[_DIAG, j * n : (j + 1) * n] = 1.0
+        lu, ipiv, info = dgbtrf(ab, _KL, _KU, overwrite_ab=True)
+        self.parts = None  # factorised in place: the band storage now holds the factors
+        if info > 0:
+            diag = lu[_DIAG].reshape(self.k, n)
+            self.bad |= np.any(diag == 0.0, axis=1)
+            self._per_member = True
+        return lu, ipiv
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Solve with every member's Jacobian: rhs (k, size) -> (k, size) (NaN rows for
         singular members)."""
         lu = self.factor()
+        if self._per_member:  # a singular member: solve the others one by one
+            out = np.full((self.k, self.size), np.nan)
+            for j in np.flatnonzero(~self.bad):
+                out[j] = _take_tangent(self, [j]).solve(rhs[j : j + 1])[0]
+            return out
         b = np.ascontiguousarray(rhs, dtype=float).reshape(-1)
         if self.uniform:
             x, info = dgttrs(*lu, b)
@@ -197,6 +205,7 @@ class PlanarRod(PathProblem):
         self._mu0 = None
         self._det_ref = None
         self._band_cache: dict = {}
+        self._no_h = np.zeros((1, 3, 3, 3))  # placeholder hessian of a linear field
         self.last_failure = ""
         if self.uniform:
             bx, by = field.B(self.clamp)[0, :2]
@@ -223,9 +232,9 @@ class PlanarRod(PathProblem):
         u[:, 0] = theta
         u[:, 1:3] = x
         if scale != 0.0:
-            b, G, _ = self._field(x[None], False)
+            _, G, _ = self._field(x[None], False)
             m = _rot(theta, self.mu)
-            f = scale * np.einsum("nij,ni->nj", G[0], m)
+            f = (scale * self.L) * np.einsum("nij,ni->nj", G[:, :2, :2], m)
             wf = self.mesh.w[:, None] * f
             u[:-1, 3:5] = np.cumsum(wf[::-1], axis=0)[::-1][1:]
         return u.ravel()
@@ -260,26 +269,15 @@ class PlanarRod(PathProblem):
         out = out.reshape(v.shape[0], -1)
         return out[0] if np.ndim(u) == 1 else out
 
-    # -- field ------------------------------------------------------------------------------------
+    # -- field ---------------------------------------------------------------------------------
     def _field(self, x: np.ndarray, hessian: bool):
-        """In-plane b (k, n, 2) T, G (k, n, 2, 2) T per L and H (k, n, 2, 2, 2) T per L^2
-        (None where not needed) at positions x (k, n, 2); raises ValueError from the field."""
-        k = x.shape[0]
+        """B (k n, 3) T, G (k n, 3, 3) T/m and H (k n, 3, 3, 3) T/m^2 (None where not needed)
+        at the positions x (k, n, 2) (units of L); raises ValueError from the field."""
         pts = self.points(x).reshape(-1, 3)
-        H = None
         if hessian and not self.linear:
-            fused = getattr(self.field, "B_gradient_hessian", None)
-            if fused is not None:
-                B, G, H = fused(pts)
-            else:
-                B, G = self.field.B_and_gradient(pts)
-                H = self.field.hessian(pts)
-            H = (self.L**2) * H[:, :2, :2, :2].reshape(k, self.n, 2, 2, 2)
-        else:
-            B, G = self.field.B_and_gradient(pts)
-        b = B[:, :2].reshape(k, self.n, 2)
-        G = self.L * G[:, :2, :2].reshape(k, self.n, 2, 2)
-        return b, G, H
+            return self.field.B_gradient_hessian(pts)
+        B, G = self.field.B_and_gradient(pts)
+        return B, G, None
 
     def _field_by_member(self, x: np.ndarray, hessian: bool):
         """Like :meth:`_field`, but members whose field cannot be evaluated get NaN (and the
@@ -289,21 +287,25 @@ class PlanarRod(PathProblem):
                 return self._field(x, hessian)
         except ValueError as exc:
             self.last_failure = f"the field could not be evaluated at the trial states ({exc})"
-        k = x.shape[0]
-        b = np.full((k, self.n, 2), np.nan)
-        G = np.full((k, self.n, 2, 2), np.nan)
-        H = np.full((k, self.n, 2, 2, 2), np.nan) if hessian and not self.linear else None
+        k, n = x.shape[0], self.n
+        B = np.full((k, n, 3), np.nan)
+        G = np.full((k, n, 3, 3), np.nan)
+        H = np.full((k, n, 3, 3, 3), np.nan) if hessian and not self.linear else None
         for j in range(k):
             try:
                 with np.errstate(all="ignore"):
-                    bj, Gj, Hj = self._field(x[j : j + 1], hessian)
+                    Bj, Gj, Hj = self._field(x[j : j + 1], hessian)
             except ValueError as exc:
                 self.last_failure = f"the field could not be evaluated at the trial states ({exc})"
                 continue
-            b[j], G[j] = bj[0], Gj[0]
+            B[j], G[j] = Bj, Gj
             if H is not None:
-                H[j] = Hj[0]
-        return b, G, H
+                H[j] = Hj
+        return (
+            B.reshape(-1, 3),
+            G.reshape(-1, 3, 3),
+            None if H is None else H.reshape(-1, 3, 3, 3),
+        )
 
     # -- the protocol -----------------------------------------------------------------------------
     def linearize(self, u, scale, tangent: bool = True) -> Linearization:
@@ -369,29 +371,11 @@ class PlanarRod(PathProblem):
             if self.uniform:
                 floor = _FLOOR * eps * size_th * self._bend_scale[1:]
                 return np.max(np.abs(R[:, 1:] * self._inv_w[1:]) / (self.tol + floor), axis=1)
-            v = R.reshape(k, self.n, _NV)
-            V = U.reshape(k, self.n, _NV)
-            size_x = 1.0 + np.max(np.abs(V[:, :, 1:3]), axis=(1, 2))[:, None]
-            size_F = 1.0 + np.max(np.abs(V[:, :, 3:5]), axis=(1, 2))[:, None]
-            load = np.max(np.abs(V[:, :, 3:5]), axis=(1, 2))[:, None]
-            e_g = (
-                np.abs(v[:, 1:, 0])
-                * self._inv_w[1:]
-                / (self.tol + _FLOOR * eps * (size_th * self._bend_scale[1:] + load))
-            )
-            e_x = (
-                np.abs(v[:, 1:, 1:3])
-                * self._inv_h[None, :, None]
-                / (self.tol + _FLOOR * eps * size_x[:, :, None] * self._inv_h[None, :, None])
-            )
-            e_F = (
-                np.abs(v[:, :-1, 3:5])
-                * self._inv_w[None, 1:, None]
-                / (self.tol + _FLOOR * eps * size_F[:, :, None] * self._inv_w[None, 1:, None])
-            )
-            return np.maximum(
-                np.max(e_g, axis=1), np.maximum(np.max(e_x, axis=(1, 2)), np.max(e_F, axis=(1, 2)))
-            )
+        from ._compiled import mixed_error
+
+        out = np.empty(k)
+        mixed_error(R, U, self._inv_w, self._inv_h, self._bend_scale, self.tol, _FLOOR * eps, out)
+        return out
 
     def residual_norm(self, lin: Linearization) -> np.ndarray:
         """Max-norm of the scaled residual (non-dimensional), shape (k,)."""
@@ -530,170 +514,75 @@ class PlanarRod(PathProblem):
 
     # -- mixed layout -----------------------------------------------------------------------------
     def _mixed(self, U: np.ndarray, S: np.ndarray, tangent: bool):
+        """Residual, load derivative and band Jacobian of a stack, by the compiled pass of
+        :mod:`coilrod.rod._compiled` (the equations are in the module docstring)."""
+        from ._compiled import mixed_assembly
+
         k, n = U.shape[0], self.n
-        h, w, c = self.mesh.h, self.mesh.w, self._c
-        V = U.reshape(k, n, _NV)
-        th, x, F = V[:, :, 0], V[:, :, 1:3], V[:, :, 3:5]
-        b, G, H = self._field_by_member(x, tangent)
-        cs, sn = np.cos(th), np.sin(th)
-        t = np.stack([cs, sn], axis=-1)
-        tp = np.stack([-sn, cs], axis=-1)
-        m = _rot(th, self.mu)
-        mp = np.stack([-m[..., 1], m[..., 0]], axis=-1)  # dm/dtheta
-        tau = np.einsum("kni,kni->kn", mp, b)
-        f = np.einsum("knij,kni->knj", G, m)  # f_j = G_ij m_i (per unit scale)
-        Ss = S[:, None]
-        R = np.empty((k, n, _NV))
-        R1 = np.zeros((k, n, _NV))
-        bend = np.zeros((k, n))
-        dth = np.diff(th, axis=1) * self._inv_h
-        bend[:, 1:] += dth
-        bend[:, :-1] -= dth
-        cwf = (c * w)[None, :, None] * f
-        R1[:, :, 0] = -w * tau - np.einsum("kni,kni->kn", tp, cwf)
-        R[:, :, 0] = bend + Ss * R1[:, :, 0] - np.einsum("kni,kni->kn", tp, w[None, :, None] * F)
-        R[:, 0, 0] = th[:, 0] - self.theta0
-        R1[:, 0, 0] = 0.0
-        R[:, 0, 1:3] = x[:, 0]
-        R[:, 1:, 1:3] = x[:, 1:] - x[:, :-1] - h[None, :, None] * (t[:, :-1] + t[:, 1:]) / 2
-        R1[:, :-1, 3:5] = -w[None, 1:, None] * f[:, 1:]
-        R[:, :-1, 3:5] = F[:, :-1] - F[:, 1:] + Ss[:, :, None] * R1[:, :-1, 3:5]
-        R[:, -1, 3:5] = F[:, -1]
-        R, R1 = R.reshape(k, -1), R1.reshape(k, -1)
-        if not tangent:
-            return R, R1, None
-        Gtmp = np.einsum("knij,kni->knj", G, mp)  # df/dtheta = G^T m_perp, also dtau/dx
-        if H is None:
-            dfdx = np.zeros((k, n, 2, 2))
-        else:
-            dfdx = np.einsum("knijl,kni->knjl", H, m)  # df_j/dx_l
-        load = w[None, :, None] * F + Ss[:, :, None] * cwf
-        diag = (
-            self._bend_scale * w
-            + Ss * w * np.einsum("kni,kni->kn", m, b)
-            + np.einsum("kni,kni->kn", t, load)
-            - Ss * c * w * np.einsum("kni,kni->kn", tp, Gtmp)
+        B, G, H = self._field_by_member(U.reshape(k, n, _NV)[:, :, 1:3], tangent)
+        R = np.empty((k, self.size))
+        R1 = np.empty((k, self.size))
+        shape = (2 * _KL + _KU + 1, k * self.size) if tangent else (1, 1)
+        ab = np.zeros(shape, order="F")  # Fortran order: LAPACK factorises it in place
+        finite = np.empty(k, dtype=np.bool_)
+        has_h = H is not None
+        mixed_assembly(
+            U,
+            S,
+            B,
+            G,
+            H if has_h else self._no_h,
+            has_h,
+            self.L,
+            self.mu,
+            self.mesh.h,
+            self.mesh.w,
+            self.theta0,
+            tangent,
+            R,
+            R1,
+            ab,
+            finite,
         )
-        dgdx = -Ss[:, :, None] * (
-            w[None, :, None] * Gtmp + (c * w)[None, :, None] * np.einsum("knj,knjl->knl", tp, dfdx)
-        )
-        dgdF = -w[None, :, None] * tp
-        hp = (h / 2)[None, :, None]
-        sw = Ss[:, :, None] * w[None, 1:, None]
-        values = [
-            diag[:, 1:],  # g_i / theta_i
-            dgdx[:, 1:, 0],
-            dgdx[:, 1:, 1],
-            dgdF[:, 1:, 0],
-            dgdF[:, 1:, 1],
-            (-hp * tp[:, :-1])[..., 0],  # position rows / theta_{i-1}
-            (-hp * tp[:, :-1])[..., 1],
-            (-hp * tp[:, 1:])[..., 0],  # position rows / theta_i
-            (-hp * tp[:, 1:])[..., 1],
-            (-sw * Gtmp[:, 1:])[..., 0],  # force rows / theta_{i+1}
-            (-sw * Gtmp[:, 1:])[..., 1],
-            -sw[..., 0] * dfdx[:, 1:, 0, 0],  # force rows / x_{i+1}
-            -sw[..., 0] * dfdx[:, 1:, 0, 1],
-            -sw[..., 0] * dfdx[:, 1:, 1, 0],
-            -sw[..., 0] * dfdx[:, 1:, 1, 1],
-        ]
-        ab, flat = self._band_template(k)
-        ab.flat[flat] = np.concatenate([v.reshape(k, -1) for v in values], axis=1).ravel()
-        return R, R1, ab
-
-    def _band_template(self, k: int):
-        """Band storage (2 KL + KU + 1, k size) with the constant entries of k stacked
-        Jacobians filled in, and the flat indices of the variable entries (in the order of
-        :meth:`_mixed`'s ``values``)."""
-        cached = self._band_cache.get(k)
-        if cached is None:
-            cached = self._band_cache[k] = self._build_band(k)
-        template, flat = cached
-        return template.copy(), flat
-
-    def _build_band(self, k: int):
-        n, N = self.n, k * self.size
-        i1 = np.arange(1, n)  # nodes 1..n-1
-        i0 = np.arange(n - 1)  # nodes 0..n-2
-        g, pos, frc = _NV * i1, _NV * i1 + 1, _NV * i0 + 3
-
-        def th(i):
-            return _NV * i
-
-        variable = [
-            (g, th(i1)),
-            (g, th(i1) + 1),
-            (g, th(i1) + 2),
-            (g, th(i1) + 3),
-            (g, th(i1) + 4),
-            (pos, th(i1 - 1)),
-            (pos + 1, th(i1 - 1)),
-            (pos, th(i1)),
-            (pos + 1, th(i1)),
-            (frc, th(i0 + 1)),
-            (frc + 1, th(i0 + 1)),
-            (frc, th(i0 + 1) + 1),
-            (frc, th(i0 + 1) + 2),
-            (frc + 1, th(i0 + 1) + 1),
-            (frc + 1, th(i0 + 1) + 2),
-        ]
-        constant = [
-            (g, th(i1 - 1), -self._inv_h),
-            (_NV * np.arange(1, n - 1), th(np.arange(2, n)), -self._inv_h[1:]),
-            (np.array([0]), np.array([0]), 1.0),
-            (pos, pos, 1.0),
-            (pos + 1, pos + 1, 1.0),
-            (pos, pos - _NV, -1.0),
-            (pos + 1, pos + 1 - _NV, -1.0),
-            (np.array([1, 2]), np.array([1, 2]), 1.0),
-            (frc, frc, 1.0),
-            (frc + 1, frc + 1, 1.0),
-            (frc, frc + _NV, -1.0),
-            (frc + 1, frc + 1 + _NV, -1.0),
-            (_NV * (n - 1) + np.array([3, 4]), _NV * (n - 1) + np.array([3, 4]), 1.0),
-        ]
-        offsets = self.size * np.arange(k)[:, None]
-
-        def flat_index(r, cc):
-            rows = (_DIAG + r - cc)[None, :]
-            cols = cc[None, :] + offsets
-            return (rows * N + cols).ravel()  # (k * m,), member-major
-
-        template = np.zeros((2 * _KL + _KU + 1, N))
-        for r, cc, val in constant:
-            idx = flat_index(r, cc)
-            template.flat[idx] = np.broadcast_to(np.asarray(val, float), (k, r.size)).ravel()
-        # variable entries: member-major order matching the concatenated values
-        per = [(_DIAG + r - cc, cc) for r, cc in variable]
-        rows = np.concatenate([p[0] for p in per])
-        cols = np.concatenate([p[1] for p in per])
-        flat = ((rows[None, :] * N) + cols[None, :] + offsets).ravel()
-        return template, flat
+        R[~finite] = np.nan
+        return R, R1, (ab if tangent else None)
 
     def _stability_mixed(self, lin: Linearization, signs: np.ndarray) -> np.ndarray:
+        """Smallest second-variation eigenvalue of each member (see :meth:`stability`).
+
+        ``S = W^1/2 H^-1 W^1/2`` has eigenvalues ``sigma = 1 / mu``; each product with it is
+        one solve with the banded factors already at hand, batched over the members.  Where
+        det H has the sign of the unloaded rod's (an even number of negative eigenvalues --
+        none on a path from the unloaded rod: the planar rod's eigenvalues are simple), the
+        lowest ``mu`` is ``1 / sigma_max``, the dominant eigenvalue of S, by power iteration
+        with Rayleigh quotients (error ~ (mu_1 / mu_2)^(2 k) after k products).  The other
+        members (unstable) take the dense spectrum of S (or ARPACK beyond
+        ``_DENSE_STABILITY`` free nodes).
+        """
         k = lin.tangent.k
-        nf = self.n - 1
         out = np.full(k, np.nan)
-        if nf > _DENSE_STABILITY:
-            for j in range(k):
-                if signs[j] != 0:
-                    out[j] = self._stability_sparse(_take_tangent(lin.tangent, [j]), signs[j])
-            return out
         rows = _NV * np.arange(1, self.n)
-        rhs = np.zeros((k, self.size, nf))
-        rhs[:, rows, np.arange(nf)] = 1.0
-        lu, ipiv = lin.tangent.factor()
-        x, info = dgbtrs(lu, _KL, _KU, rhs.reshape(k * self.size, nf), ipiv)
-        if info != 0:
-            return out
-        Hinv = x.reshape(k, self.size, nf)[:, rows, :]
         sq = np.sqrt(self.mesh.w[1:])
-        S = sq[None, :, None] * Hinv * sq[None, None, :]
-        S = 0.5 * (S + S.transpose(0, 2, 1))
-        for j in range(k):
-            if signs[j] == 0 or not np.all(np.isfinite(S[j])):
+        even = signs > 0
+        members = np.flatnonzero(even)
+        if members.size:
+            tan = lin.tangent if members.size == k else _take_tangent(lin.tangent, members)
+            sigma = _dominant_batched(tan, rows, sq)
+            good = np.isfinite(sigma) & (sigma > 0)
+            out[members[good]] = 1.0 / sigma[good]
+            even[members[~good]] = False
+        for j in np.flatnonzero(~even & (signs != 0)):
+            one = _take_tangent(lin.tangent, [j])
+            if self.n - 1 > _DENSE_STABILITY:
+                out[j] = self._stability_sparse(one, signs[j])
                 continue
-            out[j] = _lowest_from_inverse(S[j], signs[j] > 0)
+            rhs = np.zeros((self.n - 1, self.size))
+            rhs[np.arange(self.n - 1), rows] = 1.0
+            Hinv = np.stack([one.solve(r[None])[0, rows] for r in rhs], axis=1)
+            S = sq[:, None] * Hinv * sq[None, :]
+            S = 0.5 * (S + S.T)
+            if np.all(np.isfinite(S)):
+                out[j] = _lowest_from_inverse(S, False)
         return out
 
     def _stability_sparse(self, tan: RodTangent, sign: float) -> float:
@@ -740,6 +629,27 @@ def _take_tangent(tan: RodTangent, rows) -> RodTangent:
     else:
         out.parts = np.ascontiguousarray(tan.parts[:, cols])
     return out
+
+
+def _dominant_batched(tan: RodTangent, rows, sq, rtol: float = 1e-13, max_iter: int = 300):
+    """Dominant eigenvalue of ``S_j = W^1/2 H_j^-1 W^1/2`` for every member j of ``tan``,
+    by power iteration with Rayleigh quotients, one batched banded solve per product."""
+    k, nf = tan.k, rows.size
+    x = np.full((k, nf), 1.0 / np.sqrt(nf))
+    sigma = np.zeros(k)
+    rhs = np.zeros((k, tan.size))
+    for _ in range(max_iter):
+        rhs[:, rows] = sq * x
+        with np.errstate(all="ignore"):
+            y = tan.solve(rhs)[:, rows] * sq
+            new = np.einsum("ki,ki->k", x, y)
+            norm = np.linalg.norm(y, axis=1)
+            x = y / norm[:, None]
+        done = np.abs(new - sigma) <= rtol * np.abs(new)
+        sigma = new
+        if np.all(done | ~np.isfinite(new)):
+            break
+    return sigma
 
 
 def _lowest_from_inverse(S: np.ndarray, even: bool) -> float:

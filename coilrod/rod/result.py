@@ -35,7 +35,9 @@ class RodResult:
         (non-dimensional); it crosses zero at a bifurcation or limit point.  The straight
         unloaded rod has pi^2 / 4.  Computed on the coarse mesh (extrapolated near a loss of
         stability for uniform fields); for large meshes in non-uniform fields it is the
-        eigenvalue closest to zero.
+        eigenvalue closest to zero.  In non-uniform fields it is computed on first access
+        (the solve itself decides stability from the exact sign of the tangent's
+        determinant and does not need it).
     iterations : ndarray of int, shape (k,)
         Newton iterations spent on each scale (all meshes, all sub-steps).
     instabilities : list of dict
@@ -55,7 +57,7 @@ class RodResult:
     converged: np.ndarray
     stable: np.ndarray
     residual: np.ndarray
-    min_eigenvalue: np.ndarray
+    _min_eigenvalue: object = field(repr=False)  # ndarray, or a callable computing it once
     iterations: np.ndarray
     segments: int
     _theta: np.ndarray = field(repr=False)
@@ -64,6 +66,13 @@ class RodResult:
 
     def __len__(self) -> int:
         return len(self.scales)
+
+    @property
+    def min_eigenvalue(self) -> np.ndarray:
+        """See the class docstring; shape (k,)."""
+        if callable(self._min_eigenvalue):
+            self._min_eigenvalue = np.asarray(self._min_eigenvalue(), dtype=float)
+        return self._min_eigenvalue
 
     def centerline(self, k: int) -> np.ndarray:
         """Centreline of state ``k`` at the nodes :attr:`s`, shape (n, 3), m."""

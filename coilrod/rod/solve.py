@@ -215,14 +215,15 @@ def _result(rod, problems, points, iterations, events, opts) -> RodResult:
     scales = np.array([p.scale for p in points])
     states = np.array([p.u for p in points])
     iterations = np.array(iterations, dtype=int)
-    need_tangent = opts.stability and not coarse.uniform
-    lin_c = coarse.linearize(states, scales, tangent=need_tangent)
+    lin_c = coarse.linearize(states, scales, tangent=False)
     residual = coarse.residual_norm(lin_c)
     thetas_c = coarse.theta(states)
     x_c = coarse.positions(thetas_c)
     if len(problems) == 2:
         fine = problems[1]
-        res = newton(fine, coarse.interpolate_to(fine, states), scales, opts.newton)
+        res = newton(
+            fine, coarse.interpolate_to(fine, states), scales, opts.newton, tangent_at_end=False
+        )
         if not np.all(res.ok):
             k = int(np.argmin(res.ok))
             raise ConvergenceError(
@@ -240,21 +241,22 @@ def _result(rod, problems, points, iterations, events, opts) -> RodResult:
     else:
         thetas, x = thetas_c, x_c
     points_xyz = coarse.points(x)
-    if opts.stability:
-        if coarse.uniform:  # the path's own indicator is the exact eigenvalue here
-            mu = np.array([p.stability for p in points], dtype=float)
-        else:
-            mu = np.asarray(coarse.stability(lin_c, precise=True), float)
-        if len(problems) == 2 and coarse.uniform:
+    if not opts.stability:
+        mu = np.full(scales.size, np.nan)
+        stable = np.ones(scales.size, dtype=bool)
+    elif coarse.uniform:  # the path's own indicator is the exact eigenvalue here
+        mu = np.array([p.stability for p in points], dtype=float)
+        if len(problems) == 2:
             # near a loss of stability sharpen the estimate (it locates the critical scale)
             near = np.abs(mu) < _EXTRAPOLATE_MU * coarse.mu0
             if near.any():
-                mu_f = np.asarray(problems[1].stability(res.lin), float)
-                mu[near] = (4 * mu_f[near] - mu[near]) / 3
+                fine_lin = problems[1].linearize(res.u[near], scales[near])
+                mu_f = np.asarray(problems[1].stability(fine_lin), float)
+                mu[near] = (4 * mu_f - mu[near]) / 3
         stable = mu > 0
-    else:
-        mu = np.full(scales.size, np.nan)
-        stable = np.ones(scales.size, dtype=bool)
+    else:  # the exact sign now, the eigenvalues on first access
+        stable = np.array([p.stability > 0 for p in points], dtype=bool)
+        mu = _eigenvalues_later(coarse, states, scales)
     instabilities = [_refine_event(e, scales, mu, coarse) for e in events]
     return RodResult(
         scales=scales,
@@ -264,13 +266,35 @@ def _result(rod, problems, points, iterations, events, opts) -> RodResult:
         converged=np.ones(scales.size, dtype=bool),
         stable=stable,
         residual=residual,
-        min_eigenvalue=mu,
+        _min_eigenvalue=mu,
         iterations=iterations,
         segments=coarse.mesh.counts.sum(),
         _theta=thetas,
         _points=points_xyz,
         instabilities=instabilities,
     )
+
+
+def _eigenvalues_later(problem, states, scales):
+    """A callable that computes the smallest second-variation eigenvalues of ``states`` once
+    (batched), for :attr:`RodResult.min_eigenvalue` in non-uniform fields."""
+
+    def compute(rows=None):
+        sel = slice(None) if rows is None else np.asarray(rows)
+        return problem.stability(problem.linearize(states[sel], scales[sel]), precise=True)
+
+    return compute
+
+
+class _Bracket:
+    """``mu[k - 1]`` and ``mu[k]`` of a lazily computed eigenvalue array, computed together."""
+
+    def __init__(self, compute, problem, scales, k):
+        rows = [k - 1, k] if k > 0 else [k]
+        self.values = dict(zip(rows, compute(rows), strict=True))
+
+    def __getitem__(self, i):
+        return self.values[i]
 
 
 def _refine_event(event: dict, scales, mu, coarse) -> dict:
@@ -285,6 +309,8 @@ def _refine_event(event: dict, scales, mu, coarse) -> dict:
     k = e["index"]
     if k >= len(scales):
         return e
+    if callable(mu):  # only the two eigenvalues around the event are needed
+        mu = _Bracket(mu, coarse, scales, k)
     a, ma = (scales[k - 1], mu[k - 1]) if k > 0 else (0.0, coarse.mu0)
     b, mb = scales[k], mu[k]
     if np.isfinite(ma) and np.isfinite(mb) and (ma > 0) != (mb > 0) and ma != mb:

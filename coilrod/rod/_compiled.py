@@ -1,0 +1,248 @@
+"""Compiled per-node algebra of the planar rod's mixed layout (numba, cached on disk).
+
+One pass over the members of a stack and the nodes of the mesh computes the residual, its
+derivative with respect to the load scale and the banded Jacobian, written straight into
+LAPACK's band storage of the stacked (block-diagonal) matrix: entry ``(r, c)`` of member ``j``
+at ``ab[KL + KU + r - c, j size + c]`` (KL = 7, KU = 6), ready for ``gbtrf``.  The equations
+are those of :mod:`coilrod.rod.planar`; in the notation there, for
+node ``i`` with ``t = (cos, sin)(theta_i)``, ``t_perp = (-sin, cos)``, ``m = R(theta_i) mu_i``,
+``m_perp = dm/dtheta``, ``c_i = h_{i-1} / 2``:
+
+* residual ``g_i = bend_i - c w_i tau_i - t_perp . (w_i F_i + c c_i w_i f_i)`` (row 0: the
+  clamp), positions ``x_i - x_{i-1} - h_{i-1} (t_{i-1} + t_i) / 2`` (row 0: ``x_0``), forces
+  ``F_i - F_{i+1} - c w_{i+1} f_{i+1}`` (last: ``F_N``), ``tau = m_perp . b``,
+  ``f_l = G_al m_a``;
+* Jacobian ``dg_i/dtheta_i = 1/h_{i-1} + 1/h_i + c w_i m.b + t.(w_i F_i + c c_i w_i f_i)
+  - c c_i w_i t_perp . (G^T m_perp)``, ``dg_i/dx_i = -c (w_i G^T m_perp + c_i w_i t_perp . df/dx)``
+  with ``df_l/dx_q = H_alq m_a``, ``dg_i/dF_i = -w_i t_perp``, the position rows'
+  ``-h_{i-1}/2 t_perp`` and the force rows' ``-c w_{i+1} (G^T m_perp, df/dx)``.
+
+Imported on the first evaluation of a rod in a non-uniform field; a uniform field never
+compiles it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+__all__ = ["mixed_assembly", "KL", "KU"]
+
+#: Sub- and super-diagonals of the mixed Jacobian.
+KL, KU = 7, 6
+_D = KL + KU  # row of the diagonal in band storage
+
+
+@nb.njit(cache=True)
+def _put(ab, off, r, c, value):
+    ab[_D + r - c, off + c] = value
+
+
+@nb.njit(cache=True, fastmath=False)
+def mixed_assembly(U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab, finite):
+    """Fill R, R1 (k, 5n), the band storage ab (2 KL + KU + 1, 5 n k; zero on entry) and
+    finite (k,) for the stack U (k, 5n).
+
+    B (k n, 3) T, G (k n, 3, 3) T/m and H (k n, 3, 3, 3) T/m^2 (read only if ``has_h``) are
+    the field at scale 1 at the nodes (member-major); only in-plane components act, lengths
+    are scaled by L (m).  mu (n, 2), h (n - 1,), w (n,) describe the mesh.
+    """
+    k = U.shape[0]
+    n = w.shape[0]
+    size = 5 * n
+    m0 = np.empty(n)
+    m1 = np.empty(n)
+    cs = np.empty(n)
+    sn = np.empty(n)
+    f0 = np.empty(n)
+    f1 = np.empty(n)
+    g0 = np.empty(n)
+    g1 = np.empty(n)
+    d00 = np.empty(n)
+    d01 = np.empty(n)
+    d10 = np.empty(n)
+    d11 = np.empty(n)
+    tau = np.empty(n)
+    mb = np.empty(n)
+    nm = n - 1
+    L2 = L * L
+    for j in range(k):
+        s = S[j]
+        ok = True
+        for i in range(n):
+            p = j * n + i
+            th = U[j, 5 * i]
+            c = math.cos(th)
+            si = math.sin(th)
+            cs[i] = c
+            sn[i] = si
+            a0 = c * mu[i, 0] - si * mu[i, 1]
+            a1 = si * mu[i, 0] + c * mu[i, 1]
+            m0[i] = a0
+            m1[i] = a1
+            p0 = -a1  # m_perp
+            p1 = a0
+            bx = B[p, 0]
+            by = B[p, 1]
+            tau[i] = p0 * bx + p1 * by
+            mb[i] = a0 * bx + a1 * by
+            f0[i] = L * (G[p, 0, 0] * a0 + G[p, 1, 0] * a1)
+            f1[i] = L * (G[p, 0, 1] * a0 + G[p, 1, 1] * a1)
+            g0[i] = L * (G[p, 0, 0] * p0 + G[p, 1, 0] * p1)
+            g1[i] = L * (G[p, 0, 1] * p0 + G[p, 1, 1] * p1)
+            if has_h:
+                d00[i] = L2 * (H[p, 0, 0, 0] * a0 + H[p, 1, 0, 0] * a1)
+                d01[i] = L2 * (H[p, 0, 0, 1] * a0 + H[p, 1, 0, 1] * a1)
+                d10[i] = L2 * (H[p, 0, 1, 0] * a0 + H[p, 1, 1, 0] * a1)
+                d11[i] = L2 * (H[p, 0, 1, 1] * a0 + H[p, 1, 1, 1] * a1)
+            else:
+                d00[i] = 0.0
+                d01[i] = 0.0
+                d10[i] = 0.0
+                d11[i] = 0.0
+            total = tau[i] + mb[i] + f0[i] + f1[i] + g0[i] + g1[i]
+            total += d00[i] + d01[i] + d10[i] + d11[i] + U[j, 5 * i + 1] + U[j, 5 * i + 2]
+            total += U[j, 5 * i + 3] + U[j, 5 * i + 4]
+            if not math.isfinite(total):  # the band entries are products of these
+                ok = False
+        for i in range(n):
+            r = 5 * i
+            th = U[j, r]
+            Fx = U[j, r + 3]
+            Fy = U[j, r + 4]
+            ci = 0.0 if i == 0 else 0.5 * h[i - 1]
+            tp0 = -sn[i]
+            tp1 = cs[i]
+            # moment equation
+            if i == 0:
+                R[j, r] = th - theta0
+                R1[j, r] = 0.0
+            else:
+                bend = (th - U[j, r - 5]) / h[i - 1]
+                if i < nm:
+                    bend -= (U[j, r + 5] - th) / h[i]
+                cw = ci * w[i]
+                r1 = -w[i] * tau[i] - (tp0 * cw * f0[i] + tp1 * cw * f1[i])
+                R1[j, r] = r1
+                R[j, r] = bend + s * r1 - (tp0 * w[i] * Fx + tp1 * w[i] * Fy)
+            # position equations
+            if i == 0:
+                R[j, r + 1] = U[j, r + 1]
+                R[j, r + 2] = U[j, r + 2]
+            else:
+                hh = 0.5 * h[i - 1]
+                R[j, r + 1] = U[j, r + 1] - U[j, r - 4] - hh * (cs[i - 1] + cs[i])
+                R[j, r + 2] = U[j, r + 2] - U[j, r - 3] - hh * (sn[i - 1] + sn[i])
+            R1[j, r + 1] = 0.0
+            R1[j, r + 2] = 0.0
+            # force equations
+            if i == nm:
+                R[j, r + 3] = Fx
+                R[j, r + 4] = Fy
+                R1[j, r + 3] = 0.0
+                R1[j, r + 4] = 0.0
+            else:
+                r1x = -w[i + 1] * f0[i + 1]
+                r1y = -w[i + 1] * f1[i + 1]
+                R1[j, r + 3] = r1x
+                R1[j, r + 4] = r1y
+                R[j, r + 3] = Fx - U[j, r + 8] + s * r1x
+                R[j, r + 4] = Fy - U[j, r + 9] + s * r1y
+        for q in range(size):
+            if not math.isfinite(R[j, q]):
+                ok = False
+        if tangent:
+            off = j * size
+            # clamp rows: theta_0, x_0, and the free end's force F_N
+            _put(ab, off, 0, 0, 1.0)
+            _put(ab, off, 1, 1, 1.0)
+            _put(ab, off, 2, 2, 1.0)
+            _put(ab, off, 5 * nm + 3, 5 * nm + 3, 1.0)
+            _put(ab, off, 5 * nm + 4, 5 * nm + 4, 1.0)
+            for i in range(1, n):
+                r = 5 * i
+                ci = 0.5 * h[i - 1]
+                cw = ci * w[i]
+                tp0 = -sn[i]
+                tp1 = cs[i]
+                Fx = U[j, r + 3]
+                Fy = U[j, r + 4]
+                # moment row g_i
+                bend = 1.0 / h[i - 1]
+                _put(ab, off, r, r - 5, -1.0 / h[i - 1])
+                if i < nm:
+                    bend += 1.0 / h[i]
+                    _put(ab, off, r, r + 5, -1.0 / h[i])
+                _put(
+                    ab,
+                    off,
+                    r,
+                    r,
+                    bend
+                    + s * w[i] * mb[i]
+                    + cs[i] * (w[i] * Fx + s * cw * f0[i])
+                    + sn[i] * (w[i] * Fy + s * cw * f1[i])
+                    - s * cw * (tp0 * g0[i] + tp1 * g1[i]),
+                )
+                _put(ab, off, r, r + 1, -s * (w[i] * g0[i] + cw * (tp0 * d00[i] + tp1 * d10[i])))
+                _put(ab, off, r, r + 2, -s * (w[i] * g1[i] + cw * (tp0 * d01[i] + tp1 * d11[i])))
+                _put(ab, off, r, r + 3, -w[i] * tp0)
+                _put(ab, off, r, r + 4, -w[i] * tp1)
+                # position rows
+                hh = 0.5 * h[i - 1]
+                _put(ab, off, r + 1, r + 1, 1.0)
+                _put(ab, off, r + 2, r + 2, 1.0)
+                _put(ab, off, r + 1, r - 4, -1.0)
+                _put(ab, off, r + 2, r - 3, -1.0)
+                _put(ab, off, r + 1, r - 5, hh * sn[i - 1])
+                _put(ab, off, r + 2, r - 5, -hh * cs[i - 1])
+                _put(ab, off, r + 1, r, hh * sn[i])
+                _put(ab, off, r + 2, r, -hh * cs[i])
+                # force rows of node i - 1 act on node i
+                rf = r - 2  # 5 (i - 1) + 3
+                sw = s * w[i]
+                _put(ab, off, rf, rf, 1.0)
+                _put(ab, off, rf + 1, rf + 1, 1.0)
+                _put(ab, off, rf, rf + 5, -1.0)
+                _put(ab, off, rf + 1, rf + 6, -1.0)
+                _put(ab, off, rf, r, -sw * g0[i])
+                _put(ab, off, rf + 1, r, -sw * g1[i])
+                _put(ab, off, rf, r + 1, -sw * d00[i])
+                _put(ab, off, rf, r + 2, -sw * d01[i])
+                _put(ab, off, rf + 1, r + 1, -sw * d10[i])
+                _put(ab, off, rf + 1, r + 2, -sw * d11[i])
+        finite[j] = ok
+
+
+@nb.njit(cache=True)
+def mixed_error(R, U, inv_w, inv_h, bend_scale, tol, floor, out):
+    """Convergence measure of each member (see :meth:`PlanarRod.error`): the largest scaled
+    residual over (tol + its round-off floor) of the moment (per w), position (per h) and force
+    (per w) equations; floor = 32 eps times the size of each equation's terms.  out (k,)."""
+    k = R.shape[0]
+    n = inv_w.shape[0]
+    for j in range(k):
+        th_max = 0.0
+        x_max = 0.0
+        F_max = 0.0
+        for i in range(n):
+            th_max = max(th_max, abs(U[j, 5 * i]))
+            x_max = max(x_max, abs(U[j, 5 * i + 1]), abs(U[j, 5 * i + 2]))
+            F_max = max(F_max, abs(U[j, 5 * i + 3]), abs(U[j, 5 * i + 4]))
+        size_th = 1.0 + th_max
+        e = 0.0
+        for i in range(1, n):
+            r = 5 * i
+            g = abs(R[j, r]) * inv_w[i] / (tol + floor * (size_th * bend_scale[i] + F_max))
+            ex = abs(R[j, r + 1]) * inv_h[i - 1] / (tol + floor * (1.0 + x_max) * inv_h[i - 1])
+            ey = abs(R[j, r + 2]) * inv_h[i - 1] / (tol + floor * (1.0 + x_max) * inv_h[i - 1])
+            q = r - 2  # force equations of node i - 1
+            ef = (1.0 + F_max) * inv_w[i]
+            fx = abs(R[j, q]) * inv_w[i] / (tol + floor * ef)
+            fy = abs(R[j, q + 1]) * inv_w[i] / (tol + floor * ef)
+            m = max(g, ex, ey, fx, fy)
+            if not m <= e:  # also propagates NaN
+                e = m
+        out[j] = e
