@@ -40,12 +40,16 @@ class NewtonOptions:
         tangent and solved with the last factorisation, for as long as each such chord step
         keeps cutting the error by the same factor (0 disables).  The converged state then
         carries that factorisation (of an iterate within the last, small, increment).
+    chord_start : bool
+        Start in chord mode (the start is known to be close to the solution, e.g. a solution
+        interpolated from a coarser mesh); it falls back to fresh tangents as above.
     """
 
     max_iter: int = 15
     backtracks: int = 6
     stagnation: int = 3
     chord: float = 0.125
+    chord_start: bool = False
 
     def __post_init__(self):
         for name in ("max_iter", "backtracks", "stagnation"):
@@ -197,41 +201,48 @@ def newton(
     U = np.array(np.atleast_2d(u0), dtype=float)
     k = len(U)
     S = np.broadcast_to(np.asarray(scale, dtype=float), (k,)).copy()
-    lin = P.linearize(U, S)
-    err = _errors(P, lin, None)
-    alive = np.asarray(lin.ok, bool) & np.isfinite(err)
+    T = P.linearize(U, S)  # the linearization whose tangent the solves use
+    err = _errors(P, T, None)
+    alive = np.asarray(T.ok, bool) & np.isfinite(err)
+    R = np.array(T.residual)  # each member's current residual
+    owners = np.arange(k)  # T's members, in its row order (sorted)
+    fresh = np.ones(k, dtype=bool)  # a member's current state is its state in T
+    last, last_members = T, owners  # the latest linearization and the members it covers
     iters = np.zeros(k, dtype=int)
     slow = np.zeros(k, dtype=int)
-    cover = np.arange(k)  # members whose current state ``lin`` describes (in its row order)
+    # error contraction of each member's last iteration (0: trust the start as converging)
+    ratio = np.zeros(k) if (opts.chord_start and opts.chord > 0) else np.ones(k)
     growth = P.full_step_growth
-    ratio = np.ones(k)  # error contraction of each member's last iteration
     for _ in range(opts.max_iter):
         act = np.flatnonzero(alive & (err > 1.0))
         if act.size == 0:
             break
-        if act.size != cover.size:  # members only drop out: same size means same members
-            lin = take(P, lin, np.searchsorted(cover, act))
-            cover = act
+        chord = opts.chord > 0 and bool(np.all(ratio[act] <= opts.chord))
+        if not chord and not fresh[act].all():  # a new tangent at the current states
+            T, owners = P.linearize(U[act], S[act]), act
+            fresh[act] = True
+            R[act] = T.residual
+            last, last_members = T, act
+        rows = np.searchsorted(owners, act)  # act is a subset of T's members
+        rhs = np.zeros((owners.size, P.size))
+        rhs[rows] = -R[act]
         with np.errstate(all="ignore"):
-            dU = -P.solve(lin, lin.residual)
+            dU = P.solve(T, rhs)[rows]
         finite = np.all(np.isfinite(dU), axis=1)
         alive[act[~finite]] = False
-        if not finite.all():
-            act, dU = act[finite], dU[finite]
-            if act.size == 0:
-                break
-            lin = take(P, lin, np.flatnonzero(finite))
-            cover = act
+        act, dU = act[finite], dU[finite]
+        if act.size == 0:
+            break
         with np.errstate(all="ignore"):
             full = np.minimum(1.0, np.asarray(P.step_limit(U[act], dU), float))
         alpha = full.copy()
         pending = np.ones(act.size, dtype=bool)
-        parts = []  # (positions in act, linearization) of accepted trials
-        chord = opts.chord > 0 and bool(np.all(ratio[act] <= opts.chord))
+        rounds = 0
         for _ in range(opts.backtracks + 1):
             pos = np.flatnonzero(pending)
             if pos.size == 0:
                 break
+            rounds += 1
             step = alpha[pos, None] * dU[pos]
             trial = U[act[pos]] + step
             tlin = P.linearize(trial, S[act[pos]], tangent=not chord)
@@ -241,37 +252,59 @@ def newton(
             accept |= (alpha[pos] == full[pos]) & (e_new <= growth * e_old)
             accept &= np.isfinite(e_new)
             if accept.any():
-                rows = np.flatnonzero(accept)
-                members = act[pos[rows]]
-                slow[members] = np.where(e_new[rows] > 0.5 * e_old[rows], slow[members] + 1, 0)
+                acc = np.flatnonzero(accept)
+                members = act[pos[acc]]
+                slow[members] = np.where(e_new[acc] > 0.5 * e_old[acc], slow[members] + 1, 0)
                 with np.errstate(all="ignore"):
-                    ratio[members] = np.where(e_old[rows] > 0, e_new[rows] / e_old[rows], 0.0)
-                U[members] = trial[rows]
-                err[members] = e_new[rows]
+                    ratio[members] = np.where(e_old[acc] > 0, e_new[acc] / e_old[acc], 0.0)
+                U[members] = trial[acc]
+                R[members] = tlin.residual[acc]
+                err[members] = e_new[acc]
                 iters[members] += 1
-                parts.append((pos[rows], tlin, rows))
-                pending[pos[rows]] = False
+                fresh[members] = False
+                if acc.size == pos.size:
+                    last, last_members = tlin, members
+                pending[pos[acc]] = False
             alpha[pos[~accept]] *= 0.5
         failed = act[pending]
         alive[failed] = False
         iters[failed] += 1
         moved = act[~pending]
-        if len(parts) == 1 and parts[0][2].size == act.size:
-            # every trial was accepted in the first round: the trials are the new states
-            new = parts[0][1]
-            lin, cover = (P.with_tangent(new, lin) if chord else new), moved
-        elif moved.size:
-            lin, cover = P.linearize(U[moved], S[moved]), moved
-        else:
-            cover = np.zeros(0, dtype=int)
+        if not chord and moved.size:  # the new states carry their own tangent
+            if rounds == 1 and moved.size == act.size:
+                T, owners = last, moved
+            else:  # accepted over several rounds: evaluate them together
+                T, owners = P.linearize(U[moved], S[moved]), moved
+                last, last_members = T, moved
+            fresh[moved] = True
         stuck = moved[(slow[moved] >= opts.stagnation) & (err[moved] > 1.0)]
         alive[stuck] = False
     ok = np.isfinite(err) & (err <= 1.0)
-    if cover.size != k:
-        lin = P.linearize(U, S, tangent=tangent_at_end)
+    lin = _final(P, U, S, T, owners, fresh, last, last_members, tangent_at_end)
     if single:
         return NewtonResult(U[0], bool(ok[0]), float(err[0]), int(iters[0]), _single(lin))
     return NewtonResult(U, ok, err, iters, lin)
+
+
+def _final(P, U, S, T, owners, fresh, last, last_members, tangent: bool) -> Linearization:
+    """The linearization of every member at its last state, for the caller.
+
+    The tangent's own if it describes them all; with ``tangent``, otherwise the members'
+    latest residuals paired with that tangent when it covers them all (each a chord step or
+    less away), else a new evaluation; without ``tangent``, the latest residuals.
+    """
+    k = len(U)
+    everyone = owners.size == k
+    if everyone and fresh.all():
+        return T
+    state = last if last_members.size == k else None
+    if not tangent:
+        return state if state is not None else P.linearize(U, S, tangent=False)
+    if not everyone:
+        return P.linearize(U, S)
+    if state is None:
+        state = P.linearize(U, S, tangent=False)
+    return P.with_tangent(state, T)
 
 
 def _single(lin: Linearization) -> Linearization:

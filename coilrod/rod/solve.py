@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from coils._validate import as_vector, finite_scalar, positive
@@ -221,8 +223,13 @@ def _result(rod, problems, points, iterations, events, opts) -> RodResult:
     x_c = coarse.positions(thetas_c)
     if len(problems) == 2:
         fine = problems[1]
+        # the interpolated coarse solution is within O(h^2) of the fine one: chord iterations
         res = newton(
-            fine, coarse.interpolate_to(fine, states), scales, opts.newton, tangent_at_end=False
+            fine,
+            coarse.interpolate_to(fine, states),
+            scales,
+            dataclasses.replace(opts.newton, chord_start=True),
+            tangent_at_end=False,
         )
         if not np.all(res.ok):
             k = int(np.argmin(res.ok))
