@@ -188,7 +188,8 @@ def newton(
     opts : NewtonOptions, optional
     tangent_at_end : bool
         The returned linearization carries a tangent (for predictors and stability); False
-        returns residuals only where the last evaluation did not cover every member.
+        may return just the states and their residuals (``u``, ``scale``, ``residual``,
+        ``ok``).
 
     Returns
     -------
@@ -201,105 +202,152 @@ def newton(
     U = np.array(np.atleast_2d(u0), dtype=float)
     k = len(U)
     S = np.broadcast_to(np.asarray(scale, dtype=float), (k,)).copy()
-    T = P.linearize(U, S)  # the linearization whose tangent the solves use
-    err = _errors(P, T, None)
-    alive = np.asarray(T.ok, bool) & np.isfinite(err)
-    R = np.array(T.residual)  # each member's current residual
-    owners = np.arange(k)  # T's members, in its row order (sorted)
-    fresh = np.ones(k, dtype=bool)  # a member's current state is its state in T
-    last, last_members = T, owners  # the latest linearization and the members it covers
-    iters = np.zeros(k, dtype=int)
-    slow = np.zeros(k, dtype=int)
-    # error contraction of each member's last iteration (0: trust the start as converging)
-    ratio = np.zeros(k) if (opts.chord_start and opts.chord > 0) else np.ones(k)
-    growth = P.full_step_growth
-    for _ in range(opts.max_iter):
-        act = np.flatnonzero(alive & (err > 1.0))
-        if act.size == 0:
-            break
-        chord = opts.chord > 0 and bool(np.all(ratio[act] <= opts.chord))
-        if not chord and not fresh[act].all():  # a new tangent at the current states
-            T, owners = P.linearize(U[act], S[act]), act
-            fresh[act] = True
-            R[act] = T.residual
-            last, last_members = T, act
-        rows = np.searchsorted(owners, act)  # act is a subset of T's members
-        rhs = np.zeros((owners.size, P.size))
-        rhs[rows] = -R[act]
-        with np.errstate(all="ignore"):
-            dU = P.solve(T, rhs)[rows]
-        finite = np.all(np.isfinite(dU), axis=1)
-        alive[act[~finite]] = False
-        act, dU = act[finite], dU[finite]
-        if act.size == 0:
-            break
-        with np.errstate(all="ignore"):
-            full = np.minimum(1.0, np.asarray(P.step_limit(U[act], dU), float))
-        alpha = full.copy()
-        pending = np.ones(act.size, dtype=bool)
-        rounds = 0
-        for _ in range(opts.backtracks + 1):
-            pos = np.flatnonzero(pending)
-            if pos.size == 0:
+    with np.errstate(all="ignore"):
+        state = _Iteration(P, U, S, opts)
+        for _ in range(opts.max_iter):
+            if not state.step():
                 break
-            rounds += 1
-            step = alpha[pos, None] * dU[pos]
-            trial = U[act[pos]] + step
-            tlin = P.linearize(trial, S[act[pos]], tangent=not chord)
-            e_new = _errors(P, tlin, step)
-            e_old = err[act[pos]]
-            accept = (e_new < e_old) | (e_new <= 1.0)
-            accept |= (alpha[pos] == full[pos]) & (e_new <= growth * e_old)
-            accept &= np.isfinite(e_new)
-            if accept.any():
-                acc = np.flatnonzero(accept)
-                members = act[pos[acc]]
-                slow[members] = np.where(e_new[acc] > 0.5 * e_old[acc], slow[members] + 1, 0)
-                with np.errstate(all="ignore"):
-                    ratio[members] = np.where(e_old[acc] > 0, e_new[acc] / e_old[acc], 0.0)
-                U[members] = trial[acc]
-                R[members] = tlin.residual[acc]
-                err[members] = e_new[acc]
-                iters[members] += 1
-                fresh[members] = False
-                if acc.size == pos.size:
-                    last, last_members = tlin, members
-                pending[pos[acc]] = False
-            alpha[pos[~accept]] *= 0.5
-        failed = act[pending]
-        alive[failed] = False
-        iters[failed] += 1
-        moved = act[~pending]
+        lin = _final(P, U, S, state, tangent_at_end)
+    err = state.err
+    ok = np.isfinite(err) & (err <= 1.0)
+    if single:
+        return NewtonResult(U[0], bool(ok[0]), float(err[0]), int(state.iters[0]), _single(lin))
+    return NewtonResult(U, ok, err, state.iters, lin)
+
+
+class _Iteration:
+    """The state of one (batched) Newton solve; :meth:`step` does one iteration."""
+
+    def __init__(self, P, U, S, opts):
+        k = len(U)
+        self.P, self.U, self.S, self.opts = P, U, S, opts
+        self.T = P.linearize(U, S)  # the linearization whose tangent the solves use
+        self.err = _errors(P, self.T, None)
+        self.alive = np.asarray(self.T.ok, bool) & np.isfinite(self.err)
+        self.R = np.array(self.T.residual)  # each member's current residual
+        self.everyone = np.arange(k)
+        self.owners = self.everyone  # T's members, in its row order (sorted)
+        self.fresh = np.ones(k, dtype=bool)  # a member's current state is its state in T
+        self.last, self.last_members = self.T, self.everyone  # the latest linearization
+        self.iters = np.zeros(k, dtype=int)
+        self.slow = np.zeros(k, dtype=int)
+        # error contraction of each member's last iteration (0: trust the start)
+        self.ratio = np.zeros(k) if (opts.chord_start and opts.chord > 0) else np.ones(k)
+
+    def step(self) -> bool:
+        """One iteration over the unconverged members; False when none is left."""
+        P, U, S, opts = self.P, self.U, self.S, self.opts
+        active = self.alive & (self.err > 1.0)
+        n = int(np.count_nonzero(active))
+        if n == 0:
+            return False
+        act = self.everyone if n == len(U) else np.flatnonzero(active)
+        chord = opts.chord > 0 and float(self.ratio[act].max()) <= opts.chord
+        if not chord and not self.fresh[act].all():  # a new tangent at the current states
+            self.T, self.owners = P.linearize(U[act], S[act]), act
+            self.fresh[act] = True
+            self.R[act] = self.T.residual
+            self.last, self.last_members = self.T, act
+        if self.owners.size == n:  # act is T's members (they only drop out)
+            dU = P.solve(self.T, -self.R[act])
+        else:  # a subset of T's members: zero right-hand sides for the others
+            rows = np.searchsorted(self.owners, act)
+            rhs = np.zeros((self.owners.size, P.size))
+            rhs[rows] = -self.R[act]
+            dU = P.solve(self.T, rhs)[rows]
+        finite = np.isfinite(dU).all(axis=1)
+        if not finite.all():
+            self.alive[act[~finite]] = False
+            act, dU = act[finite], dU[finite]
+            if act.size == 0:
+                return False
+        full = np.minimum(1.0, np.asarray(P.step_limit(U[act], dU), float))
+        moved, rounds = self._line_search(act, dU, full, chord)
         if not chord and moved.size:  # the new states carry their own tangent
             if rounds == 1 and moved.size == act.size:
-                T, owners = last, moved
+                self.T, self.owners = self.last, moved
             else:  # accepted over several rounds: evaluate them together
-                T, owners = P.linearize(U[moved], S[moved]), moved
-                last, last_members = T, moved
-            fresh[moved] = True
-        stuck = moved[(slow[moved] >= opts.stagnation) & (err[moved] > 1.0)]
-        alive[stuck] = False
-    ok = np.isfinite(err) & (err <= 1.0)
-    lin = _final(P, U, S, T, owners, fresh, last, last_members, tangent_at_end)
-    if single:
-        return NewtonResult(U[0], bool(ok[0]), float(err[0]), int(iters[0]), _single(lin))
-    return NewtonResult(U, ok, err, iters, lin)
+                self.T, self.owners = P.linearize(U[moved], S[moved]), moved
+                self.last, self.last_members = self.T, moved
+            self.fresh[moved] = True
+        stuck = (self.slow[moved] >= opts.stagnation) & (self.err[moved] > 1.0)
+        if stuck.any():
+            self.alive[moved[stuck]] = False
+        return True
+
+    def _line_search(self, act, dU, full, chord):
+        """Backtrack each member's step until its error decreases (or a full step raises it
+        by at most ``full_step_growth``); returns the members that moved and the rounds."""
+        P, U, S = self.P, self.U, self.S
+        growth = P.full_step_growth
+        alpha = full
+        pos = np.arange(act.size)  # members of act still searching
+        moved = []
+        rounds = 0
+        for _ in range(self.opts.backtracks + 1):
+            rounds += 1
+            members = act[pos]
+            step = alpha[:, None] * dU[pos]
+            trial = U[members] + step
+            tlin = P.linearize(trial, S[members], tangent=not chord)
+            e_new = _errors(P, tlin, step)
+            e_old = self.err[members]
+            accept = (
+                (e_new < e_old)
+                | (e_new <= 1.0)
+                | ((alpha == full[pos]) & (e_new <= growth * e_old))
+            )
+            accept &= np.isfinite(e_new)
+            if accept.all():
+                self._take(members, trial, tlin, e_new, e_old, slice(None))
+                if pos.size == act.size:
+                    self.last, self.last_members = tlin, members
+                moved.append(members)
+                pos = pos[:0]
+                break
+            if accept.any():
+                acc = np.flatnonzero(accept)
+                self._take(members[acc], trial[acc], tlin, e_new[acc], e_old[acc], acc)
+                moved.append(members[acc])
+            keep = ~accept
+            pos, alpha = pos[keep], 0.5 * alpha[keep]
+            if pos.size == 0:
+                break
+        failed = act[pos]
+        if failed.size:
+            self.alive[failed] = False
+            self.iters[failed] += 1
+        moved = np.sort(np.concatenate(moved)) if moved else act[:0]
+        return moved, rounds
+
+    def _take(self, members, trial, tlin, e_new, e_old, rows):
+        """Accept the trial states of ``members`` (rows ``rows`` of ``tlin``)."""
+        self.slow[members] = np.where(e_new > 0.5 * e_old, self.slow[members] + 1, 0)
+        self.ratio[members] = np.where(e_old > 0, e_new / e_old, 0.0)
+        self.U[members] = trial
+        self.R[members] = tlin.residual[rows]
+        self.err[members] = e_new
+        self.iters[members] += 1
+        self.fresh[members] = False
 
 
-def _final(P, U, S, T, owners, fresh, last, last_members, tangent: bool) -> Linearization:
+def _final(P, U, S, it: _Iteration, tangent: bool) -> Linearization:
     """The linearization of every member at its last state, for the caller.
 
     The tangent's own if it describes them all; with ``tangent``, otherwise the members'
     latest residuals paired with that tangent when it covers them all (each a chord step or
     less away), else a new evaluation; without ``tangent``, the latest residuals.
     """
+    T, fresh = it.T, it.fresh
     k = len(U)
-    everyone = owners.size == k
+    everyone = it.owners.size == k
     if everyone and fresh.all():
         return T
-    state = last if last_members.size == k else None
-    if not tangent:
-        return state if state is not None else P.linearize(U, S, tangent=False)
+    state = it.last if it.last_members.size == k else None
+    if not tangent:  # the residuals the iteration holds (no model-specific extras)
+        if state is not None:
+            return state
+        return Linearization(U, S, it.R, np.isfinite(it.err))
     if not everyone:
         return P.linearize(U, S)
     if state is None:

@@ -52,6 +52,9 @@ class PathOptions:
         taken to end (a limit point) or the load to be unreachable.
     bifurcation_tol : float
         A change of stability is located to this fraction of the requested step (> min_step).
+    change_growth : float
+        The predicted change of the state in a step may exceed the last step's by this factor
+        (see ``_Tracker.change_limit``).
     relative_correction : float
         A step is also rejected (and cut) when the Newton correction exceeds this fraction of
         the predicted change of the state (plus 1e-3 of the model's ``max_correction``): on a
@@ -72,6 +75,7 @@ class PathOptions:
     min_step: float = 1e-6
     bifurcation_tol: float = 1e-4
     relative_correction: float = 0.25
+    change_growth: float = 2.0
     stability: bool = True
     chunk: int = 10
     snaps: int = 4
@@ -106,6 +110,8 @@ class PathPoint:
         inner states of a batch-corrected chunk, which the path does not continue from).
     rate : ndarray or None
         ``du/dscale`` along the path (None where the tangent is singular).
+    residual : ndarray or None
+        ``R(u, scale)``, shape (size,).
     """
 
     u: np.ndarray
@@ -114,6 +120,7 @@ class PathPoint:
     stability: float
     lin: Linearization
     rate: np.ndarray | None = None
+    residual: np.ndarray | None = None
 
 
 @dataclass
@@ -155,6 +162,7 @@ class _Tracker:
         self.events: list = []
         self.steps = 0
         self.cuts = 0
+        self.last_change = None  # change of the state in the last accepted step
         #: Corrections below this (1e-3 of the model's max_correction) never signal a jump.
         limit = self.P.max_correction
         self.negligible = 1e-3 * limit if np.isfinite(limit) else 0.0
@@ -163,7 +171,9 @@ class _Tracker:
     def point(self, u, scale, error, lin, stab=None) -> PathPoint:
         if stab is None:
             stab = float(self.P.stability(lin)[0]) if self.opts.stability else 1.0
-        return PathPoint(u, float(scale), float(error), stab, lin, self.rate(lin))
+        return PathPoint(
+            u, float(scale), float(error), stab, lin, self.rate(lin), np.array(lin.residual[0])
+        )
 
     def rate(self, lin: Linearization):
         """du/dscale = -J^-1 dR/dscale at a converged state (None if J is singular)."""
@@ -199,16 +209,30 @@ class _Tracker:
         change = float(dist((guess - cur.u)[None])[0])
         return correction <= self.opts.relative_correction * change + self.negligible
 
+    def change_limit(self) -> float:
+        """Largest predicted change of the state in the next step: twice the last accepted
+        step's change (so the stepping creeps into a fold or the knee of an imperfect
+        bifurcation, where the path tangent blows up, instead of leaping across), at least a
+        tenth and at most all of the model's ``max_step_change``."""
+        cap = self.P.max_step_change
+        if self.last_change is None or not np.isfinite(cap):
+            return cap
+        return min(cap, max(self.opts.change_growth * self.last_change, 0.1 * cap))
+
     def limit_change(self, cur: PathPoint, h: float) -> float:
-        """``h`` shortened so that the predicted change of the state is at most the model's
-        ``max_step_change``."""
-        limit = self.P.max_step_change
+        """``h`` shortened so that the predicted change of the state is within
+        :meth:`change_limit`."""
+        limit = self.change_limit()
         if cur.rate is None or not np.isfinite(limit):
             return h
         per_unit = float(self.P.distance(cur.rate[None])[0])
         if per_unit * abs(h) > limit:
             return float(np.copysign(limit / per_unit, h))
         return h
+
+    def accepted(self, old: PathPoint, new: PathPoint) -> None:
+        """Record the change of an accepted step (for :meth:`change_limit`)."""
+        self.last_change = float(self.P.distance((new.u - old.u)[None])[0])
 
     def near_fold(self, cur: PathPoint) -> bool:
         """The model says ``cur`` is close to a limit point (failing steps then mean a fold)."""
@@ -275,6 +299,7 @@ class _Tracker:
                     self.record_bifurcation(cur, s1, stab, k, first_of, target)
             if ok:
                 new = self.point(res.u[0], s1, residual, res.lin, stab)
+                self.accepted(cur, new)
                 prev, cur = cur, new
                 failures = 0
                 self.steps += 1
@@ -302,6 +327,7 @@ class _Tracker:
                     }
                 )
                 prev, cur = None, landed
+                self.last_change = None
                 full = h = target - cur.scale
 
     def record_bifurcation(self, cur, s1, stab, k, first_of, target):
@@ -349,11 +375,8 @@ class _Tracker:
         curv = (prev.u - cur.u + cur.rate * h) / (h * h)
         preds = cur.u + d[:, None] * cur.rate + (d * d)[:, None] * curv
         steps = self.P.distance(np.diff(np.vstack([cur.u[None], preds]), axis=0))
-        m = (
-            len(targets)
-            if np.all(steps <= self.P.max_step_change)
-            else int(np.argmax(steps > self.P.max_step_change))
-        )
+        limit = self.change_limit()
+        m = len(targets) if np.all(steps <= limit) else int(np.argmax(steps > limit))
         if m < 2:
             return []
         targets, preds, d = targets[:m], preds[:m], d[:m]
@@ -374,6 +397,9 @@ class _Tracker:
         flips = (stab[:n_good] > 0) != self.stable(cur.stability)
         if flips.any():  # leave the change of stability to the stepping (it locates it)
             n_good = int(np.argmax(flips))
+        if n_good:
+            last = res.u[n_good - 1] - (res.u[n_good - 2] if n_good > 1 else cur.u)
+            self.last_change = float(self.P.distance(last[None])[0])
         run = []
         for j in range(n_good):
             lin = rate = None
@@ -381,7 +407,13 @@ class _Tracker:
                 lin = take(self.P, res.lin, np.array([j]))
                 rate = self.rate(lin)
             p = PathPoint(
-                res.u[j], float(targets[j]), float(res.error[j]), float(stab[j]), lin, rate
+                res.u[j],
+                float(targets[j]),
+                float(res.error[j]),
+                float(stab[j]),
+                lin,
+                rate,
+                np.array(res.lin.residual[j]),
             )
             run.append((p, int(res.iterations[j])))
         return run

@@ -3,7 +3,7 @@
 One pass over the members of a stack and the nodes of the mesh computes the residual, its
 derivative with respect to the load scale and the banded Jacobian, written straight into
 LAPACK's band storage of the stacked (block-diagonal) matrix: entry ``(r, c)`` of member ``j``
-at ``ab[KL + KU + r - c, j size + c]`` (KL = 7, KU = 6), ready for ``gbtrf``.  The equations
+at ``ab[KL + KU + r - c, j size + c]`` (KL = KU = 5), ready for ``gbtrf``.  The equations
 are those of :mod:`coilrod.rod.planar`; in the notation there, for
 node ``i`` with ``t = (cos, sin)(theta_i)``, ``t_perp = (-sin, cos)``, ``m = R(theta_i) mu_i``,
 ``m_perp = dm/dtheta``, ``c_i = h_{i-1} / 2``:
@@ -30,8 +30,10 @@ import numpy as np
 
 __all__ = ["mixed_assembly", "KL", "KU"]
 
-#: Sub- and super-diagonals of the mixed Jacobian.
-KL, KU = 7, 6
+#: Sub- and super-diagonals of the mixed Jacobian.  Unknowns per node (x, y, theta, Fx, Fy)
+#: at 5i .. 5i + 4, equations (position x, position y, moment, force x, force y) in the same
+#: rows: the order that gives the narrowest band.
+KL, KU = 5, 5
 _D = KL + KU  # row of the diagonal in band storage
 
 
@@ -73,7 +75,7 @@ def mixed_assembly(U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab
         ok = True
         for i in range(n):
             p = j * n + i
-            th = U[j, 5 * i]
+            th = U[j, 5 * i + 2]
             c = math.cos(th)
             si = math.sin(th)
             cs[i] = c
@@ -103,41 +105,41 @@ def mixed_assembly(U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab
                 d10[i] = 0.0
                 d11[i] = 0.0
             total = tau[i] + mb[i] + f0[i] + f1[i] + g0[i] + g1[i]
-            total += d00[i] + d01[i] + d10[i] + d11[i] + U[j, 5 * i + 1] + U[j, 5 * i + 2]
+            total += d00[i] + d01[i] + d10[i] + d11[i] + U[j, 5 * i] + U[j, 5 * i + 1]
             total += U[j, 5 * i + 3] + U[j, 5 * i + 4]
             if not math.isfinite(total):  # the band entries are products of these
                 ok = False
         for i in range(n):
-            r = 5 * i
-            th = U[j, r]
+            r = 5 * i  # x_i, y_i at r, r + 1; theta_i at r + 2; F_i at r + 3, r + 4
+            th = U[j, r + 2]
             Fx = U[j, r + 3]
             Fy = U[j, r + 4]
             ci = 0.0 if i == 0 else 0.5 * h[i - 1]
             tp0 = -sn[i]
             tp1 = cs[i]
-            # moment equation
+            # position equations (rows r, r + 1)
             if i == 0:
-                R[j, r] = th - theta0
-                R1[j, r] = 0.0
-            else:
-                bend = (th - U[j, r - 5]) / h[i - 1]
-                if i < nm:
-                    bend -= (U[j, r + 5] - th) / h[i]
-                cw = ci * w[i]
-                r1 = -w[i] * tau[i] - (tp0 * cw * f0[i] + tp1 * cw * f1[i])
-                R1[j, r] = r1
-                R[j, r] = bend + s * r1 - (tp0 * w[i] * Fx + tp1 * w[i] * Fy)
-            # position equations
-            if i == 0:
+                R[j, r] = U[j, r]
                 R[j, r + 1] = U[j, r + 1]
-                R[j, r + 2] = U[j, r + 2]
             else:
                 hh = 0.5 * h[i - 1]
-                R[j, r + 1] = U[j, r + 1] - U[j, r - 4] - hh * (cs[i - 1] + cs[i])
-                R[j, r + 2] = U[j, r + 2] - U[j, r - 3] - hh * (sn[i - 1] + sn[i])
+                R[j, r] = U[j, r] - U[j, r - 5] - hh * (cs[i - 1] + cs[i])
+                R[j, r + 1] = U[j, r + 1] - U[j, r - 4] - hh * (sn[i - 1] + sn[i])
+            R1[j, r] = 0.0
             R1[j, r + 1] = 0.0
-            R1[j, r + 2] = 0.0
-            # force equations
+            # moment equation (row r + 2)
+            if i == 0:
+                R[j, r + 2] = th - theta0
+                R1[j, r + 2] = 0.0
+            else:
+                bend = (th - U[j, r - 3]) / h[i - 1]
+                if i < nm:
+                    bend -= (U[j, r + 7] - th) / h[i]
+                cw = ci * w[i]
+                r1 = -w[i] * tau[i] - (tp0 * cw * f0[i] + tp1 * cw * f1[i])
+                R1[j, r + 2] = r1
+                R[j, r + 2] = bend + s * r1 - (tp0 * w[i] * Fx + tp1 * w[i] * Fy)
+            # force equations (rows r + 3, r + 4)
             if i == nm:
                 R[j, r + 3] = Fx
                 R[j, r + 4] = Fy
@@ -155,7 +157,7 @@ def mixed_assembly(U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab
                 ok = False
         if tangent:
             off = j * size
-            # clamp rows: theta_0, x_0, and the free end's force F_N
+            # clamp rows: x_0, theta_0, and the free end's force F_N
             _put(ab, off, 0, 0, 1.0)
             _put(ab, off, 1, 1, 1.0)
             _put(ab, off, 2, 2, 1.0)
@@ -163,6 +165,7 @@ def mixed_assembly(U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab
             _put(ab, off, 5 * nm + 4, 5 * nm + 4, 1.0)
             for i in range(1, n):
                 r = 5 * i
+                g = r + 2  # moment row and theta_i column
                 ci = 0.5 * h[i - 1]
                 cw = ci * w[i]
                 tp0 = -sn[i]
@@ -171,35 +174,35 @@ def mixed_assembly(U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab
                 Fy = U[j, r + 4]
                 # moment row g_i
                 bend = 1.0 / h[i - 1]
-                _put(ab, off, r, r - 5, -1.0 / h[i - 1])
+                _put(ab, off, g, g - 5, -1.0 / h[i - 1])
                 if i < nm:
                     bend += 1.0 / h[i]
-                    _put(ab, off, r, r + 5, -1.0 / h[i])
+                    _put(ab, off, g, g + 5, -1.0 / h[i])
                 _put(
                     ab,
                     off,
-                    r,
-                    r,
+                    g,
+                    g,
                     bend
                     + s * w[i] * mb[i]
                     + cs[i] * (w[i] * Fx + s * cw * f0[i])
                     + sn[i] * (w[i] * Fy + s * cw * f1[i])
                     - s * cw * (tp0 * g0[i] + tp1 * g1[i]),
                 )
-                _put(ab, off, r, r + 1, -s * (w[i] * g0[i] + cw * (tp0 * d00[i] + tp1 * d10[i])))
-                _put(ab, off, r, r + 2, -s * (w[i] * g1[i] + cw * (tp0 * d01[i] + tp1 * d11[i])))
-                _put(ab, off, r, r + 3, -w[i] * tp0)
-                _put(ab, off, r, r + 4, -w[i] * tp1)
-                # position rows
+                _put(ab, off, g, r, -s * (w[i] * g0[i] + cw * (tp0 * d00[i] + tp1 * d10[i])))
+                _put(ab, off, g, r + 1, -s * (w[i] * g1[i] + cw * (tp0 * d01[i] + tp1 * d11[i])))
+                _put(ab, off, g, r + 3, -w[i] * tp0)
+                _put(ab, off, g, r + 4, -w[i] * tp1)
+                # position rows of node i
                 hh = 0.5 * h[i - 1]
+                _put(ab, off, r, r, 1.0)
                 _put(ab, off, r + 1, r + 1, 1.0)
-                _put(ab, off, r + 2, r + 2, 1.0)
+                _put(ab, off, r, r - 5, -1.0)
                 _put(ab, off, r + 1, r - 4, -1.0)
-                _put(ab, off, r + 2, r - 3, -1.0)
-                _put(ab, off, r + 1, r - 5, hh * sn[i - 1])
-                _put(ab, off, r + 2, r - 5, -hh * cs[i - 1])
-                _put(ab, off, r + 1, r, hh * sn[i])
-                _put(ab, off, r + 2, r, -hh * cs[i])
+                _put(ab, off, r, g - 5, hh * sn[i - 1])  # theta_{i-1}
+                _put(ab, off, r + 1, g - 5, -hh * cs[i - 1])
+                _put(ab, off, r, g, hh * sn[i])
+                _put(ab, off, r + 1, g, -hh * cs[i])
                 # force rows of node i - 1 act on node i
                 rf = r - 2  # 5 (i - 1) + 3
                 sw = s * w[i]
@@ -207,12 +210,12 @@ def mixed_assembly(U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab
                 _put(ab, off, rf + 1, rf + 1, 1.0)
                 _put(ab, off, rf, rf + 5, -1.0)
                 _put(ab, off, rf + 1, rf + 6, -1.0)
-                _put(ab, off, rf, r, -sw * g0[i])
-                _put(ab, off, rf + 1, r, -sw * g1[i])
-                _put(ab, off, rf, r + 1, -sw * d00[i])
-                _put(ab, off, rf, r + 2, -sw * d01[i])
-                _put(ab, off, rf + 1, r + 1, -sw * d10[i])
-                _put(ab, off, rf + 1, r + 2, -sw * d11[i])
+                _put(ab, off, rf, g, -sw * g0[i])
+                _put(ab, off, rf + 1, g, -sw * g1[i])
+                _put(ab, off, rf, r, -sw * d00[i])
+                _put(ab, off, rf, r + 1, -sw * d01[i])
+                _put(ab, off, rf + 1, r, -sw * d10[i])
+                _put(ab, off, rf + 1, r + 1, -sw * d11[i])
         finite[j] = ok
 
 
@@ -228,16 +231,16 @@ def mixed_error(R, U, inv_w, inv_h, bend_scale, tol, floor, out):
         x_max = 0.0
         F_max = 0.0
         for i in range(n):
-            th_max = max(th_max, abs(U[j, 5 * i]))
-            x_max = max(x_max, abs(U[j, 5 * i + 1]), abs(U[j, 5 * i + 2]))
+            x_max = max(x_max, abs(U[j, 5 * i]), abs(U[j, 5 * i + 1]))
+            th_max = max(th_max, abs(U[j, 5 * i + 2]))
             F_max = max(F_max, abs(U[j, 5 * i + 3]), abs(U[j, 5 * i + 4]))
         size_th = 1.0 + th_max
         e = 0.0
         for i in range(1, n):
             r = 5 * i
-            g = abs(R[j, r]) * inv_w[i] / (tol + floor * (size_th * bend_scale[i] + F_max))
-            ex = abs(R[j, r + 1]) * inv_h[i - 1] / (tol + floor * (1.0 + x_max) * inv_h[i - 1])
-            ey = abs(R[j, r + 2]) * inv_h[i - 1] / (tol + floor * (1.0 + x_max) * inv_h[i - 1])
+            g = abs(R[j, r + 2]) * inv_w[i] / (tol + floor * (size_th * bend_scale[i] + F_max))
+            ex = abs(R[j, r]) * inv_h[i - 1] / (tol + floor * (1.0 + x_max) * inv_h[i - 1])
+            ey = abs(R[j, r + 1]) * inv_h[i - 1] / (tol + floor * (1.0 + x_max) * inv_h[i - 1])
             q = r - 2  # force equations of node i - 1
             ef = (1.0 + F_max) * inv_w[i]
             fx = abs(R[j, q]) * inv_w[i] / (tol + floor * ef)
@@ -246,3 +249,78 @@ def mixed_error(R, U, inv_w, inv_h, bend_scale, tol, floor, out):
             if not m <= e:  # also propagates NaN
                 e = m
         out[j] = e
+
+
+@nb.njit(cache=True)
+def band_lu(ab, kl, ku, ipiv):
+    """LU factorisation with partial pivoting of a band matrix, in place (LAPACK ``gbtf2``).
+
+    ``ab`` (2 kl + ku + 1, n) holds A(i, j) at ``ab[kl + ku + i - j, j]`` (rows 0..kl-1 are
+    workspace, zero on entry); on return it holds U (upper kl + ku diagonals) and the
+    multipliers of L below, and ``ipiv`` (n,) the 0-based row interchanges.  Returns 0, or
+    1 + the index of the first exactly zero pivot (the factorisation is then completed)."""
+    n = ab.shape[1]
+    kv = ku + kl
+    info = 0
+    ju = 0
+    for j in range(n):
+        km = min(kl, n - 1 - j)
+        jp = 0
+        big = abs(ab[kv, j])
+        for i in range(1, km + 1):
+            a = abs(ab[kv + i, j])
+            if a > big:
+                big = a
+                jp = i
+        ipiv[j] = j + jp
+        if ab[kv + jp, j] == 0.0:
+            if info == 0:
+                info = j + 1
+            continue
+        ju = max(ju, min(j + ku + jp, n - 1))
+        if jp != 0:
+            for c in range(j, ju + 1):
+                r1 = kv + j + jp - c
+                r0 = kv + j - c
+                tmp = ab[r1, c]
+                ab[r1, c] = ab[r0, c]
+                ab[r0, c] = tmp
+        piv = ab[kv, j]
+        for i in range(1, km + 1):
+            ab[kv + i, j] /= piv
+        for c in range(j + 1, ju + 1):
+            u = ab[kv + j - c, c]
+            if u != 0.0:
+                for i in range(1, km + 1):
+                    ab[kv + i + j - c, c] -= ab[kv + i, j] * u
+    return info
+
+
+@nb.njit(cache=True)
+def band_solve(ab, kl, ku, ipiv, b):
+    """Solve A x = b with the factors of :func:`band_lu`; b (n, m) is overwritten by x."""
+    n = ab.shape[1]
+    m = b.shape[1]
+    kv = ku + kl
+    for j in range(n - 1):  # L, with the row interchanges as they were made
+        lm = min(kl, n - 1 - j)
+        p = ipiv[j]
+        if p != j:
+            for q in range(m):
+                tmp = b[p, q]
+                b[p, q] = b[j, q]
+                b[j, q] = tmp
+        for i in range(1, lm + 1):
+            f = ab[kv + i, j]
+            if f != 0.0:
+                for q in range(m):
+                    b[j + i, q] -= f * b[j, q]
+    for j in range(n - 1, -1, -1):  # U, bandwidth kl + ku
+        d = ab[kv, j]
+        for q in range(m):
+            b[j, q] /= d
+        for i in range(max(0, j - kv), j):
+            f = ab[kv + i - j, j]
+            if f != 0.0:
+                for q in range(m):
+                    b[i, q] -= f * b[j, q]

@@ -22,8 +22,9 @@ Two unknown layouts:
 
 * uniform fields: ``theta`` only; the Jacobian (= Hessian of E) is tridiagonal.
 * otherwise a mixed layout with positions and force resultants as unknowns, five per node
-  ``(theta_i, x_i, y_i, Fx_i, Fy_i)`` and equations ``(g_i, position, force)`` in the same
-  order: the Jacobian is banded (7 below, 6 above the diagonal), so a Newton step costs O(N).
+  ``(x_i, y_i, theta_i, Fx_i, Fy_i)`` and equations ``(position, g_i, force)`` in the same
+  order: the Jacobian is banded (5 below, 5 above the diagonal -- the order within a node is
+  chosen for the narrowest band), so a Newton step costs O(N).
   Eliminating positions and forces gives back the (dense, symmetric) Hessian of E.
 
 Both layouts evaluate stacks of states at once (``batched``): the k Jacobians of a stack form
@@ -35,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.linalg import eigvalsh_tridiagonal
-from scipy.linalg.lapack import dgbtrf, dgbtrs, dgttrf, dgttrs
+from scipy.linalg.lapack import dgttrf, dgttrs
 from scipy.linalg.lapack import dstebz as _stebz
 
 from ..path.protocol import Linearization, PathProblem
@@ -43,8 +44,9 @@ from .mesh import RodMesh
 
 __all__ = ["PlanarRod", "RodTangent"]
 
-_NV = 5  # unknowns per node in the mixed layout
-_KL, _KU = 7, 6  # bandwidths of the mixed Jacobian
+_NV = 5  # unknowns per node in the mixed layout: (x, y, theta, Fx, Fy)
+_TH = 2  # position of theta in a node's unknowns (and of the moment equation in its rows)
+_KL, _KU = 5, 5  # bandwidths of the mixed Jacobian
 _DIAG = _KL + _KU  # row of the diagonal in LAPACK's factorisation band storage
 #: Free nodes up to which the second variation of the mixed layout is formed densely.
 _DENSE_STABILITY = 96
@@ -105,7 +107,11 @@ class RodTangent:
         for j in np.flatnonzero(self.bad):
             ab[:, j * n : (j + 1) * n] = 0.0
             ab[_DIAG, j * n : (j + 1) * n] = 1.0
-        lu, ipiv, info = dgbtrf(ab, _KL, _KU, overwrite_ab=True)
+        from ._compiled import band_lu
+
+        ipiv = np.empty(ab.shape[1], dtype=np.int64)
+        info = band_lu(ab, _KL, _KU, ipiv)  # LAPACK's gbtf2, compiled: no per-column calls
+        lu = ab
         self.parts = None  # factorised in place: the band storage now holds the factors
         if info > 0:
             diag = lu[_DIAG].reshape(self.k, n)
@@ -122,13 +128,16 @@ class RodTangent:
             for j in np.flatnonzero(~self.bad):
                 out[j] = _take_tangent(self, [j]).solve(rhs[j : j + 1])[0]
             return out
-        b = np.ascontiguousarray(rhs, dtype=float).reshape(-1)
         if self.uniform:
+            b = np.ascontiguousarray(rhs, dtype=float).reshape(-1)
             x, info = dgttrs(*lu, b)
+            if info != 0:
+                raise np.linalg.LinAlgError(f"LAPACK solve failed (info {info})")
         else:
-            x, info = dgbtrs(lu[0], _KL, _KU, b, lu[1])
-        if info != 0:
-            raise np.linalg.LinAlgError(f"LAPACK solve failed (info {info})")
+            from ._compiled import band_solve
+
+            x = np.array(rhs, dtype=float).reshape(-1, 1)
+            band_solve(lu[0], _KL, _KU, lu[1], x)
         x = x.reshape(self.k, self.size)
         x[self.bad] = np.nan
         return x
@@ -175,8 +184,9 @@ class PlanarRod(PathProblem):
     batched = True
     #: Largest change of any node angle between the predicted and converged state of a step.
     max_correction = 0.25
-    #: Largest predicted change of any node angle in one load step, rad.
-    max_step_change = 0.15
+    #: Largest predicted change of any node angle in one load step, rad (the engine also keeps
+    #: it within twice the last step's change).
+    max_step_change = 0.5
     #: Largest change of any node angle in one Newton step, rad.
     max_rotation = 0.5
 
@@ -201,9 +211,9 @@ class PlanarRod(PathProblem):
         bend[1:] += self._inv_h
         bend[:-1] += self._inv_h
         self._bend_scale = bend * self._inv_w
+        self._floor_bend = _FLOOR * np.finfo(float).eps * self._bend_scale[1:]
         self._stab_e = -self._inv_h[1:] / np.sqrt(w[1:-1] * w[2:])
         self._mu0 = None
-        self._det_ref = None
         self._band_cache: dict = {}
         self._no_h = np.zeros((1, 3, 3, 3))  # placeholder hessian of a linear field
         self.last_failure = ""
@@ -213,6 +223,7 @@ class PlanarRod(PathProblem):
             mt, mn = wmu[:, 0], wmu[:, 1]
             self._P1 = mt * by - mn * bx  # w (m x b) and w m.b at theta = 0, scale 1
             self._Q1 = mt * bx + mn * by
+            self._k_diag = bend  # 1/h_{i-1} + 1/h_i on the diagonal
             self._k_low = -self._inv_h.copy()  # J[i + 1, i]
             self._k_up = -self._inv_h.copy()  # J[i, i + 1]
             self._k_up[0] = 0.0  # row 0 is the clamp condition
@@ -229,8 +240,8 @@ class PlanarRod(PathProblem):
             return theta.copy()
         x = self.positions(theta)
         u = np.zeros((self.n, _NV))
-        u[:, 0] = theta
-        u[:, 1:3] = x
+        u[:, _TH] = theta
+        u[:, 0:2] = x
         if scale != 0.0:
             _, G, _ = self._field(x[None], False)
             m = _rot(theta, self.mu)
@@ -241,7 +252,7 @@ class PlanarRod(PathProblem):
 
     def theta(self, u: np.ndarray) -> np.ndarray:
         """Node angles of a state (size,) or stack (k, size): shape (n,) or (k, n), rad."""
-        return u if self.uniform else u[..., 0::_NV]
+        return u if self.uniform else u[..., _TH::_NV]
 
     def positions(self, theta: np.ndarray) -> np.ndarray:
         """Trapezoid centreline relative to the clamp, theta (..., n): (..., n, 2), units of L."""
@@ -259,13 +270,16 @@ class PlanarRod(PathProblem):
         return pts
 
     def interpolate_to(self, fine: PlanarRod, u: np.ndarray) -> np.ndarray:
-        """States of this (coarse) mesh on the refined mesh ``fine`` (linear interpolation);
-        u (size,) or (k, size)."""
-        v = np.atleast_2d(u).reshape(-1, self.n, 1 if self.uniform else _NV)
-        out = np.empty((v.shape[0], fine.n, v.shape[2]))
-        for j in range(v.shape[0]):
-            for q in range(v.shape[2]):
-                out[j, :, q] = np.interp(fine.mesh.s, self.mesh.s, v[j, :, q])
+        """States of this (coarse) mesh on its refinement ``fine`` (every segment halved), by
+        linear interpolation: the coarse nodes carry over, the midpoints take the mean of their
+        neighbours; u (size,) or (k, size)."""
+        if fine.n != 2 * self.n - 1:
+            raise ValueError("fine must be the refinement of this mesh (every segment halved)")
+        nv = 1 if self.uniform else _NV
+        v = np.atleast_2d(u).reshape(-1, self.n, nv)
+        out = np.empty((v.shape[0], fine.n, nv))
+        out[:, ::2] = v
+        out[:, 1::2] = 0.5 * (v[:, :-1] + v[:, 1:])
         out = out.reshape(v.shape[0], -1)
         return out[0] if np.ndim(u) == 1 else out
 
@@ -310,8 +324,12 @@ class PlanarRod(PathProblem):
     # -- the protocol -----------------------------------------------------------------------------
     def linearize(self, u, scale, tangent: bool = True) -> Linearization:
         """Residual (k, size), admissibility (k,) and the tangent of a stack of states."""
-        U = np.atleast_2d(np.asarray(u, float))
-        S = np.broadcast_to(np.asarray(scale, float), (U.shape[0],)).astype(float)
+        U = np.asarray(u, dtype=float)
+        if U.ndim == 1:
+            U = U[None]
+        S = np.asarray(scale, dtype=float)
+        if S.shape != (U.shape[0],):
+            S = np.full(U.shape[0], float(S)) if S.ndim == 0 else S.reshape(U.shape[0])
         with np.errstate(all="ignore"):
             if self.uniform:
                 R, R1, parts = self._uniform(U, S, tangent)
@@ -365,28 +383,28 @@ class PlanarRod(PathProblem):
         R, U = lin.residual, lin.u
         k = R.shape[0]
         eps = np.finfo(float).eps
-        with np.errstate(all="ignore"):
-            th = self.theta(U)
-            size_th = 1.0 + np.max(np.abs(th), axis=1, keepdims=True)
-            if self.uniform:
-                floor = _FLOOR * eps * size_th * self._bend_scale[1:]
-                return np.max(np.abs(R[:, 1:] * self._inv_w[1:]) / (self.tol + floor), axis=1)
+        if self.uniform:
+            with np.errstate(all="ignore"):
+                size_th = 1.0 + np.abs(U).max(axis=1, keepdims=True)
+                scaled = np.abs(R[:, 1:]) * self._inv_w[1:]
+                return (scaled / (self.tol + size_th * self._floor_bend)).max(axis=1)
         from ._compiled import mixed_error
 
         out = np.empty(k)
         mixed_error(R, U, self._inv_w, self._inv_h, self._bend_scale, self.tol, _FLOOR * eps, out)
         return out
 
-    def residual_norm(self, lin: Linearization) -> np.ndarray:
-        """Max-norm of the scaled residual (non-dimensional), shape (k,)."""
-        R = lin.residual
+    def residual_norm(self, residual) -> np.ndarray:
+        """Max-norm of the scaled residual (non-dimensional), shape (k,), of residuals (k, size)
+        (or of a linearization's)."""
+        R = residual.residual if isinstance(residual, Linearization) else residual
         if self.uniform:
             return np.max(np.abs(R[:, 1:] * self._inv_w[1:]), axis=1)
         v = R.reshape(R.shape[0], self.n, _NV)
         return np.maximum(
-            np.max(np.abs(v[:, 1:, 0]) * self._inv_w[1:], axis=1),
+            np.max(np.abs(v[:, 1:, _TH]) * self._inv_w[1:], axis=1),
             np.maximum(
-                np.max(np.abs(v[:, 1:, 1:3]) * self._inv_h[None, :, None], axis=(1, 2)),
+                np.max(np.abs(v[:, 1:, 0:2]) * self._inv_h[None, :, None], axis=(1, 2)),
                 np.max(np.abs(v[:, :-1, 3:5]) * self._inv_w[None, 1:, None], axis=(1, 2)),
             ),
         )
@@ -403,7 +421,7 @@ class PlanarRod(PathProblem):
 
     def arclength_weights(self) -> np.ndarray:
         w = np.zeros(self.size)
-        w[np.arange(self.n) * (self.size // self.n)] = 1.0 / self.n
+        w[np.arange(self.n) * (self.size // self.n) + (0 if self.uniform else _TH)] = 1 / self.n
         return w
 
     def stability(self, lin: Linearization, precise: bool = False) -> np.ndarray:
@@ -412,17 +430,18 @@ class PlanarRod(PathProblem):
         H is the Hessian of the discrete energy in the free angles theta_1..theta_N
         (positions and forces eliminated); mu approximates the smallest eigenvalue of the
         continuous second variation per unit length (non-dimensional, EI/L^3 units): the
-        equilibrium is stable iff mu > 0.  Uniform fields: exact, O(N) bisection of the
-        tridiagonal H.  Otherwise the cheap indicator is the sign of det J relative to the
-        straight unloaded rod (+-1: the parity of the number of negative eigenvalues), and
-        ``precise`` forms ``W^1/2 H^-1 W^1/2`` from the banded factors (dense up to
-        ``_DENSE_STABILITY`` free nodes, ARPACK beyond).
+        equilibrium is stable iff mu > 0.  The cheap indicator is the sign of det J relative
+        to the straight unloaded rod (+-1: the parity of the number of negative eigenvalues;
+        the planar rod's eigenvalues are simple), read off the factors already at hand.
+        ``precise``: uniform fields, an O(N) bisection of the tridiagonal H; otherwise power
+        iteration on ``W^1/2 H^-1 W^1/2`` with the banded factors (dense spectrum or ARPACK
+        for unstable states).
         """
-        if self.uniform:
-            return self._stability_tridiagonal(lin)
         signs = lin.tangent.det_signs() * self.det_reference()
         if not precise:
             return signs
+        if self.uniform:
+            return self._stability_tridiagonal(lin)
         return self._stability_mixed(lin, signs)
 
     def near_fold(self, lin: Linearization) -> bool:
@@ -459,28 +478,27 @@ class PlanarRod(PathProblem):
         return self._mu0
 
     def det_reference(self) -> float:
-        """Sign of det J of the straight unloaded rod (whose second variation is positive)."""
-        if self._det_ref is None:
-            lin = self.linearize(self.straight(), 0.0)
-            self._det_ref = float(lin.tangent.det_signs()[0])
-        return self._det_ref
+        """Sign of det J of the straight unloaded rod, whose second variation is positive: +1
+        in both layouts (det J = det H, the clamp rows and the position and force equations
+        contributing unit triangular factors; asserted by the tests against a dense
+        determinant)."""
+        return 1.0
 
     # -- uniform layout ---------------------------------------------------------------------------
     def _uniform(self, th: np.ndarray, S: np.ndarray, tangent: bool):
         c, s = np.cos(th), np.sin(th)
-        tau1 = c * self._P1 - s * self._Q1  # w tau per unit scale
-        R1 = -tau1
+        R1 = s * self._Q1 - c * self._P1  # -w tau per unit scale
         R1[:, 0] = 0.0
-        dth = np.diff(th, axis=1) * self._inv_h
-        R = S[:, None] * R1
+        dth = (th[:, 1:] - th[:, :-1]) * self._inv_h
+        Sc = S[:, None]
+        R = Sc * R1
         R[:, 1:] += dth
         R[:, :-1] -= dth
         R[:, 0] = th[:, 0] - self.theta0
         if not tangent:
             return R, R1, None
-        d = S[:, None] * (c * self._Q1 + s * self._P1)  # w m.b
-        d[:, 1:] += self._inv_h
-        d[:, :-1] += self._inv_h
+        d = Sc * (c * self._Q1 + s * self._P1)  # w m.b
+        d += self._k_diag  # bending; row 0 is the clamp condition
         d[:, 0] = 1.0
         return R, R1, (d, self._off_diagonals(th.shape[0]))
 
@@ -519,7 +537,7 @@ class PlanarRod(PathProblem):
         from ._compiled import mixed_assembly
 
         k, n = U.shape[0], self.n
-        B, G, H = self._field_by_member(U.reshape(k, n, _NV)[:, :, 1:3], tangent)
+        B, G, H = self._field_by_member(U.reshape(k, n, _NV)[:, :, 0:2], tangent)
         R = np.empty((k, self.size))
         R1 = np.empty((k, self.size))
         shape = (2 * _KL + _KU + 1, k * self.size) if tangent else (1, 1)
@@ -561,7 +579,7 @@ class PlanarRod(PathProblem):
         """
         k = lin.tangent.k
         out = np.full(k, np.nan)
-        rows = _NV * np.arange(1, self.n)
+        rows = _NV * np.arange(1, self.n) + _TH
         sq = np.sqrt(self.mesh.w[1:])
         even = signs > 0
         members = np.flatnonzero(even)
@@ -592,7 +610,7 @@ class PlanarRod(PathProblem):
         eigenvalue is positive."""
         from scipy.sparse.linalg import LinearOperator, eigsh
 
-        idx = _NV * np.arange(1, self.n)
+        idx = _NV * np.arange(1, self.n) + _TH
         sq = np.sqrt(self.mesh.w[1:])
         rhs = np.zeros((1, self.size))
 

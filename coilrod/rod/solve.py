@@ -217,8 +217,7 @@ def _result(rod, problems, points, iterations, events, opts) -> RodResult:
     scales = np.array([p.scale for p in points])
     states = np.array([p.u for p in points])
     iterations = np.array(iterations, dtype=int)
-    lin_c = coarse.linearize(states, scales, tangent=False)
-    residual = coarse.residual_norm(lin_c)
+    residual = coarse.residual_norm(np.array([p.residual for p in points]))
     thetas_c = coarse.theta(states)
     x_c = coarse.positions(thetas_c)
     if len(problems) == 2:
@@ -241,7 +240,7 @@ def _result(rod, problems, points, iterations, events, opts) -> RodResult:
                 residual=float(res.error[k]),
             )
         iterations = iterations + res.iterations
-        residual = np.maximum(residual, fine.residual_norm(res.lin))
+        residual = np.maximum(residual, fine.residual_norm(res.lin.residual))
         th_f = fine.theta(res.u)
         thetas = (4 * th_f[:, ::2] - thetas_c) / 3
         x = (4 * fine.positions(th_f)[:, ::2] - x_c) / 3
@@ -251,19 +250,10 @@ def _result(rod, problems, points, iterations, events, opts) -> RodResult:
     if not opts.stability:
         mu = np.full(scales.size, np.nan)
         stable = np.ones(scales.size, dtype=bool)
-    elif coarse.uniform:  # the path's own indicator is the exact eigenvalue here
-        mu = np.array([p.stability for p in points], dtype=float)
-        if len(problems) == 2:
-            # near a loss of stability sharpen the estimate (it locates the critical scale)
-            near = np.abs(mu) < _EXTRAPOLATE_MU * coarse.mu0
-            if near.any():
-                fine_lin = problems[1].linearize(res.u[near], scales[near])
-                mu_f = np.asarray(problems[1].stability(fine_lin), float)
-                mu[near] = (4 * mu_f - mu[near]) / 3
-        stable = mu > 0
     else:  # the exact sign now, the eigenvalues on first access
         stable = np.array([p.stability > 0 for p in points], dtype=bool)
-        mu = _eigenvalues_later(coarse, states, scales)
+        fine = (problems[1], res.u) if len(problems) == 2 else None
+        mu = _eigenvalues_later(coarse, states, scales, fine)
     instabilities = [_refine_event(e, scales, mu, coarse) for e in events]
     return RodResult(
         scales=scales,
@@ -282,13 +272,27 @@ def _result(rod, problems, points, iterations, events, opts) -> RodResult:
     )
 
 
-def _eigenvalues_later(problem, states, scales):
-    """A callable that computes the smallest second-variation eigenvalues of ``states`` once
-    (batched), for :attr:`RodResult.min_eigenvalue` in non-uniform fields."""
+def _eigenvalues_later(problem, states, scales, fine=None):
+    """A callable computing the smallest second-variation eigenvalues of ``states`` (all, or
+    the given rows), batched, for :attr:`RodResult.min_eigenvalue`.
+
+    For uniform fields with a refined mesh ``fine = (problem, states)``, the eigenvalues near a
+    loss of stability (below half the straight rod's) are Richardson-extrapolated, which
+    locates a critical scale to fourth order."""
 
     def compute(rows=None):
-        sel = slice(None) if rows is None else np.asarray(rows)
-        return problem.stability(problem.linearize(states[sel], scales[sel]), precise=True)
+        sel = np.arange(len(scales)) if rows is None else np.asarray(rows)
+        mu = np.asarray(
+            problem.stability(problem.linearize(states[sel], scales[sel]), precise=True), float
+        )
+        if fine is not None and problem.uniform:
+            near = np.abs(mu) < _EXTRAPOLATE_MU * problem.mu0
+            if near.any():
+                fp, fstates = fine
+                flin = fp.linearize(fstates[sel[near]], scales[sel[near]])
+                mu_f = np.asarray(fp.stability(flin, precise=True), float)
+                mu[near] = (4 * mu_f - mu[near]) / 3
+        return mu
 
     return compute
 
