@@ -113,3 +113,24 @@ def test_unreachable_scale_raises_convergence_error_with_reached_scale():
     assert 0.1 <= err.reached < 1.0
     assert err.residual > 0  # inf: the field raised at every trial state beyond the line
     assert "field could not be evaluated" in str(err)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "name"),
+    [
+        ({"step": 0.0}, "step"),
+        ({"step": -0.1}, "step"),
+        ({"step": float("nan")}, "step"),
+        ({"max_steps": 0}, "max_steps"),
+        ({"max_steps": -3}, "max_steps"),
+        ({"max_steps": 2.5}, "max_steps"),
+        ({"tol": 0.0}, "tol"),
+        ({"direction": 0}, "direction"),
+        ({"direction": True}, "direction"),
+    ],
+)
+def test_trace_rod_numerical_parameters(kwargs, name):
+    """Parameters that would give meaningless output (a zero or negative step, no steps) are
+    a ValueError naming them."""
+    with pytest.raises(ValueError, match=name):
+        trace_rod(ROD, FIELD, 0.5, (0.0, 1.0), **kwargs)

@@ -11,7 +11,7 @@ Cross-checks:
   L/D = 5 ... 500, a strong gradient (gamma = 60) against solve_bvp, a rod running into a field
   that cannot be evaluated (ConvergenceError naming the reached scale), the real S-shaped fold
   of a small Helmholtz pair near its winding (snap-through reported), never NaN; random segment
-  profiles (hypothesis): converged or a clear ConvergenceError.
+  profiles (hypothesis): every one converges and agrees with solve_bvp.
 """
 
 import math
@@ -274,14 +274,9 @@ def test_random_segment_profiles(n_seg, data, lam, phi):
     field = coils.UniformField(B=(B * math.cos(phi), B * math.sin(phi), 0.0))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StabilityWarning)
-        failure = None
-        try:
-            res = solve_rod(rod, field, [0.5, 1.0], nodes=16)
-        except ConvergenceError as err:
-            failure = err
-    if failure is not None:  # a clear failure is acceptable; a NaN or a false success is not
-        assert failure.reached < failure.target
-        return
+        # every such load is reachable (a uniform field, |lambda| <= 40: the path may snap
+        # through a fold but never ends), so a ConvergenceError is a failure of the solver
+        res = solve_rod(rod, field, [0.5, 1.0], nodes=16)
     assert np.all(np.isfinite(res.tip))
     assert np.all(np.isfinite(res.min_eigenvalue))
     assert res.converged.all()
