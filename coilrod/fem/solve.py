@@ -10,8 +10,8 @@ from coils._validate import finite_scalar
 from coils.field import Field
 
 from ..errors import ConvergenceError
+from ..path.corrector import NewtonOptions
 from ..path.events import warn_events
-from ..path.newton import NewtonOptions
 from ..path.stepping import PathOptions, follow_load
 from .assembly import Assembler
 from .material import moduli

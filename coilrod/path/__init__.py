@@ -10,8 +10,8 @@ and :class:`ArcLength` (pseudo-arclength through limit points).  Events are plai
 """
 
 from .arclength import ArcLength
+from .corrector import NewtonOptions, NewtonResult, newton
 from .events import StabilityWarning, warn_events
-from .newton import NewtonOptions, NewtonResult, newton
 from .protocol import Linearization, PathProblem
 from .stepping import PathOptions, PathPoint, PathRun, follow_load
 

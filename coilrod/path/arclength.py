@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .newton import NewtonOptions, as_batched
+from .corrector import NewtonOptions, as_batched
 from .protocol import PathProblem
 
 __all__ = ["ArcLength"]

@@ -129,7 +129,7 @@ class PathProblem(ABC):
 
     def with_tangent(self, lin: Linearization, other: Linearization) -> Linearization:
         """``lin`` (a state evaluated without tangent) paired with the tangent of ``other``
-        (for chord iterations of :func:`~coilrod.path.newton.newton`); same members."""
+        (for chord iterations of :func:`~coilrod.path.corrector.newton`); same members."""
         out = copy.copy(lin)
         out.tangent = other.tangent
         return out

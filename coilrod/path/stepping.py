@@ -6,7 +6,7 @@ included -- is the same:
 
 1. **predict** the state at the trial scale with the path tangent ``du/ds = -J^-1 dR/ds`` plus
    a second-order (Hermite) term from the previous state;
-2. **correct** with :func:`~coilrod.path.newton.newton`;
+2. **correct** with :func:`~coilrod.path.corrector.newton`;
 3. **accept** if Newton converged, the correction is within the model's ``max_correction``
    (a larger one means the step may have jumped to another branch) and the stability did not
    change -- if it did, the step is **cut** until the change is located within
@@ -34,7 +34,7 @@ import numpy as np
 
 from ..errors import ConvergenceError
 from .arclength import ArcLength
-from .newton import NewtonOptions, as_batched, newton, take
+from .corrector import NewtonOptions, as_batched, newton, take
 from .protocol import Linearization, PathProblem
 
 __all__ = ["PathOptions", "PathPoint", "PathRun", "follow_load"]

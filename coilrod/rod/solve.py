@@ -10,8 +10,8 @@ from coils._validate import as_vector, finite_scalar, positive
 from coils.field import Field
 
 from ..errors import ConvergenceError
+from ..path.corrector import NewtonOptions, newton
 from ..path.events import warn_events
-from ..path.newton import NewtonOptions, newton
 from ..path.stepping import PathOptions, follow_load
 from ..robot.rod import Rod
 from .mesh import RodMesh, node_magnetization

@@ -10,7 +10,7 @@ from coils._validate import finite_scalar, positive
 
 from ..errors import ConvergenceError
 from ..path.arclength import ArcLength
-from ..path.newton import NewtonOptions, newton
+from ..path.corrector import NewtonOptions, newton
 from .solve import build_problem, check_inputs, make_mesh
 
 __all__ = ["trace_rod", "RodPath"]
