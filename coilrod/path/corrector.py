@@ -95,6 +95,7 @@ class _OneAtATime(PathProblem):
         self.size = problem.size
         self.max_correction = problem.max_correction
         self.max_step_change = problem.max_step_change
+        self.cheap_tangent = problem.cheap_tangent
         self.full_step_growth = problem.full_step_growth
 
     def with_tangent(self, lin, other):
@@ -232,7 +233,8 @@ class _Iteration:
         self.iters = np.zeros(k, dtype=int)
         self.slow = np.zeros(k, dtype=int)
         # error contraction of each member's last iteration (0: trust the start)
-        self.ratio = np.zeros(k) if (opts.chord_start and opts.chord > 0) else np.ones(k)
+        self.chords = opts.chord > 0 and not P.cheap_tangent
+        self.ratio = np.zeros(k) if (opts.chord_start and self.chords) else np.ones(k)
 
     def step(self) -> bool:
         """One iteration over the unconverged members; False when none is left."""
@@ -242,7 +244,7 @@ class _Iteration:
         if n == 0:
             return False
         act = self.everyone if n == len(U) else np.flatnonzero(active)
-        chord = opts.chord > 0 and float(self.ratio[act].max()) <= opts.chord
+        chord = self.chords and float(self.ratio[act].max()) <= opts.chord
         if not chord and not self.fresh[act].all():  # a new tangent at the current states
             self.T, self.owners = P.linearize(U[act], S[act]), act
             self.fresh[act] = True

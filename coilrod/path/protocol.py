@@ -71,6 +71,9 @@ class PathProblem(ABC):
         Largest predicted :meth:`distance` between two consecutive states of a load step: the
         step is shortened where the path tangent is large (near a fold or the knee of an
         imperfect bifurcation), so the stepping resolves the path instead of leaping across.
+    cheap_tangent : bool
+        The tangent costs about as much as the residual (e.g. a tridiagonal one): Newton then
+        never uses chord iterations, which would only add evaluations.
     full_step_growth : float
         A full Newton step is accepted if it raises :meth:`error` by at most this factor
         (large rotations legitimately raise a residual transiently); otherwise the step is
@@ -81,6 +84,7 @@ class PathProblem(ABC):
     batched: bool = False
     max_correction: float = np.inf
     max_step_change: float = np.inf
+    cheap_tangent: bool = False
     full_step_growth: float = 1.0
 
     # -- required -----------------------------------------------------------------------------

@@ -200,6 +200,7 @@ class PlanarRod(PathProblem):
         self.tol = float(tol)
         self.uniform = bool(field.uniform)
         self.linear = bool(field.linear or field.uniform)
+        self.cheap_tangent = self.uniform  # tridiagonal: a tangent costs a residual
         self.n = n = mesh.n
         self.size = n if self.uniform else _NV * n
         h, w = mesh.h, mesh.w
