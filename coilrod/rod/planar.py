@@ -40,7 +40,6 @@ from scipy.linalg.lapack import dgttrf, dgttrs
 from scipy.linalg.lapack import dstebz as _stebz
 
 from ..path.protocol import Linearization, PathProblem
-from .mesh import RodMesh
 
 __all__ = ["PlanarRod", "RodTangent"]
 
@@ -215,7 +214,7 @@ class PlanarRod(PathProblem):
         self._floor_bend = _FLOOR * np.finfo(float).eps * self._bend_scale[1:]
         self._stab_e = -self._inv_h[1:] / np.sqrt(w[1:-1] * w[2:])
         self._mu0 = None
-        self._band_cache: dict = {}
+        self._tri_cache: dict = {}
         self._no_h = np.zeros((1, 3, 3, 3))  # placeholder hessian of a linear field
         self.last_failure = ""
         if self.uniform:
@@ -505,13 +504,13 @@ class PlanarRod(PathProblem):
 
     def _off_diagonals(self, k: int):
         """Sub- and super-diagonals of k stacked tridiagonal Jacobians (constant: bending)."""
-        cached = self._band_cache.get(("tri", k))
+        cached = self._tri_cache.get(("tri", k))
         if cached is None:
             dl = np.zeros((k, self.n))
             du = np.zeros((k, self.n))
             dl[:, :-1] = self._k_low
             du[:, :-1] = self._k_up
-            cached = self._band_cache[("tri", k)] = (dl.ravel()[:-1], du.ravel()[:-1])
+            cached = self._tri_cache[("tri", k)] = (dl.ravel()[:-1], du.ravel()[:-1])
         return cached
 
     def _stability_tridiagonal(self, lin: Linearization) -> np.ndarray:
@@ -601,7 +600,7 @@ class PlanarRod(PathProblem):
             S = sq[:, None] * Hinv * sq[None, :]
             S = 0.5 * (S + S.T)
             if np.all(np.isfinite(S)):
-                out[j] = _lowest_from_inverse(S, False)
+                out[j] = _lowest_from_inverse(S)
         return out
 
     def _stability_sparse(self, tan: RodTangent, sign: float) -> float:
@@ -671,19 +670,11 @@ def _dominant_batched(tan: RodTangent, rows, sq, rtol: float = 1e-13, max_iter: 
     return sigma
 
 
-def _lowest_from_inverse(S: np.ndarray, even: bool) -> float:
-    """Smallest eigenvalue mu of H z = mu W z from S = W^1/2 H^-1 W^1/2 (sigma = 1/mu).
-
-    ``even``: det H > 0 relative to the unloaded rod (an even number of negative eigenvalues,
-    in practice none on a path from the unloaded rod).  Then mu_min = 1 / sigma_max, the
-    dominant eigenvalue of S, by power iteration.  Otherwise the negative sigma closest to
-    zero gives the most negative mu; sigma of |sigma| below 1e-10 sigma_max are round-off
-    (they would be eigenvalues mu beyond any physical load) and are ignored.
-    """
-    if even:
-        sigma = _dominant_eigenvalue(S)
-        if sigma > 0:
-            return 1.0 / sigma
+def _lowest_from_inverse(S: np.ndarray) -> float:
+    """Smallest eigenvalue mu of H z = mu W z from S = W^1/2 H^-1 W^1/2 (sigma = 1/mu), dense:
+    the negative sigma closest to zero gives the most negative mu; sigma of |sigma| below
+    1e-10 sigma_max are round-off (they would be eigenvalues mu beyond any physical load) and
+    are ignored."""
     ev = np.linalg.eigvalsh(S)
     big = np.max(np.abs(ev))
     neg = ev[ev < -1e-10 * big]
@@ -691,25 +682,3 @@ def _lowest_from_inverse(S: np.ndarray, even: bool) -> float:
         return float(1.0 / np.max(neg))
     pos = ev[ev > 0]
     return float(1.0 / np.max(pos)) if pos.size else float("nan")
-
-
-def _dominant_eigenvalue(S: np.ndarray, rtol: float = 1e-13, max_iter: int = 500) -> float:
-    """Dominant eigenvalue (with its sign) of a symmetric matrix by power iteration: the
-    spectrum of the inverse second variation is well separated (ratio mu_1 / mu_2 of the rod's
-    lowest modes), so a few dozen products suffice."""
-    x = np.ones(S.shape[0]) / np.sqrt(S.shape[0])
-    sigma = 0.0
-    for _ in range(max_iter):
-        y = S @ x
-        new = float(x @ y)
-        norm = np.linalg.norm(y)
-        if norm == 0:
-            return 0.0
-        x = y / norm
-        if abs(new - sigma) <= rtol * abs(new):
-            return new
-        sigma = new
-    return sigma
-
-
-RodMesh = RodMesh  # re-exported for convenience
