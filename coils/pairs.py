@@ -9,7 +9,7 @@ from scipy.constants import mu_0
 
 from ._validate import as_array, as_axis, as_counts, as_vector, finite_scalar, positive
 from .coaxial import CoaxialCoils
-from .winding import gauss_filaments, turn_filaments
+from .winding import gauss_filaments, turn_filaments, winding_section
 
 __all__ = ["Coil", "CoilPair", "HelmholtzPair", "MaxwellPair", "HELMHOLTZ_FACTOR", "MAXWELL_FACTOR"]
 
@@ -54,11 +54,7 @@ def _winding_model(radius, turns, winding, filaments, turn_layout):
                 f"winding=(width, height) too"
             )
         return None, None
-    w = as_array(winding, "winding (width, height)", (2,))
-    width = positive(w[0], "winding width")
-    height = positive(w[1], "winding height")
-    if height >= 2 * radius:
-        raise ValueError(f"winding height {height} m must be below twice the radius {radius} m")
+    width, height = winding_section(radius, *as_array(winding, "winding (width, height)", (2,)))
     if turn_layout is None:
         counts = DEFAULT_FILAMENTS if filaments is None else filaments
         return (width, height), ("gauss", as_counts(counts, "filaments", ("n_axial", "n_radial")))

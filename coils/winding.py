@@ -16,18 +16,24 @@ import numpy as np
 
 from ._validate import as_count, finite_scalar, positive
 
-__all__ = ["gauss_filaments", "turn_filaments"]
+__all__ = ["gauss_filaments", "turn_filaments", "winding_section"]
+
+
+def winding_section(radius: float, width, height) -> tuple[float, float]:
+    """Validated winding cross-section ``(width, height)`` (m, > 0) of a coil of mean radius
+    ``radius`` (m): the section must not reach the axis, ``height < 2 radius``."""
+    width = positive(width, "winding width")
+    height = positive(height, "winding height")
+    if height >= 2 * radius:
+        raise ValueError(f"winding height {height} m must be below twice the radius {radius} m")
+    return width, height
 
 
 def _section(z0, radius, width, height) -> tuple[float, float, float, float]:
     """Validated (z0 m, radius m > 0, width m > 0, height m in (0, 2 radius))."""
     z0 = finite_scalar(z0, "z0")
     radius = positive(radius, "radius")
-    width = positive(width, "winding width")
-    height = positive(height, "winding height")
-    if height >= 2 * radius:
-        raise ValueError(f"winding height {height} m must be below twice the radius {radius} m")
-    return z0, radius, width, height
+    return (z0, radius, *winding_section(radius, width, height))
 
 
 def gauss_filaments(
