@@ -13,9 +13,14 @@ d) B + gradient + hessian per call at 130, 1300 and 10^5 points (a rod solver's 
 e) far field, 10 R .. 10^10 R: error of the compiled kernel, the previous numpy kernel and
    magpylib against an mpmath reference with enough digits for the cancellation.
 f) JIT warm-up: first call with an empty and with a warm numba cache.
+g) when the gridded cache pays: direct evaluation against the cache at 300 and 3000 points for
+   fields of 2 to 200 filaments, B + gradient and B + gradient + hessian; the break-even
+   filament count sets the scene planner's ``CACHE_MIN_FILAMENTS``.
 
 Relative error = max |X - X_ref| / max |X_ref| over all entries and points.
 Run: ``python benchmarks/bench_coils.py`` (needs mpmath); writes benchmarks/results/coils.md.
+``python benchmarks/bench_coils.py g`` (any subset of the letters a-g) runs only those parts and
+writes nothing.
 """
 
 from __future__ import annotations
@@ -580,7 +585,132 @@ def part_f() -> None:
     table(["numba cache", "import coils (s)", "first call (s)"], rows)
 
 
-def main() -> None:
+# -- g) when does the gridded cache pay? ------------------------------------------------------
+#: (filaments of the pair, Gauss points per winding) of the fields compared in part g.
+CACHE_FIELDS = (
+    (2, None),
+    (8, (2, 2)),
+    (18, (3, 3)),
+    (32, (4, 4)),
+    (50, (5, 5)),
+    (100, (5, 10)),
+    (200, (10, 10)),
+)
+#: Query sizes of part g: a rod solve (2 x 150 nodes) and a 2D/3D FEM assembly.
+CACHE_POINTS = (300, 3000)
+#: Calls per round for each query size (3 rounds, the fastest call counts).
+CACHE_CALLS = {300: 150, 3000: 25}
+
+
+def _break_even(filaments, direct, grid) -> float:
+    """Filament count where the direct time, fitted as ``a + b N`` (least squares), reaches the
+    grid's time (its median: a grid query does not depend on the wrapped field)."""
+    b, a = np.polyfit(np.asarray(filaments, dtype=float), np.asarray(direct), 1)
+    return float((np.median(grid) - a) / b)
+
+
+def part_g(rng) -> dict:
+    from coilrod.scene.planner import CACHE_MIN_FILAMENTS
+
+    lower = np.array([-0.5, -0.5, -0.025]) * R
+    upper = -lower
+    emit("## g) gridded cache vs direct evaluation by filament count (the planner's threshold)")
+    emit()
+    emit(
+        f"Helmholtz pair R = {R} m along y, a 0.1 R x 0.1 R winding per coil modelled by n x m "
+        "Gauss filaments (2 filaments: no winding, one per coil), all in one coaxial group.  "
+        "Cache: `GriddedField` over a robot's reach, the box [-0.5 R, 0.5 R]^2 x "
+        "[-0.025 R, 0.025 R], with the scene runner's tolerances (tol = 1e-7, tol_gradient = "
+        "1e-5).  Queries: points uniform in the box; 'B+G' = `B_and_gradient`, 'B+G+H' = "
+        "`B_gradient_hessian`.  Times: the fastest of 3 rounds of consecutive single calls "
+        "(wall clock, microseconds); speed-up = direct / grid (below 1: the cache is slower)."
+    )
+    emit()
+    points = {n: rng.uniform(lower, upper, (n, 3)) for n in CACHE_POINTS}
+    w = (0.1 * R, 0.1 * R)
+    times = {}  # (quantity, n) -> ([direct per field], [grid per field])
+    rows = {"B+G": [], "B+G+H": []}
+    builds = []
+    for n_fil, gauss in CACHE_FIELDS:
+        kw = {} if gauss is None else {"winding": w, "filaments": gauss}
+        field = coils.HelmholtzPair(R, TURNS, CURRENT, axis="y", **kw)
+        assert field.filaments.shape[0] == n_fil
+        t0 = time.perf_counter()
+        grid = coils.GriddedField(field, lower, upper, tol=1e-7, tol_gradient=1e-5)
+        builds.append(
+            f"{n_fil}: {time.perf_counter() - t0:.2f} s ({'x'.join(map(str, grid.shape))} nodes)"
+        )
+        row = {"B+G": [f"{n_fil}"], "B+G+H": [f"{n_fil}"]}
+        for n in CACHE_POINTS:
+            pts = points[n]
+            t_d, t_g, t_dh, t_gh = best_call(
+                [
+                    lambda field=field, pts=pts: field.B_and_gradient(pts),
+                    lambda grid=grid, pts=pts: grid.B_and_gradient(pts),
+                    lambda field=field, pts=pts: field.B_gradient_hessian(pts),
+                    lambda grid=grid, pts=pts: grid.B_gradient_hessian(pts),
+                ],
+                CACHE_CALLS[n],
+            )
+            for quantity, direct, cached in (("B+G", t_d, t_g), ("B+G+H", t_dh, t_gh)):
+                d_list, g_list = times.setdefault((quantity, n), ([], []))
+                d_list.append(direct)
+                g_list.append(cached)
+                row[quantity] += [f"{1e6 * direct:.0f}", f"{1e6 * cached:.0f}"]
+                row[quantity].append(f"{direct / cached:.2f}x")
+        for quantity in rows:
+            rows[quantity].append(row[quantity])
+        del grid
+    filaments = [n for n, _ in CACHE_FIELDS]
+    header = ["filaments"]
+    for n in CACHE_POINTS:
+        header += [f"direct {n} (us)", f"grid {n} (us)", f"speed-up {n}"]
+    for quantity, quantity_rows in rows.items():
+        emit(f"{quantity}:")
+        emit()
+        table(header, quantity_rows)
+    emit(f"Cache build (s, grid nodes) by filament count: {'; '.join(builds)}.")
+    emit()
+    even = {key: _break_even(filaments, *val) for key, val in times.items()}
+    emit(
+        "Break-even filament count (direct time fitted as a + b N over the fields above, "
+        "grid time = its median over them):"
+    )
+    emit()
+    table(
+        ["query", *(f"{n} points" for n in CACHE_POINTS)],
+        [
+            [quantity, *(f"{even[quantity, n]:.0f}" for n in CACHE_POINTS)]
+            for quantity in ("B+G", "B+G+H")
+        ],
+    )
+    largest = max(even.values())
+    emit(
+        f"The cache is faster for every query type and size only above {largest:.0f} "
+        f"filaments; the planner caches from CACHE_MIN_FILAMENTS = {CACHE_MIN_FILAMENTS} "
+        f"({CACHE_MIN_FILAMENTS / largest:.2f} x that)."
+    )
+    emit()
+    return even
+
+
+PARTS = {
+    "a": part_a,
+    "d": part_d,
+    "e": lambda rng: part_e(),
+    "f": lambda rng: part_f(),
+    "b": part_b,
+    "c": part_c,
+    "g": part_g,
+}
+
+
+def main(argv: list[str] | None = None) -> None:
+    argv = sys.argv[1:] if argv is None else argv
+    chosen = "".join(argv) or "".join(PARTS)
+    unknown = sorted(set(chosen) - set(PARTS))
+    if unknown:
+        raise SystemExit(f"unknown part(s) {', '.join(unknown)}; choose from {''.join(PARTS)}")
     rng = np.random.default_rng(2026)
     emit("# coils benchmark: time against error")
     emit()
@@ -591,16 +721,14 @@ def main() -> None:
         "(the machine is shared; see benchmarks/_machine.py)."
     )
     emit()
-    part_a(rng)
-    part_d(rng)
-    part_e()
-    part_f()
-    part_b(rng)
-    part_c(rng)
+    for letter, part in PARTS.items():
+        if letter in chosen:
+            part(rng)
     emit(f"Machine at the end: {machine_info()}")
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text("\n".join(out_lines) + "\n")
-    print(f"written {RESULTS}")
+    if set(chosen) == set(PARTS):
+        RESULTS.parent.mkdir(parents=True, exist_ok=True)
+        RESULTS.write_text("\n".join(out_lines) + "\n")
+        print(f"written {RESULTS}")
 
 
 if __name__ == "__main__":

@@ -46,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validate import as_vector, finite_scalar
+from ._validate import as_field, as_vector, nonnegative
 from .coaxial import ON_WIRE_TOL, coaxial_parts
 from .field import Field, FieldSum
 
@@ -466,9 +466,10 @@ def winding_contacts(field: Field, shape, margin: float = ON_WIRE_TOL) -> list[W
     list of WindingContact
         Windings first, then filaments, group by group; empty if the shape is clear.
     """
-    margin = finite_scalar(margin, "margin")
-    if margin < 0:
-        raise ValueError(f"margin must be >= 0; got {margin}")
+    field = as_field(field)
+    margin = nonnegative(margin, "margin")
+    if not isinstance(shape, Box | Segment):
+        raise ValueError(f"shape must be a Box or a Segment; got {type(shape).__name__}")
     contacts = []
     for part in _groups(field):
         sections = np.asarray(part.windings, dtype=float).reshape(-1, 4)

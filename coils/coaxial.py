@@ -11,11 +11,12 @@ group is first evaluated, not when :mod:`coils` is imported.
 from __future__ import annotations
 
 import math
+from collections.abc import Sized
 
 import numpy as np
 from scipy.constants import mu_0
 
-from ._validate import as_axis, as_vector
+from ._validate import as_array, as_axis, as_vector
 from .field import Field, FieldSum, ScaledField
 
 __all__ = ["CoaxialCoils", "frame_from_axis", "coaxial_parts", "winding_mask"]
@@ -48,8 +49,8 @@ class CoaxialCoils(Field):
     filaments : array-like, shape (f, 3)
         Rows ``(z_offset, radius, current)``: loop plane at ``center + z_offset * axis`` (m),
         radius (m), ampere-turns (A, counter-clockwise about ``axis``).
-    axis : {"x", "y", "z"} or array-like, shape (3,)
-        Common axis direction.
+    axis : {"x", "y", "z"}, optionally signed ("-y"), or array-like, shape (3,)
+        Common axis direction (a non-zero vector, normalised).
     center : array-like, shape (3,)
         Common centre, m.
     windings : sequence of (z0, radius, width, height), optional
@@ -67,18 +68,24 @@ class CoaxialCoils(Field):
     """
 
     def __init__(self, filaments, axis="z", center=(0.0, 0.0, 0.0), windings=()):
-        fil = np.array(filaments, dtype=float)
-        if fil.ndim != 2 or fil.shape[1] != 3 or fil.shape[0] == 0:
-            raise ValueError(f"filaments must have shape (f, 3); got {fil.shape}")
-        if not np.all(np.isfinite(fil)):
-            raise ValueError("filaments must be finite")
+        fil = as_array(filaments, "filaments", ("f", 3)).copy()
+        if fil.shape[0] == 0:
+            raise ValueError("filaments must have shape (f, 3) with f >= 1; got (0, 3)")
         if np.any(fil[:, 1] <= 0):
-            raise ValueError("filament radii must be positive")
+            raise ValueError(f"filament radii must be positive; got {fil[:, 1].tolist()}")
         self.filaments = fil
         self.axis = as_axis(axis)
         self.center = as_vector(center, "center").copy()
         self.rotation = frame_from_axis(self.axis)
-        self.windings = np.array(windings, dtype=float).reshape(-1, 4)
+        if isinstance(windings, Sized) and len(windings) == 0:
+            self.windings = np.zeros((0, 4))
+        else:
+            self.windings = as_array(windings, "windings", ("w", 4)).copy()
+            if np.any(self.windings[:, 1:] <= 0):
+                raise ValueError(
+                    "windings (z0, radius, width, height) must have positive radius, width and "
+                    f"height; got {self.windings.tolist()}"
+                )
         for arr in (self.filaments, self.axis, self.center, self.rotation, self.windings):
             arr.setflags(write=False)
         self._kernel_args = None

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 from ._validate import finite_scalar, positive
 from .coaxial import CoaxialCoils
+from .pairs import Coil, CoilPair
 
 __all__ = [
     "current_for_field",
@@ -34,9 +35,15 @@ COPPER_TEMPERATURE_COEFFICIENT = 0.00393
 ABSOLUTE_ZERO = -273.15
 
 
-def _centre_values(coil: CoaxialCoils):
-    if not isinstance(coil, CoaxialCoils):
+def _as_coil(coil) -> Coil | CoilPair:
+    """``coil`` if it is a Coil or a pair (it has turns, a radius and a current)."""
+    if not isinstance(coil, Coil | CoilPair):
         raise ValueError(f"coil must be a Coil, HelmholtzPair or MaxwellPair; got {coil!r}")
+    return coil
+
+
+def _centre_values(coil: CoaxialCoils):
+    coil = _as_coil(coil)
     B, G = coil.B_and_gradient(coil.center[None, :])
     n = coil.axis
     return float(B[0] @ n), float(n @ G[0] @ n)
@@ -86,6 +93,7 @@ def turns_for_gradient(coil: CoaxialCoils, gradient: float) -> float:
 
 def wire_length(coil: CoaxialCoils) -> float:
     """Total conductor length (m): turns x 2 pi x mean radius, summed over the coils."""
+    coil = _as_coil(coil)
     n_coils = 2 if hasattr(coil, "spacing") else 1
     return n_coils * coil.turns * 2 * math.pi * coil.radius
 
@@ -147,6 +155,7 @@ def winding_power(
     ValueError
         If the wire does not fit the winding cross-section, or on a bad parameter (named).
     """
+    coil = _as_coil(coil)
     d = positive(wire_diameter, "wire_diameter")
     temperature = finite_scalar(temperature, "temperature")
     if temperature <= ABSOLUTE_ZERO:

@@ -16,10 +16,11 @@ and says what it does not need to compute, so solvers can skip work:
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Iterable
 
 import numpy as np
 
-from ._validate import as_points, finite_scalar
+from ._validate import as_field, as_points, finite_scalar
 
 __all__ = ["Field", "FieldSum", "ScaledField"]
 
@@ -130,7 +131,8 @@ class Field(ABC):
         return FieldSum([self, other])
 
     def __radd__(self, other):
-        if isinstance(other, int | float) and other == 0:  # sum([...]) support
+        if isinstance(other, int | float) and not isinstance(other, bool) and other == 0:
+            # sum([...]) starts from 0
             return self
         return NotImplemented
 
@@ -196,10 +198,11 @@ class FieldSum(Field):
     """
 
     def __init__(self, parts):
+        if isinstance(parts, Field | str) or not isinstance(parts, Iterable):
+            raise ValueError(f"parts must be a sequence of coils Fields; got {parts!r}")
         flat: list[Field] = []
         for part in parts:
-            if not isinstance(part, Field):
-                raise ValueError(f"every part must be a coils Field; got {type(part).__name__}")
+            as_field(part, "every part")
             flat.extend(part.parts if type(part) is FieldSum else [part])
         if not flat:
             raise ValueError("a field sum needs at least one part")
@@ -252,9 +255,7 @@ class ScaledField(Field):
     """A field multiplied by a constant factor (e.g. a current scaling in a load sweep)."""
 
     def __init__(self, field: Field, factor: float):
-        if not isinstance(field, Field):
-            raise ValueError(f"field must be a coils Field; got {type(field).__name__}")
-        self.field = field
+        self.field = as_field(field)
         self.factor = finite_scalar(factor, "factor")
         self.uniform = field.uniform
         self.linear = field.linear

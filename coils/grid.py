@@ -31,8 +31,15 @@ import math
 
 import numpy as np
 
-from ._counts import as_count
-from ._validate import as_points, as_vector, positive
+from ._validate import (
+    as_choice,
+    as_count,
+    as_field,
+    as_points,
+    as_triple,
+    as_vector,
+    positive,
+)
 from .clearance import Box, check_clear
 from .field import Field
 
@@ -75,27 +82,6 @@ def _hermite_matrix() -> np.ndarray:
 
 
 _HERMITE_INV = _hermite_matrix()
-
-
-def _as_triple(value, name: str, kind: type) -> np.ndarray:
-    """A scalar or 3 values as a float array (3,): node counts (``kind=int``: integral, >= 2;
-    kept as floats so that absurd counts reach the cell limit without overflowing) or spacings
-    (positive)."""
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a scalar or have shape (3,); got {value!r}") from None
-    if arr.ndim == 0:
-        arr = np.full(3, arr)
-    if arr.shape != (3,):
-        raise ValueError(f"{name} must be a scalar or have shape (3,); got {np.shape(value)}")
-    if kind is int:
-        if not np.all(np.isfinite(arr)) or np.any(arr != np.round(arr)):
-            raise ValueError(f"{name} must be integers; got {np.asarray(value).tolist()}")
-        if np.any(arr < 2):
-            raise ValueError(f"{name} needs at least 2 nodes per axis; got {arr.tolist()}")
-        return arr
-    return np.array([positive(v, name) for v in arr])
 
 
 def _cell_count(nodes: np.ndarray) -> float:
@@ -223,9 +209,7 @@ class GriddedField(Field):
         cross: str = "grid",
         max_cells: int = 200_000,
     ):
-        if not isinstance(field, Field):
-            raise ValueError(f"field must be a coils Field; got {type(field).__name__}")
-        self.field = field
+        self.field = as_field(field)
         self.lower = as_vector(lower, "lower")
         self.upper = as_vector(upper, "upper")
         if np.any(self.lower >= self.upper):
@@ -233,14 +217,10 @@ class GriddedField(Field):
                 f"lower must be below upper on every axis; got lower={self.lower.tolist()}, "
                 f"upper={self.upper.tolist()}"
             )
-        if outside not in ("raise", "direct"):
-            raise ValueError(f"outside must be 'raise' or 'direct'; got {outside!r}")
-        if cross not in ("grid", "hessian"):
-            raise ValueError(f"cross must be 'grid' or 'hessian'; got {cross!r}")
+        self.outside = as_choice(outside, "outside", ("raise", "direct"))
+        self.cross = as_choice(cross, "cross", ("grid", "hessian"))
         if shape is not None and spacing is not None:
             raise ValueError("give at most one of shape and spacing")
-        self.outside = outside
-        self.cross = cross
         self.tol = positive(tol, "tol")
         self.tol_gradient = (
             self.tol if tol_gradient is None else positive(tol_gradient, "tol_gradient")
@@ -250,10 +230,12 @@ class GriddedField(Field):
         self._slack = 1e-12 * extent
         nodes = None
         if shape is not None:
-            nodes = _as_triple(shape, "shape", int)
+            nodes = as_triple(shape, "shape", integer=True)
+            if np.any(nodes < 2):
+                raise ValueError(f"shape needs at least 2 nodes per axis; got {nodes.tolist()}")
             nodes = self._within_limit(nodes, f"shape={shape!r}")
         elif spacing is not None:
-            h = _as_triple(spacing, "spacing", float)
+            h = as_triple(spacing, "spacing")
             nodes = self._within_limit(self._nodes_for(h), f"spacing={spacing!r} m")
         # exact geometry, before any sampling: nodes could step over a thin winding
         check_clear(field, Box(self.lower, self.upper), what="the grid box")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._validate import as_vector
+from ._validate import as_array, as_count, as_field, as_vector, finite_scalar, nonnegative
 from .field import Field
 
 __all__ = ["UniformField", "LinearField", "maxwell_gradient", "linearize"]
@@ -37,12 +37,8 @@ class LinearField(Field):
 
     def __init__(self, B0=(0.0, 0.0, 0.0), gradient=None, origin=(0.0, 0.0, 0.0)):
         self.B0 = as_vector(B0, "B0")
-        G = np.zeros((3, 3)) if gradient is None else np.asarray(gradient, dtype=float)
-        if G.shape != (3, 3):
-            raise ValueError(f"gradient must have shape (3, 3); got {np.shape(gradient)}")
-        if not np.all(np.isfinite(G)):
-            raise ValueError("gradient must be finite")
-        self.G = G
+        G = np.zeros((3, 3)) if gradient is None else as_array(gradient, "gradient", (3, 3))
+        self.G = G.copy()
         self.origin = as_vector(origin, "origin")
         self.uniform = not np.any(G)
 
@@ -111,7 +107,10 @@ def maxwell_gradient(g: float, axis: int = 1) -> np.ndarray:
     Returns
     -------
     ndarray, shape (3, 3)
+        T/m.
     """
+    g = finite_scalar(g, "g")
+    axis = as_count(axis, "axis", 0, 2)
     d = np.full(3, -0.5 * g)
     d[axis] = g
     return np.diag(d)
@@ -124,7 +123,23 @@ def linearize(field: Field, center, zero_tol: float = 1e-12) -> LinearField:
     below ``zero_tol`` times their natural scale (the largest entry, or ``|B0| / length_scale``
     for the gradient) are round-off of a symmetric arrangement and are set to exactly zero, so a
     Helmholtz pair linearizes to a uniform field and a Maxwell pair to a pure gradient.
+
+    Parameters
+    ----------
+    field : Field
+        The field to linearise.
+    center : array-like, shape (3,)
+        Working point, m.
+    zero_tol : float
+        Relative size (>= 0) below which entries are set to zero.
+
+    Returns
+    -------
+    LinearField
+        ``B0`` (3,) in T at ``center``, gradient (3, 3) in T/m, origin ``center``.
     """
+    field = as_field(field)
+    zero_tol = nonnegative(zero_tol, "zero_tol")
     c = as_vector(center, "center")
     B0, G0 = field.B_and_gradient(c[None, :])
     B0, G0 = B0[0], G0[0]

@@ -7,9 +7,9 @@ import math
 import numpy as np
 from scipy.constants import mu_0
 
-from ._validate import as_axis, as_vector, finite_scalar, positive
+from ._validate import as_array, as_axis, as_counts, as_vector, finite_scalar, positive
 from .coaxial import CoaxialCoils
-from .winding import gauss_filaments, turn_filaments
+from .winding import gauss_filaments, turn_filaments, winding_section
 
 __all__ = ["Coil", "CoilPair", "HelmholtzPair", "MaxwellPair", "HELMHOLTZ_FACTOR", "MAXWELL_FACTOR"]
 
@@ -19,34 +19,70 @@ HELMHOLTZ_FACTOR = (4.0 / 5.0) ** 1.5
 MAXWELL_FACTOR = 48.0 * math.sqrt(3.0) / 7.0**2.5
 
 
-def _winding_filaments(z0, radius, turns, current, winding, filaments, turn_layout):
-    """Filament rows for one coil at axial offset z0 (current sign included in ``current``)."""
-    if winding is None:
-        if turn_layout is not None:
-            raise ValueError("turn_layout needs a winding=(width, height) cross-section")
-        return np.array([[z0, radius, turns * current]]), None
-    if len(winding) != 2:
-        raise ValueError(f"winding must be (width, height) in metres; got {winding!r}")
-    width = positive(winding[0], "winding width")
-    height = positive(winding[1], "winding height")
-    if height >= 2 * radius:
-        raise ValueError(f"winding height {height} m must be below twice the radius {radius} m")
-    if turn_layout is not None:
-        na, nr = turn_layout
-        if na * nr != turns:
-            raise ValueError(
-                f"turn_layout {turn_layout} places {na * nr} turns; the coil has {turns}"
-            )
-        fil = turn_filaments(z0, radius, current, width, height, na, nr)
-    else:
-        na, nr = filaments
-        fil = gauss_filaments(z0, radius, turns * current, width, height, na, nr)
-    return fil, (z0, radius, width, height)
+#: Gauss-Legendre points (axial, radial) of a finite winding when ``filaments`` is not given.
+DEFAULT_FILAMENTS = (3, 3)
 
 
 def _coil_parameters(radius, turns, current) -> tuple[float, float, float]:
-    """Validated (radius m > 0, turns > 0, current A finite)."""
+    """Validated (radius m > 0, turns > 0, current A finite).
+
+    ``turns`` may be fractional: the filament and Gauss models use only the ampere-turns N I
+    (:func:`_winding_model` demands a whole number for the turn-by-turn model).
+    """
     return positive(radius, "radius"), positive(turns, "turns"), finite_scalar(current, "current")
+
+
+def _winding_model(radius, turns, winding, filaments, turn_layout):
+    """Validated winding description of a coil of ``radius`` (m) and ``turns``.
+
+    Returns
+    -------
+    section : (float, float) or None
+        Winding (width, height) in m, or None for a single filament.
+    model : ("gauss", (int, int)) or ("turns", (int, int)) or None
+        Gauss-Legendre points (axial, radial) of a uniform current density, or the turn-by-turn
+        layout (turns per layer, layers); None for a single filament.
+    """
+    if winding is None:
+        if turn_layout is not None:
+            raise ValueError(
+                f"turn_layout={turn_layout!r} needs a winding=(width, height) cross-section"
+            )
+        if filaments is not None:
+            raise ValueError(
+                f"filaments={filaments!r} model a finite winding cross-section; give "
+                f"winding=(width, height) too"
+            )
+        return None, None
+    width, height = winding_section(radius, *as_array(winding, "winding (width, height)", (2,)))
+    if turn_layout is None:
+        counts = DEFAULT_FILAMENTS if filaments is None else filaments
+        return (width, height), ("gauss", as_counts(counts, "filaments", ("n_axial", "n_radial")))
+    if filaments is not None:
+        raise ValueError("give filaments (Gauss model) or turn_layout (turn by turn), not both")
+    na, nr = as_counts(turn_layout, "turn_layout", ("turns_per_layer", "layers"))
+    if not float(turns).is_integer():
+        raise ValueError(
+            f"turns must be a whole number for turn_layout (one filament per turn); got {turns}"
+        )
+    if na * nr != turns:
+        raise ValueError(f"turn_layout {(na, nr)} places {na * nr} turns; the coil has {turns:g}")
+    return (width, height), ("turns", (na, nr))
+
+
+def _winding_filaments(z0, radius, turns, current, section, model):
+    """Filament rows ``(z, radius, current)`` of one coil at axial offset ``z0`` (m; the
+    current's sign included in ``current``) and its winding box ``(z0, radius, width, height)``
+    (None without a winding section)."""
+    if section is None:
+        return np.array([[z0, radius, turns * current]]), None
+    width, height = section
+    kind, (na, nr) = model
+    if kind == "turns":
+        fil = turn_filaments(z0, radius, current, width, height, na, nr)
+    else:
+        fil = gauss_filaments(z0, radius, turns * current, width, height, na, nr)
+    return fil, (z0, radius, width, height)
 
 
 class Coil(CoaxialCoils):
@@ -57,19 +93,30 @@ class Coil(CoaxialCoils):
     radius : float
         Mean radius R, m.
     turns : float
-        Number of turns N.
+        Number of turns N (> 0; not a boolean).  The single-filament and Gauss models use only
+        the ampere-turns N I, so a fractional N is accepted there (e.g. the result of
+        :func:`coils.design.turns_for_field`, to be rounded when the coil is wound); the
+        turn-by-turn model (``turn_layout``) needs a whole number.
     current : float
         Current I per turn, A (counter-clockwise about ``axis``; may be negative).
-    axis : {"x", "y", "z"} or array-like, shape (3,)
-        Coil axis.
+    axis : {"x", "y", "z"}, optionally signed ("-y"), or array-like, shape (3,)
+        Coil axis (a non-zero vector, normalised).
     center : array-like, shape (3,)
         Centre of the coil, m.
     winding : (width, height), optional
-        Winding cross-section in m (width along the axis, height radial).  None: one filament.
-    filaments : (int, int)
-        Gauss-Legendre points (axial, radial) modelling a finite winding.
+        Winding cross-section in m (width along the axis, height radial, below 2 R).
+        None: one filament of N I ampere-turns.
+    filaments : (int, int), optional
+        Gauss-Legendre points (axial, radial) modelling a finite winding of uniform current
+        density; default (3, 3).  Needs ``winding``.
     turn_layout : (int, int), optional
         Model a finite winding turn by turn instead: turns per layer, layers (product = turns).
+        Needs ``winding``; excludes ``filaments``.
+
+    Raises
+    ------
+    ValueError
+        On a bad parameter, naming it (see :mod:`coils._validate`).
     """
 
     def __init__(
@@ -80,15 +127,15 @@ class Coil(CoaxialCoils):
         axis="z",
         center=(0.0, 0.0, 0.0),
         winding=None,
-        filaments=(3, 3),
+        filaments=None,
         turn_layout=None,
     ):
         self.radius, self.turns, self.current = _coil_parameters(radius, turns, current)
-        fil, box = _winding_filaments(
-            0.0, self.radius, self.turns, self.current, winding, filaments, turn_layout
-        )
+        section, model = _winding_model(self.radius, self.turns, winding, filaments, turn_layout)
+        fil, box = _winding_filaments(0.0, self.radius, self.turns, self.current, section, model)
         super().__init__(fil, axis, center, [box] if box else [])
-        self.winding = winding
+        #: Winding cross-section (width, height) in m, or None.
+        self.winding = section
 
     def __repr__(self):
         return (
@@ -103,6 +150,15 @@ class CoilPair(CoaxialCoils):
     ``sign = +1``: currents in the same sense (uniform field, Helmholtz);
     ``sign = -1``: opposed currents (gradient field, Maxwell / anti-Helmholtz); the coil on the
     +axis side carries +current, so the axial gradient is positive for positive current.
+
+    Parameters
+    ----------
+    radius, turns, current, axis, center, winding, filaments, turn_layout
+        As for :class:`Coil` (m, -, A, -, m, (m, m), -, -), for each of the two coils; ``turns``
+        and ``current`` are per coil, the default axis is "y".
+    spacing : float, optional
+        Distance between the coil planes, m (> the winding width); default the pair's own
+        (R for Helmholtz, sqrt(3) R for Maxwell).
     """
 
     sign: float = 1.0
@@ -117,7 +173,7 @@ class CoilPair(CoaxialCoils):
         center=(0.0, 0.0, 0.0),
         spacing=None,
         winding=None,
-        filaments=(3, 3),
+        filaments=None,
         turn_layout=None,
     ):
         self.radius, self.turns, self.current = _coil_parameters(radius, turns, current)
@@ -126,26 +182,22 @@ class CoilPair(CoaxialCoils):
         self.spacing = positive(spacing, "spacing")
         axis_vec = as_axis(axis)
         center = as_vector(center, "center")
+        section, model = _winding_model(self.radius, self.turns, winding, filaments, turn_layout)
+        if section is not None and self.spacing <= section[0]:
+            raise ValueError(
+                f"spacing {self.spacing} m must exceed the winding width {section[0]} m"
+            )
         rows, boxes = [], []
         for side, cur in ((-1.0, self.sign * self.current), (1.0, self.current)):
             fil, box = _winding_filaments(
-                side * self.spacing / 2,
-                self.radius,
-                self.turns,
-                cur,
-                winding,
-                filaments,
-                turn_layout,
+                side * self.spacing / 2, self.radius, self.turns, cur, section, model
             )
             rows.append(fil)
             if box:
                 boxes.append(box)
-        if winding is not None and self.spacing <= positive(winding[0], "winding width"):
-            raise ValueError(
-                f"spacing {self.spacing} m must exceed the winding width {winding[0]} m"
-            )
         super().__init__(np.vstack(rows), axis_vec, center, boxes)
-        self.winding = winding
+        #: Winding cross-section (width, height) of each coil in m, or None.
+        self.winding = section
 
     @property
     def ampere_turns(self) -> float:

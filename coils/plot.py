@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._counts import as_count
-from ._validate import as_vector, positive
+from ._validate import as_bool, as_choice, as_count, as_field, as_vector, positive
 from .coaxial import coaxial_parts, winding_mask
 from .field import Field
 from .region import deviation
@@ -38,9 +37,7 @@ def plane_grid(plane: str, center, half_width: float, n: int = 121):
     (i, j) : tuple of int
         Indices of the plane's axes.
     """
-    if plane not in _PLANES:
-        raise ValueError(f"plane must be one of {sorted(_PLANES)}; got {plane!r}")
-    i, j = _PLANES[plane]
+    i, j = _PLANES[as_choice(plane, "plane", tuple(_PLANES))]
     c = as_vector(center, "center")
     hw = positive(half_width, "half_width")
     n = as_count(n, "n", 2)
@@ -93,8 +90,9 @@ def plot_field_map(
     """
     import matplotlib.pyplot as plt
 
-    if show not in ("deviation", "magnitude"):
-        raise ValueError(f"show must be 'deviation' or 'magnitude'; got {show!r}")
+    field = as_field(field)
+    show = as_choice(show, "show", ("deviation", "magnitude"))
+    streamlines = as_bool(streamlines, "streamlines")
     tol = positive(tol, "tol")
     center = getattr(field, "center", np.zeros(3)) if center is None else center
     half_width = field.length_scale if half_width is None else half_width

@@ -12,8 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import brentq
 
-from ._counts import as_count
-from ._validate import as_axis, as_points, as_vector, positive
+from ._validate import as_axis, as_choice, as_count, as_field, as_points, as_vector, positive
 from .coaxial import coaxial_parts
 from .field import Field
 from .ideal import LinearField, linearize
@@ -22,11 +21,10 @@ __all__ = ["deviation", "uniformity", "UniformityReport"]
 
 
 def _pick_quantity(quantity: str, ideal: LinearField) -> str:
+    quantity = as_choice(quantity, "quantity", ("B", "gradient", "auto"))
     if quantity == "auto":
         b = np.linalg.norm(ideal.B0)
         return "gradient" if b == 0.0 and np.any(ideal.G) else "B"
-    if quantity not in ("B", "gradient"):
-        raise ValueError(f"quantity must be 'B', 'gradient' or 'auto'; got {quantity!r}")
     return quantity
 
 
@@ -52,8 +50,17 @@ def deviation(
     ndarray, shape (n,)
         Dimensionless relative deviation.
     """
+    field = as_field(field)
     pts = as_points(points)
-    ideal = field.ideal() if ideal is None else ideal
+    if ideal is None:
+        if not hasattr(field, "ideal"):
+            raise ValueError(
+                f"field ({type(field).__name__}) has no ideal() to compare with; pass "
+                f"ideal=LinearField(...)"
+            )
+        ideal = field.ideal()
+    elif not isinstance(ideal, LinearField):
+        raise ValueError(f"ideal must be a coils LinearField; got {type(ideal).__name__}")
     quantity = _pick_quantity(quantity, ideal)
     if quantity == "B":
         ref = np.linalg.norm(ideal.B0)
@@ -200,6 +207,7 @@ def uniformity(
     >>> round(rep.axial, 3), round(rep.radial, 3)
     (0.314, 0.378)
     """
+    field = as_field(field)
     tol = positive(tol, "tol")
     directions = as_count(directions, "directions")
     samples = as_count(samples, "samples", 2)

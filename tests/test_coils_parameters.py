@@ -9,7 +9,7 @@ import pytest
 
 import coils
 from coils import GriddedField, uniformity
-from coils._counts import as_count
+from coils._validate import as_count
 from coils.design import winding_power
 from coils.plot import plane_grid, plot_field_map
 

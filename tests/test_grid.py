@@ -357,3 +357,53 @@ def test_grid_at_the_cell_limit_builds(wound_pair):
     grid = GriddedField(wound_pair, (-0.02,) * 3, (0.02,) * 3, shape=5, max_cells=64)
     assert grid.n_cells == 4**3
     assert grid.nbytes == 64 * 3 * 64 * 8
+
+
+# -- when the scene planner builds a cache ------------------------------------------------------
+def _wound_helmholtz_scene(filaments: tuple[int, int]):
+    import tomllib
+
+    from coilrod.scene.parse import parse_scene
+
+    coil = (
+        '{ type = "helmholtz", radius = "80 mm", turns = 200, B = "15 mT", axis = "y", '
+        f'winding = ["8 mm", "8 mm"], filaments = [{filaments[0]}, {filaments[1]}] }}'
+    )
+    text = f"""
+    [robot]
+    length = "40 mm"
+    diameter = "2 mm"
+    youngs_modulus = "1 MPa"
+    magnetization = {{ preset = "M1", M0 = "640 kA/m", phi = 0.2 }}
+    [field]
+    type = "coils"
+    coil = [{coil}]
+    [load]
+    steps = 4
+    [models]
+    run = ["fem2d"]
+    """
+    return parse_scene(tomllib.loads(text))
+
+
+@pytest.mark.parametrize(
+    ("filaments", "cached"),
+    [
+        # 2 x 5 x 5 = 50 filaments: the cache is slower than direct evaluation with the hessian
+        # (benchmarks/bench_coils.py part g: break-even ~47 without, ~95 with the hessian)
+        ((5, 5), False),
+        ((10, 10), True),  # 200 filaments: the cache is 2x (with hessian) to 4x faster
+    ],
+)
+def test_planner_caches_only_fields_dearer_than_the_grid(filaments, cached):
+    from coilrod.scene.planner import CACHE_MIN_FILAMENTS, plan_scene
+
+    scene = _wound_helmholtz_scene(filaments)
+    n_fil = 2 * filaments[0] * filaments[1]
+    assert (n_fil >= CACHE_MIN_FILAMENTS) is cached
+    plan = plan_scene(scene)  # an FEM model: enough queries for a cache when it pays
+    text = "\n".join(plan.decisions)
+    assert f"Biot-Savart of {n_fil} filaments" in text
+    assert (plan.cache_box is not None) is cached
+    assert ("cached on a grid" in text) is cached
+    assert (f"only {n_fil} filaments" in text) is not cached

@@ -12,7 +12,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from coils._validate import finite_scalar, positive
+from coils._validate import as_array, as_count, finite_scalar, positive
 
 __all__ = ["Magnetization"]
 
@@ -56,7 +56,7 @@ class Magnetization:
     ):
         self._magnitude = _check_profile(magnitude, "magnitude")
         self._angle = _check_profile(angle, "angle")
-        self.breakpoints = tuple(sorted(finite_scalar(b, "breakpoints") for b in breakpoints))
+        self.breakpoints = tuple(sorted(as_array(breakpoints, "breakpoints", ("n",)).tolist()))
         self.label = label
 
     def check_length(self, length: float) -> None:
@@ -86,7 +86,7 @@ class Magnetization:
         return not (callable(self._magnitude) or callable(self._angle))
 
     def _eval(self, profile, s: np.ndarray, name: str) -> np.ndarray:
-        s = np.asarray(s, dtype=float)
+        s = as_array(s, "s")
         if callable(profile):
             out = np.asarray(profile(s), dtype=float)
             out = np.broadcast_to(out, s.shape).astype(float, copy=True)
@@ -106,13 +106,15 @@ class Magnetization:
 
     def vector(self, s) -> np.ndarray:
         """Body-frame magnetization (tangential, normal) components, shape (n, 2), A/m."""
-        s = np.atleast_1d(np.asarray(s, dtype=float))
+        s = np.atleast_1d(as_array(s, "s"))
         mag = self.magnitude(s)
         ang = self.angle(s)
         return np.stack([mag * np.cos(ang), mag * np.sin(ang)], axis=-1)
 
     def max_magnitude(self, length: float, samples: int = 2001) -> float:
-        """max |M| over s in [0, length] (sampled), A/m."""
+        """max |M| over s in [0, length] (m, ``samples`` >= 2 points), A/m."""
+        length = positive(length, "length")
+        samples = as_count(samples, "samples", 2)
         return float(np.max(np.abs(self.magnitude(np.linspace(0.0, length, samples)))))
 
     # -- constructors -------------------------------------------------------------------------
@@ -142,12 +144,15 @@ class Magnetization:
         >>> m.magnitude(np.array([0.01, 0.03])).tolist()
         [100000.0, 200000.0]
         """
+        lengths = as_array(lengths, "segment lengths", ("n",))
+        if len(lengths) == 0:
+            raise ValueError("segment lengths must hold at least one segment; got []")
         lengths = np.array([positive(v, "segment length") for v in lengths])
-        mags = np.array([finite_scalar(v, "segment magnitude") for v in magnitudes])
+        mags = as_array(magnitudes, "segment magnitudes", ("n",)).copy()
         if np.ndim(angles) == 0:
             angs = np.full(len(lengths), finite_scalar(angles, "segment angle"))
         else:
-            angs = np.array([finite_scalar(v, "segment angle") for v in angles])
+            angs = as_array(angles, "segment angles", ("n",)).copy()
         if not (len(lengths) == len(mags) == len(angs)):
             raise ValueError(
                 "segments need as many magnitudes and angles as lengths; got "

@@ -23,10 +23,18 @@ __all__ = ["Plan", "Job", "plan_scene", "robot_reach_box"]
 CACHE_QUERIES_PER_NODE = 20
 #: Rough grid size of a cache over the robot's reach (nodes), for that decision.
 CACHE_NODES_ESTIMATE = 20_000
-#: Below this many filaments, direct closed-form evaluation is as fast as the interpolating
-#: cache (measured in benchmarks/bench_coils.py: a grid query costs about as much as two to
-#: four filaments), so no cache is built.
-CACHE_MIN_FILAMENTS = 8
+#: Below this many filaments, direct evaluation by the compiled kernel is faster than the
+#: interpolating cache, so no cache is built.  Measured by ``benchmarks/bench_coils.py`` part g
+#: (one coaxial group, 300 and 3000 points in a robot's reach box, a single core): a direct
+#: query costs ~0.03 us per filament and point, a grid query ~1.5 us per point for B + gradient
+#: and ~3.8 us with the hessian, whatever the field, so the cache breaks even at ~47 filaments
+#: for B + gradient and ~95 for B + gradient + hessian (the rod's Newton tangent), at both
+#: sizes.  150 is 1.5 x the larger: the cache is built only where it is faster for every query
+#: (1.5 x with the hessian, 3 x without), which pays for its build (1-3 s) and its
+#: interpolation error.  Each further coaxial group adds a call overhead worth ~3 filaments,
+#: and points beyond 4 group radii use the multipole series, whose cost does not grow with the
+#: filaments; neither is counted.
+CACHE_MIN_FILAMENTS = 150
 #: Rough Newton iterations per load step, for the query estimate.
 ITERATIONS_PER_STEP = 6
 
