@@ -87,6 +87,10 @@ def test_breakpoints_merged_and_trimmed_like_the_rod_mesh():
     # more pieces than elements: one element each
     many = length_layers(L, 3, [0.1 * L, 0.2 * L, 0.3 * L, 0.4 * L])
     np.testing.assert_allclose(many, L * np.array([0.0, 0.1, 0.2, 0.3, 0.4, 1.0]), atol=ULP)
+    # short pieces raised to one element are paid for by the long one: still n in all
+    xs = length_layers(L, 6, [0.01 * L, 0.02 * L, 0.03 * L])
+    assert xs.size == 7
+    np.testing.assert_allclose(np.diff(xs)[3:], 0.97 * L / 3, rtol=1e-12)
 
 
 @pytest.mark.parametrize("n", [10, 20])

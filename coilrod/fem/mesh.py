@@ -72,14 +72,19 @@ def default_elements(rod, dim: int) -> tuple[int, ...]:
 
 
 def _layer_counts(n: int, fractions: np.ndarray) -> np.ndarray:
-    """Elements per piece: ``n`` shared out in proportion to ``fractions`` (summing to 1),
-    at least one per piece (largest remainders; ties go to the piece nearer the clamp)."""
+    """Elements per piece, ``max(n, pieces)`` in all: ``n`` shared out in proportion to
+    ``fractions`` (summing to 1) by largest remainders, at least one per piece; ties go to the
+    piece nearer the clamp."""
     share = np.round(n * fractions, _COUNT_DECIMALS)
     counts = np.maximum(1, np.floor(share).astype(int))
     spare = n - int(counts.sum())
     if spare > 0:
         order = np.argsort(-(share - counts), kind="stable")
         counts[order[:spare]] += 1
+    while spare < 0 and np.any(counts > 1):  # short pieces raised to one element: give back
+        over = np.where(counts > 1, counts - share, -np.inf)
+        counts[int(np.argmax(over))] -= 1
+        spare += 1
     return counts
 
 
@@ -89,18 +94,18 @@ def length_layers(length: float, n_length: int, breakpoints=()) -> np.ndarray:
     The breakpoints are merged and trimmed exactly as for the rod model
     (:class:`coilrod.rod.mesh.RodMesh`): those within ``MERGE_BREAKS * L`` (1e-10 L) of an end
     are dropped and of a cluster closer than that only the first is kept.  The ``n_length``
-    elements are shared out among the pieces in proportion to their lengths, at least one per
-    piece (so there are ``max(n_length, pieces)`` in all), and every piece is divided
-    uniformly.  A kept breakpoint is a layer boundary exactly (its own floating-point value),
-    and a breakpoint a few ulp off a round number gives that number's layers: the shares are
-    rounded to 1e-9 of an element before they are compared.
+    elements are shared out among the pieces in proportion to their lengths (largest
+    remainders), at least one per piece, so that there are ``max(n_length, pieces)`` in all,
+    and every piece is divided uniformly.  A kept breakpoint is a layer boundary exactly (its
+    own floating-point value), and a breakpoint a few ulp off a round number gives that
+    number's layers: the shares are rounded to 1e-9 of an element before they are compared.
 
     Parameters
     ----------
     length : float
         Rod length L, m.
     n_length : int
-        Elements along the length (about; see above).
+        Elements along the length (more if there are more pieces; see above).
     breakpoints : array-like, shape (k,)
         Arc lengths (m) of the magnetization's jumps (``Magnetization.breakpoints``).
 
