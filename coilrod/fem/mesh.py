@@ -1,18 +1,25 @@
 """Reference meshes of the rod body: 2D strip, 3D box and 3D circular (O-grid) section.
 
 The rod is clamped at ``x = 0`` and its free end is ``x = L``; the section is centred on the
-x axis with the bending-plane extent along y (DESIGN.md).
+x axis with the bending-plane extent along y (DESIGN.md).  Along x the element layers are
+piecewise uniform with a layer boundary at every breakpoint of the magnetization
+(:func:`length_layers`), so that no element straddles a jump of |M| or of its angle.
 """
 
 from __future__ import annotations
 
 import math
+from types import MappingProxyType
 
 import numpy as np
 
 from coilrod.robot.sections import Circle, Rectangle
+from coilrod.rod.mesh import RodMesh
 
 __all__ = [
+    "DEFAULT_ELEMENTS",
+    "default_elements",
+    "length_layers",
     "rectangle_mesh",
     "box_mesh",
     "circle_mesh",
@@ -23,6 +30,109 @@ __all__ = [
 
 #: Half-width of the O-grid's central square as a fraction of the radius.
 CORE_FRACTION = 0.5
+
+#: ``solve_fem``'s default ``elements``: (length, thickness) in 2D (key 2), (length,
+#: thickness, width) for a 3D Rectangle (key 3) and (length, core, ring) for a 3D Circle (key
+#: ``"3circle"``).  Use :func:`default_elements` to pick the entry for a rod.
+DEFAULT_ELEMENTS = MappingProxyType({2: (20, 1), 3: (20, 1, 1), "3circle": (20, 2, 1)})
+
+#: Piece lengths times the element count are rounded to this many decimals before the count
+#: is shared out, so that breakpoints a few ulp off a round number give the round number's
+#: mesh (no count flips between two pieces at a tie).
+_COUNT_DECIMALS = 9
+
+
+def default_elements(rod, dim: int) -> tuple[int, ...]:
+    """``solve_fem``'s default element counts for ``rod`` in ``dim`` dimensions.
+
+    Parameters
+    ----------
+    rod : coilrod.Rod
+        Its section picks the 3D layout (box for a Rectangle, O-grid for a Circle).
+    dim : {2, 3}
+
+    Returns
+    -------
+    tuple of int, length ``dim``
+        Elements along (length, thickness) in 2D, (length, thickness, width) for a 3D
+        Rectangle and (length, core, ring) for a 3D Circle (see :func:`rod_mesh`).
+
+    Examples
+    --------
+    >>> import coilrod
+    >>> rod = coilrod.Rod(0.04, 1e6, coilrod.Circle(2e-3), coilrod.presets.M1())
+    >>> default_elements(rod, 2), default_elements(rod, 3)
+    ((20, 1), (20, 2, 1))
+    """
+    if dim == 2:
+        return DEFAULT_ELEMENTS[2]
+    if dim == 3:
+        return DEFAULT_ELEMENTS["3circle" if isinstance(rod.section, Circle) else 3]
+    raise ValueError(f"dim must be 2 or 3; got {dim!r}")
+
+
+def _layer_counts(n: int, fractions: np.ndarray) -> np.ndarray:
+    """Elements per piece, ``max(n, pieces)`` in all: ``n`` shared out in proportion to
+    ``fractions`` (summing to 1) by largest remainders, at least one per piece; ties go to the
+    piece nearer the clamp."""
+    share = np.round(n * fractions, _COUNT_DECIMALS)
+    counts = np.maximum(1, np.floor(share).astype(int))
+    spare = n - int(counts.sum())
+    if spare > 0:
+        order = np.argsort(-(share - counts), kind="stable")
+        counts[order[:spare]] += 1
+    while spare < 0 and np.any(counts > 1):  # short pieces raised to one element: give back
+        over = np.where(counts > 1, counts - share, -np.inf)
+        counts[int(np.argmax(over))] -= 1
+        spare += 1
+    return counts
+
+
+def length_layers(length: float, n_length: int, breakpoints=()) -> np.ndarray:
+    """x-coordinates of the element layer boundaries: piecewise uniform, one at each breakpoint.
+
+    The breakpoints are merged and trimmed exactly as for the rod model
+    (:class:`coilrod.rod.mesh.RodMesh`): those within ``MERGE_BREAKS * L`` (1e-10 L) of an end
+    are dropped and of a cluster closer than that only the first is kept.  The ``n_length``
+    elements are shared out among the pieces in proportion to their lengths (largest
+    remainders), at least one per piece, so that there are ``max(n_length, pieces)`` in all,
+    and every piece is divided uniformly.  A kept breakpoint is a layer boundary exactly (its
+    own floating-point value), and a breakpoint a few ulp off a round number gives that
+    number's layers: the shares are rounded to 1e-9 of an element before they are compared.
+
+    Parameters
+    ----------
+    length : float
+        Rod length L, m.
+    n_length : int
+        Elements along the length (more if there are more pieces; see above).
+    breakpoints : array-like, shape (k,)
+        Arc lengths (m) of the magnetization's jumps (``Magnetization.breakpoints``).
+
+    Returns
+    -------
+    ndarray, shape (n + 1,)
+        Increasing layer boundaries, m, from exactly 0 to exactly ``length``.
+
+    Examples
+    --------
+    >>> length_layers(0.04, 4).tolist()
+    [0.0, 0.01, 0.02, 0.03, 0.04]
+    >>> length_layers(0.04, 4, [0.015]).tolist()  # 1.5 + 2.5 elements: the tie goes to the clamp
+    [0.0, 0.0075, 0.015, 0.0275, 0.04]
+    """
+    L = float(length)
+    br = np.sort(np.asarray(breakpoints, dtype=float).ravel())
+    inner = np.empty(0)
+    if br.size:
+        kept = RodMesh(1, br / L).edges[1:-1]  # the rod's merging rule, on fractions of L
+        inner = br[np.searchsorted(br / L, kept)]  # the breakpoints themselves, in metres
+    edges = np.concatenate([[0.0], inner, [L]])
+    counts = _layer_counts(int(n_length), np.diff(edges) / L)
+    pieces = [
+        np.linspace(a, b, c + 1)[:-1] for a, b, c in zip(edges[:-1], edges[1:], counts, strict=True)
+    ]
+    return np.concatenate([*pieces, [L]])
 
 
 def check_elements(elements, dim: int) -> tuple[int, ...]:
@@ -54,7 +164,7 @@ def equivalent_height(section) -> float:
     return math.sqrt(12.0 * section.second_moment / section.area)
 
 
-def rectangle_mesh(length: float, height: float, n_length: int, n_thickness: int):
+def rectangle_mesh(length: float, height: float, n_length: int, n_thickness: int, breakpoints=()):
     """Quadrilateral mesh of ``[0, length] x [-height/2, height/2]``.
 
     Parameters
@@ -62,7 +172,9 @@ def rectangle_mesh(length: float, height: float, n_length: int, n_thickness: int
     length, height : float
         Extent along x and y, metres.
     n_length, n_thickness : int
-        Elements along x and y.
+        Elements along x (about, see :func:`length_layers`) and y.
+    breakpoints : array-like, shape (k,)
+        Arc lengths (m) where element layers must end (magnetization jumps).
 
     Returns
     -------
@@ -71,15 +183,30 @@ def rectangle_mesh(length: float, height: float, n_length: int, n_thickness: int
     from skfem import MeshQuad1
 
     return MeshQuad1.init_tensor(
-        np.linspace(0.0, length, n_length + 1),
+        length_layers(length, n_length, breakpoints),
         np.linspace(-height / 2, height / 2, n_thickness + 1),
     )
 
 
 def box_mesh(
-    length: float, thickness: float, width: float, n_length: int, n_thickness: int, n_width: int
+    length: float,
+    thickness: float,
+    width: float,
+    n_length: int,
+    n_thickness: int,
+    n_width: int,
+    breakpoints=(),
 ):
     """Hexahedral mesh of ``[0, L] x [-t/2, t/2] x [-w/2, w/2]`` (thickness along y).
+
+    Parameters
+    ----------
+    length, thickness, width : float
+        Extent along x, y and z, metres.
+    n_length, n_thickness, n_width : int
+        Elements along x (about, see :func:`length_layers`), y and z.
+    breakpoints : array-like, shape (k,)
+        Arc lengths (m) where element layers must end (magnetization jumps).
 
     Returns
     -------
@@ -88,7 +215,7 @@ def box_mesh(
     from skfem import MeshHex1
 
     return MeshHex1.init_tensor(
-        np.linspace(0.0, length, n_length + 1),
+        length_layers(length, n_length, breakpoints),
         np.linspace(-thickness / 2, thickness / 2, n_thickness + 1),
         np.linspace(-width / 2, width / 2, n_width + 1),
     )
@@ -140,11 +267,19 @@ def _disc_quads(radius: float, n_core: int, n_ring: int) -> tuple[np.ndarray, np
     return verts, np.concatenate(quads, axis=1)
 
 
-def circle_mesh(length: float, diameter: float, n_length: int, n_core: int = 1, n_ring: int = 1):
+def circle_mesh(
+    length: float,
+    diameter: float,
+    n_length: int,
+    n_core: int = 1,
+    n_ring: int = 1,
+    breakpoints=(),
+):
     """Mapped hexahedral mesh of a circular cylinder along x, with quadratic geometry.
 
     The section is an O-grid (see ``_disc_quads``): ``n_core**2 + 4 n_core n_ring`` elements
-    per section, extruded in ``n_length`` layers.  The mesh is a 27-node ``MeshHex2`` whose
+    per section, extruded in about ``n_length`` layers that end at every breakpoint (arc
+    lengths, m; see :func:`length_layers`).  The mesh is a 27-node ``MeshHex2`` whose
     lateral-surface nodes lie on the exact cylinder (isoparametric quadratic boundary).  The
     circumference has ``4 n_core`` quadratic arcs: the section area is 1.2 % short with
     ``n_core = 1`` (90-degree arcs), 0.08 % with 2 and 0.016 % with 3.
@@ -158,7 +293,8 @@ def circle_mesh(length: float, diameter: float, n_length: int, n_core: int = 1, 
     R = diameter / 2
     verts, quads = _disc_quads(R, n_core, n_ring)
     nv = verts.shape[1]
-    xs = np.linspace(0.0, length, n_length + 1)
+    xs = length_layers(length, n_length, breakpoints)
+    n_length = xs.size - 1
     p = np.concatenate([np.vstack([np.full(nv, x), verts]) for x in xs], axis=1)
     lo = quads[:, None, :] + nv * np.arange(n_length)[None, :, None]  # (4, nl, nq)
     hi = lo + nv
@@ -188,14 +324,17 @@ def rod_mesh(rod, dim: int, elements: tuple[int, ...]):
 
     ``elements`` counts elements along (length, thickness) in 2D, (length, thickness, width)
     for a 3D Rectangle, and (length, core, ring) for a 3D Circle: ``core`` elements along each
-    side of the O-grid's central square and ``ring`` radial layers around it.
+    side of the O-grid's central square and ``ring`` radial layers around it.  The layers
+    along the length end at the magnetization's breakpoints (:func:`length_layers`): there
+    are ``elements[0]`` of them, or one per piece between breakpoints if that is more.
     """
     L = rod.length
     sec = rod.section
+    br = rod.magnetization.breakpoints
     if dim == 2:
-        return rectangle_mesh(L, equivalent_height(sec), *elements)
+        return rectangle_mesh(L, equivalent_height(sec), *elements, breakpoints=br)
     if isinstance(sec, Rectangle):
-        return box_mesh(L, sec.thickness, sec.width, *elements)
+        return box_mesh(L, sec.thickness, sec.width, *elements, breakpoints=br)
     if isinstance(sec, Circle):
-        return circle_mesh(L, sec.diameter, *elements)
+        return circle_mesh(L, sec.diameter, *elements, breakpoints=br)
     raise ValueError(f"unsupported section {sec!r}")

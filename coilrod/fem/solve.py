@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 from coilrod.robot.rod import Rod
-from coilrod.robot.sections import Circle
 from coils._validate import finite_scalar
 from coils.field import Field
 
@@ -15,7 +14,7 @@ from ..path.events import warn_events
 from ..path.stepping import PathOptions, follow_load
 from .assembly import Assembler
 from .material import moduli
-from .mesh import check_elements, rod_mesh
+from .mesh import check_elements, default_elements, rod_mesh
 from .problem import FEMProblem
 from .result import FEMResult
 
@@ -73,8 +72,11 @@ def solve_fem(
         Elements along (length, thickness) in 2D and (length, thickness, width) for a 3D
         Rectangle; for a 3D Circle (length, core, ring): ``core`` elements along each side
         of the O-grid's central square (``4 core`` arcs around the circumference) and
-        ``ring`` radial layers.  Default (20, 1) in 2D, (20, 1, 1) in 3D and (20, 2, 1) for
-        a 3D Circle.
+        ``ring`` radial layers.  Default :func:`~coilrod.fem.default_elements`: (20, 1) in 2D,
+        (20, 1, 1) in 3D and (20, 2, 1) for a 3D Circle.  The element layers along the length
+        end at the magnetization's breakpoints (piecewise uniform; ``elements[0]`` layers in
+        all, at least one per piece; :func:`~coilrod.fem.length_layers`), so no element
+        straddles a jump of |M| or of its angle.
     poisson_ratio : float
         nu in (-1, 0.5); sets G = E / (2(1 + nu)) and K = E / (3(1 - 2 nu)).
     plane : {"stress", "strain"}
@@ -163,11 +165,7 @@ def solve_fem(
             raise ValueError(f"{name} must be an integer from 1 to {high}; got {val!r}")
     if mesh is None:
         if elements is None:
-            elements = (
-                (20, 1)
-                if dim == 2
-                else ((20, 2, 1) if isinstance(rod.section, Circle) else (20, 1, 1))
-            )
+            elements = default_elements(rod, dim)
         mesh = rod_mesh(rod, dim, check_elements(elements, dim))
     elif mesh.p.shape[0] != dim:
         raise ValueError(f"mesh must be {dim}-dimensional for dim={dim}; got {mesh.p.shape[0]}")

@@ -19,6 +19,8 @@ import numpy as np
 
 from coils.coaxial import coaxial_parts
 
+from ..fem.mesh import DEFAULT_ELEMENTS as FEM_DEFAULT_ELEMENTS
+from ..fem.mesh import default_elements
 from ..robot.sections import Circle
 from . import limits
 from .strength import field_strength
@@ -29,8 +31,6 @@ __all__ = ["scene_problems", "centerline_points", "body_radius", "FEM_DEFAULT_EL
 CENTERLINE_SAMPLES = 2001
 #: Points of the undeformed centreline where the field itself is evaluated.
 FIELD_SAMPLES = 201
-#: ``solve_fem``'s default elements along the length, in 2D and 3D.
-FEM_DEFAULT_ELEMENTS = {2: (20, 1), 3: (20, 1, 1), "3circle": (20, 2, 1)}
 
 
 def centerline_points(length: float, n: int = CENTERLINE_SAMPLES) -> np.ndarray:
@@ -57,9 +57,7 @@ def _fem_elements(scene, dim: int) -> tuple[tuple[int, ...], bool]:
     given = scene.fem_options.get(f"elements{dim}d")
     if given is not None:
         return tuple(given), True
-    if dim == 3 and isinstance(scene.rod.section, Circle):
-        return FEM_DEFAULT_ELEMENTS["3circle"], False
-    return FEM_DEFAULT_ELEMENTS[dim], False
+    return default_elements(scene.rod, dim), False
 
 
 def fem_cells(scene, dim: int, elements) -> int:
