@@ -30,8 +30,10 @@ class ArcLength:
         Scale unit of the arclength norm (e.g. the range to be traced).
     opts : NewtonOptions, optional
     step : float, optional
-        Initial arclength step in scale units (default 0.02 span); it adapts between 1e-8 and
-        4 times the initial value.
+        Initial arclength step in scale units (default 0.02 span); it adapts between 1e-8 span
+        and ``max_step``.
+    max_step : float, optional
+        Largest arclength step in scale units (default 4 times the initial step).
     max_turn : float
         Largest :meth:`~coilrod.path.protocol.PathProblem.distance` between two path points.
     """
@@ -43,12 +45,15 @@ class ArcLength:
         opts: NewtonOptions | None = None,
         step: float | None = None,
         max_turn: float = MAX_TURN,
+        max_step: float | None = None,
     ):
         self.problem = as_batched(problem)
-        self.span = max(float(span), 1e-300)
+        self.span = max(float(span), 1e-150)  # (1 / span)^2 stays finite
         self.opts = NewtonOptions() if opts is None else opts
         self.ds0 = 0.02 if step is None else float(step) / self.span
         self.max_turn = float(max_turn)
+        top = 4 * self.ds0 if max_step is None else float(max_step) / self.span
+        self.ds_max = max(top, self.ds0)
         self.weights = problem.arclength_weights()
 
     def _norm(self, du, dc) -> float:
@@ -112,7 +117,7 @@ class ArcLength:
             tau_u, tau_c = t
             u, c = u_new, c_new
             yield u, c, err, new_lin
-            ds = min(ds * (1.5 if it <= 3 else 1.0), 4 * self.ds0)
+            ds = min(ds * (1.5 if it <= 3 else 1.0), self.ds_max)
 
     def _correct(self, u, c, tau_u, tau_c):
         """Newton on R(u, c) = 0 and <tau, z - z_pred> = 0 (bordered block elimination);

@@ -230,6 +230,7 @@ class _Iteration:
         self.owners = self.everyone  # T's members, in its row order (sorted)
         self.fresh = np.ones(k, dtype=bool)  # a member's current state is its state in T
         self.last, self.last_members = self.T, self.everyone  # the latest linearization
+        self.current = np.ones(k, dtype=bool)  # a member's current state is its state in last
         self.iters = np.zeros(k, dtype=int)
         self.slow = np.zeros(k, dtype=int)
         # error contraction of each member's last iteration (0: trust the start)
@@ -249,7 +250,7 @@ class _Iteration:
             self.T, self.owners = P.linearize(U[act], S[act]), act
             self.fresh[act] = True
             self.R[act] = self.T.residual
-            self.last, self.last_members = self.T, act
+            self._set_last(self.T, act)
         if self.owners.size == n:  # act is T's members (they only drop out)
             dU = P.solve(self.T, -self.R[act])
         else:  # a subset of T's members: zero right-hand sides for the others
@@ -270,7 +271,7 @@ class _Iteration:
                 self.T, self.owners = self.last, moved
             else:  # accepted over several rounds: evaluate them together
                 self.T, self.owners = P.linearize(U[moved], S[moved]), moved
-                self.last, self.last_members = self.T, moved
+                self._set_last(self.T, moved)
             self.fresh[moved] = True
         stuck = (self.slow[moved] >= opts.stagnation) & (self.err[moved] > 1.0)
         if stuck.any():
@@ -303,7 +304,7 @@ class _Iteration:
             if accept.all():
                 self._take(members, trial, tlin, e_new, e_old, slice(None))
                 if pos.size == act.size:
-                    self.last, self.last_members = tlin, members
+                    self._set_last(tlin, members)
                 moved.append(members)
                 pos = pos[:0]
                 break
@@ -322,6 +323,12 @@ class _Iteration:
         moved = np.sort(np.concatenate(moved)) if moved else act[:0]
         return moved, rounds
 
+    def _set_last(self, lin, members):
+        """``lin`` is the latest linearization, of ``members`` at their current states."""
+        self.last, self.last_members = lin, members
+        self.current[:] = False
+        self.current[members] = True
+
     def _take(self, members, trial, tlin, e_new, e_old, rows):
         """Accept the trial states of ``members`` (rows ``rows`` of ``tlin``)."""
         self.slow[members] = np.where(e_new > 0.5 * e_old, self.slow[members] + 1, 0)
@@ -331,6 +338,7 @@ class _Iteration:
         self.err[members] = e_new
         self.iters[members] += 1
         self.fresh[members] = False
+        self.current[members] = False
 
 
 def _final(P, U, S, it: _Iteration, tangent: bool) -> Linearization:
@@ -345,7 +353,8 @@ def _final(P, U, S, it: _Iteration, tangent: bool) -> Linearization:
     everyone = it.owners.size == k
     if everyone and fresh.all():
         return T
-    state = it.last if it.last_members.size == k else None
+    # the latest linearization, if it holds every member at its current state
+    state = it.last if it.last_members.size == k and it.current.all() else None
     if not tangent:  # the residuals the iteration holds (no model-specific extras)
         if state is not None:
             return state
