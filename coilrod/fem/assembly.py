@@ -282,14 +282,18 @@ class Assembler:
         """Field at points ``x`` (n, dim): B (n, dim), G (n, dim, dim) and H (n, d, d, d)."""
         d = self.dim
         pts = x if d == 3 else np.concatenate([x, np.zeros((x.shape[0], 1))], axis=1)
-        if need_gradient and not self.field.uniform:
-            B, G = self.field.B_and_gradient(pts)
+        f = self.field
+        Hs = None
+        if need_gradient and need_hessian and not (f.uniform or f.linear):
+            B, G, Hs = f.B_gradient_hessian(pts)  # one compiled pass for coils
+            G, Hs = G[:, :d, :d], Hs[:, :d, :d, :d]
+        elif need_gradient and not f.uniform:
+            B, G = f.B_and_gradient(pts)
             G = G[:, :d, :d]
         else:
-            B, G = self.field.B(pts), None
-        Hs = None
-        if need_hessian and not (self.field.uniform or self.field.linear):
-            Hs = self.field.hessian(pts)[:, :d, :d, :d]
+            B, G = f.B(pts), None
+            if need_hessian and not (f.uniform or f.linear):
+                Hs = f.hessian(pts)[:, :d, :d, :d]
         return B[:, :d], G, Hs
 
     # -- linear algebra of a Newton step ----------------------------------------------------
