@@ -254,23 +254,27 @@ class _Tracker:
             return cap
         return min(cap, max(self.opts.change_growth * self.last_change, 0.1 * cap))
 
-    def limit_change(self, cur: PathPoint, h: float) -> float:
-        """``h`` shortened so that the predicted change of the state is within
-        :meth:`change_limit`."""
-        limit = self.change_limit()
-        if cur.rate is None or not np.isfinite(limit):
-            return h
-        per_unit = float(self.P.distance(cur.rate[None])[0])
-        if per_unit * abs(h) > limit:
-            return float(np.copysign(limit / per_unit, h))
-        return h
+    def trial(self, cur: PathPoint, prev, h: float, target: float):
+        """The next trial step from ``cur`` toward ``target``: ``(h, s1, guess)``.
 
-    def limit_prediction(self, cur, prev, h, s1, guess, target):
-        """Shorten the step until the whole predicted change (the Hermite curvature term
-        included, which near a fold can carry the prediction across it) is within
-        :meth:`change_limit`; returns ``(h, s1, guess)``."""
+        ``h`` is shortened so that the whole predicted change of the state -- the Hermite
+        curvature term included, which near a fold can carry the prediction across it -- is
+        within :meth:`change_limit` (first by the linear part ``|rate| h``, then by shortening
+        until the prediction itself complies); a step reaching ``target`` ends exactly there.
+        """
         limit = self.change_limit()
-        if cur.rate is None or not np.isfinite(limit):
+        bounded = cur.rate is not None and np.isfinite(limit)
+        if bounded:
+            per_unit = float(self.P.distance(cur.rate[None])[0])
+            if per_unit * abs(h) > limit:
+                h = float(np.copysign(limit / per_unit, h))
+        remaining = target - cur.scale
+        if abs(h) >= abs(remaining):
+            h, s1 = remaining, target
+        else:
+            s1 = cur.scale + h
+        guess = self.predict(cur, prev, s1)
+        if not bounded:
             return h, s1, guess
         for _ in range(60):
             change = float(self.P.distance((guess - cur.u)[None])[0])
@@ -325,13 +329,7 @@ class _Tracker:
             remaining = target - cur.scale
             if remaining == 0:
                 return cur, prev, iters
-            h = self.limit_change(cur, h)
-            if abs(h) >= abs(remaining):
-                h, s1 = remaining, target
-            else:
-                s1 = cur.scale + h
-            guess = self.predict(cur, prev, s1)
-            h, s1, guess = self.limit_prediction(cur, prev, h, s1, guess, target)
+            h, s1, guess = self.trial(cur, prev, h, target)
             res = newton(self.P, guess[None], np.array([s1]), opts.newton)
             iters += int(res.iterations[0])
             ok = bool(res.ok[0])
