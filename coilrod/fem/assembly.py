@@ -278,22 +278,23 @@ class Assembler:
         """Largest displacement component of an increment ``dz``, m."""
         return float(np.max(np.abs(dz[: self.nfree]))) if self.nfree else 0.0
 
-    def field_at(self, x: np.ndarray, need_gradient: bool, need_hessian: bool):
-        """Field at points ``x`` (n, dim): B (n, dim), G (n, dim, dim) and H (n, d, d, d)."""
+    def field_at(self, x: np.ndarray, need_hessian: bool):
+        """Field at points ``x`` (n, dim): B (n, dim), G (n, dim, dim) and H (n, d, d, d).
+
+        G is None for a uniform field, H for a uniform or linear one (or without
+        ``need_hessian``); a coil field's three come from one compiled pass."""
         d = self.dim
         pts = x if d == 3 else np.concatenate([x, np.zeros((x.shape[0], 1))], axis=1)
         f = self.field
-        Hs = None
-        if need_gradient and need_hessian and not (f.uniform or f.linear):
-            B, G, Hs = f.B_gradient_hessian(pts)  # one compiled pass for coils
+        G = Hs = None
+        if f.uniform:
+            B = f.B(pts)
+        elif need_hessian and not f.linear:
+            B, G, Hs = f.B_gradient_hessian(pts)
             G, Hs = G[:, :d, :d], Hs[:, :d, :d, :d]
-        elif need_gradient and not f.uniform:
+        else:
             B, G = f.B_and_gradient(pts)
             G = G[:, :d, :d]
-        else:
-            B, G = f.B(pts), None
-            if need_hessian and not (f.uniform or f.linear):
-                Hs = f.hessian(pts)[:, :d, :d, :d]
         return B[:, :d], G, Hs
 
     # -- linear algebra of a Newton step ----------------------------------------------------
@@ -351,7 +352,7 @@ class Assembler:
             return Evaluation(ok=False, min_jacobian=minJ)
         # magnetic field at the deformed quadrature points
         x = (self.X + np.matmul(self.N, ue)).reshape(-1, d)
-        B, G, Hs = self.field_at(x, True, tangent)
+        B, G, Hs = self.field_at(x, tangent)
         if not (
             np.all(np.isfinite(B))
             and (G is None or np.all(np.isfinite(G)))

@@ -173,7 +173,7 @@ def solve_fem(
     asm = Assembler(mesh, order, rod, field, G, K, plane=plane, mixed=formulation == "mixed")
     # the field must be finite on the undeformed body
     try:
-        B, Gr, _ = asm.field_at(asm.X.reshape(-1, dim), True, False)
+        B, Gr, _ = asm.field_at(asm.X.reshape(-1, dim), False)
     except ValueError as exc:
         raise ValueError(f"field cannot be evaluated on the undeformed rod body: {exc}") from None
     if not (np.all(np.isfinite(B)) and (Gr is None or np.all(np.isfinite(Gr)))):
