@@ -7,6 +7,7 @@ import sys
 
 import numpy as np
 import pytest
+from _scenes import BASE, scene_with
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -15,31 +16,10 @@ from coilrod.scene import SceneError, load_scene, parse_scene
 from coilrod.scene.cli import main, shipped_scenes
 from coilrod.scene.units import parse_quantity
 
-BASE = {
-    "name": "test",
-    "robot": {
-        "length": "40 mm",
-        "diameter": "2 mm",
-        "youngs_modulus": "1 MPa",
-        "magnetization": {"preset": "M1"},
-    },
-    "field": {"type": "uniform", "B": "5 mT", "direction": "y"},
-    "load": {"steps": 4},
-    "models": {"run": ["rod"]},
-}
-
 
 def with_change(path: str, value):
-    data = copy.deepcopy(BASE)
-    *parents, last = path.split(".")
-    node = data
-    for p in parents:
-        node = node[p]
-    if value is None:
-        del node[last]
-    else:
-        node[last] = value
-    return data
+    """BASE with the dotted key ``path`` set to ``value`` (None removes it)."""
+    return scene_with(**{path.replace(".", "__"): value})
 
 
 def test_units_convert_to_si():

@@ -1,43 +1,15 @@
 """Scene validation: nothing is read loosely, every problem is reported at once, and a scene
 that passes can be solved (the checks ``coilrod check`` shares with ``coilrod run``)."""
 
-import copy
 import math
 
 import numpy as np
 import pytest
+from _scenes import scene_with
 
 import coils
 from coilrod.scene import SceneError, limits, parse_scene
 from coilrod.scene.planner import plan_scene
-
-BASE = {
-    "name": "test",
-    "robot": {
-        "length": "40 mm",
-        "diameter": "2 mm",
-        "youngs_modulus": "1 MPa",
-        "magnetization": {"preset": "M1"},
-    },
-    "field": {"type": "uniform", "B": "5 mT", "direction": "y"},
-    "load": {"steps": 4},
-    "models": {"run": ["rod"]},
-}
-
-
-def scene_with(**changes):
-    """BASE with dotted keys replaced (None removes the key)."""
-    data = copy.deepcopy(BASE)
-    for dotted, value in changes.items():
-        *parents, last = dotted.split("__")
-        node = data
-        for p in parents:
-            node = node.setdefault(p, {})
-        if value is None:
-            node.pop(last, None)
-        else:
-            node[last] = value
-    return data
 
 
 def problems_of(data) -> list[str]:
