@@ -324,3 +324,32 @@ def band_solve(ab, kl, ku, ipiv, b):
             if f != 0.0:
                 for q in range(m):
                     b[i, q] -= f * b[j, q]
+
+
+@nb.njit(cache=True)
+def band_solve_transposed(ab, kl, ku, ipiv, b):
+    """Solve A^T x = b with the factors of :func:`band_lu` (LAPACK ``gbtrs`` with TRANS = 'T');
+    b (n, m) is overwritten by x.  The adjoint sensitivities need it: one solve per output
+    instead of one per parameter."""
+    n = ab.shape[1]
+    m = b.shape[1]
+    kv = ku + kl
+    for j in range(n):  # U^T y = b: U^T is lower triangular with bandwidth kl + ku
+        for q in range(m):
+            acc = b[j, q]
+            for i in range(max(0, j - kv), j):
+                acc -= ab[kv + i - j, j] * b[i, q]
+            b[j, q] = acc / ab[kv, j]
+    for j in range(n - 2, -1, -1):  # L^T, undoing the row interchanges in reverse order
+        lm = min(kl, n - 1 - j)
+        for q in range(m):
+            acc = b[j, q]
+            for i in range(1, lm + 1):
+                acc -= ab[kv + i, j] * b[j + i, q]
+            b[j, q] = acc
+        p = ipiv[j]
+        if p != j:
+            for q in range(m):
+                tmp = b[p, q]
+                b[p, q] = b[j, q]
+                b[j, q] = tmp

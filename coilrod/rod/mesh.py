@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["RodMesh", "node_magnetization", "MERGE_BREAKS"]
+__all__ = ["RodMesh", "node_magnetization", "segment_weights", "MERGE_BREAKS"]
 
 #: Breakpoints closer than this (fraction of L) to each other or to an end are merged: a
 #: segment shorter than that carries a negligible part of the load and would only make the
@@ -69,6 +69,22 @@ class RodMesh:
         return self.s.size
 
 
+def _one_sided(mesh: RodMesh, length: float):
+    """Arc lengths (m) where the one-sided limits of a profile are read at each node (left,
+    right; shape (n,) each) and their weights (n,) (see :func:`node_magnetization`)."""
+    L = float(length)
+    s = mesh.s * L
+    h = mesh.h * L
+    ulp = np.spacing(np.maximum(np.abs(s), L))
+    left_len = np.concatenate([[h[0]], h])  # the node's left segment (node 0: unused)
+    right_len = np.concatenate([h, [h[-1]]])
+    d_left = np.maximum(2.0**-26 * left_len, 1e3 * ulp)
+    d_right = np.maximum(2.0**-26 * right_len, 1e3 * ulp)
+    hl = np.concatenate([[0.0], mesh.h]) / 2 / mesh.w
+    hr = np.concatenate([mesh.h, [0.0]]) / 2 / mesh.w
+    return np.clip(s - d_left, 0.0, L), np.clip(s + d_right, 0.0, L), hl, hr
+
+
 def node_magnetization(magnetization, mesh: RodMesh, length: float) -> np.ndarray:
     """Trapezoid node magnetization in the body frame, shape (n, 2), A/m.
 
@@ -79,16 +95,21 @@ def node_magnetization(magnetization, mesh: RodMesh, length: float) -> np.ndarra
     node that lands a few ulp beside a breakpoint still reads each side's own value, so the
     result is continuous in the breakpoint position.
     """
-    L = float(length)
-    s = mesh.s * L
-    h = mesh.h * L
-    ulp = np.spacing(np.maximum(np.abs(s), L))
-    left_len = np.concatenate([[h[0]], h])  # the node's left segment (node 0: unused)
-    right_len = np.concatenate([h, [h[-1]]])
-    d_left = np.maximum(2.0**-26 * left_len, 1e3 * ulp)
-    d_right = np.maximum(2.0**-26 * right_len, 1e3 * ulp)
-    left = magnetization.vector(np.clip(s - d_left, 0.0, L))
-    right = magnetization.vector(np.clip(s + d_right, 0.0, L))
-    hl = np.concatenate([[0.0], mesh.h]) / 2
-    hr = np.concatenate([mesh.h, [0.0]]) / 2
-    return (hl[:, None] * left + hr[:, None] * right) / mesh.w[:, None]
+    left, right, hl, hr = _one_sided(mesh, length)
+    return hl[:, None] * magnetization.vector(left) + hr[:, None] * magnetization.vector(right)
+
+
+def segment_weights(edges: np.ndarray, mesh: RodMesh, length: float) -> np.ndarray:
+    """Share of each node's trapezoid weight in each segment of a piecewise-constant profile
+    with segment ``edges`` (m, shape (p + 1,)): shape (n, p), rows summing to 1.  The node
+    magnetization of the profile is ``weights @ (M_j (cos a_j, sin a_j))``, exactly as
+    :func:`node_magnetization` computes it."""
+    left, right, hl, hr = _one_sided(mesh, length)
+    edges = np.asarray(edges, float)
+    p = edges.size - 1
+    out = np.zeros((mesh.n, p))
+    rows = np.arange(mesh.n)
+    for side, weight in ((left, hl), (right, hr)):
+        index = np.clip(np.searchsorted(edges, side, side="right") - 1, 0, p - 1)
+        np.add.at(out, (rows, index), weight)
+    return out

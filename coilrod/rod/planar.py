@@ -141,6 +141,34 @@ class RodTangent:
         x[self.bad] = np.nan
         return x
 
+    def solve_transposed(self, rhs: np.ndarray) -> np.ndarray:
+        """Solve with every member's transposed Jacobian (the adjoint of a state): rhs
+        (k, size), or (q, k, size) for q right-hand sides per member solved together ->
+        the same shape (NaN rows for singular members)."""
+        rhs = np.asarray(rhs, dtype=float)
+        many = rhs.ndim == 3
+        R = rhs if many else rhs[None]
+        q = R.shape[0]
+        lu = self.factor()
+        if self._per_member:
+            out = np.full(R.shape, np.nan)
+            for j in np.flatnonzero(~self.bad):
+                out[:, j] = _take_tangent(self, [j]).solve_transposed(R[:, j : j + 1])[:, 0]
+            return out if many else out[0]
+        b = np.ascontiguousarray(R.reshape(q, -1).T)  # (k size, q)
+        if self.uniform:
+            x, info = dgttrs(*lu, b, trans="T")
+            if info != 0:
+                raise np.linalg.LinAlgError(f"LAPACK solve failed (info {info})")
+        else:
+            from ._compiled import band_solve_transposed
+
+            x = b
+            band_solve_transposed(lu[0], _KL, _KU, lu[1], x)
+        x = x.T.reshape(q, self.k, self.size)
+        x[:, self.bad] = np.nan
+        return x if many else x[0]
+
     def det_signs(self) -> np.ndarray:
         """Sign of each member's Jacobian determinant, shape (k,) (+-1; 0 where singular)."""
         lu = self.factor()
@@ -178,6 +206,8 @@ class PlanarRod(PathProblem):
         Newton tolerance on the scaled residual (non-dimensional): a state is converged when
         every equation, scaled to a point value (moment per length in EI/L^2, position mismatch
         per length, force per length in EI/L^3), is below ``tol`` plus its round-off floor.
+    mixed : bool
+        Use the mixed layout even in a uniform field (sensitivities to a field gradient).
     """
 
     batched = True
@@ -189,7 +219,7 @@ class PlanarRod(PathProblem):
     #: Largest change of any node angle in one Newton step, rad.
     max_rotation = 0.5
 
-    def __init__(self, mesh, mu, field, length, clamp_position, clamp_angle, tol=1e-9):
+    def __init__(self, mesh, mu, field, length, clamp_position, clamp_angle, tol=1e-9, mixed=False):
         self.mesh = mesh
         self.mu = np.asarray(mu, float)
         self.field = field
@@ -197,7 +227,7 @@ class PlanarRod(PathProblem):
         self.clamp = np.asarray(clamp_position, float)
         self.theta0 = float(clamp_angle)
         self.tol = float(tol)
-        self.uniform = bool(field.uniform)
+        self.uniform = bool(field.uniform) and not mixed
         self.linear = bool(field.linear or field.uniform)
         self.cheap_tangent = self.uniform  # tridiagonal: a tangent costs a residual
         self.n = n = mesh.n
@@ -282,6 +312,106 @@ class PlanarRod(PathProblem):
         out[:, 1::2] = 0.5 * (v[:, :-1] + v[:, 1:])
         out = out.reshape(v.shape[0], -1)
         return out[0] if np.ndim(u) == 1 else out
+
+    # -- adjoint ---------------------------------------------------------------------------------
+    def node_positions(self, U: np.ndarray) -> np.ndarray:
+        """Node positions of a stack of states (k, size): shape (k, n, 2), units of L."""
+        U = np.atleast_2d(U)
+        if self.uniform:
+            return self.positions(U)
+        return U.reshape(U.shape[0], self.n, _NV)[:, :, 0:2]
+
+    def tip_gradients(self, U: np.ndarray) -> np.ndarray:
+        """Derivatives of the tip (x_N, y_N in units of L; theta_N in rad) with respect to the
+        unknowns of each state of a stack (k, size): shape (3, k, size)."""
+        U = np.atleast_2d(U)
+        out = np.zeros((3, U.shape[0], self.size))
+        if self.uniform:  # x_N = sum_i w_i cos(theta_i), y_N = sum_i w_i sin(theta_i)
+            th = U
+            out[0] = -self.mesh.w * np.sin(th)
+            out[1] = self.mesh.w * np.cos(th)
+            out[2, :, -1] = 1.0
+        else:
+            last = _NV * (self.n - 1)
+            out[0, :, last] = 1.0
+            out[1, :, last + 1] = 1.0
+            out[2, :, last + _TH] = 1.0
+        return out
+
+    def field_at_states(self, U: np.ndarray):
+        """B (k, n, 3) T and gradient (k, n, 3, 3) T/m of the field at scale 1 at the nodes of
+        a stack of states (k, size) (the clamp's field everywhere in the uniform layout)."""
+        U = np.atleast_2d(U)
+        k = U.shape[0]
+        if self.uniform:
+            B = np.broadcast_to(self.field.B(self.clamp)[0], (k, self.n, 3))
+            return B, np.zeros((k, self.n, 3, 3))
+        B, G, _ = self._field(self.node_positions(U), False)
+        return B.reshape(k, self.n, 3), G.reshape(k, self.n, 3, 3)
+
+    def load_adjoint(self, U: np.ndarray, lam: np.ndarray, B=None, G=None):
+        """Derivatives of ``lam . R1`` (R1 = dR/dscale, the magnetic load per unit scale) with
+        respect to the node magnetization and the field at the nodes, for a stack of states.
+
+        ``R1`` is linear in the body magnetization ``mu_i`` and in the in-plane field ``b_i``
+        and gradient ``G_i`` at each node, and each enters only node i's moment row and node
+        i - 1's force rows, so the derivatives are local (closed form, O(n)).
+
+        Parameters
+        ----------
+        U : ndarray, shape (k, size)
+            States.
+        lam : ndarray, shape (q, k, size)
+            Adjoint vectors (q per state).
+        B, G : ndarray, optional
+            The field at the nodes (:meth:`field_at_states`), if already evaluated.
+
+        Returns
+        -------
+        g_mu : ndarray, shape (q, k, n, 2)
+            d(lam . R1)/d mu_i (mu in the problem's units, 1/T).
+        g_b : ndarray, shape (q, k, n, 2)
+            d(lam . R1)/d b_i (in-plane field components, per T).
+        g_G : ndarray, shape (q, k, n, 2, 2) or None
+            d(lam . R1)/d G_i[c, a] (in-plane gradient, per T/m), ``[c, a]`` = dB_c/dx_a;
+            None in the uniform layout (which has no force unknowns; use ``mixed=True``).
+        """
+        U = np.atleast_2d(U)
+        k, n = U.shape[0], self.n
+        lam = np.asarray(lam, float).reshape(-1, k, self.size)
+        q = lam.shape[0]
+        if B is None:
+            B, G = self.field_at_states(U)
+        th = self.theta(U)
+        c, s = np.cos(th), np.sin(th)
+        m = _rot(th, self.mu)  # (k, n, 2)
+        w = self.mesh.w
+        if self.uniform:
+            lam_m = lam.copy()
+        else:
+            v5 = lam.reshape(q, k, n, _NV)
+            lam_m = v5[..., _TH].copy()
+            lam_F = np.zeros((q, k, n, 2))
+            lam_F[:, :, 1:] = v5[:, :, :-1, 3:5]  # node i's force enters node i - 1's rows
+        lam_m[..., 0] = 0.0  # row 0 is the clamp condition
+        lw = (lam_m * w)[..., None]
+        m_perp = np.empty_like(m)
+        m_perp[..., 0], m_perp[..., 1] = -m[..., 1], m[..., 0]
+        g_b = -lw * m_perp
+        b_rot = np.empty(B.shape[:-1] + (2,))
+        b_rot[..., 0], b_rot[..., 1] = B[..., 1], -B[..., 0]
+        d_m = -lw * b_rot  # d/dm of -lam w (m_perp . b)
+        g_G = None
+        if not self.uniform:
+            t_perp = np.empty((k, n, 2))
+            t_perp[..., 0], t_perp[..., 1] = -s, c
+            v = -(lam_m * (self._c * w))[..., None] * t_perp - w[:, None] * lam_F
+            d_m += self.L * (G[..., :2, :2] @ v[..., None])[..., 0]
+            g_G = self.L * m[..., :, None] * v[..., None, :]
+        g_mu = np.empty_like(d_m)  # R(theta)^T d_m
+        g_mu[..., 0] = c * d_m[..., 0] + s * d_m[..., 1]
+        g_mu[..., 1] = c * d_m[..., 1] - s * d_m[..., 0]
+        return g_mu, g_b, g_G
 
     # -- field ---------------------------------------------------------------------------------
     def _field(self, x: np.ndarray, hessian: bool):

@@ -63,6 +63,8 @@ class RodResult:
     _theta: np.ndarray = field(repr=False)
     _points: np.ndarray = field(repr=False)
     instabilities: list = field(default_factory=list)
+    #: What the sensitivities need (rod, field, the discrete problems and their states).
+    _solution: object = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.scales)

@@ -241,11 +241,13 @@ def _result(rod, problems, points, iterations, events, opts) -> RodResult:
             )
         iterations = iterations + res.iterations
         residual = np.maximum(residual, fine.residual_norm(res.lin.residual))
+        fine_states = res.u
         th_f = fine.theta(res.u)
         thetas = (4 * th_f[:, ::2] - thetas_c) / 3
         x = (4 * fine.positions(th_f)[:, ::2] - x_c) / 3
     else:
         thetas, x = thetas_c, x_c
+        fine_states = None
     points_xyz = coarse.points(x)
     if not opts.stability:
         mu = np.full(scales.size, np.nan)
@@ -269,7 +271,24 @@ def _result(rod, problems, points, iterations, events, opts) -> RodResult:
         _theta=thetas,
         _points=points_xyz,
         instabilities=instabilities,
+        _solution=RodSolution(
+            rod,
+            problems[0].field,
+            tuple(problems),
+            (states,) + ((fine_states,) if len(problems) == 2 else ()),
+        ),
     )
+
+
+@dataclasses.dataclass(frozen=True)
+class RodSolution:
+    """The discrete problems of a :class:`RodResult` and their converged states (coarse mesh,
+    and the refined mesh with Richardson), kept for :func:`coilrod.sensitivities`."""
+
+    rod: Rod
+    field: Field
+    problems: tuple
+    states: tuple
 
 
 def _eigenvalues_later(problem, states, scales, fine=None):

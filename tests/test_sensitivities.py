@@ -1,0 +1,261 @@
+"""Exact sensitivities of rod states (coilrod.sensitivities), grouped by property.
+
+The reference for every derivative is an independent one: central differences (five-point,
+fourth order) of separate solve_rod runs at tolerance 1e-12 with the parameter moved, or a
+closed form (small-deflection theory, tip = lambda L / 3).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import numpy as np
+import pytest
+
+import coils
+from coilrod import Circle, ConvergenceError, Magnetization, Rod, solve_rod
+from coilrod.design.sensitivity import SingularStateError, sensitivities
+
+L = 0.04
+LENGTHS = [0.01, 0.015, 0.015]
+MAGS = np.array([100e3, 150e3, 80e3])
+ANGLES = np.array([0.0, 0.5, -0.3])
+
+
+def _rod(mags=MAGS, angles=ANGLES, E=1e6):
+    return Rod(L, E, Circle(1e-3), Magnetization.segments(LENGTHS, mags, angles))
+
+
+FIELDS = {
+    "uniform": coils.UniformField(B=(0.0, 0.01, 0.002)),
+    "linear": coils.LinearField(
+        B0=(0.002, 0.008, 0.0),
+        gradient=[[0.3, 0.1, 0.0], [0.1, -0.2, 0.0], [0.0, 0.0, -0.1]],
+        origin=(0.01, 0.0, 0.0),
+    ),
+    "helmholtz": coils.HelmholtzPair(0.05, 100, 3.0, axis="y"),
+}
+SCALES = [0.4, 0.8, 1.0]
+STATE = 1  # the middle state of a three-state sweep: the batched rows must be the right ones
+
+
+def _solve(rod, field, scales=SCALES, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return solve_rod(rod, field, scales, tol=1e-12, **kw)
+
+
+def _outputs(res, k=STATE):
+    return np.r_[res.tip[k], res.tip_angle[k]]
+
+
+def _central(build, h):
+    """Five-point central difference of the tip outputs of ``build(delta)``."""
+    f = {d: _outputs(build(d * h)) for d in (-2, -1, 1, 2)}
+    return (8 * (f[1] - f[-1]) - (f[2] - f[-2])) / (12 * h)
+
+
+def _perturbations(kind, field):
+    """(label, build(delta) -> RodResult, step) for every parameter of the case."""
+    rod = _rod()
+    out = []
+    for j in range(3):
+        for group, base, step in (("magnitudes", MAGS, 2e3), ("angles", ANGLES, 2e-3)):
+
+            def build(d, j=j, group=group, base=base):
+                moved = base.copy()
+                moved[j] += d
+                if group == "magnitudes":
+                    return _solve(_rod(mags=moved), field)
+                return _solve(_rod(angles=moved), field)
+
+            out.append((f"{group}[{j}]", build, step))
+    out.append(
+        (
+            "youngs_modulus",
+            lambda d: _solve(dataclasses.replace(rod, youngs_modulus=1e6 + d), field),
+            2e4,
+        )
+    )
+    out.append(("scale", lambda d: _solve(rod, field, [0.4, 0.8 + d, 1.0]), 2e-3))
+    if kind == "uniform":
+        for i in range(2):
+            e = np.eye(3)[i]
+
+            def build(d, e=e):
+                return _solve(rod, coils.UniformField(B=field.B0 + d * e))
+
+            out.append((f"B[{i}]", build, 1e-4))
+    if kind == "linear":
+        for i in range(2):
+            e = np.eye(3)[i]
+
+            def build(d, e=e):
+                return _solve(rod, coils.LinearField(field.B0 + d * e, field.G, field.origin))
+
+            out.append((f"B0[{i}]", build, 1e-4))
+        for a in range(2):
+            for b in range(2):
+                E = np.zeros((3, 3))
+                E[a, b] = 1.0
+
+                def build(d, E=E):
+                    return _solve(rod, coils.LinearField(field.B0, field.G + d * E, field.origin))
+
+                out.append((f"gradient[{a},{b}]", build, 2e-3))
+    return out
+
+
+CASES = [
+    (kind, label, build, step)
+    for kind, field in FIELDS.items()
+    for label, build, step in _perturbations(kind, field)
+]
+
+
+@pytest.fixture(scope="module")
+def adjoint():
+    """Sensitivities of the middle state of each field's sweep (computed once)."""
+    return {kind: sensitivities(_solve(_rod(), field), STATE) for kind, field in FIELDS.items()}
+
+
+class TestAgainstCentralDifferences:
+    @pytest.mark.parametrize(
+        ("kind", "label", "build", "step"), CASES, ids=[f"{c[0]}-{c[1]}" for c in CASES]
+    )
+    def test_derivative(self, adjoint, kind, label, build, step):
+        sens = adjoint[kind]
+        i = sens.parameters.index(label)
+        got = np.r_[sens.tip[i], sens.tip_angle[i]]
+        ref = _central(build, step)
+        # positions (m) and angle (rad) on their own scales
+        for sl in (slice(0, 3), slice(3, 4)):
+            scale = np.max(np.abs(ref[sl]))
+            if scale == 0.0:
+                assert np.all(got[sl] == 0.0)
+                continue
+            assert np.max(np.abs(got[sl] - ref[sl])) <= 1e-6 * scale, (label, got, ref)
+
+    def test_without_richardson(self):
+        field = FIELDS["helmholtz"]
+        sens = sensitivities(_solve(_rod(), field, richardson=False), STATE, wrt="angles")
+        moved = ANGLES.copy()
+
+        def build(d):
+            moved2 = moved.copy()
+            moved2[2] += d
+            return _solve(_rod(angles=moved2), field, richardson=False)
+
+        ref = _central(build, 2e-3)
+        got = np.r_[sens["angles"].tip[2], sens["angles"].tip_angle[2]]
+        assert np.max(np.abs(got - ref)) <= 1e-6 * np.max(np.abs(ref))
+
+    def test_gradient_sensitivity_in_a_uniform_field(self):
+        """A zero-gradient LinearField is solved in the uniform layout; its gradient
+        sensitivity needs the force terms (mixed layout)."""
+        field = coils.LinearField(B0=(0.0, 0.01, 0.0), gradient=np.zeros((3, 3)))
+        rod = _rod()
+        sens = sensitivities(_solve(rod, field), STATE, wrt="gradient")
+        E = np.zeros((3, 3))
+        E[1, 0] = 1.0  # dB_y/dx
+
+        def build(d):
+            return _solve(rod, coils.LinearField(field.B0, d * E, field.origin))
+
+        ref = _central(build, 2e-3)
+        i = sens.parameters.index("gradient[1,0]")
+        got = np.r_[sens.tip[i], sens.tip_angle[i]]
+        assert np.max(np.abs(got - ref)) <= 1e-6 * np.max(np.abs(ref))
+
+
+class TestClosedForm:
+    """Small deflections: tip y = lambda L / 3, lambda = A |M| B L^2 / (E I)."""
+
+    def test_small_deflection_derivatives(self):
+        rod = Rod(L, 1e6, Circle(2e-3), Magnetization(128e3, 0.0))
+        lam = 1e-4
+        B = rod.field_for_lambda(lam)
+        res = solve_rod(rod, coils.UniformField(B=(0.0, B, 0.0)), [1.0], tol=1e-12)
+        sens = sensitivities(res, 0)
+        y = lam * L / 3
+        # a constant magnetization is one segment: magnitudes[0], angles[0]
+        assert sens["magnitudes"].tip[0, 1] == pytest.approx(y / 128e3, rel=1e-3)
+        assert sens["youngs_modulus"].tip[0, 1] == pytest.approx(-y / 1e6, rel=1e-3)
+        assert sens["B"].tip[1, 1] == pytest.approx(y / B, rel=1e-3)
+        assert sens["scale"].tip[0, 1] == pytest.approx(y, rel=1e-3)
+        # first order vanishes: B_x acts on m = M (cos theta, sin theta) only through
+        # sin(theta) ~ lambda, and turning M by a in a field along y changes the torque by
+        # cos(a) - 1 ~ a^2
+        assert sens["B"].tip[0, 1] == pytest.approx(0.0, abs=1e-3 * y / B)
+        assert sens["angles"].tip[0, 1] == pytest.approx(0.0, abs=1e-3 * y)
+
+
+class TestSingularStates:
+    def test_at_the_buckling_load_the_derivative_does_not_exist(self):
+        """A straight rod in an antiparallel field is at a pitchfork at the critical load."""
+        rod = Rod(L, 1e6, Circle(1e-3), Magnetization(100e3, 0.0))
+        field = coils.UniformField(B=(-0.01, 0.0, 0.0))
+        res0 = solve_rod(rod, field, [1e-3])
+        problem = res0._solution.problems[0]
+        mu0 = problem.mu0
+        lin = problem.linearize(problem.straight(), 1.0)
+        mu1 = float(problem.stability(lin, precise=True)[0])
+        critical = mu0 / (mu0 - mu1)  # the straight rod's eigenvalue is linear in the scale
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            try:
+                res = solve_rod(rod, field, [critical])
+            except ConvergenceError:  # pragma: no cover - the straight branch converges
+                pytest.fail("the straight branch should converge at the critical load")
+        with pytest.raises(SingularStateError, match="bifurcation or limit point"):
+            sensitivities(res, 0)
+
+    def test_away_from_it_the_derivative_exists(self):
+        rod = Rod(L, 1e6, Circle(1e-3), Magnetization(100e3, 0.0))
+        res = solve_rod(rod, coils.UniformField(B=(-0.01, 0.0, 0.0)), [0.01])
+        assert np.all(np.isfinite(sensitivities(res, 0).tip))
+
+
+@pytest.fixture(scope="module")
+def res():
+    return _solve(_rod(), FIELDS["uniform"])
+
+
+class TestBadInput:
+    def test_unknown_group(self, res):
+        with pytest.raises(ValueError, match="unknown parameter group 'stiffness'"):
+            sensitivities(res, 0, wrt="stiffness")
+
+    @pytest.mark.parametrize("group", ["currents", "B0", "gradient"])
+    def test_group_the_state_does_not_have(self, res, group):
+        with pytest.raises(ValueError, match=f"has no parameter '{group}'"):
+            sensitivities(res, 0, wrt=[group])
+
+    def test_segments_of_a_function_profile(self):
+        rod = Rod(L, 1e6, Circle(1e-3), Magnetization(lambda s: 1e5 + 0 * s, 0.0))
+        res = solve_rod(rod, FIELDS["uniform"], [0.5])
+        with pytest.raises(ValueError, match="has no parameter 'magnitudes'"):
+            sensitivities(res, 0, wrt="magnitudes")
+        assert np.isfinite(sensitivities(res, 0, wrt="youngs_modulus").tip).all()
+
+    @pytest.mark.parametrize("k", [3, -4, 1.0, True, "0"])
+    def test_bad_index(self, res, k):
+        with pytest.raises(ValueError, match="k"):
+            sensitivities(res, k)
+
+    def test_empty_wrt(self, res):
+        with pytest.raises(ValueError, match="at least one"):
+            sensitivities(res, 0, wrt=[])
+
+    def test_not_a_rod_result(self):
+        with pytest.raises(ValueError, match="RodResult"):
+            sensitivities(object(), 0)
+
+    def test_group_lookup(self, res):
+        sens = sensitivities(res, -1, wrt=("scale", "B"))
+        assert sens.index == 2
+        assert sens["B"].tip.shape == (3, 3)
+        assert sens.matrix.shape == (4, 4)
+        with pytest.raises(KeyError, match="no parameter group 'angles'"):
+            sens["angles"]
