@@ -615,9 +615,13 @@ class PlanarRod(PathProblem):
         return 1.0
 
     # -- uniform layout ---------------------------------------------------------------------------
-    def _uniform(self, th: np.ndarray, S: np.ndarray, tangent: bool):
+    def _uniform(self, th: np.ndarray, S: np.ndarray, tangent: bool, P1=None, Q1=None):
+        """Uniform layout of a stack th (k, n); ``P1``, ``Q1`` (k, n) replace the field terms
+        ``w (m x b)`` and ``w m.b`` at theta = 0 (one field direction per member)."""
+        P1 = self._P1 if P1 is None else P1
+        Q1 = self._Q1 if Q1 is None else Q1
         c, s = np.cos(th), np.sin(th)
-        R1 = s * self._Q1 - c * self._P1  # -w tau per unit scale
+        R1 = s * Q1 - c * P1  # -w tau per unit scale
         R1[:, 0] = 0.0
         dth = (th[:, 1:] - th[:, :-1]) * self._inv_h
         Sc = S[:, None]
@@ -627,7 +631,7 @@ class PlanarRod(PathProblem):
         R[:, 0] = th[:, 0] - self.theta0
         if not tangent:
             return R, R1, None
-        d = Sc * (c * self._Q1 + s * self._P1)  # w m.b
+        d = Sc * (c * Q1 + s * P1)  # w m.b
         d += self._k_diag  # bending; row 0 is the clamp condition
         d[:, 0] = 1.0
         return R, R1, (d, self._off_diagonals(th.shape[0]))

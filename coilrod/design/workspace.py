@@ -1,0 +1,545 @@
+"""The workspace of a magnetic rod: every tip position a bounded field can hold it at.
+
+Definition (what :func:`workspace` computes):
+
+* For each of ``directions`` in-plane field directions ``phi_d = 2 pi d / directions`` (from +x,
+  counter-clockwise), the field magnitude is ramped quasi-statically from 0 to ``b_max`` in
+  ``magnitudes`` equal steps, starting from the straight unloaded rod.  This is the solver's own
+  path following (:func:`coilrod.solve_rod`): at a limit point the rod snaps through to the
+  stable branch, and states are never taken from an unstable branch.
+* The tip positions form a grid ``tips[d, j]`` (direction d, magnitude ``j b_max /
+  magnitudes``).  A grid cell (d, j) -- the quadrilateral of ``tips[d, j], tips[d, j + 1],
+  tips[d + 1, j + 1], tips[d + 1, j]``, directions wrapping around -- is the image of a patch of
+  fields the rod reaches continuously.  The workspace is the union of the cells' images
+  (computed by shapely, each cell split into two triangles).
+* A cell is left out when its image is not reached continuously: a corner state is unstable
+  (e.g. the straight rod beyond buckling in an exactly antiparallel field), the rod snaps
+  through between its magnitudes, or its two directions hold the rod on different branches
+  (the node angles differ by more than ``max(0.5 rad, 2 x the direction step)`` somewhere: the
+  rod would jump, not sweep, between them).  ``cells`` says which cells count.
+
+With ``system`` (a coil system with current control) each direction's field is made by the
+currents that give ``b_max`` along that direction at the system centre, and the real
+(Biot-Savart) field of those currents acts on the rod: the real-coil workspace.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+import coils
+from coils._validate import as_count, as_vector, finite_scalar, positive
+
+from ..errors import ConvergenceError
+from ..path.corrector import NewtonOptions, newton
+from ..path.events import StabilityWarning
+from ..path.stepping import PathOptions, follow_load
+from ..robot.rod import Rod
+from ..rod.fan import UniformFan
+from ..rod.solve import DEFAULT_SEGMENTS, build_problem, make_mesh, solve_rod
+
+__all__ = ["workspace", "Workspace", "area_gradient"]
+
+#: Node angles of neighbouring directions differing by more than this (rad, or twice the
+#: direction step if larger) put the two states on different branches.
+BRANCH_JUMP = 0.5
+
+
+@dataclass
+class Workspace:
+    """Tip positions of a rod over a grid of field directions and magnitudes, and their union.
+
+    Attributes
+    ----------
+    directions : ndarray, shape (D,)
+        Field directions in the bending plane, rad from +x.
+    magnitudes : ndarray, shape (M + 1,)
+        Field magnitudes at the system centre, T (``magnitudes[0] = 0``).
+    tips : ndarray, shape (D, M + 1, 3)
+        Tip positions, m.
+    stable : ndarray of bool, shape (D, M + 1)
+        Stability of each state.
+    snaps : ndarray of bool, shape (D, M)
+        True where the rod snaps through between magnitudes j and j + 1.
+    cells : ndarray of bool, shape (D, M)
+        The grid cells whose images make up the workspace.
+    polygon : shapely geometry
+        The union of the cells' images (x, y in m).
+    area : float
+        Its area, m^2.
+    boundary : ndarray, shape (p, 2)
+        The exterior ring of the largest part of ``polygon`` (closed: first = last), m.
+    events : list of dict
+        Snap-throughs and bifurcations met, each with its ``direction`` (index) and the
+        :class:`~coilrod.RodResult` event fields.
+    system : object or None
+        The coil system, or None for ideal uniform fields.
+    currents : ndarray, shape (D, m) or None
+        With ``system``: the currents of each direction at ``b_max``, A.
+    """
+
+    directions: np.ndarray
+    magnitudes: np.ndarray
+    tips: np.ndarray
+    stable: np.ndarray
+    snaps: np.ndarray
+    cells: np.ndarray
+    polygon: object
+    area: float
+    boundary: np.ndarray
+    events: list
+    system: object = None
+    currents: np.ndarray | None = None
+    _solution: object = dataclasses.field(default=None, repr=False)
+
+    def plot(self, ax=None, *, color="C0", label=None, grid: bool = False, unit: float = 1e-3):
+        """Draw the workspace (filled union) and, with ``grid``, the tip grid.
+
+        Parameters
+        ----------
+        ax : matplotlib Axes, optional
+        color : str
+        label : str, optional
+        grid : bool
+            Also draw the tips of every state (lines along directions and magnitudes).
+        unit : float
+            Length unit of the axes, m (default mm).
+
+        Returns
+        -------
+        matplotlib Axes
+        """
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots(figsize=(5, 5))
+        geoms = getattr(self.polygon, "geoms", [self.polygon])
+        first = True
+        for g in geoms:
+            if g.is_empty:
+                continue
+            x, y = np.asarray(g.exterior.coords).T / unit
+            ax.fill(x, y, color=color, alpha=0.3, lw=1.5, ec=color, label=label if first else None)
+            first = False
+            for hole in g.interiors:
+                hx, hy = np.asarray(hole.coords).T / unit
+                ax.fill(hx, hy, color="white", lw=1.0, ec=color)
+        if grid:
+            t = self.tips[..., :2] / unit
+            ax.plot(t[:, :, 0].T, t[:, :, 1].T, color=color, lw=0.4, alpha=0.6)
+            ax.plot(t[:, -1, 0], t[:, -1, 1], ".", color=color, ms=2)
+        ax.set_aspect("equal")
+        name = {1e-3: "mm", 1.0: "m", 1e-2: "cm"}.get(unit, f"{unit:g} m")
+        ax.set_xlabel(f"tip x ({name})")
+        ax.set_ylabel(f"tip y ({name})")
+        ax.set_title(f"workspace: {self.area / unit**2:.4g} {name}$^2$")
+        return ax
+
+
+# -- geometry -----------------------------------------------------------------------------------
+def _triangles(tips_xy: np.ndarray, cells: np.ndarray):
+    """Triangles (N, 3, 2) of the included cells and their corner indices (N, 3) into the
+    flattened (D (M + 1)) tip grid."""
+    D, M1 = tips_xy.shape[:2]
+    d, j = np.nonzero(cells)
+    dn = (d + 1) % D
+    idx = lambda a, b: a * M1 + b  # noqa: E731
+    a, b, c, e = idx(d, j), idx(d, j + 1), idx(dn, j + 1), idx(dn, j)
+    corners = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, e], 1)])
+    flat = tips_xy.reshape(-1, 2)
+    return flat[corners], corners
+
+
+def _union(tips_xy: np.ndarray, cells: np.ndarray, scale: float):
+    """The union of the included cells' images (shapely), its area and boundary ring."""
+    import shapely
+
+    tri, _ = _triangles(tips_xy, cells)
+    # drop degenerate triangles (the cells at zero field have two equal corners)
+    u, v = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    area2 = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+    tri = tri[area2 > 1e-24 * scale**2]
+    if tri.shape[0] == 0:
+        return shapely.Polygon(), 0.0, np.zeros((0, 2))
+    polys = shapely.polygons(np.concatenate([tri, tri[:, :1]], axis=1))
+    union = shapely.union_all(polys)
+    union = shapely.orient_polygons(union) if hasattr(shapely, "orient_polygons") else union
+    parts = getattr(union, "geoms", [union])
+    largest = max(parts, key=lambda g: g.area)
+    return union, float(union.area), np.asarray(largest.exterior.coords)
+
+
+def area_gradient(ws: Workspace) -> np.ndarray:
+    """d(area)/d(tip x, y) of every grid state, shape (D, M + 1, 2), m^2 per m.
+
+    The union's boundary is made of pieces of the cells' triangle edges; moving the tips moves
+    each edge (linearly along it), and the area changes by the normal velocity integrated over
+    the boundary: a piece of edge (a, b) spanning edge parameters [t0, t1] and of length l
+    contributes ``l n . ((1 - t) v_a + t v_b)``, ``t = (t0 + t1) / 2``, n its outward normal.
+    Exact where the union's combinatorics do not change (almost everywhere)."""
+    import shapely
+
+    tips_xy = ws.tips[..., :2]
+    D, M1 = tips_xy.shape[:2]
+    grad = np.zeros((D * M1, 2))
+    if ws.area == 0.0:
+        return grad.reshape(D, M1, 2)
+    tri, corners = _triangles(tips_xy, ws.cells)
+    ea = np.concatenate([corners[:, 0], corners[:, 1], corners[:, 2]])
+    eb = np.concatenate([corners[:, 1], corners[:, 2], corners[:, 0]])
+    key = np.unique(np.sort(np.stack([ea, eb], 1), axis=1), axis=0)
+    ea, eb = key[:, 0], key[:, 1]
+    flat = tips_xy.reshape(-1, 2)
+    pa, pb = flat[ea], flat[eb]
+    ev = pb - pa
+    elen2 = np.einsum("ij,ij->i", ev, ev)
+    keep = elen2 > 0
+    ea, eb, pa, ev, elen2 = ea[keep], eb[keep], pa[keep], ev[keep], elen2[keep]
+    scale = math.sqrt(float(np.max(elen2))) if elen2.size else 1.0
+    tol = 1e-9 * scale
+    oriented = shapely.orient_polygons(ws.polygon) if hasattr(shapely, "orient_polygons") else None
+    geom = oriented if oriented is not None else ws.polygon
+    rings = []
+    for g in getattr(geom, "geoms", [geom]):
+        if oriented is None:
+            g = shapely.geometry.polygon.orient(g, 1.0)
+        rings.append(np.asarray(g.exterior.coords))
+        rings += [np.asarray(r.coords) for r in g.interiors]
+    for ring in rings:
+        p, q = ring[:-1], ring[1:]
+        seg = q - p
+        slen = np.hypot(seg[:, 0], seg[:, 1])
+        ok = slen > 0
+        p, q, seg, slen = p[ok], q[ok], seg[ok], slen[ok]
+        normal = np.stack([seg[:, 1], -seg[:, 0]], 1) / slen[:, None]  # outward (CCW ring)
+        # which edge holds each piece: both ends on the edge's line, within its span
+        rp = p[:, None, :] - pa[None]
+        rq = q[:, None, :] - pa[None]
+        cross_p = (rp[..., 0] * ev[None, :, 1] - rp[..., 1] * ev[None, :, 0]) / np.sqrt(elen2)
+        cross_q = (rq[..., 0] * ev[None, :, 1] - rq[..., 1] * ev[None, :, 0]) / np.sqrt(elen2)
+        tp = np.einsum("sek,ek->se", rp, ev) / elen2
+        tq = np.einsum("sek,ek->se", rq, ev) / elen2
+        on = (np.abs(cross_p) < tol) & (np.abs(cross_q) < tol)
+        span = 1e-9
+        on &= (tp > -span) & (tp < 1 + span) & (tq > -span) & (tq < 1 + span)
+        s_idx, e_idx = np.nonzero(on)
+        # a piece on several coincident edges moves with any of them: take the first
+        first = np.unique(s_idx, return_index=True)[1]
+        s_idx, e_idx = s_idx[first], e_idx[first]
+        t = 0.5 * (tp[s_idx, e_idx] + tq[s_idx, e_idx])
+        w = slen[s_idx][:, None] * normal[s_idx]
+        np.add.at(grad, ea[e_idx], (1 - t)[:, None] * w)
+        np.add.at(grad, eb[e_idx], t[:, None] * w)
+    return grad.reshape(D, M1, 2)
+
+
+# -- the solves -----------------------------------------------------------------------------------
+@dataclass
+class _Solution:
+    """What the workspace's sensitivities need: the fan problems and states per mesh, and the
+    directions solved one by one (index -> RodResult)."""
+
+    rod: Rod
+    fans: tuple = ()
+    fan_states: tuple = ()
+    fan_directions: np.ndarray | None = None
+    single: dict = dataclasses.field(default_factory=dict)
+
+
+def _check(rod, b_max, directions, magnitudes, nodes, clamp_position, clamp_angle):
+    if not isinstance(rod, Rod):
+        raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
+    b_max = positive(b_max, "b_max")
+    directions = as_count(directions, "directions", 3)
+    magnitudes = as_count(magnitudes, "magnitudes", 1)
+    nodes = as_count(DEFAULT_SEGMENTS if nodes is None else nodes, "nodes", 4)
+    clamp = as_vector(clamp_position, "clamp_position")
+    angle = finite_scalar(clamp_angle, "clamp_angle")
+    return b_max, directions, magnitudes, nodes, clamp, angle
+
+
+def _direction_fields(system, b_max: float, phi: np.ndarray):
+    """(fields, currents): each direction's field at scale 1 (``b_max`` along phi at the
+    centre) and, with a system, its currents (D, m)."""
+    B = b_max * np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], 1)
+    if system is None:
+        return [coils.UniformField(B=b) for b in B], None
+    if not (hasattr(system, "currents_for") and hasattr(system, "with_currents")):
+        raise ValueError(
+            "system must be a coil system with current control (currents_for, with_currents); "
+            f"got {type(system).__name__}"
+        )
+    currents = np.array([system.currents_for(B=b) for b in B])
+    return [system.with_currents(i) for i in currents], currents
+
+
+def workspace(
+    rod: Rod,
+    b_max: float,
+    directions: int = 72,
+    magnitudes: int = 16,
+    system=None,
+    *,
+    nodes: int | None = None,
+    richardson: bool = True,
+    clamp_position=(0.0, 0.0, 0.0),
+    clamp_angle: float = 0.0,
+    progress: bool = False,
+) -> Workspace:
+    """The workspace of ``rod``: the tip positions reached by fields up to ``b_max``.
+
+    Parameters
+    ----------
+    rod : Rod
+    b_max : float
+        Largest field magnitude (at the system centre), T, > 0.
+    directions : int
+        In-plane field directions (>= 3), evenly spaced over the full circle.
+    magnitudes : int
+        Magnitude steps from 0 to ``b_max`` (>= 1).
+    system : coil system, optional
+        A coil system with current control whose channels can make any in-plane field at its
+        centre (``currents_for``, ``with_currents``; e.g. two or three orthogonal Helmholtz
+        pairs).  Its real field acts; ``b_max`` must be within its current limits in every
+        direction.  None: ideal uniform fields.
+    nodes, richardson, clamp_position, clamp_angle
+        As in :func:`coilrod.solve_rod` (the clamp in m and rad).
+    progress : bool
+        Show a progress bar (directions solved one by one).
+
+    Returns
+    -------
+    Workspace
+        See the module docstring for the definition.
+
+    Notes
+    -----
+    Ideal fields: all directions are followed together as one block-diagonal problem
+    (:class:`~coilrod.rod.fan.UniformFan`), so 72 x 16 states of M(1) take a fraction of a
+    second; a direction whose path meets a fold or a bifurcation is re-solved on its own with
+    :func:`coilrod.solve_rod` (which locates and reports the event).  Real coil fields: one
+    :func:`coilrod.solve_rod` per direction.
+
+    Examples
+    --------
+    >>> from coilrod import presets, workspace
+    >>> ws = workspace(presets.seed_rod(presets.M1()), 0.01, directions=12, magnitudes=4)
+    >>> ws.tips.shape
+    (12, 5, 3)
+    """
+    b_max, D, M, nodes, clamp, angle = _check(
+        rod, b_max, directions, magnitudes, nodes, clamp_position, clamp_angle
+    )
+    phi = 2 * np.pi * np.arange(D) / D
+    fields, currents = _direction_fields(system, b_max, phi)
+    scales = np.arange(1, M + 1) / M
+    sol = _Solution(rod)
+    tips = np.full((D, M + 1, 3), np.nan)
+    theta = np.full((D, M + 1, 1), np.nan)
+    stable = np.ones((D, M + 1), dtype=bool)
+    snaps = np.zeros((D, M), dtype=bool)
+    events: list = []
+    todo = list(range(D))
+    if system is None:
+        todo = _solve_fan(rod, b_max, phi, scales, nodes, richardson, clamp, angle, sol)
+        if sol.fans:
+            th = sol.fan_thetas
+            theta = np.full((D, M + 1, th.shape[-1]), np.nan)
+            theta[:, 1:] = th
+            theta[:, 0] = angle
+            tips[:, 1:] = sol.fan_tips
+            stable[:, 1:] = sol.fan_stable
+    bar = None
+    if progress and todo:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(todo), desc="workspace", unit="direction")
+    try:
+        for d in todo:
+            res = _solve_direction(rod, fields[d], scales, nodes, richardson, clamp, angle)
+            sol.single[d] = res
+            if theta.shape[-1] != res.s.size:
+                theta = np.full((D, M + 1, res.s.size), np.nan)
+                theta[:, 0] = angle
+                if sol.fans:
+                    theta[:, 1:] = sol.fan_thetas
+            tips[d, 1:] = res.tip
+            theta[d, 1:] = np.array([res.theta(k) for k in range(M)])
+            stable[d, 1:] = res.stable
+            for e in res.instabilities:
+                events.append({"direction": d, **e})
+                if e["kind"] == "snap":
+                    snaps[d, e["index"]] = True
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+    straight = clamp + rod.length * np.array([math.cos(angle), math.sin(angle), 0.0])
+    tips[:, 0] = straight
+    theta[:, 0] = angle
+    cells = stable[:, :-1] & stable[:, 1:] & ~snaps
+    cells &= np.roll(cells, -1, axis=0)  # both directions' edges of the cell
+    step = 2 * np.pi / D
+    jump = np.max(np.abs(theta - np.roll(theta, -1, axis=0)), axis=2)  # (D, M + 1)
+    same_branch = jump <= max(BRANCH_JUMP, 2 * step)
+    cells &= same_branch[:, :-1] & same_branch[:, 1:]
+    polygon, area, boundary = _union(tips[..., :2], cells, rod.length)
+    return Workspace(
+        directions=phi,
+        magnitudes=b_max * np.arange(M + 1) / M,
+        tips=tips,
+        stable=stable,
+        snaps=snaps,
+        cells=cells,
+        polygon=polygon,
+        area=area,
+        boundary=boundary,
+        events=events,
+        system=system,
+        currents=currents,
+        _solution=sol,
+    )
+
+
+def _solve_direction(rod, field, scales, nodes, richardson, clamp, angle):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", StabilityWarning)
+        return solve_rod(
+            rod,
+            field,
+            scales,
+            nodes=nodes,
+            richardson=richardson,
+            clamp_position=clamp,
+            clamp_angle=angle,
+        )
+
+
+def _solve_fan(rod, b_max, phi, scales, nodes, richardson, clamp, angle, sol) -> list[int]:
+    """Follow all directions together; returns the directions to re-solve one by one (all of
+    them if the fan fails, those near a fold or bifurcation if it met one)."""
+    D = phi.size
+    mesh = make_mesh(rod, nodes)
+    meshes = [mesh, mesh.refined()] if richardson else [mesh]
+    probe = coils.UniformField(B=(b_max, 0.0, 0.0))
+    fields = b_max * np.stack([np.cos(phi), np.sin(phi)], 1)
+    fans = [UniformFan(build_problem(rod, probe, m, clamp, angle), fields) for m in meshes]
+    opts = PathOptions(newton=NewtonOptions(max_iter=15), stability=True)
+    try:
+        run = follow_load(fans[0], fans[0].straight(), scales, opts, name="workspace")
+    except ConvergenceError:
+        return list(range(D))
+    coarse = np.array([p.u for p in run.points])
+    states = [coarse]
+    if richardson:
+        res = newton(
+            fans[1],
+            fans[0].interpolate_to(fans[1], coarse),
+            scales,
+            dataclasses.replace(opts.newton, chord_start=True),
+            tangent_at_end=False,
+        )
+        if not np.all(res.ok):
+            return list(range(D))
+        states.append(res.u)
+    k, M = len(scales), len(scales)
+    thetas = [f.members(u).reshape(k, D, f.n).transpose(1, 0, 2) for f, u in zip(fans, states)]
+    pos = [f.base.positions(t) for f, t in zip(fans, thetas, strict=True)]  # (D, k, n, 2)
+    if richardson:
+        th = (4 * thetas[1][:, :, ::2] - thetas[0]) / 3
+        tip = (4 * pos[1][:, :, -1] - pos[0][:, :, -1]) / 3
+    else:
+        th, tip = thetas[0], pos[0][:, :, -1]
+    lin = fans[0].linearize(coarse, scales)
+    signs = fans[0].member_stability(lin).reshape(k, D).T  # (D, k)
+    redo = set()
+    if run.events:  # directions near the event: small eigenvalue or unstable somewhere
+        mu = fans[0].member_stability(lin, precise=True).reshape(k, D).T
+        near = np.any(mu < 0.25 * fans[0].base.mu0, axis=1)
+        redo = set(np.flatnonzero(near | np.any(signs <= 0, axis=1)).tolist())
+    sol.fans = tuple(fans)
+    sol.fan_states = tuple(states)
+    sol.fan_directions = phi
+    sol.fan_thetas = th
+    sol.fan_tips = np.concatenate(
+        [clamp[:2] + rod.length * tip, np.full(tip.shape[:2] + (1,), clamp[2])], axis=2
+    )
+    sol.fan_stable = signs > 0
+    del M
+    return sorted(redo)
+
+
+# -- derivatives ----------------------------------------------------------------------------------
+class _FanMembers:
+    """The members of a fan as the single-rod problem the adjoint code expects."""
+
+    def __init__(self, fan: UniformFan):
+        self.fan, self.n, self.mesh = fan, fan.n, fan.base.mesh
+        self.tip_gradients = fan.base.tip_gradients
+        self.load_adjoint = fan.base.load_adjoint
+
+    def field_at_states(self, U):
+        k = U.shape[0] // self.fan.D
+        B = self.fan.member_fields(k)
+        return B, np.zeros(B.shape + (3,))
+
+
+def tip_derivatives(ws: Workspace, wrt) -> tuple[list[str], np.ndarray]:
+    """d(tip x, y [m])/dp of every state of a workspace: (labels, array (D, M + 1, 2, p)).
+
+    ``wrt``: magnetization groups ("magnitudes", "angles") and "youngs_modulus" (see
+    :func:`coilrod.sensitivities`).  States at a fold or bifurcation (where the derivative
+    does not exist) and the unloaded state get zeros; they bound no included cell's interior.
+    """
+    from .sensitivity import _mesh_derivatives, _segments
+    from .sensitivity import tip_derivatives as rod_derivatives
+
+    sol = ws._solution
+    rod = sol.rod
+    groups = [wrt] if isinstance(wrt, str) else list(wrt)
+    D, M1 = ws.tips.shape[:2]
+    labels = []
+    for g in groups:
+        if g in ("magnitudes", "angles"):
+            if _segments(rod.magnetization, rod.length) is None:
+                raise ValueError(f"the rod's magnetization has no parameter {g!r}")
+            n_seg = _segments(rod.magnetization, rod.length)[1].size
+            labels += [f"{g}[{j}]" for j in range(n_seg)]
+        elif g == "youngs_modulus":
+            labels.append(g)
+        else:
+            raise ValueError(
+                f"workspace derivatives are with respect to 'magnitudes', 'angles' or "
+                f"'youngs_modulus'; got {g!r}"
+            )
+    out = np.zeros((D, M1, 2, len(labels)))
+    scales = ws.magnitudes[1:] / ws.magnitudes[-1]
+    k = scales.size
+    if sol.fans:
+        per_mesh = []
+        for fan, U in zip(sol.fans, sol.fan_states, strict=True):
+            lin = fan.member_linearization(fan.linearize(U, scales))
+            S = np.repeat(scales, fan.D)
+            with np.errstate(all="ignore"):
+                try:
+                    d = _mesh_derivatives(_FanMembers(fan), fan.members(U), S, rod, groups, {}, lin)
+                except ValueError:  # a singular member: take them one by one below
+                    d = np.full((k * fan.D, 3, len(labels)), np.nan)
+            per_mesh.append(d.reshape(k, fan.D, 3, -1).transpose(1, 0, 2, 3))
+        d = per_mesh[0] if len(per_mesh) == 1 else (4 * per_mesh[1] - per_mesh[0]) / 3
+        out[:, 1:] = rod.length * d[:, :, 0:2]
+    for direction, res in sol.single.items():
+        try:
+            _, _, _, Dd = rod_derivatives(res, np.arange(k), groups, check=False)
+            out[direction, 1:] = Dd[:, 0:2]
+        except ValueError:
+            out[direction, 1:] = np.nan
+    bad = ~np.isfinite(out)
+    out[bad] = 0.0
+    return labels, out
