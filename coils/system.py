@@ -217,8 +217,7 @@ class CoilSystem(FieldSum):
         ValueError
             If ``currents`` has the wrong shape or a non-finite entry, or if a current exceeds
             its channel's limit (naming the channel).  Limits are hardware ratings and are
-            always enforced; to explore beyond them build the system with larger
-            ``max_current`` (``CoilSystem(system.parts, max_current=...)``).
+            always enforced; to explore beyond them use ``with_limits``.
 
         Examples
         --------
@@ -234,6 +233,40 @@ class CoilSystem(FieldSum):
         current = self._as_currents(currents)
         self._check_limits(current)
         return self._rebuilt(current)
+
+    def with_limits(self, max_current) -> CoilSystem:
+        """The same system with other current limits (channels of nested systems included).
+
+        Parameters
+        ----------
+        max_current : float or array-like, shape (m,)
+            New limits, A (> 0; ``inf``: none); the present currents must respect them.
+
+        Returns
+        -------
+        CoilSystem
+            A new system; this one is unchanged.
+
+        Examples
+        --------
+        >>> from coils import CoilSystem, HelmholtzPair
+        >>> system = CoilSystem([HelmholtzPair(0.1, 100, 1.0)], max_current=10.0)
+        >>> system.with_limits(50.0).with_currents([40.0]).currents
+        array([40.])
+        """
+        return self._relimited(as_limits(max_current, "max_current", len(self._channels)))
+
+    def _relimited(self, limit: np.ndarray) -> CoilSystem:
+        parts, k = [], 0
+        for part in self.parts:
+            if isinstance(part, CoilSystem):
+                m = len(part._channels)
+                parts.append(part._relimited(limit[k : k + m]))
+                k += m
+            else:
+                k += _is_channel(part)
+                parts.append(part)
+        return type(self)(parts, center=self.center, max_current=limit, names=self._names)
 
     def _rebuilt(self, current: np.ndarray) -> CoilSystem:
         parts, k = [], 0
