@@ -40,7 +40,7 @@ def _is_channel(part: Field) -> bool:
 
 
 def _axis_label(axis: np.ndarray) -> str:
-    """ "+x", "-y" for a coordinate axis, else the rounded vector."""
+    """The label of a unit axis: '+x' or '-y' for a coordinate axis, else the rounded vector."""
     for i in range(3):
         if abs(axis[i]) == 1.0:
             return ("+" if axis[i] > 0 else "-") + _LETTERS[i]
