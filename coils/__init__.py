@@ -3,8 +3,14 @@
 Knows fields and nothing of robots.  Every source follows the :class:`~coils.field.Field`
 protocol: ``B(points)`` -> (n, 3) T, ``gradient(points)`` -> (n, 3, 3) T/m with
 ``[k, i, j] = dB_i/dx_j``, points (n, 3) in metres.
+
+A :class:`~coils.CoilSystem` is linear in the currents of its channels (coils and pairs):
+``currents``, ``with_currents``, ``unit_fields``, ``power``, ``currents_for``;
+:mod:`coils.presets` builds real arrangements (three-axis Helmholtz, Helmholtz + Maxwell, an
+eight-coil hemisphere).
 """
 
+from . import presets
 from .coaxial import CoaxialCoils
 from .field import Field, FieldSum, ScaledField
 from .grid import GriddedField
@@ -31,4 +37,5 @@ __all__ = [
     "deviation",
     "UniformityReport",
     "GriddedField",
+    "presets",
 ]

@@ -24,7 +24,8 @@ real scalars           :func:`finite_scalar`, :func:`positive`, :func:`nonnegati
 counts                 :func:`as_count` (one), :func:`as_counts` (a fixed-length tuple)
 arrays of reals        :func:`as_array` (any shape), :func:`as_vector` (shape (k,)),
                        :func:`as_points` (shape (n, 3), a single point promoted),
-                       :func:`as_triple` (a scalar or 3 values, e.g. grid spacings)
+                       :func:`as_triple` (a scalar or 3 values, e.g. grid spacings),
+                       :func:`as_limits` (a scalar or one positive bound per entry, inf allowed)
 directions             :func:`as_axis` ("x", "-y", or a non-zero 3-vector, normalised)
 flags and options      :func:`as_bool`, :func:`as_choice`
 objects                :func:`as_field` (a :class:`coils.Field`)
@@ -50,6 +51,7 @@ __all__ = [
     "as_vector",
     "as_points",
     "as_triple",
+    "as_limits",
     "as_axis",
     "as_bool",
     "as_choice",
@@ -355,6 +357,31 @@ def as_triple(value, name: str, *, integer: bool = False) -> np.ndarray:
             raise ValueError(f"{name} must be integers; got {arr.tolist()}")
         return arr
     return np.array([positive(v, name) for v in arr])
+
+
+def as_limits(value, name: str, size: int) -> np.ndarray:
+    """A positive bound per entry (e.g. current limits, A) as a float array ``(size,)``.
+
+    A scalar applies to every entry; ``inf`` means "no bound"; NaN, zero and negative bounds
+    are refused.  Messages: "max_current must be a scalar or have shape (3,); got (2,)",
+    "max_current[1] must be positive (inf: no limit); got -2.0".
+
+    Examples
+    --------
+    >>> as_limits(10, "max_current", 3).tolist()
+    [10.0, 10.0, 10.0]
+    >>> as_limits([5.0, np.inf], "max_current", 2).tolist()
+    [5.0, inf]
+    """
+    arr = _real_array(value, name, lambda: f"a scalar or real numbers with shape ({size},)")
+    if arr.ndim == 0:
+        arr = np.full(size, float(arr))
+    if arr.shape != (size,):
+        raise ValueError(f"{name} must be a scalar or have shape ({size},); got {arr.shape}")
+    for k, v in enumerate(arr):
+        if not v > 0:  # NaN, zero, negative
+            raise ValueError(f"{name}[{k}] must be positive (inf: no limit); got {v}")
+    return arr.copy()
 
 
 # -- directions ---------------------------------------------------------------------------------

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 from ._validate import finite_scalar, positive
 from .coaxial import CoaxialCoils
+from .copper import COPPER_RESISTIVITY, COPPER_TEMPERATURE_COEFFICIENT
 from .pairs import Coil, CoilPair
 
 __all__ = [
@@ -27,10 +28,6 @@ __all__ = [
     "COPPER_TEMPERATURE_COEFFICIENT",
 ]
 
-#: Resistivity of annealed copper at 20 degC, ohm m (IEC 60028).
-COPPER_RESISTIVITY = 1.7241e-8
-#: Temperature coefficient of copper's resistivity near 20 degC, 1/K.
-COPPER_TEMPERATURE_COEFFICIENT = 0.00393
 #: Absolute zero, degC.
 ABSOLUTE_ZERO = -273.15
 

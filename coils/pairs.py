@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -9,6 +10,7 @@ from scipy.constants import mu_0
 
 from ._validate import as_array, as_axis, as_counts, as_vector, finite_scalar, positive
 from .coaxial import CoaxialCoils
+from .copper import winding_resistance
 from .winding import gauss_filaments, turn_filaments, winding_section
 
 __all__ = ["Coil", "CoilPair", "HelmholtzPair", "MaxwellPair", "HELMHOLTZ_FACTOR", "MAXWELL_FACTOR"]
@@ -70,6 +72,22 @@ def _winding_model(radius, turns, winding, filaments, turn_layout):
     return (width, height), ("turns", (na, nr))
 
 
+def _resistance(radius, turns, coils, section, resistance, wire_diameter):
+    """Resistance (ohm) of the conductor of ``coils`` coils in series, or None if unknown.
+
+    ``resistance`` (ohm) if given; else round copper wire of ``wire_diameter`` (m; the turns
+    must fit the winding ``section`` if there is one); else the copper filling pi/4 of the
+    ``section``; else None (a single filament says nothing of its wire).
+    """
+    if resistance is not None:
+        if wire_diameter is not None:
+            raise ValueError("give resistance or wire_diameter, not both")
+        return positive(resistance, "resistance")
+    if wire_diameter is None and section is None:
+        return None
+    return winding_resistance(radius, turns, coils, wire_diameter=wire_diameter, section=section)
+
+
 def _winding_filaments(z0, radius, turns, current, section, model):
     """Filament rows ``(z, radius, current)`` of one coil at axial offset ``z0`` (m; the
     current's sign included in ``current``) and its winding box ``(z0, radius, width, height)``
@@ -83,6 +101,20 @@ def _winding_filaments(z0, radius, turns, current, section, model):
     else:
         fil = gauss_filaments(z0, radius, turns * current, width, height, na, nr)
     return fil, (z0, radius, width, height)
+
+
+def _with_current(coil, current):
+    """A copy of ``coil`` (a Coil or a pair) at ``current`` A: same geometry, winding model and
+    resistance; filaments rebuilt as the constructor builds them, so the copy equals a coil
+    built with that current."""
+    current = finite_scalar(current, "current")
+    new = copy.copy(coil)
+    new.current = current
+    fil, _ = coil._build(current)
+    fil.setflags(write=False)
+    new.filaments = fil
+    new._kernel_args = None  # the compiled pass's data are derived from the filaments
+    return new
 
 
 class Coil(CoaxialCoils):
@@ -112,12 +144,27 @@ class Coil(CoaxialCoils):
     turn_layout : (int, int), optional
         Model a finite winding turn by turn instead: turns per layer, layers (product = turns).
         Needs ``winding``; excludes ``filaments``.
+    resistance : float, optional
+        Resistance of the winding, ohm (> 0).  Excludes ``wire_diameter``.
+    wire_diameter : float, optional
+        Bare diameter of the round copper wire, m: the resistance is that of ``N 2 pi R`` of it
+        at 20 degC (:mod:`coils.copper`); with ``winding`` the turns must fit in the section.
+
+    Attributes
+    ----------
+    resistance : float or None
+        Ohm: given, from ``wire_diameter``, else from ``winding`` filled to pi/4 by copper
+        (square-packed round wire, insulation neglected); None for a single filament without
+        a wire (then :meth:`coils.CoilSystem.power` cannot be computed).
 
     Raises
     ------
     ValueError
         On a bad parameter, naming it (see :mod:`coils._validate`).
     """
+
+    #: Coils in series in one current channel (one for a coil).
+    n_coils: int = 1
 
     def __init__(
         self,
@@ -129,13 +176,40 @@ class Coil(CoaxialCoils):
         winding=None,
         filaments=None,
         turn_layout=None,
+        *,
+        resistance=None,
+        wire_diameter=None,
     ):
         self.radius, self.turns, self.current = _coil_parameters(radius, turns, current)
         section, model = _winding_model(self.radius, self.turns, winding, filaments, turn_layout)
-        fil, box = _winding_filaments(0.0, self.radius, self.turns, self.current, section, model)
-        super().__init__(fil, axis, center, [box] if box else [])
+        self._model = (section, model)
+        fil, boxes = self._build(self.current)
+        super().__init__(fil, axis, center, boxes)
         #: Winding cross-section (width, height) in m, or None.
         self.winding = section
+        self.resistance = _resistance(
+            self.radius, self.turns, self.n_coils, section, resistance, wire_diameter
+        )
+
+    def _build(self, current: float):
+        """Filament rows (f, 3) and winding boxes of the coil at ``current`` (A)."""
+        fil, box = _winding_filaments(0.0, self.radius, self.turns, current, *self._model)
+        return fil, [box] if box else []
+
+    def with_current(self, current) -> Coil:
+        """The same coil carrying ``current`` (A per turn): a new object, this one unchanged.
+
+        Its filaments are those a new coil built with ``current`` would have (same geometry,
+        winding model and resistance).
+
+        Examples
+        --------
+        >>> from coils import Coil
+        >>> coil = Coil(0.05, 100, 1.0)
+        >>> coil.with_current(-2.0).current, coil.current
+        (-2.0, 1.0)
+        """
+        return _with_current(self, current)
 
     def __repr__(self):
         return (
@@ -159,10 +233,19 @@ class CoilPair(CoaxialCoils):
     spacing : float, optional
         Distance between the coil planes, m (> the winding width); default the pair's own
         (R for Helmholtz, sqrt(3) R for Maxwell).
+    resistance, wire_diameter : float, optional
+        As for :class:`Coil`; the two coils are in series, so the wire is twice as long.
+
+    Attributes
+    ----------
+    resistance : float or None
+        Ohm, of both coils in series (see :class:`Coil`).
     """
 
     sign: float = 1.0
     default_spacing_factor: float = 1.0
+    #: Coils in series in one current channel (both coils of the pair).
+    n_coils: int = 2
 
     def __init__(
         self,
@@ -175,6 +258,9 @@ class CoilPair(CoaxialCoils):
         winding=None,
         filaments=None,
         turn_layout=None,
+        *,
+        resistance=None,
+        wire_diameter=None,
     ):
         self.radius, self.turns, self.current = _coil_parameters(radius, turns, current)
         if spacing is None:
@@ -187,17 +273,40 @@ class CoilPair(CoaxialCoils):
             raise ValueError(
                 f"spacing {self.spacing} m must exceed the winding width {section[0]} m"
             )
+        self._model = (section, model)
+        fil, boxes = self._build(self.current)
+        super().__init__(fil, axis_vec, center, boxes)
+        #: Winding cross-section (width, height) of each coil in m, or None.
+        self.winding = section
+        self.resistance = _resistance(
+            self.radius, self.turns, self.n_coils, section, resistance, wire_diameter
+        )
+
+    def _build(self, current: float):
+        """Filament rows (f, 3) and winding boxes of both coils at ``current`` (A per coil,
+        the -axis coil carrying ``sign * current``)."""
         rows, boxes = [], []
-        for side, cur in ((-1.0, self.sign * self.current), (1.0, self.current)):
+        for side, cur in ((-1.0, self.sign * current), (1.0, current)):
             fil, box = _winding_filaments(
-                side * self.spacing / 2, self.radius, self.turns, cur, section, model
+                side * self.spacing / 2, self.radius, self.turns, cur, *self._model
             )
             rows.append(fil)
             if box:
                 boxes.append(box)
-        super().__init__(np.vstack(rows), axis_vec, center, boxes)
-        #: Winding cross-section (width, height) of each coil in m, or None.
-        self.winding = section
+        return np.vstack(rows), boxes
+
+    def with_current(self, current) -> CoilPair:
+        """The same pair driven with ``current`` (A per turn, both coils in series with the
+        pair's sign convention): a new object, this one unchanged.
+
+        Examples
+        --------
+        >>> from coils import HelmholtzPair
+        >>> pair = HelmholtzPair(0.1, 100, 1.0)
+        >>> round(float(pair.with_current(3.0).B([0.0, 0.0, 0.0])[0, 1] / pair.center_field), 12)
+        3.0
+        """
+        return _with_current(self, current)
 
     @property
     def ampere_turns(self) -> float:

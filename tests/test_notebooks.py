@@ -56,6 +56,87 @@ def test_coil_design_notebook():
     assert r["power"] <= 400
     # the filament closed form for the centre field sits within the winding correction
     assert B[1] == pytest.approx((4 / 5) ** 1.5 * mu_0 * N * current / R, rel=0.01)
+    check_coil_design_presets(r["presets"])
+
+
+def check_coil_design_presets(p):
+    """The preset coil systems of coil_design.ipynb, driven to 5 mT along y at the centre."""
+    from _magpylib_ref import magpylib_gradient
+    from scipy.optimize import brentq
+
+    from coils import maxwell_gradient, presets
+
+    target = np.array([0.0, 5e-3, 0.0])
+    per_amp_y = (4 / 5) ** 1.5 * mu_0 * 200 / 0.14  # the y Helmholtz pair, T/A
+    g_per_amp = 48 * math.sqrt(3) / 7**2.5 * mu_0 * 500 / 0.24**2  # the Maxwell pair, T/(A m)
+    a, d = 0.06, 0.2  # hemisphere coils: B on the axis of a loop at distance d, T/A
+    loop = mu_0 * 600 * a**2 / (2 * (a**2 + d**2) ** 1.5)
+    # the minimum-power currents by closed forms: the y pair alone; the y pair and the Maxwell
+    # pair; the two facing equatorial hemisphere coils (on the y axis) with opposite currents
+    I_y, I_m, I_h = 5e-3 / per_amp_y, 0.05 / g_per_amp, 5e-3 / (2 * loop)
+    expected = {
+        "three-axis Helmholtz": [0, I_y, 0],
+        "Helmholtz + Maxwell": [0, I_y, 0, I_m],
+        "eight-coil hemisphere": [0, I_h, 0, -I_h, 0, 0, 0, 0],
+    }
+    for name, currents in expected.items():
+        np.testing.assert_allclose(p[name]["currents"], currents, rtol=1e-9, atol=1e-9)
+    # copper power by hand: rho x coils x N 2 pi R / (pi d^2 / 4) per channel, 2 mm wire
+    area = math.pi * 2e-3**2 / 4
+    windings = {
+        "three-axis Helmholtz": [(2, 200, 0.10), (2, 200, 0.14), (2, 200, 0.18)],
+        "eight-coil hemisphere": [(1, 600, 0.06)] * 8,
+    }
+    windings["Helmholtz + Maxwell"] = windings["three-axis Helmholtz"] + [(2, 500, 0.24)]
+    for name, chans in windings.items():
+        R = [1.7241e-8 * n * N * 2 * math.pi * r / area for n, N, r in chans]
+        hand = sum(res * i**2 for res, i in zip(R, p[name]["currents"], strict=True))
+        assert p[name]["power"] == pytest.approx(hand, rel=1e-12)
+    # magpylib confirms the targets: 5 mT along y, the Maxwell gradient, the hemisphere's zero
+    systems = {
+        "three-axis Helmholtz": presets.three_axis_helmholtz(),
+        "Helmholtz + Maxwell": presets.helmholtz_maxwell(),
+        "eight-coil hemisphere": presets.eight_coil_hemisphere(),
+    }
+    gradients = {"Helmholtz + Maxwell": maxwell_gradient(0.05, 1), "eight-coil hemisphere": 0}
+    driven = {n: s.with_currents(p[n]["currents"]) for n, s in systems.items()}
+    for name, system in driven.items():
+        B0 = system.to_magpylib().getB([0.0, 0.0, 0.0])
+        np.testing.assert_allclose(B0, target, rtol=0, atol=1e-12)
+        if name in gradients:
+            G0 = magpylib_gradient(system, [[0.0, 0.0, 0.0]], step=1e-3)[0]
+            np.testing.assert_allclose(G0, gradients[name] + 0 * G0, rtol=0, atol=1e-8)
+
+    # the three-axis system's axial 1 % extent: the y pair's on-axis closed form, 1 - B/B0 = 1 %
+    def on_axis(y, R=0.14):
+        return sum((R**2 + (y - s) ** 2) ** -1.5 for s in (-R / 2, R / 2))
+
+    y1 = brentq(lambda y: 1 - on_axis(y) / on_axis(0.0) - 0.01, 0.01, 0.07, xtol=1e-14)
+    assert p["three-axis Helmholtz"]["axial"] == pytest.approx(y1, rel=1e-6)
+    # the largest centre B_y of the Helmholtz systems: the y pair at its 10 A limit
+    for name in ("three-axis Helmholtz", "Helmholtz + Maxwell"):
+        assert p[name]["max_By"] == pytest.approx(10 * per_amp_y, rel=1e-9)
+    # the hemisphere's largest B_y is reachable within the limits (magpylib)
+    hemi = systems["eight-coil hemisphere"]
+    reach = hemi.currents_for(B=(1 - 1e-9) * p["eight-coil hemisphere"]["max_By"] * target / 5e-3)
+    assert np.abs(reach).max() <= 20.0
+    B = hemi.with_currents(reach).to_magpylib().getB([0.0, 0.0, 0.0])
+    assert B[1] == pytest.approx(p["eight-coil hemisphere"]["max_By"], rel=1e-8)
+    # the hemisphere's 1 % sphere, in magpylib: within 1 % of B0 + G0 x at 0.8 of its radius in
+    # 200 directions, beyond 1 % just outside it along the axis where it ends (y)
+    r1 = p["eight-coil hemisphere"]["sphere"]
+    assert r1 == pytest.approx(p["eight-coil hemisphere"]["axial"], rel=1e-12)
+    col = driven["eight-coil hemisphere"].to_magpylib()
+    B0 = col.getB([0.0, 0.0, 0.0])
+    G0 = magpylib_gradient(driven["eight-coil hemisphere"], [[0.0, 0.0, 0.0]], step=1e-3)[0]
+    dirs = np.random.default_rng(7).normal(size=(200, 3))
+    dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+
+    def dev(x):
+        return np.linalg.norm(col.getB(x) - B0 - x @ G0.T, axis=1) / np.linalg.norm(B0)
+
+    assert dev(0.8 * r1 * dirs).max() < 0.01
+    assert dev(np.array([[0.0, 1.03 * r1, 0.0], [0.0, -1.03 * r1, 0.0]])).max() > 0.01
 
 
 def test_ideal_vs_real_notebook():

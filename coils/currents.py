@@ -1,0 +1,185 @@
+"""Minimum-power currents for a target that is linear in them (tier 1: plain linear algebra).
+
+The field and gradient a coil system makes at a point are linear in its channel currents,
+``A I = b`` (rows: field and gradient components, columns: channels).  Among the currents that
+make the target, the ones that dissipate least copper power ``sum_j w_j I_j^2`` (``w_j`` the
+channel resistances) are wanted, within the channel limits ``|I_j| <= u_j``.  With
+``J = sqrt(w) I`` and ``A_w = A diag(1 / sqrt(w))`` this is the least-distance problem
+
+    min |J|^2   subject to   A_w J = b,   |J_j| <= sqrt(w_j) u_j,
+
+solved here in three steps:
+
+1. without the limits, the minimum-norm solution ``J0 = pinv(A_w) b`` (truncated SVD); if
+   ``A_w J0 != b`` the target lies outside what the channels can make;
+2. if ``J0`` respects the limits it is the answer; otherwise a linear program finds the largest
+   fraction ``s`` of the target the limits allow (``scipy.optimize.linprog``, HiGHS);
+3. if ``s >= 1``, the solutions are ``J = J0 + N z`` (``N`` an orthonormal basis of the null
+   space of ``A_w``, orthogonal to ``J0``), so ``|J|^2 = |J0|^2 + |z|^2``: the smallest ``z``
+   inside the limits, a least-distance program, is solved exactly by non-negative least squares
+   (Lawson & Hanson, *Solving Least Squares Problems*, 1974, ch. 23; ``scipy.optimize.nnls``).
+
+Nothing here validates input or knows about coils; :meth:`coils.CoilSystem.currents_for` does.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Solution", "minimum_norm", "largest_fraction", "least_distance", "minimum_power"]
+
+#: Singular values below this fraction of the largest are treated as zero (rank of A_w).
+RCOND = 1e-10
+#: A target is made if the residual is below this fraction of it.
+RESIDUAL_TOL = 1e-9
+
+
+@dataclass(frozen=True)
+class Solution:
+    """Outcome of :func:`minimum_power`.
+
+    Attributes
+    ----------
+    currents : ndarray, shape (m,) or None
+        The minimum-power currents (A) within the limits; None if the target cannot be made.
+    residual : ndarray, shape (k,)
+        ``A I - b`` of the minimum-power currents without limits (zero if the target is made).
+    rank : int
+        Number of independent target components the channels can make.
+    fraction : float or None
+        Largest fraction of the target the limits allow (``>= 1`` when it can be made within
+        them), or None when the unlimited minimum-power currents already respect the limits.
+    unlimited : ndarray, shape (m,)
+        The minimum-power currents without limits, A.
+    """
+
+    currents: np.ndarray | None
+    residual: np.ndarray
+    rank: int
+    fraction: float | None
+    unlimited: np.ndarray
+
+    @property
+    def reachable(self) -> bool:
+        """True if the channels can make the target (limits aside)."""
+        return self.currents is not None or self.fraction is not None
+
+
+def minimum_norm(A: np.ndarray, b: np.ndarray):
+    """Minimum-norm least-squares solution of ``A x = b`` by truncated SVD.
+
+    Returns
+    -------
+    x : ndarray, shape (m,)
+    rank : int
+        Singular values above ``RCOND`` times the largest.
+    null : ndarray, shape (m, m - rank)
+        Orthonormal basis of the null space of ``A``.
+    """
+    m = A.shape[1]
+    if A.size == 0 or not np.any(A):
+        return np.zeros(m), 0, np.eye(m)
+    U, s, Vt = np.linalg.svd(A, full_matrices=True)
+    rank = int(np.sum(s > RCOND * s[0]))
+    x = Vt[:rank].T @ ((U[:, :rank].T @ b) / s[:rank])
+    return x, rank, Vt[rank:].T
+
+
+def largest_fraction(A: np.ndarray, b: np.ndarray, bounds: np.ndarray) -> tuple[float, np.ndarray]:
+    """Largest ``s`` in [0, 1] such that ``A x = s b`` for some ``|x| <= bounds`` (a linear
+    program); returns ``(s, x)``.  ``bounds`` may hold ``inf``."""
+    from scipy.optimize import linprog
+
+    k, m = A.shape
+    cost = np.zeros(m + 1)
+    cost[-1] = -1.0  # maximise s
+    A_eq = np.hstack([A, -b[:, None]])
+    var_bounds = [(-u if np.isfinite(u) else None, u if np.isfinite(u) else None) for u in bounds]
+    res = linprog(
+        cost,
+        A_eq=A_eq,
+        b_eq=np.zeros(k),
+        bounds=[*var_bounds, (0.0, 1.0)],
+        method="highs",
+    )
+    if res.status != 0:  # cannot happen: x = 0, s = 0 is feasible
+        raise RuntimeError(f"the linear program for the current limits failed: {res.message}")
+    return float(res.x[-1]), res.x[:-1]
+
+
+def least_distance(G: np.ndarray, h: np.ndarray) -> np.ndarray | None:
+    """Shortest ``x`` with ``G x >= h`` (least-distance programming), or None if none exists.
+
+    Lawson & Hanson's reduction to non-negative least squares: with ``E = [G^T; h^T]`` and
+    ``f = (0, ..., 0, 1)``, the NNLS residual ``r = E u - f`` is zero if the constraints are
+    incompatible, else ``x = -r[:-1] / r[-1]``.  Rows of ``G`` are normalised first.
+    """
+    from scipy.optimize import nnls
+
+    norms = np.linalg.norm(G, axis=1)
+    keep = norms > 0
+    if not np.all(h[~keep] <= 0):  # 0 >= h fails: incompatible
+        return None
+    G, h = G[keep] / norms[keep, None], h[keep] / norms[keep]
+    n = G.shape[1]
+    if G.shape[0] == 0 or not np.any(h > 0):
+        return np.zeros(n)  # x = 0 is feasible
+    scale = float(np.abs(h).max())
+    E = np.vstack([G.T, (h / scale)[None, :]])
+    f = np.zeros(n + 1)
+    f[-1] = 1.0
+    u, _ = nnls(E, f, maxiter=50 * E.shape[1])
+    r = E @ u - f
+    if not -r[-1] > 1e-14:  # -r[-1] = |r|^2: zero when incompatible
+        return None
+    return -scale * r[:-1] / r[-1]
+
+
+def minimum_power(
+    A: np.ndarray, b: np.ndarray, weights: np.ndarray, limits: np.ndarray
+) -> Solution:
+    """Currents ``I`` (m,) minimising ``sum w I^2`` with ``A I = b`` and ``|I| <= limits``.
+
+    Parameters
+    ----------
+    A : ndarray, shape (k, m)
+        Target components per unit current of each channel.
+    b : ndarray, shape (k,)
+        Target.
+    weights : ndarray, shape (m,)
+        Positive weights (channel resistances, ohm).
+    limits : ndarray, shape (m,)
+        Positive bounds on ``|I|`` (A; inf: none).
+
+    Returns
+    -------
+    Solution
+        See :class:`Solution`; the caller raises with the context it knows.
+    """
+    root = np.sqrt(weights)
+    Aw = A / root
+    J0, rank, null = minimum_norm(Aw, b)
+    unlimited = J0 / root
+    residual = A @ unlimited - b
+    norm_b = np.linalg.norm(b)
+    if np.linalg.norm(residual) > RESIDUAL_TOL * norm_b:
+        return Solution(None, residual, rank, None, unlimited)
+    if np.all(np.abs(unlimited) <= limits):
+        return Solution(unlimited, residual, rank, None, unlimited)
+    fraction, _ = largest_fraction(A, b, limits)
+    if fraction < 1.0 - RESIDUAL_TOL:
+        return Solution(None, residual, rank, fraction, unlimited)
+    u = limits * root
+    finite = np.isfinite(u)
+    G = np.vstack([null[finite], -null[finite]])
+    h = np.concatenate([-u[finite] - J0[finite], -u[finite] + J0[finite]])
+    z = least_distance(G, h)
+    scale = float(np.abs(u[finite]).max())
+    if z is None or np.any(G @ z < h - 1e-9 * scale):
+        # the linear program found currents within the limits: this cannot happen short of a
+        # failure of the NNLS solver
+        raise RuntimeError("the least-distance program failed on a feasible current target")
+    J = np.clip(J0 + null @ z, -u, u)  # the last ulp at an active limit
+    return Solution(J / root, residual, rank, fraction, unlimited)
