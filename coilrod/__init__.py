@@ -6,7 +6,9 @@ models) driven by ``path`` (the one path-following engine) -> results; ``design`
 """
 
 from . import _moved  # noqa: F401  (old 0.1 module paths stay importable)
+from .design.optimize import MagnetizationDesign, optimize_magnetization
 from .design.sensitivity import Sensitivities, SingularStateError, sensitivities
+from .design.workspace import Workspace, workspace
 from .errors import ConvergenceError
 from .fem import solve_fem  # scikit-fem itself is imported lazily, inside the call
 from .path.events import StabilityWarning
@@ -30,4 +32,8 @@ __all__ = [
     "sensitivities",
     "Sensitivities",
     "SingularStateError",
+    "workspace",
+    "Workspace",
+    "optimize_magnetization",
+    "MagnetizationDesign",
 ]

@@ -35,6 +35,11 @@ FIELDS = {
         origin=(0.01, 0.0, 0.0),
     ),
     "helmholtz": coils.HelmholtzPair(0.05, 100, 3.0, axis="y"),
+    # two orthogonal pairs of a three-axis system (x, y channels; z at zero), a fixed
+    # uniform part on top: only the channels are parameters
+    "system": coils.presets.three_axis_helmholtz(radii=(0.06, 0.08, 0.1)).with_currents(
+        [1.5, 2.5, 0.0]
+    ),
 }
 SCALES = [0.4, 0.8, 1.0]
 STATE = 1  # the middle state of a three-state sweep: the batched rows must be the right ones
@@ -87,6 +92,20 @@ def _perturbations(kind, field):
                 return _solve(rod, coils.UniformField(B=field.B0 + d * e))
 
             out.append((f"B[{i}]", build, 1e-4))
+    if kind == "helmholtz":
+
+        def build(d):
+            return _solve(rod, field.with_current(field.current + d))
+
+        out.append(("currents[0]", build, 1e-3))
+    if kind == "system":
+        for i in range(3):
+            e = np.eye(3)[i]
+
+            def build(d, e=e):
+                return _solve(rod, field.with_currents(field.currents + d * e))
+
+            out.append((f"currents[{i}]", build, 1e-3))
     if kind == "linear":
         for i in range(2):
             e = np.eye(3)[i]

@@ -185,6 +185,14 @@ def _unit_field_groups(field) -> dict:
         groups["B0"] = ([f"B0[{i}]" for i in range(3)], field.B0.copy(), offset)
         labels = [f"gradient[{a},{b}]" for a in range(3) for b in range(3)]
         groups["gradient"] = (labels, field.G.ravel().copy(), gradient)
+    if hasattr(field, "with_current") and not hasattr(field, "unit_fields"):
+        unit = field.with_current(1.0)  # a single coil or pair: one current channel
+
+        def one_channel(points):
+            B, G = unit.B_and_gradient(points)
+            return B[..., None], G[..., None]
+
+        groups["currents"] = (["currents[0]"], np.array([field.current], float), one_channel)
     if hasattr(field, "unit_fields") and hasattr(field, "currents"):
         currents = np.asarray(field.currents, float)
         groups["currents"] = (

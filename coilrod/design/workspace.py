@@ -247,7 +247,7 @@ class _Solution:
     rod: Rod
     fans: tuple = ()
     fan_states: tuple = ()
-    fan_directions: np.ndarray | None = None
+    fan_index: np.ndarray | None = None
     single: dict = dataclasses.field(default_factory=dict)
 
 
@@ -274,7 +274,16 @@ def _direction_fields(system, b_max: float, phi: np.ndarray):
             "system must be a coil system with current control (currents_for, with_currents); "
             f"got {type(system).__name__}"
         )
-    currents = np.array([system.currents_for(B=b) for b in B])
+    currents = []
+    for b, p in zip(B, phi, strict=True):
+        try:
+            currents.append(system.currents_for(B=b))
+        except ValueError as exc:
+            raise ValueError(
+                f"the system cannot make b_max = {b_max:g} T along {np.degrees(p):g} deg at its "
+                f"centre: {exc}"
+            ) from None
+    currents = np.array(currents)
     return [system.with_currents(i) for i in currents], currents
 
 
@@ -350,10 +359,9 @@ def workspace(
         if sol.fans:
             th = sol.fan_thetas
             theta = np.full((D, M + 1, th.shape[-1]), np.nan)
-            theta[:, 1:] = th
-            theta[:, 0] = angle
-            tips[:, 1:] = sol.fan_tips
-            stable[:, 1:] = sol.fan_stable
+            theta[sol.fan_index, 1:] = th
+            tips[sol.fan_index, 1:] = sol.fan_tips
+            stable[sol.fan_index, 1:] = sol.fan_stable
     bar = None
     if progress and todo:
         from tqdm import tqdm
@@ -367,7 +375,7 @@ def workspace(
                 theta = np.full((D, M + 1, res.s.size), np.nan)
                 theta[:, 0] = angle
                 if sol.fans:
-                    theta[:, 1:] = sol.fan_thetas
+                    theta[sol.fan_index, 1:] = sol.fan_thetas
             tips[d, 1:] = res.tip
             theta[d, 1:] = np.array([res.theta(k) for k in range(M)])
             stable[d, 1:] = res.stable
@@ -422,19 +430,45 @@ def _solve_direction(rod, field, scales, nodes, richardson, clamp, angle):
 
 
 def _solve_fan(rod, b_max, phi, scales, nodes, richardson, clamp, angle, sol) -> list[int]:
-    """Follow all directions together; returns the directions to re-solve one by one (all of
-    them if the fan fails, those near a fold or bifurcation if it met one)."""
+    """Follow the directions together; returns the directions to re-solve one by one.
+
+    The fan gives up early on a hard stretch (no snap-through handling, a coarse smallest
+    sub-step): then the directions with the smallest second-variation eigenvalue at its last
+    converged state (those at a fold, a bifurcation or the sharp knee of a nearly symmetric
+    one) are handed to :func:`solve_rod` and the fan restarts without them.  After a fan that
+    met an event, the directions near it are re-solved too."""
     D = phi.size
     mesh = make_mesh(rod, nodes)
     meshes = [mesh, mesh.refined()] if richardson else [mesh]
     probe = coils.UniformField(B=(b_max, 0.0, 0.0))
-    fields = b_max * np.stack([np.cos(phi), np.sin(phi)], 1)
-    fans = [UniformFan(build_problem(rod, probe, m, clamp, angle), fields) for m in meshes]
-    opts = PathOptions(newton=NewtonOptions(max_iter=15), stability=True)
-    try:
-        run = follow_load(fans[0], fans[0].straight(), scales, opts, name="workspace")
-    except ConvergenceError:
-        return list(range(D))
+    bases = [build_problem(rod, probe, m, clamp, angle) for m in meshes]
+    opts = PathOptions(
+        newton=NewtonOptions(max_iter=15), min_step=1e-3, bifurcation_tol=1e-2, snap_steps=2
+    )
+    active = np.arange(D)
+    redo: set = set()
+    for _ in range(4):
+        if active.size == 0:
+            return sorted(redo)
+        fields = b_max * np.stack([np.cos(phi[active]), np.sin(phi[active])], 1)
+        fans = [UniformFan(base, fields) for base in bases]
+        try:
+            run = follow_load(fans[0], fans[0].straight(), scales, opts, name="workspace")
+            break
+        except ConvergenceError as err:
+            last = err.points[-1] if err.points else None
+            u = fans[0].straight() if last is None else last.u
+            mu = fans[0].member_stability(
+                fans[0].linearize(u, 0.0 if last is None else last.scale), precise=True
+            )
+            order = np.argsort(mu)
+            hard = order[: max(1, active.size // 10)]
+            hard = np.union1d(hard, np.flatnonzero(mu < 0.25 * bases[0].mu0))
+            redo |= set(active[hard].tolist())
+            active = np.delete(active, hard)
+    else:
+        return sorted(redo | set(active.tolist()))
+    Dn = active.size
     coarse = np.array([p.u for p in run.points])
     states = [coarse]
     if richardson:
@@ -446,32 +480,33 @@ def _solve_fan(rod, b_max, phi, scales, nodes, richardson, clamp, angle, sol) ->
             tangent_at_end=False,
         )
         if not np.all(res.ok):
-            return list(range(D))
+            return sorted(redo | set(active.tolist()))
         states.append(res.u)
-    k, M = len(scales), len(scales)
-    thetas = [f.members(u).reshape(k, D, f.n).transpose(1, 0, 2) for f, u in zip(fans, states)]
-    pos = [f.base.positions(t) for f, t in zip(fans, thetas, strict=True)]  # (D, k, n, 2)
+    k = len(scales)
+    thetas = [
+        f.members(u).reshape(k, Dn, f.n).transpose(1, 0, 2)
+        for f, u in zip(fans, states, strict=True)
+    ]
+    pos = [f.base.positions(t) for f, t in zip(fans, thetas, strict=True)]  # (Dn, k, n, 2)
     if richardson:
         th = (4 * thetas[1][:, :, ::2] - thetas[0]) / 3
         tip = (4 * pos[1][:, :, -1] - pos[0][:, :, -1]) / 3
     else:
         th, tip = thetas[0], pos[0][:, :, -1]
     lin = fans[0].linearize(coarse, scales)
-    signs = fans[0].member_stability(lin).reshape(k, D).T  # (D, k)
-    redo = set()
+    signs = fans[0].member_stability(lin).reshape(k, Dn).T  # (Dn, k)
     if run.events:  # directions near the event: small eigenvalue or unstable somewhere
-        mu = fans[0].member_stability(lin, precise=True).reshape(k, D).T
-        near = np.any(mu < 0.25 * fans[0].base.mu0, axis=1)
-        redo = set(np.flatnonzero(near | np.any(signs <= 0, axis=1)).tolist())
+        mu = fans[0].member_stability(lin, precise=True).reshape(k, Dn).T
+        near = np.any(mu < 0.25 * bases[0].mu0, axis=1)
+        redo |= set(active[np.flatnonzero(near | np.any(signs <= 0, axis=1))].tolist())
     sol.fans = tuple(fans)
     sol.fan_states = tuple(states)
-    sol.fan_directions = phi
+    sol.fan_index = active
     sol.fan_thetas = th
     sol.fan_tips = np.concatenate(
         [clamp[:2] + rod.length * tip, np.full(tip.shape[:2] + (1,), clamp[2])], axis=2
     )
     sol.fan_stable = signs > 0
-    del M
     return sorted(redo)
 
 
@@ -533,7 +568,7 @@ def tip_derivatives(ws: Workspace, wrt) -> tuple[list[str], np.ndarray]:
                     d = np.full((k * fan.D, 3, len(labels)), np.nan)
             per_mesh.append(d.reshape(k, fan.D, 3, -1).transpose(1, 0, 2, 3))
         d = per_mesh[0] if len(per_mesh) == 1 else (4 * per_mesh[1] - per_mesh[0]) / 3
-        out[:, 1:] = rod.length * d[:, :, 0:2]
+        out[sol.fan_index, 1:] = rod.length * d[:, :, 0:2]
     for direction, res in sol.single.items():
         try:
             _, _, _, Dd = rod_derivatives(res, np.arange(k), groups, check=False)
