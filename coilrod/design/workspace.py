@@ -76,7 +76,8 @@ class Workspace:
         The exterior ring of the largest part of ``polygon`` (closed: first = last), m.
     events : list of dict
         Snap-throughs and bifurcations met, each with its ``direction`` (index) and the
-        :class:`~coilrod.RodResult` event fields.
+        :class:`~coilrod.RodResult` event fields; kind "unreached" where a direction's path
+        could not be followed to ``b_max`` (its tips beyond ``scale`` are NaN, left out).
     system : object or None
         The coil system, or None for ideal uniform fields.
     currents : ndarray, shape (D, m) or None
@@ -369,16 +370,31 @@ def workspace(
         bar = tqdm(total=len(todo), desc="workspace", unit="direction")
     try:
         for d in todo:
-            res = _solve_direction(rod, fields[d], scales, nodes, richardson, clamp, angle)
+            try:
+                res = _solve_direction(rod, fields[d], scales, nodes, richardson, clamp, angle)
+            except ConvergenceError as err:  # keep the states before, leave the rest out
+                res = err.result
+                events.append(
+                    {
+                        "direction": d,
+                        "kind": "unreached",
+                        "scale": float(err.reached),
+                        "message": str(err),
+                    }
+                )
+                stable[d, 1:] = False
+                if res is None:
+                    continue
             sol.single[d] = res
+            got = len(res.scales)
             if theta.shape[-1] != res.s.size:
                 theta = np.full((D, M + 1, res.s.size), np.nan)
                 theta[:, 0] = angle
                 if sol.fans:
                     theta[sol.fan_index, 1:] = sol.fan_thetas
-            tips[d, 1:] = res.tip
-            theta[d, 1:] = np.array([res.theta(k) for k in range(M)])
-            stable[d, 1:] = res.stable
+            tips[d, 1 : got + 1] = res.tip
+            theta[d, 1 : got + 1] = np.array([res.theta(k) for k in range(got)])
+            stable[d, 1 : got + 1] = res.stable
             for e in res.instabilities:
                 events.append({"direction": d, **e})
                 if e["kind"] == "snap":
@@ -570,11 +586,12 @@ def tip_derivatives(ws: Workspace, wrt) -> tuple[list[str], np.ndarray]:
         d = per_mesh[0] if len(per_mesh) == 1 else (4 * per_mesh[1] - per_mesh[0]) / 3
         out[sol.fan_index, 1:] = rod.length * d[:, :, 0:2]
     for direction, res in sol.single.items():
+        got = len(res.scales)
         try:
-            _, _, _, Dd = rod_derivatives(res, np.arange(k), groups, check=False)
-            out[direction, 1:] = Dd[:, 0:2]
+            _, _, _, Dd = rod_derivatives(res, np.arange(got), groups, check=False)
+            out[direction, 1 : got + 1] = Dd[:, 0:2]
         except ValueError:
-            out[direction, 1:] = np.nan
+            out[direction, 1 : got + 1] = np.nan
     bad = ~np.isfinite(out)
     out[bad] = 0.0
     return labels, out
