@@ -185,3 +185,57 @@ def test_seed_figures_notebook():
     field_b = coils.LinearField(B0=(0.0, 5e-3, 0.0), gradient=coils.maxwell_gradient(0.4))
     tip = bvp_tip_continued(presets.seed_rod(presets.M3()), field_b, scales)
     np.testing.assert_allclose(r["m3_tip"][:2], tip, atol=1e-6 * L)
+
+
+def test_design_notebook():
+    """Workspaces of the presets in ideal and real fields, and the optimised layout."""
+    import magpylib as magpy
+
+    import coils
+    from coilrod import Magnetization, presets
+
+    r = execute("design.ipynb")
+    b_max = r["b_max"]
+    scales = np.linspace(0.1, 1.0, 10)
+    # tips at b_max against an independent solve_bvp continuation (ideal fields)
+    for name, mag in (("m1", presets.M1()), ("m2b", presets.M2(variant="b"))):
+        rod = presets.seed_rod(mag)
+        for phi, tip in zip(r["directions"], r[f"ideal_tips_{name}"], strict=True):
+            field = coils.UniformField(B=b_max * np.array([math.cos(phi), math.sin(phi), 0.0]))
+            ref = bvp_tip_continued(rod, field, scales)
+            np.testing.assert_allclose(tip, ref, atol=1e-6 * rod.length)
+    # real coils: the currents make b_max along +y at the centre (magpylib), and the tip in
+    # their Biot-Savart field matches solve_bvp in that field
+    rod = presets.seed_rod(presets.M1())
+    systems = {
+        "large": coils.presets.three_axis_helmholtz(),
+        "compact": coils.presets.three_axis_helmholtz(radii=(0.04, 0.05, 0.06), max_current=50.0),
+    }
+    for name, system in systems.items():
+        driven = system.with_currents(r["currents_y"][name])
+        B = magpy.getB(driven.to_magpylib(), np.zeros(3))
+        np.testing.assert_allclose(B, [0.0, b_max, 0.0], atol=1e-6 * b_max)
+        ref = bvp_tip_continued(rod, driven, scales)
+        np.testing.assert_allclose(r[f"tip_{name}_y"], ref, atol=1e-6 * rod.length)
+    # coils 2.5 L and more in radius: within 3 % of the ideal workspace; about L: far smaller
+    area = r["area_real"]
+    assert area["large"] == pytest.approx(area["ideal"], rel=0.03)
+    assert area["compact"] < 0.8 * area["ideal"]
+    # the optimised layout: within the bounds, better than every preset at the same grid,
+    # its best-so-far history never decreasing; one of its tips against solve_bvp
+    opt = r["optimised"]
+    assert opt["solves"] <= 80
+    assert max(opt["magnitudes"]) <= 128e3 * (1 + 1e-12)
+    assert opt["area"] > max(r["preset_area_coarse"].values())
+    assert np.all(np.diff(opt["history"]) >= 0)
+    assert opt["history"][-1] == opt["area"]
+    mag = Magnetization.segments([0.01] * 4, opt["magnitudes"], opt["angles"])
+    rod = presets.seed_rod(mag)
+    tip = bvp_tip_continued(rod, coils.UniformField(B=(0.0, b_max, 0.0)), scales)
+    from coilrod import solve_rod
+
+    np.testing.assert_allclose(
+        solve_rod(rod, coils.UniformField(B=(0.0, b_max, 0.0)), scales).tip[-1, :2],
+        tip,
+        atol=1e-6 * rod.length,
+    )

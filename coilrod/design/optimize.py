@@ -158,7 +158,9 @@ def optimize_magnetization(
     directions, magnitudes : int
         Resolution of the workspaces evaluated (see :func:`coilrod.workspace`).
     starts : int
-        Random starts of the gradient method (magnitudes 0.5 to 1 of the bound, any angles).
+        Starts of the gradient method: M(2a) in segments (the direction turning by pi/2
+        from clamp to tip, magnitudes at the bound), then random layouts (magnitudes 0.5 to 1
+        of the bound, any angles).
 
     Returns
     -------
@@ -193,11 +195,15 @@ def optimize_magnetization(
     n = 2 * segments
     try:
         if method == "gradient":
-            # random starts: a layout with exactly aligned segments (e.g. all axial) puts an
-            # exact pitchfork in the antiparallel direction, where the area is not smooth
-            x0s = [
+            # first start: M(2a) in segments (direction turning by pi/2 along the rod, full
+            # magnitude), a good design of the seed; then random ones.  No layout with exactly
+            # aligned segments (e.g. all axial): it puts an exact pitchfork in the antiparallel
+            # direction, where the area is not smooth
+            turning = np.pi / 2 * (np.arange(segments) + 0.5) / segments
+            x0s = [np.r_[np.ones(segments), turning]]
+            x0s += [
                 np.r_[rng.uniform(0.5, 1.0, segments), rng.uniform(-np.pi, np.pi, segments)]
-                for _ in range(starts)
+                for _ in range(starts - 1)
             ]
             bounds = [(0.0, 1.0)] * segments + [(-2 * np.pi, 2 * np.pi)] * segments
 
