@@ -21,6 +21,30 @@ def test_library_example_runs(capsys):
     assert "within 1% of ideal" in capsys.readouterr().out
 
 
+def test_design_example_runs(capsys):
+    """The design example (run after the library example, as a reader would) gives exact
+    sensitivities: the current derivative against a central difference of two solves."""
+    import coilrod
+
+    text = README.read_text(encoding="utf-8")
+    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
+    design = next(b for b in blocks if "sensitivities(res" in b)
+    namespace: dict = {}
+    exec(compile(blocks[0], "README.md", "exec"), namespace)  # noqa: S102
+    capsys.readouterr()
+    exec(compile(design, "README.md", "exec"), namespace)  # noqa: S102
+    assert capsys.readouterr().out.strip().endswith("True")
+    rod, pair, scales, d = (namespace[k] for k in ("rod", "pair", "scales", "d"))
+    h = 1e-3
+    tips = [
+        coilrod.solve_rod(rod, pair.with_current(pair.current + s * h), scales, tol=1e-12).tip[-1]
+        for s in (1, -1)
+    ]
+    fd = (tips[0] - tips[1]) / (2 * h)
+    np.testing.assert_allclose(d["currents"].tip[0], fd, rtol=1e-5, atol=1e-9 * np.abs(fd).max())
+    assert d["angles"].tip.shape == (4, 3)
+
+
 def test_quick_start_test_command_is_what_ci_runs():
     text = README.read_text(encoding="utf-8")
     quick = re.search(r"## Quick start\n\n```bash\n(.*?)```", text, re.S).group(1).splitlines()

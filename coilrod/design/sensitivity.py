@@ -277,7 +277,8 @@ def _mesh_derivatives(problem, U, S, rod, groups, field_groups, lin=None):
         )
     R1 = lin.load_rate  # (k, size), dR/dscale
     lamR1 = np.einsum("qks,ks->kq", lam, R1)  # (k, 3)
-    B, G = problem.field_at_states(U)
+    fv = getattr(lin, "field_values", None)
+    B, G = fv if fv is not None else problem.field_at_states(U)
     k, n = U.shape[0], problem.n
     g_mu, g_b, g_G = problem.load_adjoint(U, lam, B, G)  # (3, k, n, ...)
     cols = []

@@ -471,6 +471,10 @@ class PlanarRod(PathProblem):
             tan.bad |= ~ok
         lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
         lin.load_rate = R1
+        last = getattr(self, "_last_field", None)
+        if not self.uniform and last is not None and last[0] is U:
+            lin.field_values = last[1:]  # B (k, n, 3), G (k, n, 3, 3) at the nodes
+        self._last_field = None
         return lin
 
     def solve(self, lin: Linearization, rhs: np.ndarray) -> np.ndarray:
@@ -672,6 +676,7 @@ class PlanarRod(PathProblem):
 
         k, n = U.shape[0], self.n
         B, G, H = self._field_by_member(U.reshape(k, n, _NV)[:, :, 0:2], tangent)
+        self._last_field = (U, B.reshape(k, n, 3), G.reshape(k, n, 3, 3))
         R = np.empty((k, self.size))
         R1 = np.empty((k, self.size))
         shape = (2 * _KL + _KU + 1, k * self.size) if tangent else (1, 1)
