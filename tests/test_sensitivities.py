@@ -278,3 +278,84 @@ class TestBadInput:
         assert sens.matrix.shape == (4, 4)
         with pytest.raises(KeyError, match="no parameter group 'angles'"):
             sens["angles"]
+
+
+class TestFEM:
+    """FEM states (direct method: one solve with the state's tangent per parameter) against
+    central differences of independent solve_fem runs at a tight tolerance."""
+
+    KW = dict(dim=2, elements=(16, 1))
+
+    @pytest.fixture(scope="class")
+    @classmethod
+    def case(cls):
+        from coilrod import solve_fem
+
+        rod = Rod(
+            L, 1e6, Circle(2e-3), Magnetization.segments([0.02, 0.02], [1e5, 1.5e5], [0.0, 0.4])
+        )
+        fields = {
+            "uniform": coils.UniformField(B=(0.0, 0.004, 0.0)),
+            "pair": coils.HelmholtzPair(0.06, 100, 2.0, axis="y"),
+        }
+        return (
+            rod,
+            fields,
+            {
+                k: sensitivities(solve_fem(rod, f, [0.5, 1.0], **self.KW), 1)
+                for k, f in fields.items()
+            },
+        )
+
+    def _solve(self, rod, field, s=1.0):
+        from coilrod import solve_fem
+
+        r = solve_fem(rod, field, [0.5, s], rtol=1e-11, **self.KW)
+        return np.r_[r.tip[1], r.tip_angle[1]]
+
+    def _moved_rod(self, rod, mags=(1e5, 1.5e5), angles=(0.0, 0.4)):
+        return dataclasses.replace(
+            rod, magnetization=Magnetization.segments([0.02, 0.02], mags, angles)
+        )
+
+    @pytest.mark.parametrize("kind", ["uniform", "pair"])
+    def test_against_central_differences(self, case, kind):
+        rod, fields, sens = case
+        field, sens = fields[kind], sens[kind]
+        builds = {
+            "scale": (lambda d: self._solve(rod, field, 1.0 + d), 1e-4),
+            "youngs_modulus": (
+                lambda d: self._solve(dataclasses.replace(rod, youngs_modulus=1e6 + d), field),
+                1e2,
+            ),
+            "magnitudes[1]": (
+                lambda d: self._solve(self._moved_rod(rod, (1e5, 1.5e5 + d)), field),
+                1e2,
+            ),
+            "angles[0]": (
+                lambda d: self._solve(self._moved_rod(rod, angles=(d, 0.4)), field),
+                1e-4,
+            ),
+        }
+        if kind == "uniform":
+            builds["B[0]"] = (
+                lambda d: self._solve(rod, coils.UniformField(B=(d, 0.004, 0.0))),
+                1e-6,
+            )
+        else:
+            builds["currents[0]"] = (lambda d: self._solve(rod, field.with_current(2.0 + d)), 1e-4)
+        for label, (build, h) in builds.items():
+            ref = (build(h) - build(-h)) / (2 * h)
+            i = sens.parameters.index(label)
+            got = np.r_[sens.tip[i], sens.tip_angle[i]]
+            assert np.max(np.abs(got - ref)) <= 1e-6 * np.max(np.abs(ref)), label
+
+    def test_bad_group(self, case):
+        from coilrod import solve_fem
+
+        rod, fields, _ = case
+        res = solve_fem(rod, fields["uniform"], [0.5], **self.KW)
+        with pytest.raises(ValueError, match="has no parameter 'currents'"):
+            sensitivities(res, 0, wrt="currents")
+        with pytest.raises(ValueError, match="out of range"):
+            sensitivities(res, 1)

@@ -393,13 +393,148 @@ def _check_regular(result, sol, rows, S):
         )
 
 
+# -- FEM results ----------------------------------------------------------------------------------
+FEM_GROUPS = ("scale", "youngs_modulus", "magnitudes", "angles", "B", "currents")
+
+
+def _fem_available(result) -> list[str]:
+    asm = result._asm
+    field = asm.field
+    rod = result._asm.rod
+    out = ["scale", "youngs_modulus"]
+    if _segments(rod.magnetization, rod.length) is not None:
+        out += ["magnitudes", "angles"]
+    if isinstance(field, coils.UniformField):
+        out.append("B")
+    if hasattr(field, "with_current") and not hasattr(field, "unit_fields"):
+        out.append("currents")
+    return out
+
+
+def _fem_sensitivities(result, k: int, wrt) -> Sensitivities:
+    """Sensitivities of a FEM state by the direct method: one solve with the state's
+    factorised tangent per parameter.
+
+    The load enters the residual as ``scale * R1(z; M, B)``, linear in the magnetization at the
+    quadrature points and in the field, so ``dR/dp = scale * R1(z; dM/dp or dB/dp)``.  The
+    moduli are proportional to E at a fixed Poisson ratio, so the state depends on E and the
+    scale only through scale / E: ``dq/dE = -(scale / E) dq/dscale`` (exact)."""
+    import copy
+
+    from ..fem.problem import FEMProblem
+
+    asm = result._asm
+    rod = asm.rod
+    have = _fem_available(result)
+    groups = have if wrt is None else ([wrt] if isinstance(wrt, str) else list(dict.fromkeys(wrt)))
+    if not groups:
+        raise ValueError("wrt must name at least one parameter group")
+    for g in groups:
+        if g not in PARAMETER_GROUPS:
+            raise ValueError(
+                f"unknown parameter group {g!r}; the groups are {sorted(PARAMETER_GROUPS)}"
+            )
+        if g not in have:
+            raise ValueError(
+                f"this FEM state has no parameter {g!r} (field {type(asm.field).__name__}); "
+                f"it has {have}"
+            )
+    z, s = result._states[k], float(result.scales[k])
+    problem = FEMProblem(asm, 1e-8, 1e-8)
+    lin = problem.linearize(z, s)
+    if not lin.ok:
+        raise ValueError(f"FEM state {k} could not be evaluated")
+
+    def rate(**swap):
+        other = copy.copy(asm)
+        for name, value in swap.items():
+            setattr(other, name, value)
+        out = np.zeros(problem.size)
+        out[: asm.nfree] = other.evaluate(z, 1.0, tangent=False).load_rate
+        return out
+
+    labels, units, values, cols = [], [], [], []
+    R1 = problem.d_residual_d_scale(lin)
+    for g in groups:
+        if g in ("scale", "youngs_modulus"):
+            lab, val, col = [g], [s if g == "scale" else rod.youngs_modulus], [R1]
+        elif g in ("magnitudes", "angles"):
+            edges, mags, angs = _segments(rod.magnetization, rod.length)
+            sq = asm.X[..., 0]
+            seg = np.clip(np.searchsorted(edges, sq, side="right") - 1, 0, mags.size - 1)
+            lab, val, col = [], [], []
+            for j in range(mags.size):
+                dM = np.zeros_like(asm.M)
+                on = seg == j
+                if g == "magnitudes":
+                    dM[on, 0], dM[on, 1] = np.cos(angs[j]), np.sin(angs[j])
+                else:
+                    dM[on, 0], dM[on, 1] = -mags[j] * np.sin(angs[j]), mags[j] * np.cos(angs[j])
+                lab.append(f"{g}[{j}]")
+                val.append((mags if g == "magnitudes" else angs)[j])
+                col.append(s * rate(M=dM))
+        elif g == "B":
+            lab = [f"B[{i}]" for i in range(3)]
+            val = list(asm.field.B0)
+            col = [s * rate(field=coils.UniformField(B=np.eye(3)[i])) for i in range(3)]
+        else:  # currents of a single coil or pair
+            lab, val = ["currents[0]"], [asm.field.current]
+            col = [s * rate(field=asm.field.with_current(1.0))]
+        labels += lab
+        units += [PARAMETER_GROUPS[g]] * len(lab)
+        values += list(val)
+        cols += col
+    dz = np.array([-problem.solve(lin, c) for c in cols])  # (p, size)
+    origin = asm.tip(np.zeros(problem.size))
+    tip = np.array([asm.tip(d) - origin for d in dz])
+    angle = _fem_angle_rates(result, asm, z, dz)
+    if "youngs_modulus" in labels:  # through scale / E: d/dE = -(scale / E) d/dscale
+        i = labels.index("youngs_modulus")
+        tip[i] *= -s / rod.youngs_modulus
+        angle[i] *= -s / rod.youngs_modulus
+    groups_sl, start = {}, 0
+    for g in groups:
+        n = sum(1 for lab in labels if lab == g or lab.startswith(g + "["))
+        groups_sl[g] = slice(start, start + n)
+        start += n
+    return Sensitivities(
+        index=k,
+        scale=s,
+        parameters=tuple(labels),
+        groups=groups_sl,
+        units=tuple(units),
+        values=np.asarray(values, float),
+        tip=tip,
+        tip_angle=angle,
+    )
+
+
+def _fem_angle_rates(result, asm, z, dz) -> np.ndarray:
+    """d(tip angle) for state increments dz (p, size): the angle of the image ``a`` of the
+    end face's y axis (least-squares fit of the face, as :attr:`FEMResult.tip_angle`)."""
+    X = asm.nodes
+    face = np.abs(X[0] - asm.length) <= 1e-9 * asm.length
+    cols = [np.ones(face.sum()), X[1, face]] + ([X[2, face]] if asm.dim == 3 else [])
+    pinv = np.linalg.pinv(np.column_stack(cols))[1]  # a = pinv @ x_face
+    x = (X + asm.nodal(z))[:2, face]
+    a = x @ pinv
+    out = np.empty(len(dz))
+    for i, d in enumerate(dz):
+        da = asm.nodal(d)[:2, face] @ pinv
+        out[i] = (a[0] * da[1] - a[1] * da[0]) / (a @ a)
+    return out
+
+
 def sensitivities(result, k: int, wrt: Sequence[str] | str | None = None) -> Sensitivities:
     """Exact derivatives of the tip of state ``k`` of a rod result (adjoint method).
 
     Parameters
     ----------
-    result : RodResult
-        From :func:`coilrod.solve_rod` (any field, with or without Richardson).
+    result : RodResult or FEMResult
+        From :func:`coilrod.solve_rod` (any field, with or without Richardson) or
+        :func:`coilrod.solve_fem` (groups "scale", "youngs_modulus", "magnitudes", "angles",
+        "B" of a uniform field, "currents" of a single coil or pair; by the direct method, one
+        solve with the state's tangent per parameter).
     k : int
         The state (index into ``result.scales``; negative counts from the end).
     wrt : str or sequence of str, optional
@@ -449,6 +584,15 @@ def sensitivities(result, k: int, wrt: Sequence[str] | str | None = None) -> Sen
     >>> round(float(d.tip[0, 1] / (-lam * rod.length / 3 / rod.youngs_modulus)), 3)
     1.0
     """
+    from ..fem.result import FEMResult
+
+    if isinstance(result, FEMResult):
+        n_states = len(result.scales)
+        if isinstance(k, bool) or not isinstance(k, int | np.integer):
+            raise ValueError(f"k must be an integer state index; got {k!r}")
+        if not -n_states <= k < n_states:
+            raise ValueError(f"k = {k} is out of range for a result of {n_states} states")
+        return _fem_sensitivities(result, int(k) % n_states, wrt)
     _solution(result)
     n_states = len(result.scales)
     if isinstance(k, bool) or not isinstance(k, int | np.integer):

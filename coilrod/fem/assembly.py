@@ -119,6 +119,7 @@ class Assembler:
         self.plane_stress = dim == 2 and plane == "stress"
         self.mixed = bool(mixed) and not self.plane_stress
         self.length = float(rod.length)
+        self.rod = rod
 
         elem = _element(dim, order)
         basis = Basis(mesh, elem, intorder=INTORDER[order])
