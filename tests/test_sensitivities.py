@@ -302,7 +302,7 @@ class TestFEM:
             rod,
             fields,
             {
-                k: sensitivities(solve_fem(rod, f, [0.5, 1.0], **self.KW), 1)
+                k: sensitivities(solve_fem(rod, f, [0.5, 1.0], **cls.KW), 1)
                 for k, f in fields.items()
             },
         )
