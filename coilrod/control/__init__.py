@@ -1,0 +1,5 @@
+"""Control in real coil systems: the currents that put the tip on a target."""
+
+from .currents import ControlResult, solve_currents
+
+__all__ = ["solve_currents", "ControlResult"]

@@ -1,0 +1,426 @@
+"""Coil currents that put the rod's tip on a target, in the real field or as an ideal-field
+controller would choose them.
+
+``model="real"``: Gauss-Newton on the currents.  Each iteration is one forward solve of the
+rod in the system's real (Biot-Savart) field, followed along the load path from the straight
+rod (:func:`coilrod.solve_rod`), and the exact derivatives of the tip with respect to the
+currents (:func:`coilrod.sensitivities`, adjoint).  With more channels than constraints the
+step is the minimum-power one: ``I_new = argmin sum_j R_j I_j^2`` subject to the linearised
+target ``J (I_new - I) = target - tip`` and the current limits (the least-distance program of
+:func:`coils.currents.minimum_power`), whose fixed point satisfies the first-order conditions
+of the minimum-power currents that reach the target.  The start is the ideal-field answer:
+the in-plane uniform field that puts the tip on the target (a cheap two-unknown Newton
+iteration with uniform-field solves), made by the system's minimum-power currents at its
+centre.
+
+``model="ideal"``: the usual controller -- the same iteration with the field over the robot
+replaced by the system's field and gradient at its centre (``system.with_currents(I).ideal()``
+for every current vector, exact in the currents); the currents are then applied to the real
+field and ``miss`` says how far the tip really lands from the target.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+import coils
+from coils._validate import as_array, as_vector, finite_scalar, positive
+
+from ..errors import ConvergenceError
+from ..path.events import StabilityWarning
+from ..robot.rod import Rod
+from ..rod.result import RodResult
+from ..rod.solve import solve_rod
+
+__all__ = ["solve_currents", "ControlResult"]
+
+
+@dataclass
+class ControlResult:
+    """Currents for a target tip pose and where the tip lands in the real field.
+
+    Attributes
+    ----------
+    currents : ndarray, shape (m,)
+        Channel currents, A.
+    tip : ndarray, shape (3,)
+        Tip position in the real field with these currents, m.
+    tip_angle : float
+        Tip angle in the real field, rad.
+    miss : float
+        Distance of the real tip from the target position, m (with a target angle: the
+        position miss; ``angle_miss`` holds the angle's).
+    angle_miss : float or None
+        |tip angle - target angle|, rad (None without a target angle).
+    power : float
+        Copper power of the currents, W (NaN if a channel has no resistance).
+    result : RodResult
+        The forward solve in the real field (load path from the straight rod to the currents).
+    model : str
+        "real" or "ideal".
+    target : ndarray, shape (2,)
+        Target (x, y), m.
+    solves : int
+        Forward solves used (real or ideal field; the start's uniform-field solves counted
+        separately in ``start_solves``).
+    start_solves : int
+        Uniform-field solves of the start.
+    history : list of float
+        Miss after each iteration, m (in the model's own field).
+    """
+
+    currents: np.ndarray
+    tip: np.ndarray
+    tip_angle: float
+    miss: float
+    angle_miss: float | None
+    power: float
+    result: RodResult
+    model: str
+    target: np.ndarray
+    solves: int
+    start_solves: int
+    history: list = field(default_factory=list)
+
+
+def _channels_at_center(system):
+    """B (3, m) T/A and gradient (3, 3, m) T/(A m) per unit current at the system centre."""
+    B, G = system.unit_fields(np.asarray(system.center, float)[None])
+    return B[0], G[0]
+
+
+def _forward(rod, field, steps, opts):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", StabilityWarning)
+        return solve_rod(rod, field, np.arange(1, steps + 1) / steps, **opts)
+
+
+def _outputs(res: RodResult, with_angle: bool) -> np.ndarray:
+    tip = res.tip[-1, :2]
+    return np.r_[tip, res.tip_angle[-1]] if with_angle else tip.copy()
+
+
+def _weights_for(with_angle: bool, length: float) -> np.ndarray:
+    """Scales of the outputs in the least-squares sense: positions in L, the angle in rad."""
+    return np.r_[1.0 / length, 1.0 / length, 1.0] if with_angle else np.full(2, 1.0 / length)
+
+
+def _uniform_start(rod, goal, with_angle, steps, opts, b_cap):
+    """The in-plane uniform field (2,) T whose tip meets ``goal`` (least squares), and the
+    solves used: scipy's trust-region least squares with the exact Jacobian (the tip's
+    sensitivity to the field is nearly singular along the rod's own direction, so plain
+    Newton steps overshoot), from a field perpendicular to the clamp on the target's side."""
+    from scipy.optimize import least_squares
+
+    from ..design.sensitivity import tip_derivatives
+
+    L = rod.length
+    wts = _weights_for(with_angle, L)
+    clamp = np.asarray(opts["clamp_position"], float)
+    rel = (goal[:2] - clamp[:2]) / L
+    ang = opts["clamp_angle"]
+    side = -math.sin(ang) * rel[0] + math.cos(ang) * rel[1]  # the target's side of the axis
+    del side
+    # the closest stable state of a coarse (direction, magnitude) grid up to b_cap (all
+    # directions followed together, coilrod.workspace): a start on the regular branch, not
+    # on a buckled one of a nearly antiparallel field
+    from ..design.workspace import workspace
+
+    grid = workspace(
+        rod,
+        b_cap,
+        directions=36,
+        magnitudes=8,
+        nodes=16,
+        richardson=False,
+        clamp_position=clamp,
+        clamp_angle=ang,
+    )
+    dist = np.linalg.norm(grid.tips[:, 1:, :2] - goal[:2], axis=2)
+    dist = np.where(grid.stable[:, 1:], dist, np.inf)
+    d, j = np.unravel_index(np.argmin(dist + 1e-3 * L * np.arange(1, 9) / 8), dist.shape)
+    b0 = grid.magnitudes[j + 1]
+    x0 = np.array([math.cos(grid.directions[d]), math.sin(grid.directions[d])])  # units b0
+    cache = {}
+
+    def solve(x):
+        key = tuple(x)
+        if key not in cache:
+            B = b0 * np.array([x[0], x[1], 0.0])
+            try:
+                cache[key] = _forward(rod, coils.UniformField(B=B), steps, opts)
+            except ConvergenceError:
+                cache[key] = None
+        return cache[key]
+
+    best = [np.inf, x0]
+
+    def fun(x):
+        res = solve(x)
+        if res is None:
+            return np.full(goal.size, 1e3)
+        r = (_outputs(res, with_angle) - goal) * wts
+        if np.linalg.norm(r) < best[0]:
+            best[:] = [float(np.linalg.norm(r)), np.array(x, float)]
+        return r
+
+    def jac(x):
+        res = solve(x)
+        if res is None:
+            return np.eye(goal.size, 2)
+        _, _, _, D = tip_derivatives(res, [len(res) - 1], ["B"], check=False)
+        J = np.vstack([D[0, 0:2, 0:2], D[0, 3:4, 0:2]])[: goal.size]
+        return J * wts[:, None] * b0
+
+    fit = least_squares(
+        fun, x0, jac=jac, xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=60, x_scale="jac"
+    )
+    del fit
+    return best[1] * b0, len(cache) + 1
+
+
+def solve_currents(
+    rod: Rod,
+    system,
+    target,
+    max_current=None,
+    model: str = "real",
+    *,
+    angle: float | None = None,
+    steps: int = 10,
+    clamp_position=(0.0, 0.0, 0.0),
+    clamp_angle: float = 0.0,
+    nodes: int | None = None,
+    tol: float | None = None,
+    max_iter: int = 15,
+) -> ControlResult:
+    """Currents of ``system`` that put the tip of ``rod`` on ``target``.
+
+    Parameters
+    ----------
+    rod : Rod
+    system : coils.CoilSystem
+        A coil system under current control (``unit_fields``, ``with_currents``,
+        ``currents_for``), e.g. ``coils.presets.three_axis_helmholtz()``.
+    target : array-like, shape (2,)
+        Tip position (x, y) in the bending plane, m.
+    max_current : float or array-like, shape (m,), optional
+        Current limits, A (> 0); default the system's own (``system.max_current``).
+    model : {"real", "ideal"}
+        "real": the currents are found in the real field; "ideal": as the usual controller
+        does, from the system's field and gradient at its centre (see the module docstring).
+    angle : float, optional
+        Target tip angle, rad (then three conditions; with fewer independent channels the
+        result is the least-squares compromise and the misses say so).
+    steps : int
+        Load steps of each forward solve (the currents ramped from zero: the path matters at
+        snap-throughs).
+    clamp_position, clamp_angle, nodes
+        As in :func:`coilrod.solve_rod` (m, rad).
+    tol : float, optional
+        Position tolerance, m (default 1e-7 L).
+    max_iter : int
+        Gauss-Newton iterations.
+
+    Returns
+    -------
+    ControlResult
+
+    Raises
+    ------
+    ValueError
+        Bad input (naming the argument), or a system that cannot make an in-plane field.
+    coilrod.ConvergenceError
+        The target is not reachable (within the current limits): the message gives the closest
+        reachable tip found and its distance; ``err.result`` is the ControlResult there.
+
+    Examples
+    --------
+    >>> import coils
+    >>> from coilrod import presets, solve_currents
+    >>> rod = presets.seed_rod(presets.M1())
+    >>> system = coils.presets.three_axis_helmholtz()
+    >>> out = solve_currents(rod, system, target=(0.03, 0.02))
+    >>> bool(out.miss < 1e-6 * rod.length)
+    True
+    """
+    from ..design.sensitivity import tip_derivatives
+
+    if not isinstance(rod, Rod):
+        raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
+    if not all(hasattr(system, a) for a in ("unit_fields", "with_currents", "currents_for")):
+        raise ValueError(
+            "system must be a coil system under current control (a coils.CoilSystem); got "
+            f"{type(system).__name__}"
+        )
+    if model not in ("real", "ideal"):
+        raise ValueError(f"model must be 'real' or 'ideal'; got {model!r}")
+    goal = as_array(target, "target", (2,))
+    with_angle = angle is not None
+    if with_angle:
+        goal = np.r_[goal, finite_scalar(angle, "angle")]
+    m = system.currents.size
+    if max_current is None:
+        limits = np.asarray(system.max_current, float)
+    else:
+        limits = np.broadcast_to(np.asarray(max_current, float), (m,)).copy()
+        if not np.all(np.isfinite(limits) | np.isinf(limits)) or np.any(~(limits > 0)):
+            raise ValueError(f"max_current must be positive; got {max_current!r}")
+        system = system.with_limits(limits)
+    L = rod.length
+    tol = 1e-7 * L if tol is None else positive(tol, "tol")
+    clamp = as_vector(clamp_position, "clamp_position")
+    opts = dict(
+        clamp_position=clamp, clamp_angle=finite_scalar(clamp_angle, "clamp_angle"), nodes=nodes
+    )
+    Bu, Gu = _channels_at_center(system)
+    if np.linalg.matrix_rank(Bu[:2], tol=1e-12 * max(np.abs(Bu).max(), 1e-300)) < 2:
+        raise ValueError(
+            "the system's channels cannot make every in-plane field (B_x, B_y) at its centre: "
+            f"the centre field per ampere has rank {np.linalg.matrix_rank(Bu[:2])} in the plane"
+        )
+    if np.linalg.norm(goal[:2] - clamp[:2]) > L * (1 + 1e-12):
+        raise ConvergenceError(
+            f"the target {goal[:2].tolist()} m is {np.linalg.norm(goal[:2] - clamp[:2]):.4g} m "
+            f"from the clamp, beyond the rod's length {L:g} m: unreachable",
+            reached=0.0,
+            target=1.0,
+        )
+    try:
+        weights = np.asarray(system.resistance, float)
+    except ValueError:
+        weights = np.ones(m)
+    wts = _weights_for(with_angle, L)
+    # start: the uniform field that meets the target, made at the centre
+    from coils.currents import largest_fraction
+
+    phis = np.linspace(0.0, 2 * np.pi, 36, endpoint=False)
+    b_big = rod.field_for_lambda(30.0)  # beyond any useful field: lambda = 30
+    caps = [
+        largest_fraction(Bu[:2], b_big * np.array([math.cos(a), math.sin(a)]), limits)[0]
+        for a in phis
+    ]
+    b_cap = b_big * float(min(caps))  # the largest centre field (T) in every direction
+    b, start_solves = _uniform_start(rod, goal, with_angle, steps, opts, b_cap)
+    from coils.currents import minimum_power
+
+    start = minimum_power(Bu, np.array([b[0], b[1], 0.0]), weights, limits)
+    I = start.currents if start.currents is not None else np.clip(start.unlimited, -limits, limits)
+
+    def field_of(I):
+        real = system.with_currents(I)
+        if model == "real":
+            return real
+        return coils.LinearField(
+            Bu @ I + _fixed(system)[0], Gu @ I + _fixed(system)[1], system.center
+        )
+
+    def jacobian(res):
+        k = len(res) - 1
+        if model == "real":
+            _, _, _, D = tip_derivatives(res, [k], ["currents"], check=False)
+            J = D[0]
+        else:
+            _, _, _, D = tip_derivatives(res, [k], ["B0", "gradient"], check=False)
+            J = D[0, :, :3] @ Bu + D[0, :, 3:] @ Gu.reshape(9, m)
+        rows = [0, 1, 3] if with_angle else [0, 1]
+        return J[rows] * wts[:, None]
+
+    solves, history, best = 0, [], None
+    for _ in range(max_iter):
+        try:
+            res = _forward(rod, field_of(I), steps, opts)
+        except ConvergenceError as err:
+            raise ConvergenceError(
+                f"solve_currents: the forward solve failed at currents {np.round(I, 6).tolist()} A"
+                f" ({err})",
+                reached=err.reached,
+                target=err.target,
+            ) from err
+        solves += 1
+        r = (_outputs(res, with_angle) - goal) * wts
+        miss = float(np.linalg.norm(r[:2])) * L
+        history.append(miss)
+        if best is None or np.linalg.norm(r) < best[0]:
+            best = (float(np.linalg.norm(r)), I.copy(), res)
+        if miss <= tol and (not with_angle or abs(r[2]) <= tol / L):
+            break
+        J = jacobian(res)
+        sol = minimum_power(J, J @ I - r, weights, limits)
+        if sol.currents is not None:
+            new = sol.currents
+        else:  # the linearised target is out of reach: the least-squares step within limits
+            from scipy.optimize import lsq_linear
+
+            new = lsq_linear(J, J @ I - r, bounds=(-limits, limits)).x
+        if np.allclose(new, I, rtol=1e-12, atol=1e-12 * max(limits.min(), 1.0)):
+            break
+        if len(history) > 1 and history[-1] > history[-2]:  # the last step overshot: shorten
+            new = best[1] + 0.5 * (new - best[1])
+        I = new
+    _, I, res = best
+    return _finish(
+        rod,
+        system,
+        I,
+        res,
+        goal,
+        with_angle,
+        model,
+        steps,
+        opts,
+        tol,
+        solves,
+        start_solves,
+        history,
+    )
+
+
+def _fixed(system):
+    """Field and gradient of the system's fixed (current-free) parts at its centre."""
+    B, G = system.fixed_field(np.asarray(system.center, float)[None])
+    return B[0], G[0]
+
+
+def _finish(
+    rod, system, I, res, goal, with_angle, model, steps, opts, tol, solves, start_solves, history
+):
+    real = res if model == "real" else _forward(rod, system.with_currents(I), steps, opts)
+    tip = real.tip[-1]
+    miss = float(np.linalg.norm(tip[:2] - goal[:2]))
+    try:
+        power = float(system.power(I))
+    except ValueError:
+        power = float("nan")
+    out = ControlResult(
+        currents=I,
+        tip=tip.copy(),
+        tip_angle=float(real.tip_angle[-1]),
+        miss=miss,
+        angle_miss=abs(float(real.tip_angle[-1]) - goal[2]) if with_angle else None,
+        power=power,
+        result=real,
+        model=model,
+        target=goal[:2].copy(),
+        solves=solves,
+        start_solves=start_solves,
+        history=history,
+    )
+    own_miss = history[-1] if history else miss
+    if model == "real" and min(history) > tol and not with_angle:
+        err = ConvergenceError(
+            f"solve_currents: the target {goal[:2].tolist()} m is not reachable within the "
+            f"current limits; the closest tip found is {tip[:2].tolist()} m, "
+            f"{miss:.4g} m ({miss / rod.length:.3g} L) away, with currents "
+            f"{np.round(I, 4).tolist()} A",
+            reached=0.0,
+            target=1.0,
+            residual=own_miss,
+        )
+        err.result = out
+        raise err
+    return out
