@@ -87,6 +87,7 @@ class _Objective:
         self.best = (-np.inf, None, None)
         self.history = []
         self._cache = {}
+        self.start_limit = np.inf
 
     def layout(self, x):
         x = np.asarray(x, float)
@@ -105,6 +106,8 @@ class _Objective:
             return self._cache[key]
         if self.solves >= self.budget:
             raise _BudgetSpent
+        if self.solves >= self.start_limit:
+            raise _StartSpent
         rod = self.rod_for(x)
         ws = workspace(rod, self.b_max, **self.kw)
         self.solves += 1
@@ -122,6 +125,10 @@ class _Objective:
 
 
 class _BudgetSpent(Exception):
+    pass
+
+
+class _StartSpent(Exception):
     pass
 
 
@@ -211,17 +218,25 @@ def optimize_magnetization(
                 area, grad = obj.evaluate(x, True)
                 return -area / rod.length**2, -grad / rod.length**2
 
-            for x0 in x0s:
+            for i, x0 in enumerate(x0s):
                 if obj.solves >= budget:
                     break
-                minimize(
-                    fun,
-                    x0,
-                    jac=True,
-                    method="L-BFGS-B",
-                    bounds=bounds,
-                    options={"maxfun": budget - obj.solves, "ftol": 1e-10, "gtol": 1e-8},
-                )
+                # each start gets its share of the budget (a start stuck at a local optimum
+                # whose line searches keep failing on the area's jumps hands over in time)
+                share = (budget - obj.solves) // (len(x0s) - i)
+                obj.start_limit = obj.solves + max(share, 1)
+                try:
+                    minimize(
+                        fun,
+                        x0,
+                        jac=True,
+                        method="L-BFGS-B",
+                        bounds=bounds,
+                        options={"maxfun": max(share, 1), "ftol": 1e-6, "gtol": 1e-8},
+                    )
+                except _StartSpent:
+                    pass
+            obj.start_limit = np.inf
         else:
             bounds = [(0.0, 1.0)] * segments + [(-np.pi, np.pi)] * segments
             popsize = 10
