@@ -29,6 +29,7 @@ import numpy as np
 
 import coils
 from coils._validate import as_array, as_vector, finite_scalar, positive
+from coils.currents import minimum_power
 
 from ..errors import ConvergenceError
 from ..path.events import StabilityWarning
@@ -183,6 +184,24 @@ def _uniform_start(rod, goal, with_angle, steps, opts, b_cap):
     return best[1] * b0, len(cache) + 1
 
 
+def _start(rod, goal, with_angle, steps, opts, Bu, weights, limits):
+    """Start currents: the uniform-field answer (within the largest centre field the limits
+    allow in every direction), made at the centre with minimum power; and the solves used."""
+    from coils.currents import largest_fraction
+
+    phis = np.linspace(0.0, 2 * np.pi, 36, endpoint=False)
+    b_big = rod.field_for_lambda(30.0)  # beyond any useful field: lambda = 30
+    caps = [
+        largest_fraction(Bu[:2], b_big * np.array([math.cos(a), math.sin(a)]), limits)[0]
+        for a in phis
+    ]
+    b_cap = b_big * float(min(caps))  # the largest centre field (T) in every direction
+    b, solves = _uniform_start(rod, goal, with_angle, steps, opts, b_cap)
+    start = minimum_power(Bu, np.array([b[0], b[1], 0.0]), weights, limits)
+    I = start.currents if start.currents is not None else np.clip(start.unlimited, -limits, limits)
+    return I, solves
+
+
 def solve_currents(
     rod: Rod,
     system,
@@ -197,6 +216,7 @@ def solve_currents(
     nodes: int | None = None,
     tol: float | None = None,
     max_iter: int = 15,
+    initial=None,
 ) -> ControlResult:
     """Currents of ``system`` that put the tip of ``rod`` on ``target``.
 
@@ -225,6 +245,9 @@ def solve_currents(
         Position tolerance, m (default 1e-7 L).
     max_iter : int
         Gauss-Newton iterations.
+    initial : array-like, shape (m,), optional
+        Start currents, A (e.g. the previous target's along a tip path): the uniform-field
+        start is skipped.
 
     Returns
     -------
@@ -296,20 +319,13 @@ def solve_currents(
         weights = np.ones(m)
     wts = _weights_for(with_angle, L)
     # start: the uniform field that meets the target, made at the centre
-    from coils.currents import largest_fraction
-
-    phis = np.linspace(0.0, 2 * np.pi, 36, endpoint=False)
-    b_big = rod.field_for_lambda(30.0)  # beyond any useful field: lambda = 30
-    caps = [
-        largest_fraction(Bu[:2], b_big * np.array([math.cos(a), math.sin(a)]), limits)[0]
-        for a in phis
-    ]
-    b_cap = b_big * float(min(caps))  # the largest centre field (T) in every direction
-    b, start_solves = _uniform_start(rod, goal, with_angle, steps, opts, b_cap)
-    from coils.currents import minimum_power
-
-    start = minimum_power(Bu, np.array([b[0], b[1], 0.0]), weights, limits)
-    I = start.currents if start.currents is not None else np.clip(start.unlimited, -limits, limits)
+    if initial is not None:
+        I = as_array(initial, "initial", (m,)).copy()
+        if np.any(np.abs(I) > limits):
+            raise ValueError(f"initial currents {I.tolist()} A exceed the limits {limits.tolist()}")
+        start_solves = 0
+    else:
+        I, start_solves = _start(rod, goal, with_angle, steps, opts, Bu, weights, limits)
 
     def field_of(I):
         real = system.with_currents(I)
