@@ -6,6 +6,7 @@ models) driven by ``path`` (the one path-following engine) -> results; ``design`
 """
 
 from . import _moved  # noqa: F401  (old 0.1 module paths stay importable)
+from .design.sweep import SweepResult, sweep  # dask is imported only for a cluster
 from .errors import ConvergenceError
 from .fem import solve_fem  # scikit-fem itself is imported lazily, inside the call
 from .path.events import StabilityWarning
@@ -26,4 +27,6 @@ __all__ = [
     "RodPath",
     "StabilityWarning",
     "elastica",
+    "sweep",
+    "SweepResult",
 ]
