@@ -752,12 +752,13 @@ def sweep(
 
 def _check_resumed(rows: dict, grid: list, parameters: list[Parameter], path: Path) -> None:
     """The rows of an existing file must be points of this grid."""
+    outside = [point for point in rows if not 0 <= point < len(grid)]
+    if outside:
+        raise SceneError(
+            f"{path}: has point {outside[0]}, this sweep has points 0 to {len(grid) - 1}: it is "
+            "from another sweep; use another folder or overwrite it"
+        )
     for point, row in rows.items():
-        if not 0 <= point < len(grid):
-            raise SceneError(
-                f"{path}: has point {point}, this sweep has points 0 to {len(grid) - 1}: it is "
-                "from another sweep; use another folder or overwrite it"
-            )
         for p, value in zip(parameters, grid[point], strict=True):
             if row[p.column] != value:
                 raise SceneError(

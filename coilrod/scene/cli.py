@@ -382,16 +382,24 @@ def _sweep(args) -> int:
         problems += exc.problems
     if problems:
         raise SceneError(problems)
-    result = sweep(
-        scene,
-        params,
-        client=args.scheduler,
-        workers=workers,
-        out=args.out,
-        resume=args.resume,
-        overwrite=args.overwrite,
-        progress=False if (args.no_progress or args.quiet) else None,
-    )
+    try:
+        result = sweep(
+            scene,
+            params,
+            client=args.scheduler,
+            workers=workers,
+            out=args.out,
+            resume=args.resume,
+            overwrite=args.overwrite,
+            progress=False if (args.no_progress or args.quiet) else None,
+        )
+    except KeyboardInterrupt:
+        print(
+            f"coilrod: interrupted; the finished points are in {args.out / 'sweep.csv'} "
+            "(add --resume to continue)",
+            file=sys.stderr,
+        )
+        return 130
     parts = []
     if result.reused:
         parts.append(f"{result.reused} from {result.path}")
