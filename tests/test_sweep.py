@@ -277,12 +277,11 @@ def dask_cluster(tmp_path_factory):
         with Client(address, set_as_default=False) as client:
             client.wait_for_workers(2, timeout=60)
         yield address
-    finally:
-        for proc in reversed(procs):
+    finally:  # the workers first: a worker whose scheduler is gone may wait for it
+        for proc in [*procs[1:], *procs[:1]]:
             proc.terminate()
-        for proc in procs:
             try:
-                proc.wait(timeout=20)
+                proc.wait(timeout=10)
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
@@ -744,7 +743,7 @@ def test_rod_only_sweeps_import_neither_dask_nor_scikit_fem(tmp_path):
         "         'magnetization': {'preset': 'M1'}}, 'field': {'type': 'uniform', 'B': '5 mT'},\n"
         "         'load': {'steps': 1}}\n"
         "for workers in (1, 2):\n"
-        "    r = coilrod.sweep(scene, {'robot.youngs_modulus': '1 MPa:2 MPa:2'}, workers=workers)\n"
+        "    r = coilrod.sweep(scene, {'robot.youngs_modulus': '1 MPa:2 MPa:3'}, workers=workers)\n"
         "    assert not r.failed, r.failed\n"
         "heavy = ('dask', 'distributed', 'skfem')\n"
         "print(sorted(m for m in sys.modules if m.split('.')[0] in heavy))\n"

@@ -453,13 +453,20 @@ def _run_serial(tasks, source, done: Callable) -> None:
         done(point, solve_point(data, source))
 
 
-def _run_processes(tasks, source, workers: int, done: Callable) -> None:
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+def _start_pool(workers: int):
+    """A pool of ``workers`` processes, started now and the platform's default way (fork on
+    Linux before Python 3.14: the workers start with coilrod imported), before any thread of
+    the sweep (the progress bar's) exists."""
+    from concurrent.futures import ProcessPoolExecutor
 
-    pool = ProcessPoolExecutor(
-        workers, mp_context=multiprocessing.get_context("spawn"), initializer=_ignore_sigint
-    )
+    pool = ProcessPoolExecutor(workers, initializer=_ignore_sigint)
+    pool.submit(int).result()
+    return pool
+
+
+def _run_processes(tasks, source, pool, done: Callable) -> None:
+    from concurrent.futures import as_completed
+
     try:
         futures = {pool.submit(solve_point, data, source): point for point, data in tasks}
         for future in as_completed(futures):
@@ -769,13 +776,28 @@ def _check_resumed(rows: dict, grid: list, parameters: list[Parameter], path: Pa
 
 def _run(scene, parameters, grid, todo, rows, file, client, workers, progress) -> str:
     """Solve the points ``todo``, fill ``rows`` and append them to ``file``; says how."""
+    import multiprocessing
+
     from tqdm.auto import tqdm
 
+    n = 0 if client is not None or not todo else min(workers or os.cpu_count() or 1, len(todo))
+    first = None
+    if n > 1 and multiprocessing.get_start_method() == "fork":
+        # solve one point here first: forked workers then start with the kernels loaded
+        data = _point_data(scene.data, parameters, grid[todo[0]])
+        first = (todo[0], solve_point(data, scene.source))
+        todo = todo[1:]
+        n = min(n, len(todo))
+    pool = _start_pool(n) if n > 1 else None
     show = sys.stderr.isatty() if progress is None else bool(progress)
     names = result_columns(scene)
     tasks = ((i, _point_data(scene.data, parameters, grid[i])) for i in todo)
     bar = tqdm(
-        total=len(grid), initial=len(grid) - len(todo), desc="sweep", unit="point", disable=not show
+        total=len(grid),
+        initial=len(grid) - len(todo) - (first is not None),
+        desc="sweep",
+        unit="point",
+        disable=not show,
     )
 
     def done(point: int, result: dict) -> None:
@@ -789,16 +811,19 @@ def _run(scene, parameters, grid, todo, rows, file, client, workers, progress) -
         bar.update()
 
     try:
-        if not todo:
+        if first is not None:
+            done(*first)
+        if not todo and first is None:
             return ""
         if client is not None:
             _run_dask(tasks, scene.source, client, done)
             return f"on the Dask cluster at {client.scheduler.address}"
-        n = min(workers or os.cpu_count() or 1, len(todo))
-        if n == 1:
-            _run_serial(tasks, scene.source, done)
-            return "serially"
-        _run_processes(tasks, scene.source, n, done)
-        return f"in {n} local processes"
+        if pool is not None:
+            _run_processes(tasks, scene.source, pool, done)
+            return f"in {n} local processes"
+        _run_serial(tasks, scene.source, done)
+        return "serially"
     finally:
         bar.close()
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
