@@ -19,6 +19,7 @@ Cross-checks, by property:
 
 import json
 import math
+import multiprocessing
 import os
 import socket
 import subprocess
@@ -507,6 +508,35 @@ def test_an_unexpected_exception_is_a_row_not_a_lost_sweep(monkeypatch):
     monkeypatch.setattr(coilrod.scene.runner, "run_scene", broken)
     result = sweep(scene_with(), {"robot.youngs_modulus": "1 MPa:2 MPa:2"}, workers=1)
     assert [r["error"] for r in result.rows] == ["RuntimeError: something broke", ""]
+
+
+_SOLVE_POINT = sweep_module.solve_point
+
+
+def crashing_at_2_mpa(data, source="<embedded>"):
+    """``solve_point``, but the process dies (out of memory, a segfault) at E = 2 MPa."""
+    if data["robot"]["youngs_modulus"] == "2000000.0 Pa":
+        os._exit(3)
+    return _SOLVE_POINT(data, source)
+
+
+@pytest.mark.skipif(
+    multiprocessing.get_start_method() != "fork", reason="the crash is patched in by forking"
+)
+def test_a_worker_process_that_dies_gives_rows_with_the_error(monkeypatch, tmp_path):
+    monkeypatch.setattr(sweep_module, "solve_point", crashing_at_2_mpa)
+    grid = {"robot.youngs_modulus": "1 MPa:2 MPa:5"}
+    result = sweep(scene_with(), grid, workers=2, out=tmp_path)
+    assert [r["point"] for r in result.rows] == [0, 1, 2, 3, 4]
+    assert result.rows[0]["error"] == ""  # solved before the pool started
+    assert result.rows[4]["error"].startswith("worker process: BrokenProcessPool")
+    good = [r for r in result.rows if not r["error"]]
+    assert all(r["rod_ideal_converged"] for r in good)
+    # resuming solves the points whose worker died again (and only those)
+    monkeypatch.setattr(sweep_module, "solve_point", _SOLVE_POINT)
+    resumed = sweep(scene_with(), grid, out=tmp_path, resume=True)
+    assert resumed.solved == len(result.failed)
+    assert resumed.rows == sweep(scene_with(), grid).rows
 
 
 def test_cli_reports_failed_points_exit_1(coil_file, tmp_path, capsys):

@@ -195,7 +195,8 @@ class SweepFile:
             self._fh = None
 
     def rewrite(self, rows: list[dict]) -> None:
-        """Replace the file by ``rows`` (in their order) at once (a temporary file, renamed)."""
+        """Replace the file by ``rows`` (in their order) at once (a temporary file, renamed);
+        :meth:`open` then appends to it."""
         self.close()
         fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=".sweep-", suffix=".csv")
         try:
@@ -203,6 +204,7 @@ class SweepFile:
                 fh.write(self._line({c: c for c in self.columns}))
                 fh.writelines(self._line(r) for r in rows)
             os.replace(tmp, self.path)
+            self._keep = self.path.stat().st_size
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
             raise
