@@ -9,6 +9,7 @@ from . import _moved  # noqa: F401  (old 0.1 module paths stay importable)
 from .control import ControlResult, solve_currents
 from .design.optimize import MagnetizationDesign, optimize_magnetization
 from .design.sensitivity import Sensitivities, SingularStateError, sensitivities
+from .design.sweep import SweepResult, sweep  # dask is imported only for a cluster
 from .design.workspace import Workspace, workspace
 from .errors import ConvergenceError
 from .fem import solve_fem  # scikit-fem itself is imported lazily, inside the call
@@ -39,4 +40,6 @@ __all__ = [
     "MagnetizationDesign",
     "solve_currents",
     "ControlResult",
+    "sweep",
+    "SweepResult",
 ]

@@ -4,8 +4,8 @@
 validated completely (every problem at once, each on its own line), and the output folder is
 checked (``run``: created and test-written) before anything is solved.
 
-Exit codes: 0 success, 1 a solver could not reach its load, 2 invalid scene, unusable output
-folder or usage; 130 interrupted.
+Exit codes: 0 success, 1 a solver could not reach its load (``sweep``: a point failed), 2
+invalid scene, parameters, output folder, scheduler or usage; 130 interrupted.
 """
 
 from __future__ import annotations
@@ -36,6 +36,8 @@ examples:
   coilrod check my.toml                validate a scene and print what would run
   coilrod check my.toml --out results  ... and that the results can be written there
   coilrod run my.toml --out results    run it: tables (CSV, JSON), figures (PNG), summary
+  coilrod sweep my.toml --param field.coil.0.radius=60mm:120mm:4 --out sweep1
+                                       run it over a grid of values -> sweep1/sweep.csv
 """
 
 #: The demo's scenes: the seed's robot with M(1) and M(2a) in a real Helmholtz pair vs ideal.
@@ -211,6 +213,47 @@ def main(argv: list[str] | None = None) -> int:
         help="also check that results could be written to this folder (nothing is created)",
     )
 
+    p_sweep = sub.add_parser(
+        "sweep",
+        help="run a scene over a grid of parameter values",
+        description="Run a scene at every combination of the --param values (the first varying "
+        "slowest) and write one row per point to OUT/sweep.csv: the values (SI), each model's "
+        "tip in each field at the last load scale, the real-vs-ideal shift, converged, stable "
+        "and the error of a point that failed. Local processes by default; --scheduler runs on "
+        "an existing Dask cluster (pip install 'coilrod[cluster]').",
+    )
+    p_sweep.add_argument("scene", help="scene file (.toml) or the name of a shipped scene")
+    p_sweep.add_argument(
+        "--param",
+        action="append",
+        required=True,
+        metavar="KEY=START:STOP:N",
+        help="a scene key and N evenly spaced values with units, e.g. "
+        "field.coil.0.radius=60mm:120mm:4 or robot.youngs_modulus=0.5MPa:2MPa:4; repeat for "
+        "a grid",
+    )
+    p_sweep.add_argument("--out", type=Path, required=True, help="output folder (sweep.csv)")
+    p_sweep.add_argument(
+        "--workers",
+        metavar="N",
+        default=None,
+        help="local worker processes (default: one per CPU; 1: serially in this process)",
+    )
+    p_sweep.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        default=None,
+        help="run on the Dask cluster of this scheduler, e.g. tcp://10.0.0.5:8786",
+    )
+    p_sweep.add_argument(
+        "--resume", action="store_true", help="keep the points already in OUT/sweep.csv"
+    )
+    p_sweep.add_argument(
+        "--overwrite", action="store_true", help="replace an existing OUT/sweep.csv"
+    )
+    p_sweep.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    p_sweep.add_argument("--quiet", action="store_true", help="print only the summary")
+
     p_list = sub.add_parser(
         "scenes",
         help="list the shipped scenes",
@@ -266,6 +309,8 @@ def _command(args, load_scene, parse_scene) -> int:
     if args.command == "run":
         scene, out = prepare(args.scene, args.out, create_out=True)
         return _run(scene, out, args.quiet, args.no_cache, False if args.no_progress else None)
+    if args.command == "sweep":
+        return _sweep(args)
     if args.command == "demo":
         from .outputs import prepare_output_dir
 
@@ -282,6 +327,97 @@ def _command(args, load_scene, parse_scene) -> int:
             code = max(code, _run(scene, args.out / name, args.quiet, False, None))
         return code
     return 2
+
+
+def _sweep_options(args) -> tuple[dict, int | None, list[str]]:
+    """The --param values by key, --workers, and the problems of the options."""
+    problems = []
+    params: dict[str, str] = {}
+    for text in args.param:
+        key, sep, spec = text.partition("=")
+        if not sep or not key.strip():
+            problems.append(
+                f"--param {text!r}: expected KEY=START:STOP:N, e.g. "
+                "field.coil.0.radius=60mm:120mm:4"
+            )
+        elif key.strip() in params:
+            problems.append(f"--param {key.strip()}: given twice")
+        else:
+            params[key.strip()] = spec
+    workers = None
+    if args.workers is not None:
+        try:
+            workers = int(args.workers)
+        except ValueError:
+            workers = 0
+        if workers < 1:
+            problems.append(f"--workers: expected a whole number of at least 1; got {args.workers}")
+            workers = None
+        elif args.scheduler is not None:
+            problems.append(
+                "--workers: give either --workers (local processes) or --scheduler, not both"
+            )
+    return params, workers, problems
+
+
+def _sweep(args) -> int:
+    from ..design.sweep import sweep, sweep_parameters
+    from .outputs import prepare_output_dir
+    from .parse import SceneError, load_scene
+
+    params, workers, problems = _sweep_options(args)
+    scene = None
+    try:
+        scene = load_scene(_resolve_scene(args.scene))
+    except SceneError as exc:
+        problems = exc.problems + problems
+    if scene is not None and params:
+        try:
+            sweep_parameters(params, scene)
+        except SceneError as exc:
+            problems += exc.problems
+    try:
+        prepare_output_dir(args.out, create=False)
+    except SceneError as exc:
+        problems += exc.problems
+    if problems:
+        raise SceneError(problems)
+    try:
+        result = sweep(
+            scene,
+            params,
+            client=args.scheduler,
+            workers=workers,
+            out=args.out,
+            resume=args.resume,
+            overwrite=args.overwrite,
+            progress=False if (args.no_progress or args.quiet) else None,
+        )
+    except KeyboardInterrupt:
+        print(
+            f"coilrod: interrupted; the finished points are in {args.out / 'sweep.csv'} "
+            "(add --resume to continue)",
+            file=sys.stderr,
+        )
+        return 130
+    parts = []
+    if result.reused:
+        parts.append(f"{result.reused} from {result.path}")
+    if result.solved:
+        rate = f", {result.solved / result.seconds:.3g} points/s" if result.seconds > 0 else ""
+        parts.append(f"{result.solved} solved {result.executor} in {result.seconds:.1f} s{rate}")
+    print(
+        f"sweep of {scene.name}: {len(result)} points ({'; '.join(parts)}), "
+        f"{len(result.failed)} failed"
+    )
+    if not args.quiet:
+        for row in result.failed[:5]:
+            values = ", ".join(f"{p.column} = {row[p.column]}" for p in result.parameters)
+            print(f"  point {row['point']} ({values}): {row['error']}")
+        if len(result.failed) > 5:
+            print(f"  ... and {len(result.failed) - 5} more (the error column of the file)")
+        print(f"wrote {result.path}")
+    return 1 if result.failed else 0
 
 
 if __name__ == "__main__":

@@ -29,6 +29,7 @@ __all__ = [
     "MAX_FEM_ELEMENT_STEPS",
     "MAX_SCALE",
     "MAX_MAGNETOELASTIC",
+    "MAX_SWEEP_POINTS",
 ]
 
 
@@ -81,3 +82,6 @@ MAX_FEM_ELEMENT_STEPS = {2: 200_000, 3: 20_000}
 #: the top load: beyond it the rod simply lines up with the field within a boundary layer of
 #: width L / sqrt(lambda) at the clamp, which no default mesh resolves.
 MAX_MAGNETOELASTIC = 1e4
+#: Points of a sweep (the product of the value counts): a day of 0.1 s rod points on one core,
+#: and the rows of a CSV file a spreadsheet or pandas still reads at once.
+MAX_SWEEP_POINTS = 1_000_000

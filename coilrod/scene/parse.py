@@ -33,6 +33,7 @@ Example (``coilrod/scene/examples/helmholtz_vs_ideal.toml``)::
 
 from __future__ import annotations
 
+import copy
 import math
 import re
 import tomllib
@@ -134,6 +135,8 @@ class Scene:
         ``figures`` and ``tables`` booleans.
     source : str
         Where the scene came from (path or "<embedded>").
+    data : dict or None
+        A copy of the TOML data the scene was parsed from (what :func:`coilrod.sweep` varies).
     """
 
     name: str
@@ -148,6 +151,7 @@ class Scene:
     description: str = ""
     source: str = "<embedded>"
     poisson_ratio: float | None = None
+    data: dict | None = field(default=None, repr=False, compare=False)
 
 
 # -- collecting problems -------------------------------------------------------------------------
@@ -1080,6 +1084,7 @@ def parse_scene(data: dict, source: str = "<embedded>") -> Scene:
         description=description,
         source=source,
         poisson_ratio=nu,
+        data=copy.deepcopy(data),
     )
     from .checks import scene_problems
 

@@ -9,7 +9,15 @@ from __future__ import annotations
 import math
 import re
 
-__all__ = ["UnitError", "parse_quantity", "DIMENSIONS", "short_int"]
+__all__ = [
+    "UnitError",
+    "parse_quantity",
+    "read_quantity",
+    "dimension_of",
+    "DIMENSIONS",
+    "SI_UNITS",
+    "short_int",
+]
 
 
 class UnitError(ValueError):
@@ -26,6 +34,8 @@ DIMENSIONS: dict[str, dict[str, float]] = {
     "current": {"A": 1.0, "mA": 1e-3, "kA": 1e3},
     "angle": {"rad": 1.0, "deg": math.pi / 180, "°": math.pi / 180},
 }
+#: The SI unit of each dimension (factor 1 in :data:`DIMENSIONS`).
+SI_UNITS = {dim: next(u for u, f in units.items() if f == 1.0) for dim, units in DIMENSIONS.items()}
 
 _NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _RE = re.compile(rf"^\s*(?P<num>{_NUMBER})\s*(?P<unit>\S*)\s*$")
@@ -93,6 +103,65 @@ def parse_quantity(value, dimension: str, key: str = "value") -> float:
     if not math.isfinite(result):
         raise UnitError(f"{key}: {value!r} is not finite")
     return result
+
+
+def dimension_of(unit: str) -> str | None:
+    """The dimension whose units include ``unit`` (None if none does).
+
+    Examples
+    --------
+    >>> dimension_of("kA/m"), dimension_of("mm"), dimension_of("furlong")
+    ('magnetization', 'length', None)
+    """
+    return next((dim for dim, units in DIMENSIONS.items() if unit in units), None)
+
+
+def read_quantity(value: str, key: str = "value") -> tuple[float, str | None]:
+    """Read ``"60 mm"`` (any known unit) or ``"0.2"`` (a plain number) without knowing the
+    dimension beforehand.
+
+    Parameters
+    ----------
+    value : str
+        A number, optionally followed by a unit of one of :data:`DIMENSIONS`.
+    key : str
+        What the value is for, for the error message.
+
+    Returns
+    -------
+    (float, str or None)
+        The value in SI units and its dimension (None for a plain number).
+
+    Raises
+    ------
+    UnitError
+        If ``value`` is not a number with an optional unit, or the unit is unknown.
+
+    Examples
+    --------
+    >>> read_quantity("60 mm")
+    (0.06, 'length')
+    >>> read_quantity("0.25")
+    (0.25, None)
+    """
+    match = _RE.match(value) if isinstance(value, str) else None
+    if not match:
+        raise UnitError(
+            f"{key}: cannot read {value!r} as a number with an optional unit, e.g. '40 mm'"
+        )
+    number, unit = float(match["num"]), match["unit"]
+    if not math.isfinite(number):
+        raise UnitError(f"{key}: {value!r} is not finite")
+    if not unit:
+        return number, None
+    dim = dimension_of(unit)
+    if dim is None:
+        known = ", ".join(u for units in DIMENSIONS.values() for u in units)
+        raise UnitError(f"{key}: unknown unit {unit!r} in {value!r} (known units: {known})")
+    result = number * DIMENSIONS[dim][unit]
+    if not math.isfinite(result):
+        raise UnitError(f"{key}: {value!r} is not finite")
+    return result, dim
 
 
 #: A typical value of each dimension, quoted in error messages.
