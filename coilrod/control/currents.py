@@ -143,7 +143,12 @@ def _uniform_start(rod, goal, with_angle, steps, opts, b_cap):
     )
     dist = np.linalg.norm(grid.tips[:, 1:, :2] - goal[:2], axis=2)
     dist = np.where(grid.stable[:, 1:], dist, np.inf)
-    d, j = np.unravel_index(np.argmin(dist + 1e-3 * L * np.arange(1, 9) / 8), dist.shape)
+    # among the grid states near the closest one, the weakest field: the minimum-power answer
+    # is sought, and a strong field reaching the same tip (a rod curled further) is a
+    # different, costlier solution
+    near = dist <= max(2.0 * dist.min(), dist.min() + 0.03 * L)
+    field = np.broadcast_to(grid.magnitudes[1:], dist.shape)
+    d, j = np.unravel_index(np.argmin(np.where(near, field + 1e-9 * dist, np.inf)), dist.shape)
     b0 = grid.magnitudes[j + 1]
     x0 = np.array([math.cos(grid.directions[d]), math.sin(grid.directions[d])])  # units b0
     cache = {}
@@ -347,7 +352,9 @@ def solve_currents(
         return J[rows] * wts[:, None]
 
     solves, history, best = 0, [], None
-    for _ in range(max_iter):
+
+    def evaluate(I):
+        nonlocal solves, best
         try:
             res = _forward(rod, field_of(I), steps, opts)
         except ConvergenceError as err:
@@ -363,21 +370,53 @@ def solve_currents(
         history.append(miss)
         if best is None or np.linalg.norm(r) < best[0]:
             best = (float(np.linalg.norm(r)), I.copy(), res)
+        return res, r, miss
+
+    res, r, miss = evaluate(I)
+    far = 1e-3 * L  # beyond this miss, steps restore the target first (with a line search)
+    root = np.sqrt(weights)
+
+    def restoring(J, r):  # the least weighted correction towards the target
+        return (np.linalg.pinv(J / root) @ -r) / root
+
+    def least_power(J, r):  # the minimum-power currents of the linearised target
+        sol = minimum_power(J, J @ I - r, weights, limits)
+        if sol.currents is not None:
+            return sol.currents - I
+        from scipy.optimize import lsq_linear  # out of reach: least squares within limits
+
+        return lsq_linear(J, J @ I - r, bounds=(-limits, limits)).x - I
+
+    for _ in range(max_iter):
         if miss <= tol and (not with_angle or abs(r[2]) <= tol / L):
             break
         J = jacobian(res)
-        sol = minimum_power(J, J @ I - r, weights, limits)
-        if sol.currents is not None:
-            new = sol.currents
-        else:  # the linearised target is out of reach: the least-squares step within limits
-            from scipy.optimize import lsq_linear
+        # near the target the minimum-power step (whose fixed point is the minimum-power
+        # solution); far from it, or if that step fails, the restoring step
+        kinds = [least_power, restoring] if miss <= far else [restoring]
+        moved = False
+        for kind in kinds:
+            step = kind(J, r)
+            t = _room(I, step, limits)
+            if t < 0.1:  # a channel at its limit blocks the step: a step within the limits
+                from scipy.optimize import lsq_linear
 
-            new = lsq_linear(J, J @ I - r, bounds=(-limits, limits)).x
-        if np.allclose(new, I, rtol=1e-12, atol=1e-12 * max(limits.min(), 1.0)):
+                lo, hi = -limits - I, limits - I
+                step = lsq_linear(J, -r, bounds=(np.minimum(lo, 0.0), np.maximum(hi, 0.0))).x
+                t = _room(I, step, limits)
+            if not np.any(step) or t <= 0.0:
+                continue
+            for _trial in range(4):  # backtrack while the miss grows, or leaves the near zone
+                trial = np.clip(I + t * step, -limits, limits)
+                res_t, r_t, miss_t = evaluate(trial)
+                if miss_t < miss or (miss <= far and miss_t <= far):
+                    I, res, r, miss, moved = trial, res_t, r_t, miss_t, True
+                    break
+                t /= 2
+            if moved:
+                break
+        if not moved:
             break
-        if len(history) > 1 and history[-1] > history[-2]:  # the last step overshot: shorten
-            new = best[1] + 0.5 * (new - best[1])
-        I = new
     _, I, res = best
     return _finish(
         rod,
@@ -394,6 +433,13 @@ def solve_currents(
         start_solves,
         history,
     )
+
+
+def _room(I, step, limits) -> float:
+    """Largest t <= 1 with |I + t step| <= limits."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        room = np.where(step != 0, (limits - np.sign(step) * I) / np.abs(step), np.inf)
+    return float(max(0.0, min(1.0, np.min(room))))
 
 
 def _fixed(system):
