@@ -239,3 +239,62 @@ def test_design_notebook():
         tip,
         atol=1e-6 * rod.length,
     )
+
+
+def _field_checked(system, points):
+    """The coil system's field, after checking it against magpylib's own loop kernel at the
+    given points (the rod's region): the reference solves then use it (a magpylib gradient by
+    differences inside solve_bvp would cost minutes)."""
+    from _magpylib_ref import magpylib_B
+
+    B = system.B(points)
+    np.testing.assert_allclose(B, magpylib_B(system, points), rtol=1e-9, atol=1e-12)
+    return system
+
+
+def test_control_notebook():
+    """Currents for targets: the real inverse's tips and the ideal controller's misses checked
+    by solve_bvp forward solves in fields checked against magpylib."""
+    import coils
+    from coilrod import presets
+
+    r = execute("control.ipynb")
+    L = presets.SEED_LENGTH
+    scales = np.linspace(0.1, 1.0, 10)
+    rod = presets.seed_rod(presets.M1())
+    helm = coils.presets.three_axis_helmholtz()
+    case = r["helmholtz_m1"]
+    region = np.column_stack([np.linspace(0, L, 9), np.linspace(0, 0.03, 9), np.zeros(9)])
+    real_tip = bvp_tip_continued(
+        rod, _field_checked(helm.with_currents(case["real"]), region), scales
+    )
+    np.testing.assert_allclose(real_tip, case["target"], atol=1e-6 * L)
+    ideal_tip = bvp_tip_continued(
+        rod, _field_checked(helm.with_currents(case["ideal"]), region), scales
+    )
+    assert np.linalg.norm(ideal_tip - case["target"]) == pytest.approx(case["ideal_miss"], rel=1e-3)
+    assert case["real_power"] == pytest.approx(helm.power(case["real"]), rel=1e-12)
+    hemi = r["hemisphere"]
+    system = coils.presets.eight_coil_hemisphere()
+    tip = bvp_tip_continued(rod, _field_checked(system.with_currents(hemi["real"]), region), scales)
+    np.testing.assert_allclose(tip, hemi["target"], atol=1e-6 * L)
+    # every real inverse lands; the ideal controller misses more with the hemisphere's close
+    # coils than with the Helmholtz systems
+    assert r["max_real_miss"] <= 1e-6 * L
+    pct = r["ideal_miss_pct"]
+    helm_max = max(v for k, v in pct.items() if k.startswith("three-axis"))
+    assert helm_max < 1.0
+    assert min(v for k, v in pct.items() if k.startswith("eight-coil")) > helm_max
+    # the miss falls steeply with the coil size (Helmholtz: 4th-order field error) and grows
+    # with the robot's distance from the centre
+    assert -6.0 < r["size_slope"] < -3.5
+    assert np.all(np.diff(r["size_miss"]) < 0)
+    assert np.all(np.diff(r["place_miss"]) > 0)
+    # the tip path: each target reached
+    compact = coils.presets.three_axis_helmholtz(radii=(0.05, 0.06, 0.07), max_current=30.0)
+    rod2 = presets.seed_rod(presets.M2(variant="a"))
+    k = len(r["path_targets"]) // 2
+    tip = bvp_tip_continued(
+        rod2, _field_checked(compact.with_currents(r["path_currents"][k]), region), scales
+    )
+    np.testing.assert_allclose(tip, r["path_targets"][k], atol=1e-6 * L)

@@ -252,7 +252,7 @@ def solve_currents(
         Gauss-Newton iterations.
     initial : array-like, shape (m,), optional
         Start currents, A (e.g. the previous target's along a tip path): the uniform-field
-        start is skipped.
+        start is skipped (and taken after all if the warm start does not reach the target).
 
     Returns
     -------
@@ -418,6 +418,25 @@ def solve_currents(
         if not moved:
             break
     _, I, res = best
+    if initial is not None and model == "real" and min(history) > tol:
+        # the warm start led astray (e.g. across a snap-through): start afresh, count both
+        out = solve_currents(
+            rod,
+            system,
+            goal[:2],
+            limits,
+            model,
+            angle=angle,
+            steps=steps,
+            clamp_position=clamp,
+            clamp_angle=opts["clamp_angle"],
+            nodes=nodes,
+            tol=tol,
+            max_iter=max_iter,
+        )
+        out.solves += solves
+        out.history = history + out.history
+        return out
     return _finish(
         rod,
         system,
