@@ -45,6 +45,26 @@ def test_design_example_runs(capsys):
     assert d["angles"].tip.shape == (4, 3)
 
 
+def test_control_example_runs():
+    """The steering example lands on its target: checked by solve_bvp with its currents."""
+    from rod_bvp_reference import bvp_tip_continued
+
+    text = README.read_text(encoding="utf-8")
+    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
+    control = next(b for b in blocks if "solve_currents(" in b)
+    namespace: dict = {}
+    exec(compile(blocks[0], "README.md", "exec"), namespace)  # noqa: S102
+    exec(compile(control, "README.md", "exec"), namespace)  # noqa: S102
+    rod, system, out, ideal = (namespace[k] for k in ("rod", "system", "out", "ideal"))
+    field = system.with_currents(out.currents)
+    tip = bvp_tip_continued(rod, field, np.linspace(0.1, 1.0, 10))
+    np.testing.assert_allclose(tip, [0.029, 0.025], atol=1e-6 * rod.length)
+    tip_ideal = bvp_tip_continued(
+        rod, system.with_currents(ideal.currents), np.linspace(0.1, 1.0, 10)
+    )
+    assert abs(np.linalg.norm(tip_ideal - [0.029, 0.025]) - ideal.miss) <= 1e-6 * rod.length
+
+
 def test_quick_start_test_command_is_what_ci_runs():
     text = README.read_text(encoding="utf-8")
     quick = re.search(r"## Quick start\n\n```bash\n(.*?)```", text, re.S).group(1).splitlines()
