@@ -52,7 +52,7 @@ def main():
         ideal = solve_currents(ROD, SYSTEM, target, model="ideal")
         count = [0]
 
-        def fun(I):
+        def fun(I, count=count, target=target):
             count[0] += 1
             return (tip(I) - target) / L
 
@@ -62,9 +62,8 @@ def main():
         miss_ours = np.linalg.norm(tip(ours.currents, 1e-12) - target) / L
         miss_ls = np.linalg.norm(tip(fit.x, 1e-12) - target) / L
         label = f"({target[0] * 1e3:.1f}, {target[1] * 1e3:.1f})"
-        out.append(
-            f"| {label} | solve_currents | {n_ours} ({ours.solves} real) | {t_ours:.2f} | {miss_ours:.1e} |"
-        )
+        row = f"| {label} | solve_currents | {n_ours} ({ours.solves} real) | {t_ours:.2f} | "
+        out.append(row + f"{miss_ours:.1e} |")
         out.append(f"| | least_squares, FD Jacobian | {count[0]} | {t_ls:.2f} | {miss_ls:.1e} |")
         out.append(f"| | ideal-field controller | 1 | | {ideal.miss / L:.1e} |")
         ratios_solves.append(count[0] / n_ours)
