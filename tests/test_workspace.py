@@ -220,3 +220,38 @@ class TestBadInput:
     def test_optimisation(self, kwargs, match):
         with pytest.raises(ValueError, match=match):
             optimize_magnetization(ROD, **({"b_max": 0.01} | kwargs))
+
+
+class TestUnreachedDirections:
+    def test_a_direction_that_stops_short_keeps_its_states_and_is_reported(self, monkeypatch):
+        """A real-coil direction whose path cannot be followed to b_max (forced here: the
+        solver gives up half-way) keeps the states it reached, its cells beyond are left out,
+        and the event says so; the other directions are untouched."""
+        import coilrod.design.workspace as W
+        from coilrod import ConvergenceError
+
+        system = coils.presets.three_axis_helmholtz()
+        kw = dict(directions=8, magnitudes=4, system=system)
+        full = workspace(ROD, 0.01, **kw)
+        real = W._solve_direction
+
+        def stops_half_way(rod, field, scales, *args):
+            res = real(rod, field, scales, *args)
+            if abs(field.currents[0]) < 1e-9 and field.currents[1] > 0:  # the +y direction
+                part = real(rod, field, scales[:2], *args)
+                err = ConvergenceError("gave up", reached=float(scales[1]), target=float(scales[2]))
+                err.result = part
+                raise err
+            return res
+
+        monkeypatch.setattr(W, "_solve_direction", stops_half_way)
+        ws = workspace(ROD, 0.01, **kw)
+        d = 2  # 90 deg
+        np.testing.assert_allclose(ws.tips[d, :3], full.tips[d, :3], atol=1e-12)
+        assert np.isnan(ws.tips[d, 3:]).all()
+        assert not ws.cells[d, 2:].any()
+        assert not ws.cells[d - 1, 2:].any()
+        assert [e["kind"] for e in ws.events if e["direction"] == d] == ["unreached"]
+        others = [i for i in range(8) if i not in (d - 1, d)]
+        np.testing.assert_array_equal(ws.cells[others], full.cells[others])
+        assert ws.area < full.area
