@@ -223,13 +223,12 @@ def _solution(result):
     return sol
 
 
-def _check_wrt(result, wrt) -> list[str]:
-    have = available(result)
+def _groups(wrt, have: list[str], what: str) -> list[str]:
+    """The requested parameter groups (default: all the state has), validated: ValueError for
+    an unknown group or one the state (described by ``what``) does not have."""
     if wrt is None:
-        return have
-    if isinstance(wrt, str):
-        wrt = (wrt,)
-    wrt = list(wrt)
+        return list(have)
+    wrt = [wrt] if isinstance(wrt, str) else list(wrt)
     if not wrt:
         raise ValueError("wrt must name at least one parameter group")
     for name in wrt:
@@ -238,12 +237,14 @@ def _check_wrt(result, wrt) -> list[str]:
                 f"unknown parameter group {name!r}; the groups are {sorted(PARAMETER_GROUPS)}"
             )
         if name not in have:
-            sol = _solution(result)
-            raise ValueError(
-                f"this state has no parameter {name!r} (rod magnetization "
-                f"{sol.rod.magnetization!r}, field {type(sol.field).__name__}); it has {have}"
-            )
+            raise ValueError(f"this state has no parameter {name!r} ({what}); it has {have}")
     return list(dict.fromkeys(wrt))
+
+
+def _check_wrt(result, wrt) -> list[str]:
+    sol = _solution(result)
+    what = f"rod magnetization {sol.rod.magnetization!r}, field {type(sol.field).__name__}"
+    return _groups(wrt, available(result), what)
 
 
 # -- the computation ----------------------------------------------------------------------------
@@ -425,20 +426,7 @@ def _fem_sensitivities(result, k: int, wrt) -> Sensitivities:
 
     asm = result._asm
     rod = asm.rod
-    have = _fem_available(result)
-    groups = have if wrt is None else ([wrt] if isinstance(wrt, str) else list(dict.fromkeys(wrt)))
-    if not groups:
-        raise ValueError("wrt must name at least one parameter group")
-    for g in groups:
-        if g not in PARAMETER_GROUPS:
-            raise ValueError(
-                f"unknown parameter group {g!r}; the groups are {sorted(PARAMETER_GROUPS)}"
-            )
-        if g not in have:
-            raise ValueError(
-                f"this FEM state has no parameter {g!r} (field {type(asm.field).__name__}); "
-                f"it has {have}"
-            )
+    groups = _groups(wrt, _fem_available(result), f"FEM, field {type(asm.field).__name__}")
     z, s = result._states[k], float(result.scales[k])
     problem = FEMProblem(asm, 1e-8, 1e-8)
     lin = problem.linearize(z, s)
