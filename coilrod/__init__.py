@@ -6,6 +6,7 @@ models) driven by ``path`` (the one path-following engine) -> results; ``design`
 """
 
 from . import _moved  # noqa: F401  (old 0.1 module paths stay importable)
+from .design.calibrate import Calibration, IdentifiabilityError, calibrate
 from .design.optimize import MagnetizationDesign, optimize_magnetization
 from .design.sensitivity import Sensitivities, SingularStateError, sensitivities
 from .design.workspace import Workspace, workspace
@@ -36,4 +37,7 @@ __all__ = [
     "Workspace",
     "optimize_magnetization",
     "MagnetizationDesign",
+    "calibrate",
+    "Calibration",
+    "IdentifiabilityError",
 ]
