@@ -7,6 +7,7 @@ models) driven by ``path`` (the one path-following engine) -> results; ``design`
 
 from . import _moved  # noqa: F401  (old 0.1 module paths stay importable)
 from .control import ControlResult, solve_currents
+from .design.calibrate import Calibration, IdentifiabilityError, calibrate
 from .design.optimize import MagnetizationDesign, optimize_magnetization
 from .design.sensitivity import Sensitivities, SingularStateError, sensitivities
 from .design.sweep import SweepResult, sweep  # dask is imported only for a cluster
@@ -42,4 +43,7 @@ __all__ = [
     "ControlResult",
     "sweep",
     "SweepResult",
+    "calibrate",
+    "Calibration",
+    "IdentifiabilityError",
 ]

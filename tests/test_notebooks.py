@@ -298,3 +298,76 @@ def test_control_notebook():
         rod2, _field_checked(compact.with_currents(r["path_currents"][k]), region), scales
     )
     np.testing.assert_allclose(tip, r["path_targets"][k], atol=1e-6 * L)
+def _zhao_data(case: str):
+    """The Zhao et al. (2019) points of ``case`` read straight from the shipped CSV."""
+    import csv
+
+    lines = (NOTEBOOKS / "data" / "zhao2019_beam.csv").read_text().splitlines()
+    rows = [r for r in csv.DictReader(x for x in lines if not x.startswith("#"))]
+    rows = [r for r in rows if r["case"] == case]
+    return (
+        np.array([float(r["B_applied_mT"]) for r in rows]) * 1e-3,
+        np.array([float(r["delta_over_L"]) for r in rows]),
+    )
+
+
+def test_calibration_notebook():
+    import coils
+    from coilrod import Magnetization, Rectangle, Rod, solve_rod
+
+    r = execute("calibration.ipynb")
+    L = 17.2e-3
+    B, measured = _zhao_data("perp_90deg")
+    assert B.size == 13
+    np.testing.assert_array_equal(r["measured"], measured)
+
+    def rod(E, M=0.143 / mu_0):
+        return Rod(L, E, Rectangle(width=5e-3, thickness=0.84e-3), Magnetization(M, 0.0))
+
+    def tips(E, field_angle=0.0, B=B, direction=(0.0, 1.0)):
+        """Tip y of independent solves, one per field from zero (not one path)."""
+        out = []
+        for b in B:
+            c, s = np.cos(field_angle), np.sin(field_angle)
+            Bx, By = b * direction[0], b * direction[1]
+            field = coils.UniformField(B=(c * Bx - s * By, s * Bx + c * By, 0.0))
+            out.append(solve_rod(rod(E), field, [1.0], tol=1e-12).tip[0, 1] if b else 0.0)
+        return np.array(out)
+
+    E = r["E"]
+    assert r["magnitude"] == pytest.approx(0.143 / mu_0, rel=1e-12)
+    # the fitted E reproduces the notebook's residuals in independent solves
+    tip = tips(E)
+    np.testing.assert_allclose(r["residuals"], tip - measured * L, rtol=0, atol=1e-9 * L)
+    # and it is the least-squares minimum: the sum of squares rises either side of it
+    ssr = {f: np.sum((tips(E * f) - measured * L) ** 2) for f in (1 - 1e-3, 1.0, 1 + 1e-3)}
+    assert ssr[1.0] < ssr[1 - 1e-3]
+    assert ssr[1.0] < ssr[1 + 1e-3]
+    # standard error: sqrt(s^2 / J.J) with J by central differences of independent solves
+    h = 1e-4 * E
+    J = (tips(E + h) - tips(E - h)) / (2 * h)
+    se = np.sqrt(ssr[1.0] / (B.size - 1) / (J @ J))
+    assert r["E_se"] == pytest.approx(se, rel=1e-4)
+    assert r["G"] == pytest.approx(E / 3, rel=1e-12)
+    assert r["G_se"] == pytest.approx(se / 3, rel=1e-4)
+    # against the literature value G = 303 kPa, loosely (digitised data, a model of the beam)
+    assert abs(r["G"] / 303e3 - 1) < 0.1
+    assert r["G_se"] < 0.05 * r["G"]
+    # E and |M| together raised; doubling |M| doubles E (lambda ~ |M| / E)
+    assert r["both_raised"] is True
+    assert r["ratio_2M"] == pytest.approx(2.0, rel=1e-6)
+    # the 2D plane-stress FEM agrees with the rod to well below the residuals
+    assert r["fem_gap"] < 0.01
+    assert r["fem_gap"] < np.sqrt(np.mean(np.square(r["residuals"]))) / L
+    # the 180-degree prediction: independent solves with the stated misalignment, and the
+    # critical field of the perfect rod, lambda = pi^2 / 4
+    B180, d180 = _zhao_data("antiparallel_180deg")
+    pred = tips(E, r["alpha180"], B180, (-1.0, 0.0)) / L
+    np.testing.assert_allclose(r["pred180"], pred, rtol=0, atol=1e-8)
+    EI = E * 5e-3 * 0.84e-3**3 / 12
+    B_crit = np.pi**2 / 4 * EI / (0.143 / mu_0 * 5e-3 * 0.84e-3 * L**2)
+    assert r["B_crit"] == pytest.approx(B_crit, rel=1e-12)
+    assert B_crit < B180[1]  # every non-zero field of the data is past buckling
+    far = B180 > 9e-3
+    assert np.abs(pred[far] - d180[far]).max() < 0.02
+    assert r["E180"] / E == pytest.approx(1.12, abs=0.03)
