@@ -298,6 +298,8 @@ def test_control_notebook():
         rod2, _field_checked(compact.with_currents(r["path_currents"][k]), region), scales
     )
     np.testing.assert_allclose(tip, r["path_targets"][k], atol=1e-6 * L)
+
+
 def _zhao_data(case: str):
     """The Zhao et al. (2019) points of ``case`` read straight from the shipped CSV."""
     import csv
