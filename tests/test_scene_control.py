@@ -550,3 +550,30 @@ def test_control_scenes_are_not_swept(tmp_path):
 
     with pytest.raises(SceneError, match="cannot be swept yet"):
         sweep(shipped_scenes()["control_three_axis"], {"robot.length": "30 mm:40 mm:2"})
+
+
+# -- the README's control scene --------------------------------------------------------------
+def test_readme_control_scene_is_the_example_and_its_output(example):
+    import re
+    import tomllib
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    block = next(b for b in re.findall(r"```toml\n(.*?)```", text, re.S) if "[control]" in b)
+    shipped = load_scene(shipped_scenes()["control_three_axis"])
+    data = {"robot": shipped.data["robot"], **tomllib.loads(block)}
+    scene = parse_scene(data)
+    same_system(scene.fields["coils"], shipped.fields["coils"])
+    np.testing.assert_array_equal(scene.control.target, shipped.control.target)
+    assert scene.control.models == shipped.control.models
+    # every line of the printed table it shows (but "...") is in the example's output
+    _, out, summary, _ = example
+    ideal = next(r for r in summary["runs"] if r["model"] == "ideal")
+    mm, percent = re.search(r"\(here ([\d.]+) mm, ([\d.]+) % of L\)", text).groups()
+    assert f"{ideal['miss_mm']:.2f}" == mm
+    assert f"{ideal['miss_percent_L']:.1f}" == percent
+    printed = {" ".join(line.split()) for line in out.splitlines()}
+    shown = re.search(r"prints one column per controller:\n```\n(.*?)```", text, re.S).group(1)
+    for line in shown.splitlines():
+        if "..." not in line:
+            assert " ".join(line.split()) in printed, line
