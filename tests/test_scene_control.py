@@ -153,6 +153,24 @@ class TestAgainstTheLibrary:
         assert result.channels == ("coil[0] helmholtz +x", "coil[1] helmholtz +y")
 
 
+def test_coils_without_copper_have_no_power(tmp_path):
+    # listed coils without wire_diameter have no resistance: the power is "n/a" (null in the
+    # JSON, never NaN), and the minimum-power weighting falls back to sum I^2
+    coil = {"type": "helmholtz", "radius": "90 mm", "turns": 150}
+    data = control_with(
+        field={"preset": None, "coil": [{**coil, "axis": "x"}, {**coil, "axis": "y"}]},
+        control={"max_current": "8 A", "model": "ideal"},
+    )
+    result = plan_and_run(parse_scene(data))
+    assert result.ok
+    power = next(ln for ln in result.summary().splitlines() if "power (W)" in ln)
+    assert power.split() == ["power", "(W)", "n/a"]
+    result.write(tmp_path)
+    run = json.loads((tmp_path / "control.json").read_text())["runs"][0]
+    assert run["power_W"] is None
+    assert len(run["currents_A"]) == 2
+
+
 def plan_and_run(scene):
     from coilrod.scene.runner import run_scene
 

@@ -212,7 +212,7 @@ class ControlSceneResult:
                 writer.writerows(rows)
             written.append(path)
             path = out / "control.json"
-            path.write_text(json.dumps(self._json(), indent=2, allow_nan=False))
+            path.write_text(json.dumps(_finite(self._json()), indent=2, allow_nan=False))
             written.append(path)
         if self.scene.outputs.get("figures", True):
             import matplotlib.pyplot as plt
@@ -281,6 +281,17 @@ def _unmet(out: ControlResult, spec, rod) -> str:
     if out.angle_miss is not None:
         text += f" and {math.degrees(out.angle_miss):.3g} deg from the target angle"
     return text + " (the least-squares compromise within the current limits)"
+
+
+def _finite(obj):
+    """``obj`` with every non-finite float replaced by None (JSON has no NaN)."""
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_finite(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
 
 
 def _column(name: str) -> str:
