@@ -50,7 +50,11 @@ def test_valid_scene_builds_objects():
         ("robot.colour", "red", "robot.colour: unknown key"),
         ("robot.youngs_modulus", "0 Pa", "robot.youngs_modulus: must be positive"),
         ("robot.magnetization", {"preset": "M9"}, "unknown preset 'M9'"),
-        ("field.type", "rotating", "field.type: expected 'uniform', 'gradient' or 'coils'"),
+        (
+            "field.type",
+            "rotating",
+            "field.type: expected 'uniform', 'gradient', 'coils' or 'system'",
+        ),
         ("field.B", "5 T/m", "unknown unit 'T/m' for a flux density"),
         ("load.steps", 0, "load.steps: must be positive"),
         ("load.steps", 2.5, "load.steps: expected an integer"),

@@ -36,6 +36,11 @@ __all__ = ["sweep", "SweepResult", "Parameter", "sweep_parameters", "solve_point
 FILENAME = "sweep.csv"
 #: Errors of points whose worker died, not of the points: a resumed sweep solves them again.
 RETRIED = ("worker process:", "dask:")
+#: Why a control scene is not swept (its rows would be currents, not tips: not done yet).
+CONTROL_NOT_SWEPT = (
+    "control: a control scene ([control]) cannot be swept yet (a sweep row holds tips under a "
+    "given field); run it with 'coilrod run'"
+)
 
 
 @dataclass
@@ -320,7 +325,7 @@ def sweep(
     [27.0, 23.17, 20.01]
     """
     scene = _as_scene(scene)
-    problems: list[str] = []
+    problems: list[str] = [CONTROL_NOT_SWEPT] if scene.control is not None else []
     parameters: list[Parameter] = []
     try:
         parameters = sweep_parameters(params, scene)

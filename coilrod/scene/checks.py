@@ -8,7 +8,9 @@ and ``coilrod run`` stop at the same problems (:func:`coilrod.scene.parse_scene`
 - the magneto-elastic number at the top load stays within :data:`limits.MAX_MAGNETOELASTIC`;
 - the clamp and the undeformed robot keep clear of every coil winding, and the real field is
   finite on the undeformed centreline (the problem names the coil);
-- FEM meshes resolve the magnetization segments and stay within the element limits.
+- FEM meshes resolve the magnetization segments and stay within the element limits;
+- a coil system under control (``field.type = "system"``) can make every in-plane field at its
+  centre, where the ideal controller takes its field, and that centre is off the windings.
 """
 
 from __future__ import annotations
@@ -187,7 +189,7 @@ def _clearance(scene, coil_keys) -> list[str]:
                 else f"the undeformed robot, at s = {_mm(s)} from the clamp,"
             )
             problems.append(
-                f"{c.key}: {where} touches the winding of this coil (the robot's body reaches "
+                f"{c.key}: {where} touches the winding of {c.what} (the robot's body reaches "
                 f"{_mm(r)} from its centreline); move the coil (center, radius, spacing) or "
                 "change the robot"
             )
@@ -245,6 +247,28 @@ def _fem(scene) -> list[str]:
     return problems
 
 
+def _control_system(scene, key) -> list[str]:
+    """A coil system under control: its centre off the windings, every in-plane field there."""
+    system = scene.fields["coils"]
+    where = ", ".join(_mm(c) for c in system.center)
+    try:
+        Bu, _ = system.unit_fields(np.asarray(system.center, float)[None])
+    except ValueError as exc:
+        return [
+            f"{key}: the system's centre ({where}), where the ideal controller takes its "
+            f"field, lies on a winding ({exc}); move the coils"
+        ]
+    plane = Bu[0, :2]
+    rank = int(np.linalg.matrix_rank(plane, tol=1e-12 * max(np.abs(Bu).max(), 1e-300)))
+    if rank < 2:
+        return [
+            f"{key}: the channels cannot make every in-plane field (B_x, B_y) at the system's "
+            f"centre ({where}): rank {rank} of 2, so no currents bend the robot every way; add "
+            "a coil or pair with its axis along x or y"
+        ]
+    return []
+
+
 def scene_problems(scene, coil_keys=(), strength_key: str = "field") -> list[str]:
     """Every reason a well-formed ``scene`` cannot be solved (empty: it can).
 
@@ -262,6 +286,9 @@ def scene_problems(scene, coil_keys=(), strength_key: str = "field") -> list[str
     list of str
         One line per problem, each starting with the key to change.
     """
+    if scene.field_kind == "system":  # the currents are to be found: no field strength yet
+        problems = _clearance(scene, list(coil_keys))
+        return problems or _control_system(scene, strength_key)
     zero = _zero_field(scene, list(coil_keys), strength_key)
     if zero:
         return zero

@@ -24,8 +24,9 @@ coilrod: how far do real Helmholtz and Maxwell coil pairs move a magnetic soft c
 robot away from what the ideal (uniform / constant-gradient) field predicts?
 
 A scene file (TOML) describes the robot, the field (ideal, or coils from Biot-Savart), the
-load path and the models (rod, fem2d, fem3d). Quantities carry units: "40 mm", "15 mT",
-"640 kA/m", "1 MPa", "0.4 T/m", "90 deg".
+load path and the models (rod, fem2d, fem3d); a control scene gives a coil system and a tip
+target ([control]) and finds the currents. Quantities carry units: "40 mm", "15 mT",
+"640 kA/m", "1 MPa", "0.4 T/m", "90 deg", "10 A".
 """
 
 EPILOG = """\
@@ -36,6 +37,7 @@ examples:
   coilrod check my.toml                validate a scene and print what would run
   coilrod check my.toml --out results  ... and that the results can be written there
   coilrod run my.toml --out results    run it: tables (CSV, JSON), figures (PNG), summary
+  coilrod run control_three_axis       the coil currents that put the tip on a target
   coilrod sweep my.toml --param field.coil.0.radius=60mm:120mm:4 --out sweep1
                                        run it over a grid of values -> sweep1/sweep.csv
 """
@@ -371,7 +373,11 @@ def _sweep(args) -> int:
         scene = load_scene(_resolve_scene(args.scene))
     except SceneError as exc:
         problems = exc.problems + problems
-    if scene is not None and params:
+    if scene is not None and scene.control is not None:
+        from ..design.sweep import CONTROL_NOT_SWEPT
+
+        problems.append(CONTROL_NOT_SWEPT)
+    elif scene is not None and params:
         try:
             sweep_parameters(params, scene)
         except SceneError as exc:

@@ -1,5 +1,6 @@
 """Figures of a scene's results: tip deflection against field strength, deformed shapes over
-the field map (with the uniformity contour of the real coils)."""
+the field map (with the uniformity contour of the real coils), and a control scene's shapes in
+the real field with the target."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import numpy as np
 
 from .strength import field_strength
 
-__all__ = ["plot_tip_vs_field", "plot_scene_shapes", "centerline_of"]
+__all__ = ["plot_tip_vs_field", "plot_scene_shapes", "plot_control_shapes", "centerline_of"]
 
 _STYLE = {"coils": "-", "ideal": "--"}
 _COLOR = {"rod": "tab:blue", "fem2d": "tab:orange", "fem3d": "tab:green"}
@@ -134,6 +135,67 @@ def plot_scene_shapes(result, ax=None, k: int = -1):
         )
     ax.plot([0, 1e3 * L], [0, 0], color="0.6", lw=1, label="undeformed")
     ax.plot(0, 0, "ks", ms=6)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.legend(fontsize=7, loc="best")
+    ax.set_title(scene.name, fontsize=10)
+    return ax
+
+
+_CONTROL_STYLE = {"real": ("-", "tab:blue"), "ideal": ("--", "tab:red")}
+
+
+def plot_control_shapes(result, ax=None):
+    """A control scene's shapes in the real field, one per controller (solid: the real-field
+    controller; dashed: the ideal one, its currents applied to the real field), with the target
+    (and its tip angle) marked, over the map of the real field made by the first controller's
+    currents (its deviation from ideal, with the 1% contour).  Returns the Axes."""
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=(6, 5))
+    scene, spec = result.scene, result.scene.control
+    L = scene.rod.length
+    target = np.asarray(spec.target, float)
+    shapes = [(r, r.result.result.centerline(-1)) for r in result.runs if r.result is not None]
+    pts = np.vstack(
+        [c[:, :2] for _, c in shapes] + [np.array([[0.0, 0.0], [L, 0.0]]), target[None]]
+    )
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    center = np.array([*(0.5 * (lo + hi)), 0.0])
+    half = 0.5 * float(np.max(hi - lo)) + 0.1 * L
+    currents = shapes[0][0].result.currents if shapes else None
+    if currents is not None and np.any(currents):
+        from coils.plot import plot_field_map
+
+        real = scene.fields["coils"].with_currents(currents)
+        plot_field_map(real, "xy", center=center, half_width=half, n=81, ax=ax, streamlines=True)
+    else:
+        ax.set_xlim(1e3 * (center[0] - half), 1e3 * (center[0] + half))
+        ax.set_ylim(1e3 * (center[1] - half), 1e3 * (center[1] + half))
+    for r, c in shapes:
+        style, color = _CONTROL_STYLE.get(r.model, (":", "k"))
+        state = " (closest found)" if r.error else ""
+        ax.plot(
+            1e3 * c[:, 0],
+            1e3 * c[:, 1],
+            style,
+            color=color,
+            lw=2,
+            label=f"{r.model} controller{state}, miss {1e3 * r.result.miss:.3g} mm",
+        )
+    ax.plot([0, 1e3 * L], [0, 0], color="0.6", lw=1, label="undeformed")
+    ax.plot(0, 0, "ks", ms=6)
+    ax.plot(*(1e3 * target), "kx", ms=10, mew=2, label="target")
+    if spec.angle is not None:
+        d = 0.15 * L * np.array([np.cos(spec.angle), np.sin(spec.angle)])
+        ax.annotate(
+            "",
+            xy=1e3 * (target + d),
+            xytext=1e3 * target,
+            arrowprops={"arrowstyle": "->", "color": "k"},
+        )
     ax.set_aspect("equal")
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")

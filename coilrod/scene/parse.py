@@ -8,6 +8,8 @@ their unit, keys that do not apply (a ``magnitude`` next to a ``preset``) are er
 number must lie in the ranges of :mod:`coilrod.scene.limits`.  Once the scene is well formed,
 :mod:`coilrod.scene.checks` makes sure it can be solved (a field that is not zero, a robot
 clear of the coil windings, FEM meshes that resolve the magnetization and fit in memory).
+A control scene -- a coil system as its field (``type = "system"``) and a ``[control]`` table
+with the tip target whose currents the scene finds -- is read by :mod:`coilrod.scene.control`.
 
 Example (``coilrod/scene/examples/helmholtz_vs_ideal.toml``)::
 
@@ -39,7 +41,7 @@ import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -51,6 +53,9 @@ from ..robot.rod import Rod
 from ..robot.sections import Circle, Rectangle
 from . import limits
 from .units import EXAMPLES, UnitError, parse_quantity, short_int
+
+if TYPE_CHECKING:
+    from .control import ControlSpec
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "MODELS", "PRESETS"]
 
@@ -70,6 +75,7 @@ PRESET_PARAMETERS = {
 _PRESET_KEYS = ("M0", "phi", "slope", "segment", "segment_angle")
 _COIL_TYPES = {"helmholtz": coils.HelmholtzPair, "maxwell": coils.MaxwellPair, "coil": coils.Coil}
 _COIL_NAMES = {"helmholtz": "Helmholtz pair", "maxwell": "Maxwell pair", "coil": "single coil"}
+_FIELD_TYPES = "'uniform', 'gradient', 'coils' or 'system'"
 
 
 #: Longest problem line (a value pasted by mistake is cut, not printed in full).
@@ -137,6 +143,10 @@ class Scene:
         Where the scene came from (path or "<embedded>").
     data : dict or None
         A copy of the TOML data the scene was parsed from (what :func:`coilrod.sweep` varies).
+    control : ControlSpec or None
+        The ``[control]`` table of a control scene (:mod:`coilrod.scene.control`): then
+        ``field_kind`` is "system", ``fields`` is ``{"coils": system}`` (the coil system at
+        0 A) and ``scales`` the load path of each forward solve.
     """
 
     name: str
@@ -152,6 +162,7 @@ class Scene:
     source: str = "<embedded>"
     poisson_ratio: float | None = None
     data: dict | None = field(default=None, repr=False, compare=False)
+    control: ControlSpec | None = None
 
 
 # -- collecting problems -------------------------------------------------------------------------
@@ -634,33 +645,30 @@ def _parse_robot(data, p: _Problems):
 
 @dataclass
 class _Coil:
-    """A parsed coil and the scene keys that describe it."""
+    """A parsed coil and the scene keys that describe it (``what``: the coil in messages)."""
 
     key: str
     coil: coils.Field
     strength_key: str
+    what: str = "this coil"
 
 
-def _parse_coil(data, key: str, p: _Problems):
+def _parse_coil(data, key: str, p: _Problems, *, control: bool = False):
+    """A coil table: at the current its ``current``, ``B`` or ``gradient`` gives; in a coil
+    system under control (``control``) at 0 A, with an optional ``wire_diameter``."""
     data = _table(data, key)
-    p.take(
-        _unknown_keys,
-        data,
-        key,
-        {
-            "type",
-            "radius",
-            "turns",
-            "current",
-            "B",
-            "gradient",
-            "axis",
-            "center",
-            "spacing",
-            "winding",
-            "filaments",
-        },
-    )
+    strengths = ("current", "B", "gradient")
+    geometry = {"type", "radius", "turns", "axis", "center", "spacing", "winding", "filaments"}
+    allowed = geometry | ({"wire_diameter"} if control else set(strengths))
+    if control:  # the currents are what the scene finds
+        for k in strengths:
+            if k in data:
+                p.add(
+                    f"{key}.{k}: not used in a coil system under control ([control] finds the "
+                    "currents); remove it"
+                )
+        allowed |= set(strengths)
+    p.take(_unknown_keys, data, key, allowed)
     kind = data.get("type", _MISSING)
     if kind is _MISSING:
         p.add(f"{key}.type: missing required key (one of {', '.join(_COIL_TYPES)})")
@@ -736,7 +744,20 @@ def _parse_coil(data, key: str, p: _Problems):
             )
     elif "filaments" in data:
         p.add(f"{key}.filaments: filaments model a finite winding; give winding too")
-    given = [k for k in ("current", "B", "gradient") if k in data]
+    if control:
+        if "wire_diameter" in data:
+            kwargs["wire_diameter"] = p.take(
+                _quantity, data, "wire_diameter", "length", key, kind="coil size", positive=True
+            )
+        if not _ok(kind, radius, turns, *kwargs.values()):
+            return _BAD
+        try:
+            coil = _COIL_TYPES[kind](radius, turns, 0.0, **kwargs)
+        except ValueError as exc:  # the coil classes' own checks
+            p.add(f"{key}: {exc}")
+            return _BAD
+        return _Coil(key, coil, key)
+    given = [k for k in strengths if k in data]
     strength = _BAD
     if len(given) != 1:
         p.add(
@@ -796,6 +817,7 @@ class _FieldInfo:
     kind: str
     coils: list[_Coil]
     strength_key: str
+    label: str = ""
 
 
 def _parse_field(data, p: _Problems):
@@ -859,9 +881,13 @@ def _parse_field(data, p: _Problems):
             fields["ideal"] = ideal
         strength_key = built[0].strength_key if len(built) == 1 else f"{key}.coil"
         return _FieldInfo(fields, "coils", built, strength_key)
+    if kind == "system":
+        from .control import parse_system
+
+        return parse_system(data, p)
     if kind is _MISSING:
-        raise SceneError(f"{key}.type: missing required key ('uniform', 'gradient' or 'coils')")
-    raise SceneError(f"{key}.type: expected 'uniform', 'gradient' or 'coils'; got {_show(kind)}")
+        raise SceneError(f"{key}.type: missing required key ({_FIELD_TYPES})")
+    raise SceneError(f"{key}.type: expected {_FIELD_TYPES}; got {_show(kind)}")
 
 
 def _parse_load(data, p: _Problems):
@@ -1001,6 +1027,29 @@ def _parse_outputs(data, p: _Problems):
     return {"figures": figures, "tables": tables} if _ok(figures, tables) else _BAD
 
 
+def _parse_control_scene(data: dict, robot, info, scales, models, p: _Problems):
+    """The ControlSpec of a control scene, and the keys that do not apply to one."""
+    from .control import parse_control
+
+    load = data.get("load", {})
+    for k in ("scales", "max_scale"):
+        if isinstance(load, dict) and k in load:
+            p.add(
+                f"load.{k}: not used in a control scene (each forward solve ramps the currents "
+                "from zero in load.steps equal steps); give load.steps only"
+            )
+            scales = _BAD
+    if _ok(models):
+        for i, m in enumerate(models):
+            if m != "rod":
+                p.add(
+                    f"models.run[{i}]: {m!r} is not used for control (the currents are found "
+                    "with the rod model); remove it"
+                )
+    steps = len(scales) if _ok(scales) else _BAD
+    return parse_control(data["control"], robot, info, steps, p)
+
+
 def parse_scene(data: dict, source: str = "<embedded>") -> Scene:
     """Validate a scene given as a dict (as read from TOML) and build its objects.
 
@@ -1049,7 +1098,18 @@ def parse_scene(data: dict, source: str = "<embedded>") -> Scene:
         _unknown_keys,
         data,
         "",
-        {"name", "description", "robot", "field", "load", "models", "rod", "fem", "output"},
+        {
+            "name",
+            "description",
+            "robot",
+            "field",
+            "load",
+            "models",
+            "rod",
+            "fem",
+            "output",
+            "control",
+        },
     )
     name = p.take(_text, data, "name", "", Path(source).stem)
     description = p.take(_text, data, "description", "", "")
@@ -1062,13 +1122,21 @@ def parse_scene(data: dict, source: str = "<embedded>") -> Scene:
     if "field" in data:
         info = p.take(_parse_field, data["field"], p)
     else:
-        p.add("field: missing required table (type = 'uniform', 'gradient' or 'coils')")
+        p.add(f"field: missing required table (type = {_FIELD_TYPES})")
     scales = p.take(_parse_load, data.get("load", {}), p)
     models = p.take(_parse_models, data.get("models", {"run": ["rod"]}), p)
     rod_options = p.take(_parse_rod_options, data.get("rod", {}), p)
     fem_options = p.take(_parse_fem_options, data.get("fem", {}), p)
     outputs = p.take(_parse_outputs, data.get("output", {}), p)
-    if p.lines or not _ok(robot, info, scales, models, rod_options, fem_options, outputs):
+    control = None
+    if "control" in data:
+        control = p.take(_parse_control_scene, data, robot, info, scales, models, p)
+    elif _ok(info) and info.kind == "system":
+        p.add(
+            "control: missing required table (e.g. target = ['20 mm', '30 mm']): a coil system "
+            "(field.type = 'system') has no currents until [control] finds them for a target"
+        )
+    if p.lines or not _ok(robot, info, scales, models, rod_options, fem_options, outputs, control):
         raise SceneError(p.lines or ["scene: invalid"])
     rod, nu = robot
     scene = Scene(
@@ -1085,6 +1153,7 @@ def parse_scene(data: dict, source: str = "<embedded>") -> Scene:
         source=source,
         poisson_ratio=nu,
         data=copy.deepcopy(data),
+        control=control,
     )
     from .checks import scene_problems
 

@@ -7,6 +7,7 @@ queried many times over the robot's reach, no scikit-fem import for rod-only sce
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,12 +42,15 @@ ITERATIONS_PER_STEP = 6
 
 @dataclass
 class Job:
-    """One solve: a model in one of the scene's fields."""
+    """One solve: a model in one of the scene's fields (``kind`` "solve"), or one controller of
+    a control scene (``kind`` "control": ``field_label`` is the controller, "real" or
+    "ideal", and ``field`` the coil system)."""
 
     model: str
     field_label: str
     field: coils.Field
     note: str = ""
+    kind: str = "solve"
 
 
 @dataclass
@@ -59,7 +63,12 @@ class Plan:
 
     def __str__(self) -> str:
         lines = ["plan:"]
-        lines += [f"  run   {j.model:6s} in {j.field_label:6s} field{j.note}" for j in self.jobs]
+        lines += [
+            f"  run   {j.model:6s} in {j.field_label:6s} field{j.note}"
+            if j.kind == "solve"
+            else f"  run   {j.model:6s} currents by the {j.field_label} controller{j.note}"
+            for j in self.jobs
+        ]
         lines += [f"  note  {d}" for d in self.decisions]
         return "\n".join(lines)
 
@@ -104,6 +113,60 @@ def _unused_options(scene: Scene) -> list[str]:
     return notes
 
 
+def _mm(x: float) -> str:
+    return f"{1e3 * x:.6g}"
+
+
+def _plan_control(scene: Scene) -> Plan:
+    """The controllers of a control scene, and what each does."""
+    spec = scene.control
+    system = scene.fields["coils"]
+    plan = Plan()
+    notes = {
+        "real": " (Gauss-Newton on the currents, each iteration a rod solve in the real "
+        "Biot-Savart field)",
+        "ideal": " (the system's field and gradient at its centre; its currents then solved "
+        "in the real field: the miss)",
+    }
+    for model in spec.models:
+        plan.jobs.append(Job("rod", model, system, notes[model], kind="control"))
+    limits = ", ".join(f"{v:g}" for v in spec.max_current)
+    m = len(system.names)
+    plan.decisions.append(
+        f"coil system: {spec.system}, {m} current channel{'s' if m > 1 else ''} "
+        f"({', '.join(system.names)}), limits {limits} A"
+    )
+    target = f"target: tip at ({_mm(spec.target[0])}, {_mm(spec.target[1])}) mm in the plane"
+    if spec.angle is not None:
+        target += (
+            f", tip angle {math.degrees(spec.angle):.6g} deg (three conditions: with fewer "
+            "independent in-plane controls the currents are the least-squares compromise, and "
+            "the misses say how far)"
+        )
+    plan.decisions.append(target)
+    nodes = scene.rod_options.get("nodes")
+    plan.decisions.append(
+        f"each rod solve ramps the currents from zero in {spec.steps} load steps"
+        + (f" on {nodes} rod segments" if nodes else "")
+    )
+    if "real" in spec.models:
+        plan.decisions.append(
+            "the real controller starts from the uniform-field answer (a coarse workspace of "
+            "uniform fields, then a least-squares fit) made at the centre with minimum power, "
+            "and steps with the exact (adjoint) current sensitivities"
+        )
+    n_fil = sum(len(p.filaments) for p in coaxial_parts(system))
+    plan.decisions.append(
+        f"coil field: Biot-Savart of {n_fil} filaments, evaluated directly (the currents "
+        "change at every iteration: no grid cache)"
+    )
+    plan.decisions.append(
+        "control uses the rod model only: no FEM solve, scikit-fem is not imported"
+    )
+    plan.decisions += _unused_options(scene)
+    return plan
+
+
 def plan_scene(scene: Scene, *, cache: bool | None = None) -> Plan:
     """Plan the solves of ``scene``.
 
@@ -112,8 +175,10 @@ def plan_scene(scene: Scene, *, cache: bool | None = None) -> Plan:
     scene : Scene
     cache : bool, optional
         Force (True) or forbid (False) the gridded field cache; default: decided from the
-        expected number of field queries.
+        expected number of field queries.  Control scenes (``scene.control``) never cache.
     """
+    if scene.control is not None:
+        return _plan_control(scene)
     plan = Plan()
     if scene.field_kind in ("uniform", "gradient"):
         plan.decisions.append("ideal field: no Biot-Savart evaluation")

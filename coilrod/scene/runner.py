@@ -268,9 +268,16 @@ def run_scene(
     """Plan (unless given) and run every job of ``scene``.
 
     A job that cannot reach its load is recorded with the solver's message (and whatever it
-    reached); the other jobs still run.  ``progress`` shows tqdm bars (default: when stderr is
+    reached); the other jobs still run.  A control scene (``scene.control``) runs its
+    controllers instead and returns a
+    :class:`~coilrod.scene.control_runner.ControlSceneResult` (same ``ok``, ``summary`` and
+    ``write``).  ``progress`` shows tqdm bars (default: when stderr is
     a terminal); ``log`` is a callable for one-line messages (default: none).
     """
+    if scene.control is not None:  # a control scene: the currents for its target
+        from .control_runner import run_control
+
+        return run_control(scene, plan=plan, log=log)
     plan = plan_scene(scene) if plan is None else plan
     progress = sys.stderr.isatty() if progress is None else progress
     result = SceneResult(scene, plan)
