@@ -137,6 +137,10 @@ class TestBadInput:
             ({"max_current": -1.0}, "max_current"),
             ({"max_current": np.nan}, "max_current"),
             ({"model": "linear"}, "model"),
+            ({"max_solves": 0}, "max_solves"),
+            ({"initial": (1.0, np.nan, 0.0)}, "initial"),
+            ({"initial": (1.0, 2.0)}, "initial"),
+            ({"initial": (20.0, 0.0, 0.0)}, "initial"),
         ],
     )
     def test_bad_arguments(self, kwargs, match):

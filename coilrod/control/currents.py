@@ -183,7 +183,7 @@ def _uniform_start(rod, goal, with_angle, steps, opts, b_cap):
         return J * wts[:, None] * b0
 
     fit = least_squares(
-        fun, x0, jac=jac, xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=60, x_scale="jac"
+        fun, x0, jac=jac, xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=30, x_scale="jac"
     )
     del fit
     return best[1] * b0, len(cache) + 1
@@ -222,6 +222,7 @@ def solve_currents(
     tol: float | None = None,
     max_iter: int = 15,
     initial=None,
+    max_solves: int = 40,
 ) -> ControlResult:
     """Currents of ``system`` that put the tip of ``rod`` on ``target``.
 
@@ -250,6 +251,9 @@ def solve_currents(
         Position tolerance, m (default 1e-7 L).
     max_iter : int
         Gauss-Newton iterations.
+    max_solves : int
+        Most forward solves of the iteration (its start excluded): a target that is not met
+        by then is reported unreachable with the closest tip found.
     initial : array-like, shape (m,), optional
         Start currents, A (e.g. the previous target's along a tip path): the uniform-field
         start is skipped (and taken after all if the warm start does not reach the target).
@@ -301,6 +305,8 @@ def solve_currents(
         system = system.with_limits(limits)
     L = rod.length
     tol = 1e-7 * L if tol is None else positive(tol, "tol")
+    if isinstance(max_solves, bool) or not isinstance(max_solves, int) or max_solves < 1:
+        raise ValueError(f"max_solves must be a positive integer; got {max_solves!r}")
     clamp = as_vector(clamp_position, "clamp_position")
     opts = dict(
         clamp_position=clamp, clamp_angle=finite_scalar(clamp_angle, "clamp_angle"), nodes=nodes
@@ -353,8 +359,13 @@ def solve_currents(
 
     solves, history, best = 0, [], None
 
+    class _Spent(Exception):
+        pass
+
     def evaluate(I):
         nonlocal solves, best
+        if solves >= max_solves:
+            raise _Spent
         try:
             res = _forward(rod, field_of(I), steps, opts)
         except ConvergenceError as err:
@@ -387,36 +398,39 @@ def solve_currents(
 
         return lsq_linear(J, J @ I - r, bounds=(-limits, limits)).x - I
 
-    for _ in range(max_iter):
-        if miss <= tol and (not with_angle or abs(r[2]) <= tol / L):
-            break
-        J = jacobian(res)
-        # near the target the minimum-power step (whose fixed point is the minimum-power
-        # solution); far from it, or if that step fails, the restoring step
-        kinds = [least_power, restoring] if miss <= far else [restoring]
-        moved = False
-        for kind in kinds:
-            step = kind(J, r)
-            t = _room(I, step, limits)
-            if t < 0.1:  # a channel at its limit blocks the step: a step within the limits
-                from scipy.optimize import lsq_linear
-
-                lo, hi = -limits - I, limits - I
-                step = lsq_linear(J, -r, bounds=(np.minimum(lo, 0.0), np.maximum(hi, 0.0))).x
-                t = _room(I, step, limits)
-            if not np.any(step) or t <= 0.0:
-                continue
-            for _trial in range(4):  # backtrack while the miss grows, or leaves the near zone
-                trial = np.clip(I + t * step, -limits, limits)
-                res_t, r_t, miss_t = evaluate(trial)
-                if miss_t < miss or (miss <= far and miss_t <= far):
-                    I, res, r, miss, moved = trial, res_t, r_t, miss_t, True
-                    break
-                t /= 2
-            if moved:
+    try:
+        for _ in range(max_iter):
+            if miss <= tol and (not with_angle or abs(r[2]) <= tol / L):
                 break
-        if not moved:
-            break
+            J = jacobian(res)
+            # near the target the minimum-power step (whose fixed point is the minimum-power
+            # solution); far from it, or if that step fails, the restoring step
+            kinds = [least_power, restoring] if miss <= far else [restoring]
+            moved = False
+            for kind in kinds:
+                step = kind(J, r)
+                t = _room(I, step, limits)
+                if t < 0.1:  # a channel at its limit blocks the step: a step within the limits
+                    from scipy.optimize import lsq_linear
+
+                    lo, hi = -limits - I, limits - I
+                    step = lsq_linear(J, -r, bounds=(np.minimum(lo, 0.0), np.maximum(hi, 0.0))).x
+                    t = _room(I, step, limits)
+                if not np.any(step) or t <= 0.0:
+                    continue
+                for _trial in range(4):  # backtrack while the miss grows, or leaves the near zone
+                    trial = np.clip(I + t * step, -limits, limits)
+                    res_t, r_t, miss_t = evaluate(trial)
+                    if miss_t < miss or (miss <= far and miss_t <= far):
+                        I, res, r, miss, moved = trial, res_t, r_t, miss_t, True
+                        break
+                    t /= 2
+                if moved:
+                    break
+            if not moved:
+                break
+    except _Spent:  # the solve budget is spent: the closest tip found is reported
+        pass
     _, I, res = best
     if initial is not None and model == "real" and min(history) > tol:
         # the warm start led astray (e.g. across a snap-through): start afresh, count both
@@ -433,6 +447,7 @@ def solve_currents(
             nodes=nodes,
             tol=tol,
             max_iter=max_iter,
+            max_solves=max_solves,
         )
         out.solves += solves
         out.history = history + out.history
