@@ -186,9 +186,13 @@ class TestBadInput:
             ({"b_max": 0.0}, "b_max"),
             ({"b_max": -1.0}, "b_max"),
             ({"b_max": float("nan")}, "b_max"),
+            ({"b_max": 10.0}, "magnetoelastic number"),
             ({"directions": 2}, "directions"),
             ({"magnitudes": 0}, "magnitudes"),
             ({"directions": 4.5}, "directions"),
+            ({"directions": 10**6}, "directions"),
+            ({"magnitudes": 10**5}, "magnitudes"),
+            ({"nodes": 3}, "nodes"),
             ({"system": coils.UniformField(B=(0, 0, 0.01))}, "current control"),
         ],
     )
@@ -215,6 +219,9 @@ class TestBadInput:
             ({"method": "newton"}, "method"),
             ({"max_magnitude": -1.0}, "max_magnitude"),
             ({"segments": 0}, "segments"),
+            ({"segments": 1000}, "segments"),
+            ({"budget": 10**9}, "budget"),
+            ({"starts": 0}, "starts"),
         ],
     )
     def test_optimisation(self, kwargs, match):

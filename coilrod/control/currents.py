@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 import coils
-from coils._validate import as_array, as_vector, finite_scalar, positive
+from coils._validate import as_array, as_count, as_vector, finite_scalar, positive
 from coils.currents import minimum_power
 
 from ..errors import ConvergenceError
@@ -305,8 +305,9 @@ def solve_currents(
         system = system.with_limits(limits)
     L = rod.length
     tol = 1e-7 * L if tol is None else positive(tol, "tol")
-    if isinstance(max_solves, bool) or not isinstance(max_solves, int) or max_solves < 1:
-        raise ValueError(f"max_solves must be a positive integer; got {max_solves!r}")
+    max_solves = as_count(max_solves, "max_solves", 1, 10_000)
+    steps = as_count(steps, "steps", 1, 10_000)
+    max_iter = as_count(max_iter, "max_iter", 1, 10_000)
     clamp = as_vector(clamp_position, "clamp_position")
     opts = dict(
         clamp_position=clamp, clamp_angle=finite_scalar(clamp_angle, "clamp_angle"), nodes=nodes

@@ -186,7 +186,7 @@ def optimize_magnetization(
 
     if not isinstance(rod, Rod):
         raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
-    segments = as_count(segments, "segments", 1)
+    segments = as_count(segments, "segments", 1, 64)
     b_max = positive(b_max, "b_max")
     if method not in ("gradient", "evolution"):
         raise ValueError(f"method must be 'gradient' or 'evolution'; got {method!r}")
@@ -194,8 +194,8 @@ def optimize_magnetization(
         max_magnitude = rod.magnetization.max_magnitude(rod.length)
     max_magnitude = positive(max_magnitude, "max_magnitude")
     default = 400 if method == "gradient" else 4000
-    budget = as_count(default if budget is None else budget, "budget", 1)
-    starts = as_count(starts, "starts", 1)
+    budget = as_count(default if budget is None else budget, "budget", 1, 10**6)
+    starts = as_count(starts, "starts", 1, 1000)
     obj = _Objective(rod, segments, b_max, max_magnitude, directions, magnitudes, budget)
     rng = np.random.default_rng(seed)
     t0 = time.process_time()

@@ -41,9 +41,15 @@ from ..path.events import StabilityWarning
 from ..path.stepping import PathOptions, follow_load
 from ..robot.rod import Rod
 from ..rod.fan import UniformFan
-from ..rod.solve import DEFAULT_SEGMENTS, build_problem, make_mesh, solve_rod
+from ..rod.solve import DEFAULT_SEGMENTS, MAX_SEGMENTS, build_problem, make_mesh, solve_rod
 
 __all__ = ["workspace", "Workspace", "area_gradient"]
+
+#: Largest grids accepted (time and memory stay bounded: 3600 x 1000 states).
+MAX_DIRECTIONS = 3600
+MAX_MAGNITUDES = 1000
+#: Largest magnetoelastic number A |M| b_max L^2 / (E I) accepted.
+MAX_LAMBDA = 1000.0
 
 #: Node angles of neighbouring directions differing by more than this (rad, or twice the
 #: direction step if larger) put the two states on different branches.
@@ -256,9 +262,15 @@ def _check(rod, b_max, directions, magnitudes, nodes, clamp_position, clamp_angl
     if not isinstance(rod, Rod):
         raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
     b_max = positive(b_max, "b_max")
-    directions = as_count(directions, "directions", 3)
-    magnitudes = as_count(magnitudes, "magnitudes", 1)
-    nodes = as_count(DEFAULT_SEGMENTS if nodes is None else nodes, "nodes", 4)
+    lam = rod.magnetoelastic_number(b_max)
+    if lam > MAX_LAMBDA:
+        raise ValueError(
+            f"b_max = {b_max:g} T gives a magnetoelastic number of {lam:.3g} for this rod, beyond "
+            f"{MAX_LAMBDA:g}: the rod would be a boundary layer at the clamp; lower b_max"
+        )
+    directions = as_count(directions, "directions", 3, MAX_DIRECTIONS)
+    magnitudes = as_count(magnitudes, "magnitudes", 1, MAX_MAGNITUDES)
+    nodes = as_count(DEFAULT_SEGMENTS if nodes is None else nodes, "nodes", 4, MAX_SEGMENTS)
     clamp = as_vector(clamp_position, "clamp_position")
     angle = finite_scalar(clamp_angle, "clamp_angle")
     return b_max, directions, magnitudes, nodes, clamp, angle
