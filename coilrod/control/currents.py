@@ -28,9 +28,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 import coils
-from coils._validate import as_array, as_count, as_vector, finite_scalar, positive
+from coils._validate import as_array, as_count, as_limits, as_vector, finite_scalar, positive
 from coils.currents import minimum_power
 
+from ..design.sensitivity import tip_derivatives
+from ..design.workspace import workspace
 from ..errors import ConvergenceError
 from ..path.events import StabilityWarning
 from ..robot.rod import Rod
@@ -114,23 +116,17 @@ def _uniform_start(rod, goal, with_angle, steps, opts, b_cap):
     """The in-plane uniform field (2,) T whose tip meets ``goal`` (least squares), and the
     solves used: scipy's trust-region least squares with the exact Jacobian (the tip's
     sensitivity to the field is nearly singular along the rod's own direction, so plain
-    Newton steps overshoot), from a field perpendicular to the clamp on the target's side."""
+    Newton steps overshoot), from the weakest state of a coarse workspace grid near the
+    target (the best point the least squares met is returned)."""
     from scipy.optimize import least_squares
-
-    from ..design.sensitivity import tip_derivatives
 
     L = rod.length
     wts = _weights_for(with_angle, L)
     clamp = np.asarray(opts["clamp_position"], float)
-    rel = (goal[:2] - clamp[:2]) / L
     ang = opts["clamp_angle"]
-    side = -math.sin(ang) * rel[0] + math.cos(ang) * rel[1]  # the target's side of the axis
-    del side
     # the closest stable state of a coarse (direction, magnitude) grid up to b_cap (all
     # directions followed together, coilrod.workspace): a start on the regular branch, not
     # on a buckled one of a nearly antiparallel field
-    from ..design.workspace import workspace
-
     grid = workspace(
         rod,
         b_cap,
@@ -182,10 +178,7 @@ def _uniform_start(rod, goal, with_angle, steps, opts, b_cap):
         J = np.vstack([D[0, 0:2, 0:2], D[0, 3:4, 0:2]])[: goal.size]
         return J * wts[:, None] * b0
 
-    fit = least_squares(
-        fun, x0, jac=jac, xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=30, x_scale="jac"
-    )
-    del fit
+    least_squares(fun, x0, jac=jac, xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=30, x_scale="jac")
     return best[1] * b0, len(cache) + 1
 
 
@@ -280,8 +273,6 @@ def solve_currents(
     >>> bool(out.miss < 1e-6 * rod.length)
     True
     """
-    from ..design.sensitivity import tip_derivatives
-
     if not isinstance(rod, Rod):
         raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
     if not all(hasattr(system, a) for a in ("unit_fields", "with_currents", "currents_for")):
@@ -299,9 +290,7 @@ def solve_currents(
     if max_current is None:
         limits = np.asarray(system.max_current, float)
     else:
-        limits = np.broadcast_to(np.asarray(max_current, float), (m,)).copy()
-        if not np.all(np.isfinite(limits) | np.isinf(limits)) or np.any(~(limits > 0)):
-            raise ValueError(f"max_current must be positive; got {max_current!r}")
+        limits = as_limits(max_current, "max_current", m)
         system = system.with_limits(limits)
     L = rod.length
     tol = 1e-7 * L if tol is None else positive(tol, "tol")
@@ -339,13 +328,13 @@ def solve_currents(
     else:
         I, start_solves = _start(rod, goal, with_angle, steps, opts, Bu, weights, limits)
 
+    B_fixed, G_fixed = _fixed(system)
+
     def field_of(I):
-        real = system.with_currents(I)
         if model == "real":
-            return real
-        return coils.LinearField(
-            Bu @ I + _fixed(system)[0], Gu @ I + _fixed(system)[1], system.center
-        )
+            return system.with_currents(I)
+        system.with_currents(I)  # the limits are checked as for the real field
+        return coils.LinearField(Bu @ I + B_fixed, Gu @ I + G_fixed, system.center)
 
     def jacobian(res):
         k = len(res) - 1
