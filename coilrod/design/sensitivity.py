@@ -331,6 +331,27 @@ def _as_mixed(problem, U):
     return mixed, np.array([mixed.from_theta(problem.theta(u)) for u in np.atleast_2d(U)])
 
 
+def _parameters(rod, groups, field_groups) -> tuple[list[str], list[str], np.ndarray]:
+    """Labels, units and values (SI; NaN for the per-state scale) of the parameters of
+    ``groups``, in order."""
+    labels, units, values = [], [], []
+    for group in groups:
+        if group in ("magnitudes", "angles"):
+            _, mags, angs = _segments(rod.magnetization, rod.length)
+            val = mags if group == "magnitudes" else angs
+            lab = [f"{group}[{j}]" for j in range(val.size)]
+        elif group == "youngs_modulus":
+            lab, val = ["youngs_modulus"], np.array([rod.youngs_modulus])
+        elif group == "scale":
+            lab, val = ["scale"], np.array([np.nan])  # per state; filled by sensitivities()
+        else:
+            lab, val, _ = field_groups[group]
+        labels += list(lab)
+        units += [PARAMETER_GROUPS[group]] * len(lab)
+        values.append(np.asarray(val, float))
+    return labels, units, np.concatenate(values)
+
+
 def tip_derivatives(result, rows, wrt=None, *, check: bool = True):
     """Batched sensitivities of the states ``rows`` of a rod result (see
     :func:`sensitivities`): returns (labels, units, values, D) with D of shape (k, 4, p):
@@ -341,24 +362,7 @@ def tip_derivatives(result, rows, wrt=None, *, check: bool = True):
     rod = sol.rod
     field_groups = _unit_field_groups(sol.field)
     S = np.asarray(result.scales, float)[rows]
-    labels, units, values = [], [], []
-    for group in groups:
-        if group in ("magnitudes", "angles"):
-            _, mags, angs = _segments(rod.magnetization, rod.length)
-            val = mags if group == "magnitudes" else angs
-            lab = [f"{group}[{j}]" for j in range(val.size)]
-        elif group == "youngs_modulus":
-            lab, val = ["youngs_modulus"], np.array([rod.youngs_modulus])
-        elif group == "scale":
-            lab, val = ["scale"], np.array([np.nan])
-        else:
-            lab, val, _ = field_groups[group]
-        labels += list(lab)
-        units += [PARAMETER_GROUPS[group]] * len(lab)
-        values.append(np.asarray(val, float))
-    values = np.concatenate(values)
-    if "scale" in groups:
-        values[labels.index("scale")] = np.nan  # per state; filled by sensitivities()
+    labels, units, values = _parameters(rod, groups, field_groups)
     if check:
         _check_regular(result, sol, rows, S)
     per_mesh = []

@@ -362,7 +362,7 @@ def workspace(
     scales = np.arange(1, M + 1) / M
     sol = _Solution(rod)
     tips = np.full((D, M + 1, 3), np.nan)
-    theta = np.full((D, M + 1, 1), np.nan)
+    theta = np.full((D, M + 1, make_mesh(rod, nodes).n), np.nan)  # node angles, rad
     stable = np.ones((D, M + 1), dtype=bool)
     snaps = np.zeros((D, M), dtype=bool)
     events: list = []
@@ -370,9 +370,7 @@ def workspace(
     if system is None:
         todo = _solve_fan(rod, b_max, phi, scales, nodes, richardson, clamp, angle, sol)
         if sol.fans:
-            th = sol.fan_thetas
-            theta = np.full((D, M + 1, th.shape[-1]), np.nan)
-            theta[sol.fan_index, 1:] = th
+            theta[sol.fan_index, 1:] = sol.fan_thetas
             tips[sol.fan_index, 1:] = sol.fan_tips
             stable[sol.fan_index, 1:] = sol.fan_stable
     bar = None
@@ -399,11 +397,6 @@ def workspace(
                     continue
             sol.single[d] = res
             got = len(res.scales)
-            if theta.shape[-1] != res.s.size:
-                theta = np.full((D, M + 1, res.s.size), np.nan)
-                theta[:, 0] = angle
-                if sol.fans:
-                    theta[sol.fan_index, 1:] = sol.fan_thetas
             tips[d, 1 : got + 1] = res.tip
             theta[d, 1 : got + 1] = np.array([res.theta(k) for k in range(got)])
             stable[d, 1 : got + 1] = res.stable
@@ -560,27 +553,18 @@ def tip_derivatives(ws: Workspace, wrt) -> tuple[list[str], np.ndarray]:
     :func:`coilrod.sensitivities`).  States at a fold or bifurcation (where the derivative
     does not exist) and the unloaded state get zeros; they bound no included cell's interior.
     """
-    from .sensitivity import _mesh_derivatives, _segments
+    from .sensitivity import _groups, _mesh_derivatives, _parameters, _segments
     from .sensitivity import tip_derivatives as rod_derivatives
 
     sol = ws._solution
     rod = sol.rod
-    groups = [wrt] if isinstance(wrt, str) else list(wrt)
+    have = ["youngs_modulus"]
+    if _segments(rod.magnetization, rod.length) is not None:
+        have = ["magnitudes", "angles", *have]
+    what = f"workspace of a rod with magnetization {rod.magnetization!r}"
+    groups = _groups(wrt, have, what)
     D, M1 = ws.tips.shape[:2]
-    labels = []
-    for g in groups:
-        if g in ("magnitudes", "angles"):
-            if _segments(rod.magnetization, rod.length) is None:
-                raise ValueError(f"the rod's magnetization has no parameter {g!r}")
-            n_seg = _segments(rod.magnetization, rod.length)[1].size
-            labels += [f"{g}[{j}]" for j in range(n_seg)]
-        elif g == "youngs_modulus":
-            labels.append(g)
-        else:
-            raise ValueError(
-                f"workspace derivatives are with respect to 'magnitudes', 'angles' or "
-                f"'youngs_modulus'; got {g!r}"
-            )
+    labels = _parameters(rod, groups, {})[0]
     out = np.zeros((D, M1, 2, len(labels)))
     scales = ws.magnitudes[1:] / ws.magnitudes[-1]
     k = scales.size
