@@ -461,20 +461,18 @@ class PlanarRod(PathProblem):
         if S.shape != (U.shape[0],):
             S = np.full(U.shape[0], float(S)) if S.ndim == 0 else S.reshape(U.shape[0])
         with np.errstate(all="ignore"):
+            field_values = None
             if self.uniform:
                 R, R1, parts = self._uniform(U, S, tangent)
             else:
-                R, R1, parts = self._mixed(U, S, tangent)
+                R, R1, parts, field_values = self._mixed(U, S, tangent)
             ok = np.all(np.isfinite(R), axis=1)
         tan = RodTangent(U.shape[0], self.size, self.uniform, parts, R1) if tangent else None
         if tan is not None:
             tan.bad |= ~ok
         lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
         lin.load_rate = R1
-        last = getattr(self, "_last_field", None)
-        if not self.uniform and last is not None and last[0] is U:
-            lin.field_values = last[1:]  # B (k, n, 3), G (k, n, 3, 3) at the nodes
-        self._last_field = None
+        lin.field_values = field_values  # mixed layout: B (k, n, 3), G (k, n, 3, 3) at the nodes
         return lin
 
     def solve(self, lin: Linearization, rhs: np.ndarray) -> np.ndarray:
@@ -670,13 +668,13 @@ class PlanarRod(PathProblem):
 
     # -- mixed layout -----------------------------------------------------------------------------
     def _mixed(self, U: np.ndarray, S: np.ndarray, tangent: bool):
-        """Residual, load derivative and band Jacobian of a stack, by the compiled pass of
+        """Residual, load derivative, band Jacobian and the field at the nodes (B (k, n, 3),
+        G (k, n, 3, 3), kept for the adjoint) of a stack, by the compiled pass of
         :mod:`coilrod.rod._compiled` (the equations are in the module docstring)."""
         from ._compiled import mixed_assembly
 
         k, n = U.shape[0], self.n
         B, G, H = self._field_by_member(U.reshape(k, n, _NV)[:, :, 0:2], tangent)
-        self._last_field = (U, B.reshape(k, n, 3), G.reshape(k, n, 3, 3))
         R = np.empty((k, self.size))
         R1 = np.empty((k, self.size))
         shape = (2 * _KL + _KU + 1, k * self.size) if tangent else (1, 1)
@@ -702,7 +700,7 @@ class PlanarRod(PathProblem):
             finite,
         )
         R[~finite] = np.nan
-        return R, R1, (ab if tangent else None)
+        return R, R1, (ab if tangent else None), (B.reshape(k, n, 3), G.reshape(k, n, 3, 3))
 
     def _stability_mixed(self, lin: Linearization, signs: np.ndarray) -> np.ndarray:
         """Smallest second-variation eigenvalue of each member (see :meth:`stability`).
