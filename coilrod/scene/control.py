@@ -42,13 +42,13 @@ import numpy as np
 
 import coils
 
-from . import limits
 from .parse import (
     _BAD,
     _MISSING,
     SceneError,
     _axis,
     _Coil,
+    _coil_list_problem,
     _FieldInfo,
     _mm,
     _ok,
@@ -152,12 +152,17 @@ def _one_or_list(raw, full: str, one, n: int, what: str):
             raise SceneError(
                 f"{full}: expected one value or a list of {n} ({what}); got a list of {len(raw)}"
             )
-        p = _Problems()
-        out = [p.take(one, v, f"{full}[{i}]") for i, v in enumerate(raw)]
-        if p.lines:
-            raise SceneError(p.lines)
-        return tuple(out)
+        return _each(raw, full, one)
     return one(raw, full)
+
+
+def _each(items: list, full: str, one) -> tuple:
+    """Every entry of ``items`` read by ``one(raw, key)``; all problems reported together."""
+    p = _Problems()
+    out = [p.take(one, v, f"{full}[{i}]") for i, v in enumerate(items)]
+    if p.lines:
+        raise SceneError(p.lines)
+    return tuple(out)
 
 
 def _winding(raw, full):
@@ -165,11 +170,7 @@ def _winding(raw, full):
         raise SceneError(
             f"{full}: expected ['width', 'height'], e.g. ['28 mm', '28 mm']; got {_show(raw)}"
         )
-    p = _Problems()
-    out = [p.take(_length, v, f"{full}[{i}]") for i, v in enumerate(raw)]
-    if p.lines:
-        raise SceneError(p.lines)
-    return tuple(out)
+    return _each(raw, full, _length)
 
 
 def _preset_argument(name: str, raw, full: str, preset: str):
@@ -285,11 +286,8 @@ def parse_system(data: dict, p: _Problems):
                 f"{', '.join(SYSTEM_PRESETS)}) and/or a coil list (coil = [...])"
             )
             return _BAD
-    elif not isinstance(parts, list) or not parts:
-        p.add(f"{key}.coil: expected a non-empty list of coil tables; got {_show(parts)}")
-        return _BAD
-    elif len(parts) > limits.MAX_COILS:
-        p.add(f"{key}.coil: at most {limits.MAX_COILS} coils; got {len(parts)}")
+    elif (problem := _coil_list_problem(parts, key)) is not None:
+        p.add(problem)
         return _BAD
     else:
         built = [

@@ -653,6 +653,16 @@ class _Coil:
     what: str = "this coil"
 
 
+def _coil_list_problem(parts, key: str) -> str | None:
+    """The problem with a ``coil = [...]`` list of ``key`` (not a non-empty list, too many
+    coils), or None."""
+    if not isinstance(parts, list) or not parts:
+        return f"{key}.coil: expected a non-empty list of coil tables; got {_show(parts)}"
+    if len(parts) > limits.MAX_COILS:
+        return f"{key}.coil: at most {limits.MAX_COILS} coils; got {len(parts)}"
+    return None
+
+
 def _parse_coil(data, key: str, p: _Problems, *, control: bool = False):
     """A coil table: at the current its ``current``, ``B`` or ``gradient`` gives; in a coil
     system under control (``control``) at 0 A, with an optional ``wire_diameter``."""
@@ -858,11 +868,9 @@ def _parse_field(data, p: _Problems):
         if parts is _MISSING:
             p.add(f"{key}.coil: missing required key (a list of coil tables)")
             return _BAD
-        if not isinstance(parts, list) or not parts:
-            p.add(f"{key}.coil: expected a non-empty list of coil tables; got {_show(parts)}")
-            return _BAD
-        if len(parts) > limits.MAX_COILS:
-            p.add(f"{key}.coil: at most {limits.MAX_COILS} coils; got {len(parts)}")
+        problem = _coil_list_problem(parts, key)
+        if problem is not None:
+            p.add(problem)
             return _BAD
         built = [p.take(_parse_coil, c, f"{key}.coil[{i}]", p) for i, c in enumerate(parts)]
         if not _ok(compare, *built):
