@@ -67,8 +67,18 @@ class RodTangent:
     Jacobian is singular or not finite (their solves return NaN).
     """
 
-    def __init__(self, k: int, size: int, uniform: bool, parts, load_rate: np.ndarray):
+    def __init__(
+        self,
+        k: int,
+        size: int,
+        uniform: bool,
+        parts,
+        load_rate: np.ndarray,
+        kl: int = _KL,
+        ku: int = _KU,
+    ):
         self.k, self.size, self.uniform = k, size, uniform
+        self.kl, self.ku = kl, ku  # bandwidths of a band layout
         self.parts = parts
         self.load_rate = load_rate  # dR/dscale, (k, size)
         self.bad = np.zeros(k, dtype=bool)
@@ -103,18 +113,19 @@ class RodTangent:
         found singular (an exactly zero pivot; LAPACK completes the factorisation) is flagged,
         and :meth:`solve` then solves member by member so that it cannot spoil the others."""
         ab, n = self.parts, self.size
+        diag = self.kl + self.ku
         for j in np.flatnonzero(self.bad):
             ab[:, j * n : (j + 1) * n] = 0.0
-            ab[_DIAG, j * n : (j + 1) * n] = 1.0
+            ab[diag, j * n : (j + 1) * n] = 1.0
         from ._compiled import band_lu
 
         ipiv = np.empty(ab.shape[1], dtype=np.int64)
-        info = band_lu(ab, _KL, _KU, ipiv)  # LAPACK's gbtf2, compiled: no per-column calls
+        info = band_lu(ab, self.kl, self.ku, ipiv)  # LAPACK's gbtf2, compiled: no per-column calls
         lu = ab
         self.parts = None  # factorised in place: the band storage now holds the factors
         if info > 0:
-            diag = lu[_DIAG].reshape(self.k, n)
-            self.bad |= np.any(diag == 0.0, axis=1)
+            pivots = lu[diag].reshape(self.k, n)
+            self.bad |= np.any(pivots == 0.0, axis=1)
             self._per_member = True
         return lu, ipiv
 
@@ -136,7 +147,7 @@ class RodTangent:
             from ._compiled import band_solve
 
             x = np.array(rhs, dtype=float).reshape(-1, 1)
-            band_solve(lu[0], _KL, _KU, lu[1], x)
+            band_solve(lu[0], self.kl, self.ku, lu[1], x)
         x = x.reshape(self.k, self.size)
         x[self.bad] = np.nan
         return x
@@ -164,7 +175,7 @@ class RodTangent:
             from ._compiled import band_solve_transposed
 
             x = b
-            band_solve_transposed(lu[0], _KL, _KU, lu[1], x)
+            band_solve_transposed(lu[0], self.kl, self.ku, lu[1], x)
         x = x.T.reshape(q, self.k, self.size)
         x[:, self.bad] = np.nan
         return x if many else x[0]
@@ -177,7 +188,7 @@ class RodTangent:
         if self.uniform:
             diag, ipiv, base = lu[1], lu[4], 1
         else:
-            diag, ipiv, base = lu[0][_DIAG], lu[1], 0
+            diag, ipiv, base = lu[0][self.kl + self.ku], lu[1], 0
         neg = np.count_nonzero((diag < 0).reshape(self.k, n), axis=1)
         moved = ipiv != np.arange(base, ipiv.size + base)
         swaps = np.count_nonzero(moved.reshape(self.k, n), axis=1)
@@ -772,10 +783,10 @@ def _take_tangent(tan: RodTangent, rows) -> RodTangent:
     if tan.uniform:
         d, (dl, du) = tan.parts
         off = (dl[: rows.size * n - 1], du[: rows.size * n - 1])  # the same for every member
-        out = RodTangent(rows.size, n, True, (d[rows], off), tan.load_rate[rows])
+        out = RodTangent(rows.size, n, True, (d[rows], off), tan.load_rate[rows], tan.kl, tan.ku)
         out.bad = tan.bad[rows].copy()
         return out  # refactorised on use (tridiagonal: O(n), cheaper than slicing pivots)
-    out = RodTangent(rows.size, n, False, None, tan.load_rate[rows])
+    out = RodTangent(rows.size, n, False, None, tan.load_rate[rows], tan.kl, tan.ku)
     out.bad = tan.bad[rows].copy()
     if tan._lu is not None:
         lu, ipiv = tan._lu

@@ -48,6 +48,9 @@ class RodResult:
         (scale at which the path, followed around the fold, was stable again).
     segments : int
         Segments of the (coarse) mesh; the fine mesh of the extrapolation has twice as many.
+    model : str
+        "planar" or "spatial": the rod model that produced the states (see
+        :func:`~coilrod.solve_rod`'s ``model``).
     """
 
     scales: np.ndarray
@@ -65,6 +68,8 @@ class RodResult:
     instabilities: list = field(default_factory=list)
     #: What the sensitivities need (rod, field, the discrete problems and their states).
     _solution: object = field(default=None, repr=False)
+    model: str = "planar"
+    _frames: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.scales)
@@ -80,6 +85,26 @@ class RodResult:
         """Centreline of state ``k`` at the nodes :attr:`s`, shape (n, 3), m."""
         return self._points[k].copy()
 
+    def frames(self, k: int) -> np.ndarray:
+        """Cross-section frames of state ``k`` at the nodes :attr:`s`, shape (n, 3, 3): the
+        columns of ``frames(k)[i]`` are the tangent, normal and binormal at node i in world
+        coordinates (planar: rotations by the tangent angle about z)."""
+        if self._frames is not None:
+            return self._frames[k].copy()
+        th = self._theta[k]
+        c, s = np.cos(th), np.sin(th)
+        out = np.zeros((th.size, 3, 3))
+        out[:, 0, 0], out[:, 1, 0] = c, s
+        out[:, 0, 1], out[:, 1, 1] = -s, c
+        out[:, 2, 2] = 1.0
+        return out
+
     def theta(self, k: int) -> np.ndarray:
-        """Tangent angle of state ``k`` at the nodes :attr:`s`, shape (n,), rad."""
+        """Tangent angle of state ``k`` at the nodes :attr:`s`, shape (n,), rad (planar model
+        only; a spatial state has :meth:`frames`)."""
+        if self._theta is None:
+            raise ValueError(
+                "theta() is the tangent angle of a planar state; this result is spatial: use "
+                "frames(k) (tangent, normal, binormal at each node)"
+            )
         return self._theta[k].copy()

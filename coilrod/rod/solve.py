@@ -1,4 +1,5 @@
-"""``solve_rod``: planar hard-magnetic Kirchhoff rod (seed eq. 5) in any field, load sweeps."""
+"""``solve_rod``: hard-magnetic Kirchhoff rods (planar, seed eq. 5, and spatial) in any field,
+load sweeps."""
 
 from __future__ import annotations
 
@@ -15,10 +16,19 @@ from ..path.events import warn_events
 from ..path.stepping import PathOptions, follow_load
 from ..robot.rod import Rod
 from .mesh import RodMesh, node_magnetization
+from .model import choose_model, clamp_frame
 from .planar import PlanarRod
 from .result import RodResult
+from .so3 import expm, logm
 
-__all__ = ["solve_rod", "DEFAULT_SEGMENTS", "MAX_SEGMENTS", "build_problem", "make_mesh"]
+__all__ = [
+    "solve_rod",
+    "DEFAULT_SEGMENTS",
+    "MAX_SEGMENTS",
+    "build_problem",
+    "build_spatial_problem",
+    "make_mesh",
+]
 
 #: Default number of segments of the coarse mesh (the fine mesh has twice as many).  With
 #: Richardson extrapolation this meets a tip error of 1e-6 L against the closed-form elastica
@@ -40,7 +50,8 @@ def _int_option(value, name: str, low: int, high: int | None = None) -> int:
 
 
 def check_inputs(rod, field, scales, nodes, clamp_position, clamp_angle, tol=1e-9):
-    """Validate the common inputs of the rod solvers (ValueError naming the argument)."""
+    """Validate the common inputs of the rod solvers (ValueError naming the argument); returns
+    (scales, nodes, clamp, angle, tol)."""
     if not isinstance(rod, Rod):
         raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
     if not isinstance(field, Field):
@@ -72,15 +83,47 @@ def build_problem(
     return PlanarRod(mesh, mu, field, L, clamp_position, clamp_angle, tol)
 
 
+def _node_magnetization3(rod: Rod, mesh: RodMesh) -> np.ndarray:
+    """Body-frame node magnetization (n, 3), A/m (tangent, normal, binormal)."""
+    try:
+        return node_magnetization(rod.magnetization, mesh, rod.length, dim=3)
+    except TypeError:  # a planar-only profile description
+        mu = node_magnetization(rod.magnetization, mesh, rod.length)
+        return np.concatenate([mu, np.zeros((mu.shape[0], 1))], axis=1)
+
+
+def rod_stiffnesses(rod: Rod) -> np.ndarray:
+    """(GJ, EI_y, EI_z) / EI_z of ``rod`` (torsion, out-of-plane and in-plane bending)."""
+    stiff = getattr(rod, "stiffnesses", None)
+    if stiff is None:  # circle, nu = 0.5: GJ = E/3 * 2 I
+        return np.array([2.0 / 3.0, 1.0, 1.0])
+    return np.asarray(stiff, float) / rod.bending_stiffness
+
+
+def build_spatial_problem(
+    rod: Rod, field: Field, mesh: RodMesh, clamp_position, clamp_rotation, tol: float = 1e-9
+):
+    """The spatial discrete problem of ``rod`` in ``field`` on ``mesh`` (non-dimensional)."""
+    from .spatial import SpatialRod
+
+    L = rod.length
+    mu = _node_magnetization3(rod, mesh) * (rod.area * L**2 / rod.bending_stiffness)
+    return SpatialRod(
+        mesh, mu, rod_stiffnesses(rod), field, L, clamp_position, clamp_rotation, tol
+    )
+
+
 def solve_rod(
     rod: Rod,
     field: Field,
     scales,
     *,
+    model: str = "auto",
     nodes: int | None = None,
     richardson: bool = True,
     clamp_position=(0.0, 0.0, 0.0),
     clamp_angle: float = 0.0,
+    clamp_rotation=None,
     tol: float = 1e-9,
     max_iter: int = 15,
     stability: bool = True,
@@ -93,11 +136,19 @@ def solve_rod(
     rod : Rod
         Geometry, modulus and magnetization.
     field : coils.Field
-        Applied field; evaluated on the deformed centreline.  Only the in-plane (x, y)
-        components of B and of its gradient act (planar model).
+        Applied field; evaluated on the deformed centreline.
     scales : array-like, shape (k,)
         Field multipliers, solved in order along the load path from the straight rod at
         scale 0 (the first scale too: it is continued from the unloaded rod, not jumped to).
+    model : {"auto", "planar", "spatial"}
+        "planar": the rod bends in the plane z = clamp_position[2] (seed eq. 5,
+        :mod:`coilrod.rod.planar`); "spatial": the 3D Kirchhoff rod with torsion
+        (:mod:`coilrod.rod.spatial`); "auto" (default) takes the planar model exactly when
+        nothing pushes the rod out of its plane -- a planar magnetization (no elevation), a
+        clamp frame turned about z only, and a field with ``B_z = 0`` and ``dB_z/dx = dB_z/dy
+        = 0`` on the plane within the rod's reach (relative 1e-12) -- and the spatial one
+        otherwise.  ``result.model`` says which ran.  "planar" with an out-of-plane load
+        raises ValueError instead of dropping it.
     nodes : int, optional
         Segments of the coarse mesh (default :data:`DEFAULT_SEGMENTS`, at most
         :data:`MAX_SEGMENTS`); a node is placed at every magnetization breakpoint.
@@ -107,7 +158,10 @@ def solve_rod(
     clamp_position : array-like, shape (3,)
         Clamp position, m.  The rod moves in the plane z = clamp_position[2].
     clamp_angle : float
-        Tangent angle at the clamp, rad from +x.
+        Tangent angle at the clamp, rad from +x (a rotation of the clamp about z).
+    clamp_rotation : (3, 3) array or scipy.spatial.transform.Rotation, optional
+        Clamp frame in 3D (columns: tangent, normal, binormal of the unloaded rod); orthonormal
+        to 1e-9 with determinant +1.  Give either this or ``clamp_angle``.
     tol : float
         Newton tolerance on the scaled residual (non-dimensional, > 0); each equation also
         has a round-off floor that follows its own segment length.
@@ -157,9 +211,19 @@ def solve_rod(
     defaults (64 + 128 segments, Richardson), fourth order in the segment length; a boundary
     layer of width ~ L / sqrt(lambda) forms at the clamp, so lambda >> 100 needs more nodes.
 
+    The spatial model (:mod:`coilrod.rod.spatial`) discretises the energy of the
+    inextensible, unshearable Kirchhoff rod with stiffnesses (GJ, EI_y, EI_z)
+    (:attr:`coilrod.Rod.stiffnesses`), frames on SO(3) at the nodes, torque ``A m x B`` and
+    force ``A (grad B)^T m`` on the deformed centreline with their exact Jacobian; a
+    planar state is the planar model's discrete solution.  Its result carries
+    ``frames(k)``; its ``tip_angle`` is the azimuth of the tip tangent about z, continued
+    from the clamp's.
+
     Limitations: a fold pair narrower than a load step (a small hysteresis loop) can be
-    stepped over without a report (use finer scales or :func:`~coilrod.trace_rod`).
-    Out-of-plane components of B, of the torque and of the force are ignored (planar model).
+    stepped over without a report (use finer scales or :func:`~coilrod.trace_rod`).  In the
+    spatial model a double eigenvalue (a circular section in a load symmetric about the
+    rod's axis) crosses zero without the cheap stability sign noticing it; ``min_eigenvalue``
+    (computed on access) sees it.
 
     Examples
     --------
@@ -175,9 +239,18 @@ def solve_rod(
         rod, field, scales, nodes, clamp_position, clamp_angle, tol
     )
     max_iter = _int_option(max_iter, "max_iter", 1)
+    R0 = clamp_frame(angle, clamp_rotation)
+    chosen = choose_model(model, rod, field, clamp, R0)
+    if chosen == "planar" and clamp_rotation is not None:
+        angle = float(np.arctan2(R0[1, 0], R0[0, 0]))
     mesh = make_mesh(rod, nodes)
     meshes = [mesh, mesh.refined()] if richardson else [mesh]
-    problems = [build_problem(rod, field, m, clamp, angle, tol) for m in meshes]
+    if chosen == "planar":
+        problems = [build_problem(rod, field, m, clamp, angle, tol) for m in meshes]
+        finish = _result
+    else:
+        problems = [build_spatial_problem(rod, field, m, clamp, R0, tol) for m in meshes]
+        finish = _result_spatial
     opts = PathOptions(newton=NewtonOptions(max_iter=max_iter), stability=bool(stability))
     bar = None
     tick = None
@@ -197,7 +270,7 @@ def solve_rod(
         err.result = None
         if err.points:
             try:
-                err.result = _result(
+                err.result = finish(
                     rod, problems, err.points, np.zeros(len(err.points), int), err.events, opts
                 )
             except ConvergenceError:
@@ -206,9 +279,33 @@ def solve_rod(
     finally:
         if bar is not None:
             bar.close()
-    result = _result(rod, problems, run.points, run.iterations, run.events, opts)
+    result = finish(rod, problems, run.points, run.iterations, run.events, opts)
     warn_events(result.instabilities, stacklevel=3)
     return result
+
+
+def _refine(problems, states, scales, opts):
+    """Newton on the refined mesh from the interpolated coarse states: (states, iterations,
+    residual norms); ConvergenceError if a state cannot be reached."""
+    coarse, fine = problems
+    # the interpolated coarse solution is within O(h^2) of the fine one: chord iterations
+    res = newton(
+        fine,
+        coarse.interpolate_to(fine, states),
+        scales,
+        dataclasses.replace(opts.newton, chord_start=True),
+        tangent_at_end=False,
+    )
+    if not np.all(res.ok):
+        k = int(np.argmin(res.ok))
+        raise ConvergenceError(
+            f"solve_rod could not reach scale {scales[k]:g} (index {k}) on the refined "
+            f"mesh from the coarse solution (error {float(res.error[k]):.3g} of tolerance)",
+            reached=float(scales[k - 1]) if k else 0.0,
+            target=float(scales[k]),
+            residual=float(res.error[k]),
+        )
+    return res.u, res.iterations, fine.residual_norm(res.lin.residual)
 
 
 def _result(rod, problems, points, iterations, events, opts) -> RodResult:
@@ -222,27 +319,10 @@ def _result(rod, problems, points, iterations, events, opts) -> RodResult:
     x_c = coarse.positions(thetas_c)
     if len(problems) == 2:
         fine = problems[1]
-        # the interpolated coarse solution is within O(h^2) of the fine one: chord iterations
-        res = newton(
-            fine,
-            coarse.interpolate_to(fine, states),
-            scales,
-            dataclasses.replace(opts.newton, chord_start=True),
-            tangent_at_end=False,
-        )
-        if not np.all(res.ok):
-            k = int(np.argmin(res.ok))
-            raise ConvergenceError(
-                f"solve_rod could not reach scale {scales[k]:g} (index {k}) on the refined "
-                f"mesh from the coarse solution (error {float(res.error[k]):.3g} of tolerance)",
-                reached=float(scales[k - 1]) if k else 0.0,
-                target=float(scales[k]),
-                residual=float(res.error[k]),
-            )
-        iterations = iterations + res.iterations
-        residual = np.maximum(residual, fine.residual_norm(res.lin.residual))
-        fine_states = res.u
-        th_f = fine.theta(res.u)
+        fine_states, its, fine_res = _refine(problems, states, scales, opts)
+        iterations = iterations + its
+        residual = np.maximum(residual, fine_res)
+        th_f = fine.theta(fine_states)
         thetas = (4 * th_f[:, ::2] - thetas_c) / 3
         x = (4 * fine.positions(th_f)[:, ::2] - x_c) / 3
     else:
@@ -254,7 +334,7 @@ def _result(rod, problems, points, iterations, events, opts) -> RodResult:
         stable = np.ones(scales.size, dtype=bool)
     else:  # the exact sign now, the eigenvalues on first access
         stable = np.array([p.stability > 0 for p in points], dtype=bool)
-        fine = (problems[1], res.u) if len(problems) == 2 else None
+        fine = (problems[1], fine_states) if len(problems) == 2 else None
         mu = _eigenvalues_later(coarse, states, scales, fine)
     instabilities = [_refine_event(e, scales, mu, coarse) for e in events]
     return RodResult(
@@ -278,6 +358,73 @@ def _result(rod, problems, points, iterations, events, opts) -> RodResult:
             (states,) + ((fine_states,) if len(problems) == 2 else ()),
         ),
     )
+
+
+def _result_spatial(rod, problems, points, iterations, events, opts) -> RodResult:
+    """RodResult of the spatial model: refined-mesh states, Richardson extrapolation of the
+    positions and of the frames (on SO(3)), stability."""
+    coarse = problems[0]
+    scales = np.array([p.scale for p in points])
+    states = np.array([p.u for p in points])
+    iterations = np.array(iterations, dtype=int)
+    residual = coarse.residual_norm(np.array([p.residual for p in points]))
+    R_c = coarse.frames(states)
+    x_c = coarse.positions_from_frames(R_c)
+    fine_states = None
+    if len(problems) == 2:
+        fine = problems[1]
+        fine_states, its, fine_res = _refine(problems, states, scales, opts)
+        iterations = iterations + its
+        residual = np.maximum(residual, fine_res)
+        R_f = fine.frames(fine_states)
+        x = (4 * fine.positions_from_frames(R_f)[:, ::2] - x_c) / 3
+        R_f = R_f[:, ::2]
+        # R_c = R exp(4 e), R_f = R exp(e) to leading order: R = R_f exp(-log(R_f^T R_c) / 3)
+        frames = R_f @ expm(-logm(np.swapaxes(R_f, -1, -2) @ R_c) / 3)
+    else:
+        x, frames = x_c, R_c
+    points_xyz = coarse.points(x)
+    if not opts.stability:
+        mu = np.full(scales.size, np.nan)
+        stable = np.ones(scales.size, dtype=bool)
+    else:
+        stable = np.array([p.stability > 0 for p in points], dtype=bool)
+        fine = (problems[1], fine_states) if len(problems) == 2 else None
+        mu = _eigenvalues_later(coarse, states, scales, fine)
+    instabilities = [_refine_event(e, scales, mu, coarse) for e in events]
+    return RodResult(
+        scales=scales,
+        s=coarse.mesh.s * rod.length,
+        tip=points_xyz[:, -1, :].copy(),
+        tip_angle=_tip_azimuth(frames[:, -1], coarse.rotations(states)[:, -1], coarse.R0),
+        converged=np.ones(scales.size, dtype=bool),
+        stable=stable,
+        residual=residual,
+        _min_eigenvalue=mu,
+        iterations=iterations,
+        segments=coarse.mesh.counts.sum(),
+        _theta=None,
+        _points=points_xyz,
+        instabilities=instabilities,
+        _solution=RodSolution(
+            rod,
+            coarse.field,
+            tuple(problems),
+            (states,) + ((fine_states,) if len(problems) == 2 else ()),
+        ),
+        model="spatial",
+        _frames=frames,
+    )
+
+
+def _tip_azimuth(tip_frames: np.ndarray, tip_phi: np.ndarray, R0: np.ndarray) -> np.ndarray:
+    """Azimuth (rad) of the tip tangent about z, ``atan2(t_y, t_x)``, continued from the clamp
+    tangent's: the branch nearest to the clamp azimuth plus the tip's rotation about z (the
+    planar model's unwrapped tip angle for a planar state)."""
+    t = tip_frames[:, :, 0]
+    raw = np.arctan2(t[:, 1], t[:, 0])
+    guess = np.arctan2(R0[1, 0], R0[0, 0]) + tip_phi[:, 2]
+    return raw + 2 * np.pi * np.round((guess - raw) / (2 * np.pi))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,0 +1,139 @@
+"""Which rod model a solve needs: the clamp frame, and whether field, magnetization and clamp
+keep the rod in its plane (planar model) or not (spatial model)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from coils.field import Field
+
+__all__ = ["MODELS", "as_rotation", "clamp_frame", "choose_model", "planar_reasons"]
+
+MODELS = ("auto", "planar", "spatial")
+#: Out-of-plane field (|B_z|, and L |dB_z/dx|, L |dB_z/dy|) on the plane of the rod, relative
+#: to the largest |B| there, below which a field counts as planar: its effect on the rod is
+#: below 1e-12 L, far under the solvers' accuracy.
+PLANAR_FIELD_TOL = 1e-12
+#: Orthonormality tolerance of a clamp rotation matrix (max-norm of R^T R - I).
+ROTATION_TOL = 1e-9
+
+
+def as_rotation(value, name: str = "clamp_rotation") -> np.ndarray:
+    """A rotation matrix (3, 3) from a (3, 3) array or a scipy ``Rotation`` (ValueError naming
+    ``name`` unless finite, orthonormal to 1e-9 and of determinant +1).  The result is
+    re-orthonormalised to machine precision (polar decomposition)."""
+    if hasattr(value, "as_matrix") and callable(value.as_matrix):
+        arr = np.asarray(value.as_matrix(), dtype=float)
+        if arr.shape != (3, 3):
+            raise ValueError(f"{name} must be a single rotation; got a stack of shape {arr.shape}")
+    else:
+        try:
+            arr = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"{name} must be a 3x3 rotation matrix or a scipy Rotation; got {value!r}"
+            ) from None
+    if arr.shape != (3, 3):
+        raise ValueError(f"{name} must have shape (3, 3); got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite; got {arr.tolist()}")
+    err = float(np.max(np.abs(arr.T @ arr - np.eye(3))))
+    if err > ROTATION_TOL:
+        raise ValueError(
+            f"{name} must be orthonormal (R^T R = I to {ROTATION_TOL:g}); its columns deviate by "
+            f"{err:.3g}"
+        )
+    if np.linalg.det(arr) < 0:
+        raise ValueError(f"{name} must be a proper rotation (determinant +1); it is a reflection")
+    U, _, Vt = np.linalg.svd(arr)
+    return U @ Vt
+
+
+def clamp_frame(clamp_angle: float, clamp_rotation) -> np.ndarray:
+    """The clamp frame (3, 3) (columns tangent, normal, binormal): ``clamp_rotation`` if given,
+    else the rotation by ``clamp_angle`` (rad) about z.  Both given: ValueError unless the angle
+    is 0."""
+    if clamp_rotation is not None:
+        if clamp_angle != 0.0:
+            raise ValueError(
+                "give the clamp orientation either as clamp_angle or as clamp_rotation, not both "
+                f"(clamp_angle = {clamp_angle!r})"
+            )
+        return as_rotation(clamp_rotation, "clamp_rotation")
+    c, s = np.cos(clamp_angle), np.sin(clamp_angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _in_plane_rotation(R0: np.ndarray) -> bool:
+    """True if the frame keeps the binormal on +z (a rotation about z)."""
+    return bool(
+        abs(R0[2, 2] - 1.0) <= 1e-14
+        and np.all(np.abs(R0[2, :2]) <= 1e-14)
+        and np.all(np.abs(R0[:2, 2]) <= 1e-14)
+    )
+
+
+def _field_reasons(field: Field, clamp: np.ndarray, length: float) -> list[str]:
+    """Why ``field`` would push a rod clamped at ``clamp`` out of the plane z = clamp_z (empty
+    if it does not): B_z or dB_z/dx, dB_z/dy nonzero on the disc of radius ``length`` the rod
+    can reach.  Uniform and linear fields are checked exactly, others on a polar grid of the
+    disc (17 radii x 48 angles)."""
+    uniform = bool(getattr(field, "uniform", False))
+    if uniform:
+        B = np.asarray(field.B(clamp)[0], float)
+        if B[2] != 0.0 and abs(B[2]) > PLANAR_FIELD_TOL * np.linalg.norm(B):
+            return [f"the field has an out-of-plane component B_z = {B[2]:.3g} T"]
+        return []
+    r = np.linspace(0.0, length, 17)
+    a = np.linspace(0.0, 2 * np.pi, 48, endpoint=False)
+    pts = np.zeros((r.size * a.size, 3))
+    pts[:, 0] = clamp[0] + np.outer(r, np.cos(a)).ravel()
+    pts[:, 1] = clamp[1] + np.outer(r, np.sin(a)).ravel()
+    pts[:, 2] = clamp[2]
+    try:
+        B, G = field.B_and_gradient(pts)
+    except ValueError:  # a winding inside the reachable disc: judge the clamp only
+        B, G = field.B_and_gradient(clamp[None])
+    scale = max(float(np.max(np.linalg.norm(B, axis=1))), 1e-300)
+    bz = float(np.max(np.abs(B[:, 2])))
+    gz = float(np.max(np.abs(G[:, 2, :2]))) * length
+    reasons = []
+    if bz > PLANAR_FIELD_TOL * scale:
+        reasons.append(f"the field has an out-of-plane component |B_z| up to {bz:.3g} T")
+    if gz > PLANAR_FIELD_TOL * scale:
+        reasons.append(
+            f"dB_z/dx, dB_z/dy up to {gz / length:.3g} T/m on the plane (an out-of-plane force)"
+        )
+    return reasons
+
+
+def planar_reasons(rod, field: Field, clamp: np.ndarray, R0: np.ndarray) -> list[str]:
+    """What keeps the rod from staying in the plane z = clamp_z (empty: the planar model is
+    exact)."""
+    reasons = []
+    mag = rod.magnetization
+    if not getattr(mag, "is_planar", True):
+        reasons.append("the magnetization has an out-of-plane elevation")
+    if not _in_plane_rotation(R0):
+        reasons.append("the clamp rotation turns the rod out of the x-y plane")
+    reasons += _field_reasons(field, np.asarray(clamp, float), rod.length)
+    return reasons
+
+
+def choose_model(model: str, rod, field: Field, clamp: np.ndarray, R0: np.ndarray) -> str:
+    """"planar" or "spatial" for the requested ``model`` ("auto", "planar", "spatial").
+
+    "auto" is planar exactly when :func:`planar_reasons` finds nothing; "planar" with a reason
+    raises ValueError (the planar model would drop out-of-plane loads)."""
+    if not isinstance(model, str) or model not in MODELS:
+        raise ValueError(f"model must be one of {MODELS}; got {model!r}")
+    if model == "spatial":
+        return "spatial"
+    reasons = planar_reasons(rod, field, clamp, R0)
+    if model == "planar" and reasons:
+        raise ValueError(
+            "model='planar' would drop out-of-plane loads: "
+            + "; ".join(reasons)
+            + " -- use model='auto' or 'spatial'"
+        )
+    return "spatial" if reasons else "planar"

@@ -1,0 +1,632 @@
+"""The spatial discrete hard-magnetic Kirchhoff rod as a :class:`~coilrod.path.PathProblem`.
+
+Non-dimensional like :mod:`coilrod.rod.planar`: lengths in L, moments in EI_z/L, forces in
+EI_z/L^2 (EI_z the in-plane bending stiffness, :attr:`coilrod.Rod.bending_stiffness`).  Nodes
+``s_0 = 0 < ... < s_N = 1`` with segment lengths ``h_i`` and trapezoid weights ``w_i``; each
+node carries a cross-section frame ``R_i`` in SO(3) (columns: tangent, normal, binormal).
+
+Discretisation (inextensible, unshearable).  The discrete energy is
+
+    E = sum_i psi_i^T K psi_i / (2 h_i) - c sum_i w_i m_i . b(x_i),
+    psi_i = log(R_i^T R_{i+1}),   m_i = R_i mu_i,
+    x_{i+1} = x_i + h_i (t_i + t_{i+1}) / 2,   t_i = R_i e_1,
+
+with ``K = diag(GJ, EI_y, EI_z) / EI_z`` (torsion, bending about the normal, bending about the
+binormal), ``mu_i`` the body-frame node magnetization times ``A L^2 / EI_z`` (1/T) and ``b``
+the field (T) at scale 1, ``c`` the load scale.  ``psi_i / h_i`` is the body-frame Darboux
+vector of segment i (exact for a helix between the nodes); for a planar state (rotations about
+z) the energy is exactly that of :mod:`coilrod.rod.planar`, so the two solvers share their
+discrete solutions.  The scheme is symmetric: the error expands in even powers of h (second
+order; fourth with the Richardson extrapolation of :func:`~coilrod.solve_rod`).
+
+Unknowns.  The frames are ``R_i = exp(hat(phi_i)) R_0`` with ``phi_i`` the rotation vector (rad,
+world frame) relative to the clamp frame ``R_0``: a vector chart, so the engine's predictors and
+secants apply unchanged; it is singular only where a node has turned a full 2 pi relative to
+the clamp (:attr:`SpatialRod.max_turn` guards it).  The equations are the moment balances in the
+world frame (the derivative of E with respect to a small world rotation of each node); their
+Jacobian with respect to ``phi`` is exact: the second derivative in world rotations, minus
+``hat(r_i) / 2`` on the diagonal (the rotations do not commute), times ``J_l(phi)``.
+
+* uniform fields: ``phi`` only (3 unknowns per node): block-tridiagonal Jacobian (band 5, 5).
+* otherwise a mixed layout with positions and the position constraints' multipliers (the
+  internal force of each segment) as unknowns, nine per node ``(x_i, phi_i, F_i)``, equations
+  (position, moment, force) in the same order: band (11, 11); a Newton step costs O(N).
+
+Both layouts evaluate stacks of states at once; the k Jacobians of a stack form one block
+diagonal band matrix factorised by one pass (:class:`~coilrod.rod.planar.RodTangent`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..path.protocol import Linearization, PathProblem
+from .planar import RodTangent, _lowest_from_inverse, _take_tangent
+from .so3 import cross, expm, hat, inv_right_jacobian_coefficients, left_jacobian, logm
+
+__all__ = ["SpatialRod"]
+
+_FLOOR = 32.0
+#: Free rotational unknowns up to which the second variation is formed densely.
+_DENSE_STABILITY = 600
+
+
+def _matvec(A, v):
+    return np.einsum("...ij,...j->...i", A, v)
+
+
+def _outer(a, b):
+    return a[..., :, None] * b[..., None, :]
+
+
+def _sym_term(a, b):
+    """Hessian of ``b . (exp(hat(d)) a)`` in the world rotation d at 0: (a b^T + b a^T) / 2
+    - (a . b) I."""
+    out = 0.5 * (_outer(a, b) + _outer(b, a))
+    d = np.einsum("...i,...i->...", a, b)
+    out[..., 0, 0] -= d
+    out[..., 1, 1] -= d
+    out[..., 2, 2] -= d
+    return out
+
+
+class SpatialRod(PathProblem):
+    """The discrete spatial rod for one rod, field and mesh (non-dimensional).
+
+    Parameters
+    ----------
+    mesh : RodMesh
+    mu : ndarray, shape (n, 3)
+        Node magnetization in the body frame (tangent, normal, binormal) times A L^2 / EI_z, 1/T.
+    stiffness : array-like, shape (3,)
+        (GJ, EI_y, EI_z) / EI_z, non-dimensional.
+    field : coils.Field
+        The applied field (SI) at scale 1.
+    length : float
+        L in m.
+    clamp_position : ndarray, shape (3,)
+        m.
+    clamp_rotation : ndarray, shape (3, 3)
+        Frame of the clamp (columns: tangent, normal, binormal), orthonormal, det +1.
+    tol : float
+        Newton tolerance on the scaled residual (as :class:`~coilrod.rod.planar.PlanarRod`).
+    """
+
+    batched = True
+    max_correction = 0.25
+    max_step_change = 0.5
+    #: Largest rotation of any node in one Newton step, rad.
+    max_rotation = 0.5
+    #: Largest rotation of a node relative to the clamp accepted (rad): the chart
+    #: ``exp(hat(phi)) R_0`` is singular at 2 pi.
+    max_turn = 1.9 * np.pi
+
+    def __init__(
+        self, mesh, mu, stiffness, field, length, clamp_position, clamp_rotation, tol=1e-9
+    ):
+        self.mesh = mesh
+        self.mu = np.asarray(mu, float)
+        self.K = np.asarray(stiffness, float)
+        self.field = field
+        self.L = float(length)
+        self.clamp = np.asarray(clamp_position, float)
+        self.R0 = np.asarray(clamp_rotation, float)
+        self.tol = float(tol)
+        self.uniform = bool(field.uniform)
+        self.linear = bool(field.linear or field.uniform)
+        self.cheap_tangent = False
+        self.n = n = mesh.n
+        self.nv = 3 if self.uniform else 9
+        self.size = self.nv * n
+        self.kl = self.ku = 5 if self.uniform else 11
+        h, w = mesh.h, mesh.w
+        self._inv_h = 1.0 / h
+        self._inv_w = 1.0 / w
+        bend = np.zeros(n)
+        bend[1:] += self._inv_h
+        bend[:-1] += self._inv_h
+        self._bend_scale = bend * self._inv_w * float(np.max(self.K))
+        self._band_cache: dict = {}
+        self._mu0 = None
+        self._det_ref = None
+        self.last_failure = ""
+        if self.uniform:
+            self._b_uniform = np.asarray(field.B(self.clamp)[0], float)
+        self._index = self._band_indices()
+
+    # -- layout -----------------------------------------------------------------------------
+    def _slots(self):
+        """Offsets of (x, phi, F) within a node's unknowns (None where absent)."""
+        return (None, 0, None) if self.uniform else (0, 3, 6)
+
+    def rotations(self, u: np.ndarray) -> np.ndarray:
+        """Rotation vectors phi (rad) of a state (size,) or stack (k, size): (..., n, 3)."""
+        v = u.reshape(u.shape[:-1] + (self.n, self.nv))
+        return v[..., 0:3] if self.uniform else v[..., 3:6]
+
+    def frames(self, u: np.ndarray) -> np.ndarray:
+        """Node frames R_i (..., n, 3, 3) (columns: tangent, normal, binormal, world)."""
+        return expm(self.rotations(u)) @ self.R0
+
+    def positions_from_frames(self, R: np.ndarray) -> np.ndarray:
+        """Trapezoid centreline relative to the clamp from frames (..., n, 3, 3): (..., n, 3),
+        units of L."""
+        t = R[..., :, 0]
+        seg = self.mesh.h[:, None] * (t[..., :-1, :] + t[..., 1:, :]) / 2
+        out = np.zeros(t.shape)
+        np.cumsum(seg, axis=-2, out=out[..., 1:, :])
+        return out
+
+    def node_positions(self, U: np.ndarray) -> np.ndarray:
+        """Node positions (k, n, 3) relative to the clamp, units of L."""
+        U = np.atleast_2d(U)
+        if self.uniform:
+            return self.positions_from_frames(self.frames(U))
+        return U.reshape(U.shape[0], self.n, 9)[:, :, 0:3]
+
+    def points(self, x: np.ndarray) -> np.ndarray:
+        """Physical points (..., 3) in m from positions relative to the clamp in units of L."""
+        return self.clamp + self.L * x
+
+    def straight(self) -> np.ndarray:
+        """The straight unloaded state along the clamp tangent, shape (size,)."""
+        u = np.zeros((self.n, self.nv))
+        if not self.uniform:
+            u[:, 0:3] = self.mesh.s[:, None] * self.R0[:, 0]
+        return u.ravel()
+
+    def from_rotations(self, phi: np.ndarray, scale: float = 0.0) -> np.ndarray:
+        """Unknowns (size,) with positions and forces consistent with rotations phi (n, 3)."""
+        phi = np.asarray(phi, float)
+        if self.uniform:
+            return phi.ravel().copy()
+        R = expm(phi) @ self.R0
+        x = self.positions_from_frames(R)
+        u = np.zeros((self.n, 9))
+        u[:, 0:3], u[:, 3:6] = x, phi
+        if scale != 0.0:
+            _, G, _ = self._field(x[None], False)
+            m = _matvec(R, self.mu)
+            f = (scale * self.L) * np.einsum("nij,ni->nj", G, m)
+            wf = self.mesh.w[:, None] * f
+            u[:-1, 6:9] = np.cumsum(wf[::-1], axis=0)[::-1][1:]
+        return u.ravel()
+
+    def interpolate_to(self, fine: SpatialRod, u: np.ndarray) -> np.ndarray:
+        """States of this mesh on its refinement (every segment halved), linear interpolation
+        of every unknown; u (size,) or (k, size)."""
+        if fine.n != 2 * self.n - 1:
+            raise ValueError("fine must be the refinement of this mesh (every segment halved)")
+        v = np.atleast_2d(u).reshape(-1, self.n, self.nv)
+        out = np.empty((v.shape[0], fine.n, self.nv))
+        out[:, ::2] = v
+        out[:, 1::2] = 0.5 * (v[:, :-1] + v[:, 1:])
+        out = out.reshape(v.shape[0], -1)
+        return out[0] if np.ndim(u) == 1 else out
+
+    # -- field ------------------------------------------------------------------------------
+    def _field(self, x: np.ndarray, hessian: bool):
+        pts = self.points(x).reshape(-1, 3)
+        if hessian and not self.linear:
+            return self.field.B_gradient_hessian(pts)
+        B, G = self.field.B_and_gradient(pts)
+        return B, G, None
+
+    def _field_by_member(self, x: np.ndarray, hessian: bool):
+        """:meth:`_field` with NaN for members whose field cannot be evaluated."""
+        try:
+            with np.errstate(all="ignore"):
+                return self._field(x, hessian)
+        except ValueError as exc:
+            self.last_failure = f"the field could not be evaluated at the trial states ({exc})"
+        k, n = x.shape[0], self.n
+        B = np.full((k, n, 3), np.nan)
+        G = np.full((k, n, 3, 3), np.nan)
+        H = np.full((k, n, 3, 3, 3), np.nan) if hessian and not self.linear else None
+        for j in range(k):
+            try:
+                with np.errstate(all="ignore"):
+                    Bj, Gj, Hj = self._field(x[j : j + 1], hessian)
+            except ValueError as exc:
+                self.last_failure = f"the field could not be evaluated at the trial states ({exc})"
+                continue
+            B[j], G[j] = Bj, Gj
+            if H is not None:
+                H[j] = Hj
+        return (
+            B.reshape(-1, 3),
+            G.reshape(-1, 3, 3),
+            None if H is None else H.reshape(-1, 3, 3, 3),
+        )
+
+    # -- the protocol -------------------------------------------------------------------------
+    def linearize(self, u, scale, tangent: bool = True) -> Linearization:
+        """Residual (k, size), admissibility (k,) and the tangent of a stack of states."""
+        U = np.asarray(u, dtype=float)
+        if U.ndim == 1:
+            U = U[None]
+        S = np.asarray(scale, dtype=float)
+        if S.shape != (U.shape[0],):
+            S = np.full(U.shape[0], float(S)) if S.ndim == 0 else S.reshape(U.shape[0])
+        with np.errstate(all="ignore"):
+            R, R1, ab = self._assemble(U, S, tangent)
+            ok = np.all(np.isfinite(R), axis=1)
+            turned = np.sqrt(np.einsum("kni,kni->kn", *(2 * (self.rotations(U),)))).max(axis=1)
+            bad_turn = turned > self.max_turn
+            if bad_turn.any():
+                ok &= ~bad_turn
+                self.last_failure = (
+                    f"a node turned {float(turned.max()):.3g} rad relative to the clamp (the "
+                    f"rotation chart of the spatial rod is limited to {self.max_turn:.3g} rad)"
+                )
+        tan = None
+        if tangent:
+            tan = RodTangent(U.shape[0], self.size, False, ab, R1, self.kl, self.ku)
+            tan.bad |= ~ok
+        lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
+        lin.load_rate = R1
+        return lin
+
+    def solve(self, lin: Linearization, rhs: np.ndarray) -> np.ndarray:
+        return lin.tangent.solve(np.atleast_2d(rhs))
+
+    def d_residual_d_scale(self, lin: Linearization) -> np.ndarray:
+        return lin.load_rate
+
+    def take(self, lin: Linearization, rows) -> Linearization:
+        """Members ``rows`` of a stacked linearization (factors sliced)."""
+        rows = np.asarray(rows, dtype=int)
+        out = Linearization(
+            u=lin.u[rows], scale=lin.scale[rows], residual=lin.residual[rows], ok=lin.ok[rows]
+        )
+        out.load_rate = lin.load_rate[rows]
+        out.tangent = None if lin.tangent is None else _take_tangent(lin.tangent, rows)
+        return out
+
+    def residual(self, u: np.ndarray, scale) -> np.ndarray:
+        """``R(u, scale)`` with the shape of ``u``."""
+        return self.linearize(u, scale, tangent=False).residual.reshape(np.shape(u))
+
+    def dense_jacobian(self, u: np.ndarray, scale: float) -> np.ndarray:
+        """The Jacobian of one state as a dense (size, size) array (tests, small problems)."""
+        ab = self.linearize(u, scale).tangent.parts
+        N, kl, ku = self.size, self.kl, self.ku
+        J = np.zeros((N, N))
+        for off in range(-kl, ku + 1):
+            J += np.diag(ab[kl + ku - off, max(off, 0) : N + min(off, 0)], off)
+        return J
+
+    def _scaled(self, R: np.ndarray) -> np.ndarray:
+        """Residuals scaled to point values (k, n, nv): moments per length, position mismatch
+        per length, forces per length."""
+        v = R.reshape(R.shape[0], self.n, self.nv)
+        out = np.empty_like(v)
+        if self.uniform:
+            out[:] = v * self._inv_w[:, None]
+            out[:, 0] = 0.0
+            return out
+        out[:, :, 3:6] = v[:, :, 3:6] * self._inv_w[:, None]
+        out[:, 0, 3:6] = 0.0
+        out[:, 1:, 0:3] = v[:, 1:, 0:3] * self._inv_h[:, None]
+        out[:, 0, 0:3] = 0.0
+        out[:, :-1, 6:9] = v[:, :-1, 6:9] * self._inv_w[1:, None]
+        out[:, -1, 6:9] = 0.0
+        return out
+
+    def error(self, lin: Linearization, du) -> np.ndarray:
+        """max over equations of |scaled residual| / (tol + its round-off floor), shape (k,)."""
+        scaled = np.abs(self._scaled(lin.residual))
+        U = lin.u.reshape(lin.u.shape[0], self.n, self.nv)
+        eps = np.finfo(float).eps
+        with np.errstate(all="ignore"):
+            size = 1.0 + np.abs(U).max(axis=(1, 2))  # rotations, positions, forces
+            load = np.abs(self._scaled(lin.load_rate)).max(axis=(1, 2)) * np.abs(lin.scale)
+            floor = _FLOOR * eps * (size[:, None] * self._bend_scale + load[:, None])
+            err = scaled / (self.tol + floor[:, :, None])
+            out = err.max(axis=(1, 2))
+        out[~np.isfinite(out)] = np.inf
+        return out
+
+    def residual_norm(self, residual) -> np.ndarray:
+        """Max-norm of the scaled residual (non-dimensional), shape (k,)."""
+        R = residual.residual if isinstance(residual, Linearization) else residual
+        return np.abs(self._scaled(R)).max(axis=(1, 2))
+
+    def step_limit(self, u, du):
+        """No node rotates by more than :attr:`max_rotation` in one Newton step."""
+        d = self.rotations(np.atleast_2d(du))
+        rot = np.sqrt(np.einsum("kni,kni->kn", d, d)).max(axis=1)
+        with np.errstate(divide="ignore"):
+            return np.where(rot > 0, np.minimum(1.0, self.max_rotation / rot), 1.0)
+
+    def distance(self, du):
+        """Largest change of a node rotation vector, rad, shape (k,)."""
+        d = self.rotations(np.atleast_2d(du))
+        return np.sqrt(np.einsum("kni,kni->kn", d, d)).max(axis=1)
+
+    def arclength_weights(self) -> np.ndarray:
+        w = np.zeros((self.n, self.nv))
+        w[:, self._slots()[1] : self._slots()[1] + 3] = 1.0 / self.n
+        return w.ravel()
+
+    # -- assembly -----------------------------------------------------------------------------
+    def _band_indices(self):
+        """Band-storage rows and columns (member 0) of every Jacobian block, by block kind:
+        arrays (nblocks, 3, 3) for the row/column of each entry."""
+        n, nv = self.n, self.nv
+        ox, op, of = self._slots()
+        kk = self.kl + self.ku
+        ii, jj = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
+
+        def block(rnodes, roff, cnodes, coff):
+            r = (nv * np.asarray(rnodes) + roff)[:, None, None] + ii
+            c = (nv * np.asarray(cnodes) + coff)[:, None, None] + jj
+            return kk + r - c, c
+
+        j = np.arange(1, n)  # free nodes
+        idx = {
+            "clamp_phi": block([0], op, [0], op),
+            "m_prev": block(j, op, j - 1, op),  # moment j wrt phi_{j-1}
+            "m_diag": block(j, op, j, op),
+            "m_next": block(j[:-1], op, j[:-1] + 1, op),
+        }
+        if not self.uniform:
+            idx.update(
+                {
+                    "clamp_x": block([0], ox, [0], ox),
+                    "p_x": block(j, ox, j, ox),
+                    "p_xprev": block(j, ox, j - 1, ox),
+                    "p_phiprev": block(j, ox, j - 1, op),
+                    "p_phi": block(j, ox, j, op),
+                    "m_x": block(j, op, j, ox),
+                    "m_Fprev": block(j, op, j - 1, of),
+                    "m_F": block(j[:-1], op, j[:-1], of),
+                    "f_F": block(np.arange(n), of, np.arange(n), of),
+                    "f_Fnext": block(j - 1, of, j, of),
+                    "f_xnext": block(j - 1, of, j, ox),
+                    "f_phinext": block(j - 1, of, j, op),
+                }
+            )
+        return idx
+
+    def _scatter(self, k: int, blocks: dict) -> np.ndarray:
+        """LAPACK band storage (2 kl + ku + 1, k size) of the stacked Jacobians."""
+        shape = (2 * self.kl + self.ku + 1, k * self.size)
+        ab = np.zeros(shape, order="F")
+        offs = (np.arange(k) * self.size)[:, None, None, None]
+        for name, values in blocks.items():
+            r, c = self._index[name]
+            vals = np.broadcast_to(values, (k,) + r.shape)
+            ab[np.broadcast_to(r, vals.shape), c + offs] = vals
+        return ab
+
+    def _assemble(self, U: np.ndarray, S: np.ndarray, tangent: bool):
+        k, n, nv = U.shape[0], self.n, self.nv
+        h, w, L = self.mesh.h, self.mesh.w, self.L
+        V = U.reshape(k, n, nv)
+        phi = self.rotations(U)
+        Q = expm(phi)
+        Rm = Q @ self.R0  # (k, n, 3, 3)
+        t = Rm[..., :, 0]
+        m = _matvec(Rm, self.mu)  # (k, n, 3)
+        # bending: psi_i = log(R_i^T R_{i+1}), p_i = R_{i+1} J_l^-1(psi_i) K psi_i / h_i
+        Ra, Rb = Rm[:, :-1], Rm[:, 1:]
+        psi = logm(np.swapaxes(Ra, -1, -2) @ Rb)  # (k, n-1, 3)
+        g = psi * self.K * self._inv_h[:, None]
+        theta = np.sqrt(np.einsum("kni,kni->kn", psi, psi))
+        cc, dc = inv_right_jacobian_coefficients(theta)
+        psi_g = cross(psi, g)
+        Jg = g - 0.5 * psi_g + cc[..., None] * cross(psi, psi_g)  # J_l^-1(psi) g
+        p = _matvec(Rb, Jg)
+        # field at the nodes
+        if self.uniform:
+            b = np.broadcast_to(self._b_uniform, (k, n, 3))
+            G = Hs = None
+            x = F = None
+        else:
+            x, F = V[:, :, 0:3], V[:, :, 6:9]
+            B, G, Hs = self._field_by_member(x, tangent)
+            b = B.reshape(k, n, 3)
+            G = G.reshape(k, n, 3, 3)
+            if Hs is not None:
+                Hs = Hs.reshape(k, n, 3, 3, 3)
+        tau = cross(m, b)  # torque per unit load and weight
+        Sc = S[:, None, None]
+        # moment rows
+        M1 = -w[:, None] * tau
+        M = Sc * M1
+        M[:, 1:] += p
+        M[:, :-1] -= p
+        if not self.uniform:
+            hF = 0.5 * h[:, None] * F[:, :-1]  # h_i F_i / 2, (k, n-1, 3)
+            M[:, 1:] -= cross(t[:, 1:], hF)
+            M[:, :-1] -= cross(t[:, :-1], hF)
+        M[:, 0] = phi[:, 0]
+        M1[:, 0] = 0.0
+        R = np.empty((k, n, nv))
+        R1 = np.zeros((k, n, nv))
+        if self.uniform:
+            R[:] = M
+            R1[:] = M1
+        else:
+            R[:, :, 3:6], R1[:, :, 3:6] = M, M1
+            # positions: C_{j-1} = x_j - x_{j-1} - h (t_{j-1} + t_j) / 2
+            R[:, 0, 0:3] = x[:, 0]
+            R[:, 1:, 0:3] = x[:, 1:] - x[:, :-1] - 0.5 * h[:, None] * (t[:, :-1] + t[:, 1:])
+            # forces: F_j - F_{j+1} - c w_{j+1} L G_{j+1}^T m_{j+1}
+            f1 = -(w[:, None] * L) * np.einsum("knij,kni->knj", G, m)  # (k, n, 3)
+            R1[:, :-1, 6:9] = f1[:, 1:]
+            R[:, :-1, 6:9] = F[:, :-1] - F[:, 1:] + Sc * f1[:, 1:]
+            R[:, -1, 6:9] = F[:, -1]
+        R = R.reshape(k, -1)
+        R1 = R1.reshape(k, -1)
+        if not tangent:
+            return R, R1, None
+        # -- Jacobian blocks (world rotations d), then columns times J_l(phi) --
+        # segment Hessian: P = Rb (M^T K/h M + S) Rb^T, M = J_r^-1(psi)
+        I3 = np.eye(3)
+        Kh = self.K[None, :, None] * self._inv_h[:, None, None]  # (n-1, 3, 3) rows scaled
+        Psi = hat(psi)
+        Minv = I3 + 0.5 * Psi + cc[..., None, None] * (Psi @ Psi)  # J_r^-1(psi)
+        KM = Kh * Minv  # diag(K/h) @ Minv
+        MtKM = np.swapaxes(Minv, -1, -2) @ KM
+        Gm = hat(g)
+        N = (
+            -0.5 * Gm
+            - cc[..., None, None] * (Gm @ Psi)
+            - cc[..., None, None] * hat(cross(g, psi))
+            + dc[..., None, None] * _outer(psi, _matvec(Psi @ Psi, g))
+        )
+        MtN = np.swapaxes(Minv, -1, -2) @ N
+        Sym = 0.5 * (MtN + np.swapaxes(MtN, -1, -2))
+        P = Rb @ (MtKM + Sym) @ np.swapaxes(Rb, -1, -2)  # (k, n-1, 3, 3)
+        hp = 0.5 * hat(p)
+        A_ab = -P + hp  # d(moment row i) / d(rotation i+1)
+        A_ba = -P - hp  # d(moment row i+1) / d(rotation i)
+        diag = np.zeros((k, n, 3, 3))
+        diag[:, 1:] += P
+        diag[:, :-1] += P
+        diag -= Sc[..., None] * w[:, None, None] * _sym_term(m, b)
+        if not self.uniform:
+            diag[:, 1:] -= _sym_term(t[:, 1:], hF)
+            diag[:, :-1] -= _sym_term(t[:, :-1], hF)
+        Mres = R.reshape(k, n, nv)[..., self._slots()[1] : self._slots()[1] + 3]
+        diag -= 0.5 * hat(Mres)
+        Jl = left_jacobian(phi)  # (k, n, 3, 3)
+        blocks = {
+            "clamp_phi": I3,
+            "m_prev": A_ba @ Jl[:, :-1],
+            "m_diag": diag[:, 1:] @ Jl[:, 1:],
+            "m_next": A_ab[:, 1:] @ Jl[:, 2:],
+        }
+        if not self.uniform:
+            half = 0.5 * h[:, None, None]
+            That = hat(t)
+            mhat = hat(m)
+            cwL = Sc[..., None] * (w[:, None, None] * L)
+            GtM = np.swapaxes(G, -1, -2) @ mhat  # G^T hat(m)
+            if Hs is not None:
+                mH = np.einsum("kni,kniac->knac", m, Hs)
+            else:
+                mH = 0.0
+            blocks.update(
+                {
+                    "clamp_x": I3,
+                    "p_x": I3,
+                    "p_xprev": -I3,
+                    "p_phiprev": (half * That[:, :-1]) @ Jl[:, :-1],
+                    "p_phi": (half * That[:, 1:]) @ Jl[:, 1:],
+                    "m_x": (-cwL * (mhat @ G))[:, 1:],
+                    "m_Fprev": -half * That[:, 1:],
+                    "m_F": -half[1:] * That[:, 1:-1],
+                    "f_F": I3,
+                    "f_Fnext": -I3,
+                    "f_xnext": (-cwL * L * mH)[:, 1:] if Hs is not None else 0.0,
+                    "f_phinext": (cwL * GtM)[:, 1:] @ Jl[:, 1:],
+                }
+            )
+        return R, R1, self._scatter(k, blocks)
+
+    # -- stability ------------------------------------------------------------------------------
+    def det_reference(self) -> float:
+        """Sign of det J of the straight unloaded rod (stable), computed once."""
+        if self._det_ref is None:
+            lin = self.linearize(self.straight(), 0.0)
+            self._det_ref = float(lin.tangent.det_signs()[0])
+        return self._det_ref
+
+    def stability(self, lin: Linearization, precise: bool = False) -> np.ndarray:
+        """Smallest eigenvalue mu of the second variation ``H z = mu W z`` (W: trapezoid
+        weights) in the free nodes' world rotations (positions and forces eliminated), in
+        EI_z / L^3 units; cheap indicator: the sign of det J relative to the straight rod.
+
+        The cheap sign is the parity of the number of negative eigenvalues: a symmetric
+        problem (a circular section in a load symmetric about the rod's axis) can have a
+        double eigenvalue that crosses zero without changing it; ``precise`` computes the
+        smallest eigenvalue itself (dense spectrum up to :data:`_DENSE_STABILITY` free
+        unknowns, else ARPACK on the eigenvalue closest to zero)."""
+        signs = lin.tangent.det_signs() * self.det_reference()
+        if not precise:
+            return signs
+        out = np.full(lin.tangent.k, np.nan)
+        for j in range(lin.tangent.k):
+            if signs[j] == 0:
+                continue
+            one = _take_tangent(lin.tangent, [j])
+            out[j] = self._lowest(one, lin.u[j], signs[j])
+        return out
+
+    def _rotation_rows(self):
+        op = self._slots()[1]
+        return (self.nv * np.arange(1, self.n)[:, None] + op + np.arange(3)).ravel()
+
+    def _lowest(self, tan: RodTangent, u: np.ndarray, sign: float) -> float:
+        rows = self._rotation_rows()
+        sq = np.repeat(np.sqrt(self.mesh.w[1:]), 3)
+        Jl = left_jacobian(self.rotations(u)[1:])  # world rotation = J_l dphi
+
+        def apply(V):  # V (q, 3(n-1)) -> W^1/2 H^-1 W^1/2 V
+            rhs = np.zeros((V.shape[0], self.size))
+            rhs[:, rows] = sq * V
+            sol = tan.solve_many(rhs) if hasattr(tan, "solve_many") else _solve_many(tan, rhs)
+            dphi = sol[:, rows].reshape(V.shape[0], self.n - 1, 3)
+            return sq * np.einsum("nij,qnj->qni", Jl, dphi).reshape(V.shape[0], -1)
+
+        nf = rows.size
+        if nf <= _DENSE_STABILITY:
+            Sm = apply(np.eye(nf))
+            Sm = 0.5 * (Sm + Sm.T)
+            if not np.all(np.isfinite(Sm)):
+                return float("nan")
+            return _lowest_from_inverse(Sm)
+        from scipy.sparse.linalg import LinearOperator, eigsh
+
+        op = LinearOperator((nf, nf), matvec=lambda v: apply(np.ravel(v)[None])[0], dtype=float)
+        sigma = eigsh(op, k=1, which="LM", tol=1e-10, return_eigenvectors=False)[0]
+        mu = 1.0 / sigma
+        return float(-abs(mu) if (mu > 0 and sign < 0) else mu)
+
+    @property
+    def mu0(self) -> float:
+        """Smallest second-variation eigenvalue of the straight unloaded rod (about
+        min(GJ, EI_y, EI_z) / EI_z pi^2 / 4)."""
+        if self._mu0 is None:
+            lin = self.linearize(self.straight(), 0.0)
+            self._mu0 = float(self.stability(lin, precise=True)[0])
+        return self._mu0
+
+    def near_fold(self, lin: Linearization) -> bool:
+        """True if the smallest second-variation eigenvalue is below 5 % of the straight
+        rod's."""
+        try:
+            mu = float(self.stability(lin, precise=True)[0])
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+            return False
+        return bool(mu < 0.05 * self.mu0)
+
+    def fold_hint(self, lin: Linearization) -> str:
+        """Say whether the state of ``lin`` is close to a limit point (fold)."""
+        try:
+            mu = float(self.stability(lin, precise=True)[0])
+        except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+            return ""
+        if not np.isfinite(mu):
+            return ""
+        if mu < 0.05 * self.mu0:
+            return (
+                f"; the smallest eigenvalue of the second variation there is {mu:.3g}: "
+                "a limit point (fold) or a bifurcation -- trace it with coilrod.trace_rod"
+            )
+        return f"; smallest second-variation eigenvalue there {mu:.3g}"
+
+
+def _solve_many(tan: RodTangent, rhs: np.ndarray) -> np.ndarray:
+    """Solve one member's Jacobian (k = 1) for several right-hand sides (q, size)."""
+    from ._compiled import band_solve
+
+    lu = tan.factor()
+    if tan.bad[0]:
+        return np.full(rhs.shape, np.nan)
+    x = np.ascontiguousarray(rhs.T)
+    band_solve(lu[0], tan.kl, tan.ku, lu[1], x)
+    return x.T
