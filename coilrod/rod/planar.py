@@ -79,6 +79,9 @@ class RodTangent:
     ):
         self.k, self.size, self.uniform = k, size, uniform
         self.kl, self.ku = kl, ku  # bandwidths of a band layout
+        #: Arrays with one row per member that travel with the tangent (sliced by
+        #: :func:`_take_tangent`), e.g. the spatial rod's symmetric blocks for the inertia.
+        self.blocks: tuple = ()
         self.parts = parts
         self.load_rate = load_rate  # dR/dscale, (k, size)
         self.bad = np.zeros(k, dtype=bool)
@@ -778,6 +781,12 @@ class PlanarRod(PathProblem):
 def _take_tangent(tan: RodTangent, rows) -> RodTangent:
     """Members ``rows`` of a stacked tangent (factors sliced: the blocks are independent)."""
     rows = np.asarray(rows, dtype=int)
+    out = _take_members(tan, rows)
+    out.blocks = tuple(b[rows] for b in tan.blocks)
+    return out
+
+
+def _take_members(tan: RodTangent, rows: np.ndarray) -> RodTangent:
     n = tan.size
     cols = (rows[:, None] * n + np.arange(n)[None, :]).ravel()
     if tan.uniform:

@@ -128,7 +128,6 @@ class SpatialRod(PathProblem):
         self._bend_scale = bend * self._inv_w * float(np.max(self.K))
         self._band_cache: dict = {}
         self._mu0 = None
-        self._det_ref = None
         self.last_failure = ""
         if self.uniform:
             self._b_uniform = np.asarray(field.B(self.clamp)[0], float)
@@ -249,7 +248,7 @@ class SpatialRod(PathProblem):
         if S.shape != (U.shape[0],):
             S = np.full(U.shape[0], float(S)) if S.ndim == 0 else S.reshape(U.shape[0])
         with np.errstate(all="ignore"):
-            R, R1, ab = self._assemble(U, S, tangent)
+            R, R1, ab, sym = self._assemble(U, S, tangent)
             ok = np.all(np.isfinite(R), axis=1)
             turned = np.sqrt(np.einsum("kni,kni->kn", *(2 * (self.rotations(U),)))).max(axis=1)
             bad_turn = turned > self.max_turn
@@ -263,6 +262,7 @@ class SpatialRod(PathProblem):
         if tangent:
             tan = RodTangent(U.shape[0], self.size, False, ab, R1, self.kl, self.ku)
             tan.bad |= ~ok
+            tan.blocks = sym  # (diagonal, upper) blocks of the second variation
         lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
         lin.load_rate = R1
         return lin
@@ -461,7 +461,7 @@ class SpatialRod(PathProblem):
         R = R.reshape(k, -1)
         R1 = R1.reshape(k, -1)
         if not tangent:
-            return R, R1, None
+            return R, R1, None, None
         # -- Jacobian blocks (world rotations d), then columns times J_l(phi) --
         # segment Hessian: P = Rb (M^T K/h M + S) Rb^T, M = J_r^-1(psi)
         I3 = np.eye(3)
@@ -525,27 +525,41 @@ class SpatialRod(PathProblem):
                     "f_phinext": (cwL * GtM)[:, 1:] @ Jl[:, 1:],
                 }
             )
-        return R, R1, self._scatter(k, blocks)
+        # second variation in world rotations (free nodes), symmetric block tridiagonal:
+        # uniform blocks d_j; mixed blocks Z_j = (x_j, F_{j-1}, d_j), j = 1..N (the Lagrangian's
+        # Hessian: positions, constraint multipliers, rotations)
+        if self.uniform:
+            sym = (diag[:, 1:], A_ab[:, 1:])
+        else:
+            nf = n - 1
+            D = np.zeros((k, nf, 9, 9))
+            E = np.zeros((k, max(nf - 1, 0), 9, 9))
+            if Hs is not None:
+                D[:, :, 0:3, 0:3] = (-cwL * L * mH)[:, 1:]
+            D[:, :, 0:3, 3:6] = I3
+            D[:, :, 3:6, 0:3] = I3
+            D[:, :, 0:3, 6:9] = (cwL * GtM)[:, 1:]
+            D[:, :, 6:9, 0:3] = np.swapaxes(D[:, :, 0:3, 6:9], -1, -2)
+            D[:, :, 3:6, 6:9] = half * That[:, 1:]
+            D[:, :, 6:9, 3:6] = -half * That[:, 1:]
+            D[:, :, 6:9, 6:9] = diag[:, 1:]
+            E[:, :, 0:3, 3:6] = -I3
+            E[:, :, 6:9, 3:6] = -half[1:] * That[:, 1:-1]
+            E[:, :, 6:9, 6:9] = A_ab[:, 1:]
+            sym = (D, E)
+        return R, R1, self._scatter(k, blocks), sym
 
     # -- stability ------------------------------------------------------------------------------
-    def det_reference(self) -> float:
-        """Sign of det J of the straight unloaded rod (stable), computed once."""
-        if self._det_ref is None:
-            lin = self.linearize(self.straight(), 0.0)
-            self._det_ref = float(lin.tangent.det_signs()[0])
-        return self._det_ref
-
     def stability(self, lin: Linearization, precise: bool = False) -> np.ndarray:
         """Smallest eigenvalue mu of the second variation ``H z = mu W z`` (W: trapezoid
         weights) in the free nodes' world rotations (positions and forces eliminated), in
-        EI_z / L^3 units; cheap indicator: the sign of det J relative to the straight rod.
-
-        The cheap sign is the parity of the number of negative eigenvalues: a symmetric
-        problem (a circular section in a load symmetric about the rod's axis) can have a
-        double eigenvalue that crosses zero without changing it; ``precise`` computes the
-        smallest eigenvalue itself (dense spectrum up to :data:`_DENSE_STABILITY` free
-        unknowns, else ARPACK on the eigenvalue closest to zero)."""
-        signs = lin.tangent.det_signs() * self.det_reference()
+        EI_z / L^3 units.  The cheap indicator is +1 for a stable state and minus the number
+        of negative eigenvalues otherwise (:meth:`inertia_signs`; it counts a double
+        eigenvalue -- a circular section in a load symmetric about the rod's axis -- which
+        the determinant's sign would miss).  ``precise``: the smallest eigenvalue itself
+        (dense spectrum up to :data:`_DENSE_STABILITY` free unknowns, else ARPACK on the
+        eigenvalue closest to zero, signed by the inertia)."""
+        signs = self.inertia_signs(lin)
         if not precise:
             return signs
         out = np.full(lin.tangent.k, np.nan)
@@ -555,6 +569,23 @@ class SpatialRod(PathProblem):
             one = _take_tangent(lin.tangent, [j])
             out[j] = self._lowest(one, lin.u[j], signs[j])
         return out
+
+    def negative_count(self, lin: Linearization) -> np.ndarray:
+        """Number of negative eigenvalues of the second variation of each member (k,) (-1
+        where it is not finite), by block LDL^T (:mod:`coilrod.rod._inertia`)."""
+        from ._inertia import block_tridiagonal_inertia
+
+        D, E = lin.tangent.blocks
+        neg, _ = block_tridiagonal_inertia(D, E)
+        if not self.uniform:  # the Lagrangian's Hessian has one negative per constraint
+            neg = np.where(neg >= 0, neg - 3 * (self.n - 1), neg)
+        return neg
+
+    def inertia_signs(self, lin: Linearization) -> np.ndarray:
+        """+1 where the second variation is positive definite, minus the number of negative
+        eigenvalues where not, 0 where it cannot be evaluated; shape (k,)."""
+        neg = self.negative_count(lin)
+        return np.where(neg == 0, 1.0, np.where(neg > 0, -neg.astype(float), 0.0))
 
     def _rotation_rows(self):
         op = self._slots()[1]

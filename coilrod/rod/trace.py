@@ -11,7 +11,8 @@ from coils._validate import finite_scalar, positive
 from ..errors import ConvergenceError
 from ..path.arclength import ArcLength
 from ..path.corrector import NewtonOptions, newton
-from .solve import build_problem, check_inputs, make_mesh
+from .model import choose_model, clamp_frame
+from .solve import _tip_azimuth, build_problem, build_spatial_problem, check_inputs, make_mesh
 
 __all__ = ["trace_rod", "RodPath"]
 
@@ -42,6 +43,8 @@ class RodPath:
         ``tip_angle``.  A rod loaded past a fold snaps through to another branch.
     s : ndarray, shape (n,)
         Arc length of the nodes, m.
+    model : str
+        "planar" or "spatial" (see :func:`~coilrod.solve_rod`).
     """
 
     scale: np.ndarray
@@ -54,16 +57,32 @@ class RodPath:
     _theta: np.ndarray = field(repr=False)
     _points: np.ndarray = field(repr=False)
     limit_points: list = field(default_factory=list)
+    model: str = "planar"
+    _frames: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.scale)
+
+    def frames(self, k: int) -> np.ndarray:
+        """Frames of point ``k`` at :attr:`s`, shape (n, 3, 3) (columns: tangent, normal,
+        binormal in world coordinates)."""
+        if self._frames is not None:
+            return self._frames[k].copy()
+        th = self._theta[k]
+        out = np.zeros((th.size, 3, 3))
+        out[:, 0, 0], out[:, 1, 0] = np.cos(th), np.sin(th)
+        out[:, 0, 1], out[:, 1, 1] = -np.sin(th), np.cos(th)
+        out[:, 2, 2] = 1.0
+        return out
 
     def centerline(self, k: int) -> np.ndarray:
         """Centreline of point ``k``, shape (n, 3), m."""
         return self._points[k].copy()
 
     def theta(self, k: int) -> np.ndarray:
-        """Tangent angles of point ``k`` at :attr:`s`, shape (n,), rad."""
+        """Tangent angles of point ``k`` at :attr:`s`, shape (n,), rad (planar paths)."""
+        if self._theta is None:
+            raise ValueError("theta() belongs to planar paths; this one is spatial: use frames(k)")
         return self._theta[k].copy()
 
 
@@ -80,6 +99,8 @@ def trace_rod(
     nodes: int | None = 64,
     clamp_position=(0.0, 0.0, 0.0),
     clamp_angle: float = 0.0,
+    clamp_rotation=None,
+    model: str = "auto",
     tol: float = 1e-9,
 ) -> RodPath:
     """Follow an equilibrium path in the field scale by pseudo-arclength continuation.
@@ -97,8 +118,10 @@ def trace_rod(
     scale_range : (float, float)
         The trace stops when the scale leaves this interval.
     initial : callable or array-like, optional
-        Starting guess: ``theta(s)`` (s in m, returns rad) or node angles, shape (n,).  Default:
-        the straight rod.  The first point is the equilibrium Newton finds from it.
+        Starting guess: planar model ``theta(s)`` (s in m, returns rad) or node angles, shape
+        (n,); spatial model: node rotation vectors relative to the clamp frame (rad, world
+        axes), shape (n, 3), or a callable of s returning them.  Default: the straight rod.
+        The first point is the equilibrium Newton finds from it.
     direction : {1, -1}
         Initial direction of the scale.
     step : float, optional
@@ -108,7 +131,7 @@ def trace_rod(
         Maximum number of path points (>= 1).
     nodes : int, optional
         Segments of the mesh (one mesh, second order, no extrapolation).
-    clamp_position, clamp_angle, tol
+    clamp_position, clamp_angle, clamp_rotation, model, tol
         As in :func:`~coilrod.solve_rod`.
 
     Returns
@@ -133,9 +156,17 @@ def trace_rod(
         raise ValueError(f"max_steps must be a positive integer; got {max_steps!r}")
     span = max(hi - lo, 1e-300)
     ds = 0.02 * span if step is None else positive(step, "step")
-    problem = build_problem(rod, field, make_mesh(rod, nodes), clamp, angle, tol)
-    theta0 = _initial_theta(problem, rod, initial)
-    first = newton(problem, problem.from_theta(theta0, c0), c0, NewtonOptions())
+    R0 = clamp_frame(angle, clamp_rotation)
+    chosen = choose_model(model, rod, field, clamp, R0)
+    if chosen == "planar":
+        if clamp_rotation is not None:
+            angle = float(np.arctan2(R0[1, 0], R0[0, 0]))
+        problem = build_problem(rod, field, make_mesh(rod, nodes), clamp, angle, tol)
+        start = problem.from_theta(_initial_theta(problem, rod, initial), c0)
+    else:
+        problem = build_spatial_problem(rod, field, make_mesh(rod, nodes), clamp, R0, tol)
+        start = problem.from_rotations(_initial_rotations(problem, rod, initial), c0)
+    first = newton(problem, start, c0, NewtonOptions())
     if not first.ok:
         raise ConvergenceError(
             f"trace_rod found no equilibrium at scale {c0:g} from the given "
@@ -171,31 +202,59 @@ def _initial_theta(problem, rod, initial) -> np.ndarray:
     return theta
 
 
+def _initial_rotations(problem, rod, initial) -> np.ndarray:
+    s = problem.mesh.s * rod.length
+    if initial is None:
+        return np.zeros((problem.n, 3))
+    phi = np.asarray(initial(s) if callable(initial) else initial, dtype=float)
+    if phi.shape != (problem.n, 3):
+        raise ValueError(
+            f"initial must give node rotation vectors of shape ({problem.n}, 3) for the "
+            f"spatial model; got shape {phi.shape}"
+        )
+    if not np.all(np.isfinite(phi)):
+        raise ValueError("initial must give finite rotation vectors")
+    phi = phi.copy()
+    phi[0] = 0.0
+    return phi
+
+
 def _finish(problem, rod, pts_u, pts_c) -> RodPath:
     scale = np.array(pts_c)
     states = np.array(pts_u)
     lin = problem.linearize(states, scale)
-    thetas = problem.theta(states)
-    points = problem.points(problem.positions(thetas))
+    spatial = hasattr(problem, "frames")
+    if spatial:
+        frames = problem.frames(states)
+        points = problem.points(problem.positions_from_frames(frames))
+        tip_angle = _tip_azimuth(frames[:, -1], problem.rotations(states)[:, -1], problem.R0)
+        thetas = None
+    else:
+        frames = None
+        thetas = problem.theta(states)
+        points = problem.points(problem.positions(thetas))
+        tip_angle = thetas[:, -1].copy()
     mu = np.asarray(problem.stability(lin, precise=True), float)
     residuals = problem.residual_norm(lin)
     path = RodPath(
         scale=scale,
         tip=points[:, -1].copy(),
-        tip_angle=thetas[:, -1].copy(),
+        tip_angle=tip_angle,
         stable=mu > 0,
         min_eigenvalue=mu,
         residual=np.array(residuals),
         s=problem.mesh.s * rod.length,
         _theta=thetas,
         _points=points,
+        model="spatial" if spatial else "planar",
+        _frames=frames,
     )
     dc = np.diff(scale)
     events = {}
     for k in range(1, len(dc)):
         if dc[k - 1] * dc[k] < 0:  # the scale turns back: a fold between k - 1 and k + 1
             # vertex of the parabola scale(tip angle) through the three points
-            phi, c3 = thetas[k - 1 : k + 2, -1], scale[k - 1 : k + 2]
+            phi, c3 = tip_angle[k - 1 : k + 2], scale[k - 1 : k + 2]
             ext = float(c3[1])
             if len(np.unique(phi)) == 3:
                 a2, a1, a0 = np.polyfit(phi - phi[1], c3, 2)
@@ -204,7 +263,7 @@ def _finish(problem, rod, pts_u, pts_c) -> RodPath:
             events[k] = {
                 "index": k + 1,
                 "scale": ext,
-                "tip_angle": float(thetas[k, -1]),
+                "tip_angle": float(tip_angle[k]),
                 "kind": "fold",
             }
     for k in range(1, len(mu)):
@@ -215,7 +274,7 @@ def _finish(problem, rod, pts_u, pts_c) -> RodPath:
             events[k] = {
                 "index": k,
                 "scale": float(scale[k - 1] + w * (scale[k] - scale[k - 1])),
-                "tip_angle": float(thetas[k - 1, -1] + w * (thetas[k, -1] - thetas[k - 1, -1])),
+                "tip_angle": float(tip_angle[k - 1] + w * (tip_angle[k] - tip_angle[k - 1])),
                 "kind": "stability",
             }
     path.limit_points = [events[k] for k in sorted(events)]
