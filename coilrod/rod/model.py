@@ -121,7 +121,7 @@ def planar_reasons(rod, field: Field, clamp: np.ndarray, R0: np.ndarray) -> list
 
 
 def choose_model(model: str, rod, field: Field, clamp: np.ndarray, R0: np.ndarray) -> str:
-    """"planar" or "spatial" for the requested ``model`` ("auto", "planar", "spatial").
+    """ "planar" or "spatial" for the requested ``model`` ("auto", "planar", "spatial").
 
     "auto" is planar exactly when :func:`planar_reasons` finds nothing; "planar" with a reason
     raises ValueError (the planar model would drop out-of-plane loads)."""

@@ -96,16 +96,19 @@ def logm(R: np.ndarray) -> np.ndarray:
     t2 = theta * theta
     with np.errstate(divide="ignore", invalid="ignore"):
         factor = np.where(
-            small, 1 + t2 / 6 * (1 + 7 * t2 / 60 * (1 + 31 * t2 / 294)), theta / np.where(s > 0, s, 1)
+            small,
+            1 + t2 / 6 * (1 + 7 * t2 / 60 * (1 + 31 * t2 / 294)),
+            theta / np.where(s > 0, s, 1),
         )
     out = factor[..., None] * v
     near_pi = theta > np.pi - 1e-3
-    if np.any(near_pi):  # axis from (R + I) / 2 = cos^2 ... : its largest column
+    if np.any(near_pi):  # axis from (R + R^T) / 2 - cos(t) I = (1 - cos t) a a^T
         Rp = R[near_pi]
         S = 0.5 * (Rp + np.swapaxes(Rp, -1, -2))
-        S[..., 0, 0] += 1.0
-        S[..., 1, 1] += 1.0
-        S[..., 2, 2] += 1.0
+        cp = c[near_pi]
+        S[..., 0, 0] -= cp
+        S[..., 1, 1] -= cp
+        S[..., 2, 2] -= cp
         col = np.argmax(np.einsum("...ii->...i", S), axis=-1)
         axis = np.take_along_axis(S, col[..., None, None], axis=-1)[..., 0]
         axis /= np.linalg.norm(axis, axis=-1, keepdims=True)

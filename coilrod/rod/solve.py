@@ -108,9 +108,7 @@ def build_spatial_problem(
 
     L = rod.length
     mu = _node_magnetization3(rod, mesh) * (rod.area * L**2 / rod.bending_stiffness)
-    return SpatialRod(
-        mesh, mu, rod_stiffnesses(rod), field, L, clamp_position, clamp_rotation, tol
-    )
+    return SpatialRod(mesh, mu, rod_stiffnesses(rod), field, L, clamp_position, clamp_rotation, tol)
 
 
 def solve_rod(
