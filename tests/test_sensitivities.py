@@ -359,3 +359,89 @@ class TestFEM:
             sensitivities(res, 0, wrt="currents")
         with pytest.raises(ValueError, match="out of range"):
             sensitivities(res, 1)
+
+
+class TestSpatialStates:
+    """Sensitivities of spatial states (adjoint of the spatial rod's Jacobian) against central
+    differences of independent solves; and of planar states to out-of-plane parameters, whose
+    first-order effect (the tip leaving the plane) only the spatial model has."""
+
+    FIELDS3 = {
+        "uniform": coils.UniformField(B=(0.0, 0.01, 0.002)),
+        "linear": coils.LinearField(
+            B0=(0.002, 0.008, 0.001),
+            gradient=[[0.3, 0.1, 0.05], [0.1, -0.2, 0.0], [0.05, 0.0, -0.1]],
+            origin=(0.01, 0.0, 0.0),
+        ),
+        "system": coils.presets.three_axis_helmholtz(radii=(0.06, 0.08, 0.1)).with_currents(
+            [1.5, 2.5, 0.8]
+        ),
+    }
+
+    @staticmethod
+    def _check(sens, label, build, step):
+        i = sens.parameters.index(label)
+        got = np.r_[sens.tip[i], sens.tip_angle[i]]
+        ref = _central(build, step)
+        for sl in (slice(0, 3), slice(3, 4)):
+            scale = np.max(np.abs(ref[sl]))
+            assert np.max(np.abs(got[sl] - ref[sl])) <= 1e-6 * max(scale, 1e-12), (label, got, ref)
+
+    @pytest.mark.parametrize("kind", ["uniform", "linear", "system"])
+    def test_against_central_differences(self, kind):
+        field = self.FIELDS3[kind]
+        rod = _rod()
+        res = _solve(rod, field)
+        assert res.model == "spatial"
+        sens = sensitivities(res, STATE)
+
+        def mags(d):
+            m = MAGS.copy()
+            m[1] += d
+            return _solve(_rod(mags=m), field)
+
+        def angles(d):
+            a = ANGLES.copy()
+            a[2] += d
+            return _solve(_rod(angles=a), field)
+
+        self._check(sens, "magnitudes[1]", mags, 2e3)
+        self._check(sens, "angles[2]", angles, 2e-3)
+        self._check(
+            sens,
+            "youngs_modulus",
+            lambda d: _solve(dataclasses.replace(rod, youngs_modulus=1e6 + d), field),
+            2e4,
+        )
+        if kind == "uniform":
+            self._check(
+                sens,
+                "B[2]",
+                lambda d: _solve(rod, coils.UniformField(B=field.B0 + [0, 0, d])),
+                1e-4,
+            )
+        if kind == "linear":
+            E = np.zeros((3, 3))
+            E[2, 0] = 1.0
+
+            def grad(d):
+                return _solve(rod, coils.LinearField(field.B0, field.G + d * E, field.origin))
+
+            self._check(sens, "gradient[2,0]", grad, 2e-3)
+        if kind == "system":
+
+            def cur(d):
+                return _solve(rod, field.with_currents(field.currents + [0, 0, d]))
+
+            self._check(sens, "currents[2]", cur, 1e-3)
+
+    def test_planar_state_out_of_plane_parameter(self):
+        field = coils.UniformField(B=(0.0, 0.01, 0.0))
+        rod = _rod()
+        res = _solve(rod, field)
+        assert res.model == "planar"
+        sens = sensitivities(res, STATE, wrt="B")
+        self._check(
+            sens, "B[2]", lambda d: _solve(rod, coils.UniformField(B=field.B0 + [0, 0, d])), 1e-4
+        )
+        assert abs(sens.tip[sens.parameters.index("B[2]")][2]) > 0  # the tip leaves the plane

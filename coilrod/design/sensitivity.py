@@ -307,6 +307,98 @@ def _mesh_derivatives(problem, U, S, rod, groups, field_groups, lin=None):
     return np.concatenate(cols, axis=2)
 
 
+def _pushes_out_of_plane(sol, rows, groups, field_groups) -> bool:
+    """True if a field parameter of ``groups`` changes B_z or dB_z/dx, dB_z/dy at the nodes
+    of the planar states ``rows`` (relative 1e-12 of the field's own size)."""
+    problem, U = sol.problems[0], sol.states[0][rows]
+    points = problem.points(problem.node_positions(U)).reshape(-1, 3)
+    for group in groups:
+        if group not in field_groups:
+            continue
+        Bp, Gp = field_groups[group][2](points)
+        Bp, Gp = np.asarray(Bp), np.asarray(Gp)
+        size = max(float(np.max(np.abs(Bp))), 1e-300)
+        if np.max(np.abs(Bp[:, 2])) > 1e-12 * size:
+            return True
+        if np.max(np.abs(Gp[:, 2, :2])) * sol.rod.length > 1e-12 * size:
+            return True
+    return False
+
+
+def _as_spatial(sol, rows, S, mixed=False):
+    """The spatial problems on the meshes of a planar solution and the states ``rows`` (scales
+    ``S``) carried over -- rotations about z by theta - theta_0, the same discrete equilibria:
+    (problems, states), each state stack of shape (len(rows), size)."""
+    from ..rod.model import clamp_frame
+    from ..rod.solve import build_spatial_problem
+
+    problems, states = [], []
+    for problem, U in zip(sol.problems, sol.states, strict=True):
+        if hasattr(problem, "rotations"):  # spatial already (to the mixed layout)
+            R0, phi = problem.R0, problem.rotations(np.atleast_2d(U)[rows])
+        else:
+            R0 = clamp_frame(problem.theta0, None)
+            th = problem.theta(np.atleast_2d(U)[rows])
+            phi = np.zeros(th.shape + (3,))
+            phi[..., 2] = th - problem.theta0
+        sp = build_spatial_problem(
+            sol.rod, sol.field, problem.mesh, problem.clamp, R0, problem.tol, mixed
+        )
+        states.append(np.array([sp.from_rotations(p, c) for p, c in zip(phi, S, strict=True)]))
+        problems.append(sp)
+    return tuple(problems), tuple(states)
+
+
+def _spatial_magnetization_rates(rod, mesh, group: str) -> np.ndarray:
+    """d(mu_i)/dp of the segment magnitudes or angles in 3D, shape (p, n, 3) (the body vector
+    (cos a cos e, sin a cos e, sin e) of each segment's angle a and elevation e)."""
+    edges, mags, angs = _segments(rod.magnetization, rod.length)
+    elev = np.asarray(getattr(rod.magnetization, "segment_elevations", np.zeros_like(angs)))
+    factor = rod.area * rod.length**2 / rod.bending_stiffness
+    W = segment_weights(edges, mesh, rod.length) * factor  # (n, p)
+    ce = np.cos(elev)
+    if group == "magnitudes":
+        u = np.stack([np.cos(angs) * ce, np.sin(angs) * ce, np.sin(elev)], axis=-1)
+    else:
+        u = mags[:, None] * np.stack([-np.sin(angs) * ce, np.cos(angs) * ce, 0 * ce], axis=-1)
+    return W.T[:, :, None] * u[:, None, :]
+
+
+def _spatial_mesh_derivatives(problem, U, S, rod, groups, field_groups):
+    """d(tip x, y, z [units of L], azimuth [rad])/dp of spatial states U (k, size) on one
+    mesh by the adjoint of the state's Jacobian: shape (k, 4, p)."""
+    lin = problem.linearize(U, S)
+    lam = lin.tangent.solve_transposed(problem.tip_gradients(U))  # (4, k, size)
+    if not np.all(np.isfinite(lam)):
+        raise SingularStateError(
+            "the Jacobian of the state is singular: it is at a bifurcation or limit point, "
+            "where the tip is not differentiable"
+        )
+    lamR1 = np.einsum("qks,ks->kq", lam, lin.load_rate)  # (k, 4)
+    k, n = U.shape[0], problem.n
+    cols = []
+    for group in groups:
+        if group == "scale":
+            cols.append(-lamR1[:, :, None])
+        elif group == "youngs_modulus":  # mu ~ 1/E, the stiffness ratios do not change
+            cols.append((S[:, None] / rod.youngs_modulus * lamR1)[:, :, None])
+        else:
+            if group in ("magnitudes", "angles"):
+                rates = problem.load_rates(
+                    U, dmu=_spatial_magnetization_rates(rod, problem.mesh, group)
+                )
+            else:
+                _, _, evaluate = field_groups[group]
+                points = problem.points(problem.node_positions(U)).reshape(-1, 3)
+                Bp, Gp = evaluate(points)
+                Bp = np.asarray(Bp).reshape(k, n, 3, -1)
+                Gp = np.asarray(Gp).reshape(k, n, 3, 3, -1)
+                rates = problem.load_rates(U, B=Bp, G=Gp)
+            d = np.einsum("qks,ksp->kqp", lam, rates)
+            cols.append(-S[:, None, None] * d)
+    return np.concatenate(cols, axis=2)
+
+
 def _contract(g: np.ndarray, F: np.ndarray) -> np.ndarray:
     """sum over nodes and components of g (q, k, n, ...) times F (k, n, ..., p): (k, q, p)."""
     q, k = g.shape[:2]
@@ -366,12 +458,33 @@ def tip_derivatives(result, rows, wrt=None, *, check: bool = True):
     if check:
         _check_regular(result, sol, rows, S)
     per_mesh = []
-    for problem, states in zip(sol.problems, sol.states, strict=True):
-        U = states[rows]
+    spatial = getattr(result, "model", "planar") == "spatial"
+    problems, all_states = sol.problems, sol.states
+    gradient = "gradient" in groups and sol.problems[0].uniform
+    if (not spatial and _pushes_out_of_plane(sol, rows, groups, field_groups)) or (
+        spatial and gradient
+    ):
+        # a planar state whose parameter moves the field out of the plane: its tip leaves
+        # the plane at first order -- the spatial model at the same (planar) state has it;
+        # a gradient parameter needs the force unknowns (mixed layout)
+        problems, all_states = _as_spatial(sol, rows, S, mixed=gradient)
+        spatial = True
+        rows_in = np.arange(rows.size)
+    else:
+        rows_in = rows
+    for problem, states in zip(problems, all_states, strict=True):
+        U = states[rows_in]
+        if spatial:
+            per_mesh.append(_spatial_mesh_derivatives(problem, U, S, rod, groups, field_groups))
+            continue
         if problem.uniform and "gradient" in groups:
             problem, U = _as_mixed(problem, U)
         per_mesh.append(_mesh_derivatives(problem, U, S, rod, groups, field_groups))
     d = per_mesh[0] if len(per_mesh) == 1 else (4 * per_mesh[1] - per_mesh[0]) / 3
+    if spatial:
+        D = d.copy()
+        D[:, 0:3] *= rod.length  # units of L -> m
+        return labels, units, values, D
     D = np.zeros((rows.size, 4, d.shape[2]))
     D[:, 0:2] = rod.length * d[:, 0:2]  # units of L -> m
     D[:, 3] = d[:, 2]

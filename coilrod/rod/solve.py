@@ -101,14 +101,22 @@ def rod_stiffnesses(rod: Rod) -> np.ndarray:
 
 
 def build_spatial_problem(
-    rod: Rod, field: Field, mesh: RodMesh, clamp_position, clamp_rotation, tol: float = 1e-9
+    rod: Rod,
+    field: Field,
+    mesh: RodMesh,
+    clamp_position,
+    clamp_rotation,
+    tol: float = 1e-9,
+    mixed: bool = False,
 ):
     """The spatial discrete problem of ``rod`` in ``field`` on ``mesh`` (non-dimensional)."""
     from .spatial import SpatialRod
 
     L = rod.length
     mu = _node_magnetization3(rod, mesh) * (rod.area * L**2 / rod.bending_stiffness)
-    return SpatialRod(mesh, mu, rod_stiffnesses(rod), field, L, clamp_position, clamp_rotation, tol)
+    return SpatialRod(
+        mesh, mu, rod_stiffnesses(rod), field, L, clamp_position, clamp_rotation, tol, mixed
+    )
 
 
 def solve_rod(

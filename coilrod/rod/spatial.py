@@ -90,6 +90,8 @@ class SpatialRod(PathProblem):
         Frame of the clamp (columns: tangent, normal, binormal), orthonormal, det +1.
     tol : float
         Newton tolerance on the scaled residual (as :class:`~coilrod.rod.planar.PlanarRod`).
+    mixed : bool
+        Use the mixed layout even in a uniform field (sensitivities to a field gradient).
     """
 
     batched = True
@@ -102,7 +104,16 @@ class SpatialRod(PathProblem):
     max_turn = 1.9 * np.pi
 
     def __init__(
-        self, mesh, mu, stiffness, field, length, clamp_position, clamp_rotation, tol=1e-9
+        self,
+        mesh,
+        mu,
+        stiffness,
+        field,
+        length,
+        clamp_position,
+        clamp_rotation,
+        tol=1e-9,
+        mixed=False,
     ):
         self.mesh = mesh
         self.mu = np.asarray(mu, float)
@@ -112,7 +123,7 @@ class SpatialRod(PathProblem):
         self.clamp = np.asarray(clamp_position, float)
         self.R0 = np.asarray(clamp_rotation, float)
         self.tol = float(tol)
-        self.uniform = bool(field.uniform)
+        self.uniform = bool(field.uniform) and not mixed
         self.linear = bool(field.linear or field.uniform)
         self.cheap_tangent = False
         self.n = n = mesh.n
@@ -348,6 +359,62 @@ class SpatialRod(PathProblem):
         w = np.zeros((self.n, self.nv))
         w[:, self._slots()[1] : self._slots()[1] + 3] = 1.0 / self.n
         return w.ravel()
+
+    # -- derivatives of the tip (sensitivities) --------------------------------------------------
+    def tip_gradients(self, U: np.ndarray) -> np.ndarray:
+        """Derivatives of the tip (x_N, y_N, z_N in units of L relative to the clamp; the tip
+        azimuth atan2(t_y, t_x) in rad) with respect to the unknowns of each state of a stack
+        (k, size): shape (4, k, size)."""
+        U = np.atleast_2d(U)
+        k, n, nv = U.shape[0], self.n, self.nv
+        out = np.zeros((4, k, n, nv))
+        phi = self.rotations(U)
+        op = self._slots()[1]
+        if self.uniform:  # x_N = sum_j w_j t_j, dt_j = -hat(t_j) J_l(phi_j) dphi_j
+            R = self.frames(U)
+            dt = -hat(R[..., :, 0]) @ left_jacobian(phi)  # (k, n, 3, 3)
+            out[0:3, :, :, op : op + 3] = np.moveaxis(self.mesh.w[:, None, None] * dt, 2, 0)
+        else:
+            out[0:3, :, -1, 0:3] = np.eye(3)[:, None, :]
+        t = expm(phi[:, -1]) @ self.R0[:, 0]  # (k, 3) tip tangent
+        dt = -hat(t) @ left_jacobian(phi[:, -1])  # (k, 3, 3)
+        rho2 = t[:, 0] ** 2 + t[:, 1] ** 2
+        out[3, :, -1, op : op + 3] = (t[:, 0, None] * dt[:, 1] - t[:, 1, None] * dt[:, 0]) / rho2[
+            :, None
+        ]
+        return out.reshape(4, k, -1)
+
+    def load_rates(self, U: np.ndarray, dmu=None, B=None, G=None) -> np.ndarray:
+        """dR/dscale of the states (k, size) for other loads, linear in them: the body
+        magnetization ``dmu`` (p, n, 3) in the problem's units in the field of the problem,
+        or the field ``B`` (k, n, 3, p) T and gradient ``G`` (k, n, 3, 3, p) T/m at the nodes
+        with the problem's magnetization.  Shape (k, size, p)."""
+        U = np.atleast_2d(U)
+        k, n, nv = U.shape[0], self.n, self.nv
+        R = self.frames(U)  # (k, n, 3, 3)
+        w = self.mesh.w
+        if dmu is not None:
+            m = np.einsum("knij,pnj->knip", R, dmu)  # (k, n, 3, p)
+            if self.uniform:
+                b = np.broadcast_to(self._b_uniform, (k, n, 3))
+                Gf = None
+            else:
+                Bf, Gf, _ = self._field(self.node_positions(U), False)
+                b, Gf = Bf.reshape(k, n, 3), Gf.reshape(k, n, 3, 3)
+            tau = cross(np.moveaxis(m, -1, 0), b[None])  # (p, k, n, 3)
+            f = None if Gf is None else np.einsum("knij,knip->knjp", Gf, m)
+        else:
+            m = np.einsum("knij,nj->kni", R, self.mu)
+            tau = cross(m[None], np.moveaxis(B, -1, 0))
+            f = np.einsum("knijp,kni->knjp", G, m)
+        p = tau.shape[0]
+        out = np.zeros((k, n, nv, p))
+        op = self._slots()[1]
+        out[:, :, op : op + 3] = np.moveaxis(-w[:, None] * tau, 0, -1)
+        out[:, 0, op : op + 3] = 0.0
+        if f is not None and not self.uniform:
+            out[:, :-1, 6:9] = -(w[1:, None, None] * self.L) * f[:, 1:]
+        return out.reshape(k, -1, p)
 
     # -- assembly -----------------------------------------------------------------------------
     def _band_indices(self):
