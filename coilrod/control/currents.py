@@ -102,14 +102,36 @@ def _forward(rod, field, steps, opts):
         return solve_rod(rod, field, np.arange(1, steps + 1) / steps, **opts)
 
 
-def _outputs(res: RodResult, with_angle: bool) -> np.ndarray:
-    tip = res.tip[-1, :2]
+def _outputs(res: RodResult, with_angle: bool, with_z: bool = False) -> np.ndarray:
+    """The controlled outputs of the last state: tip x, y (and z), (and the tip angle)."""
+    tip = res.tip[-1, : 3 if with_z else 2]
     return np.r_[tip, res.tip_angle[-1]] if with_angle else tip.copy()
 
 
-def _weights_for(with_angle: bool, length: float) -> np.ndarray:
+def _weights_for(with_angle: bool, length: float, with_z: bool = False) -> np.ndarray:
     """Scales of the outputs in the least-squares sense: positions in L, the angle in rad."""
-    return np.r_[1.0 / length, 1.0 / length, 1.0] if with_angle else np.full(2, 1.0 / length)
+    pos = np.full(3 if with_z else 2, 1.0 / length)
+    return np.r_[pos, 1.0] if with_angle else pos
+
+
+def _leaves_plane(system, clamp: np.ndarray, length: float) -> bool:
+    """True if some channel of ``system`` makes B_z (or dB_z/dx, dB_z/dy) on the rod's plane
+    within its reach: the tip can then leave the plane and z is controlled too."""
+    r = np.linspace(0.0, length, 9)
+    a = np.linspace(0.0, 2 * np.pi, 24, endpoint=False)
+    pts = np.zeros((r.size * a.size, 3))
+    pts[:, 0] = clamp[0] + np.outer(r, np.cos(a)).ravel()
+    pts[:, 1] = clamp[1] + np.outer(r, np.sin(a)).ravel()
+    pts[:, 2] = clamp[2]
+    try:
+        B, G = system.unit_fields(pts)
+    except ValueError:  # a winding in the disc: judge the clamp
+        B, G = system.unit_fields(clamp[None])
+    size = max(float(np.max(np.abs(B))), 1e-300)
+    return bool(
+        np.max(np.abs(B[:, 2])) > 1e-12 * size
+        or np.max(np.abs(G[:, 2, :2])) * length > 1e-12 * size
+    )
 
 
 def _uniform_start(rod, goal, with_angle, steps, opts, b_cap):
@@ -318,7 +340,11 @@ def solve_currents(
         weights = np.asarray(system.resistance, float)
     except ValueError:
         weights = np.ones(m)
-    wts = _weights_for(with_angle, L)
+    # a system that can push the rod out of its plane: the tip is held on the plane too
+    with_z = _leaves_plane(system, clamp, L)
+    npos = 3 if with_z else 2
+    goal_z = np.r_[goal[:2], clamp[2], goal[2:]] if with_z else goal
+    wts_z = _weights_for(with_angle, L, with_z)
     # start: the uniform field that meets the target, made at the centre
     if initial is not None:
         I = as_array(initial, "initial", (m,)).copy()
@@ -344,8 +370,8 @@ def solve_currents(
         else:
             _, _, _, D = tip_derivatives(res, [k], ["B0", "gradient"], check=False)
             J = D[0, :, :3] @ Bu + D[0, :, 3:] @ Gu.reshape(9, m)
-        rows = [0, 1, 3] if with_angle else [0, 1]
-        return J[rows] * wts[:, None]
+        rows = ([0, 1, 2] if with_z else [0, 1]) + ([3] if with_angle else [])
+        return J[rows] * wts_z[:, None]
 
     solves, history, best = 0, [], None
 
@@ -366,8 +392,8 @@ def solve_currents(
                 target=err.target,
             ) from err
         solves += 1
-        r = (_outputs(res, with_angle) - goal) * wts
-        miss = float(np.linalg.norm(r[:2])) * L
+        r = (_outputs(res, with_angle, with_z) - goal_z) * wts_z
+        miss = float(np.linalg.norm(r[:npos])) * L
         history.append(miss)
         if best is None or np.linalg.norm(r) < best[0]:
             best = (float(np.linalg.norm(r)), I.copy(), res)
@@ -388,14 +414,21 @@ def solve_currents(
 
         return lsq_linear(J, J @ I - r, bounds=(-limits, limits)).x - I
 
+    restore_next = False
+    trust = 1.0  # fraction of the minimum-power step tried first (grows back after successes)
     try:
         for _ in range(max_iter):
-            if miss <= tol and (not with_angle or abs(r[2]) <= tol / L):
+            if miss <= tol and (not with_angle or abs(r[-1]) <= tol / L):
                 break
             J = jacobian(res)
             # near the target the minimum-power step (whose fixed point is the minimum-power
-            # solution); far from it, or if that step fails, the restoring step
-            kinds = [least_power, restoring] if miss <= far else [restoring]
+            # solution); far from it, or if that step fails, the restoring step; a
+            # minimum-power step that left the tip further off is followed by restoring steps
+            # only (with many channels it moves far along the target's null space, where the
+            # linearisation is poor, and alternating would cycle): the currents are then
+            # those of the last minimum-power step, corrected onto the target
+            near = miss <= far and not restore_next
+            kinds = [least_power, restoring] if near else [restoring]
             moved = False
             for kind in kinds:
                 step = kind(J, r)
@@ -408,13 +441,23 @@ def solve_currents(
                     t = _room(I, step, limits)
                 if not np.any(step) or t <= 0.0:
                     continue
+                if kind is least_power:
+                    t = min(t, trust)
                 for _trial in range(4):  # backtrack while the miss grows, or leaves the near zone
                     trial = np.clip(I + t * step, -limits, limits)
                     res_t, r_t, miss_t = evaluate(trial)
-                    if miss_t < miss or (miss <= far and miss_t <= far):
+                    if miss_t < miss or (near and miss_t <= far):
+                        # once a minimum-power step has left the tip further off (the
+                        # linearisation is poor along the target's null space), restore
+                        restore_next = restore_next or (kind is least_power and miss_t > miss)
+                        if kind is least_power:
+                            trust = min(1.0, 2.0 * t)
                         I, res, r, miss, moved = trial, res_t, r_t, miss_t, True
                         break
                     t /= 2
+                else:
+                    if kind is least_power:
+                        trust = t
                 if moved:
                     break
             if not moved:
@@ -456,6 +499,7 @@ def solve_currents(
         solves,
         start_solves,
         history,
+        goal_z[:npos],
     )
 
 
@@ -473,11 +517,25 @@ def _fixed(system):
 
 
 def _finish(
-    rod, system, I, res, goal, with_angle, model, steps, opts, tol, solves, start_solves, history
+    rod,
+    system,
+    I,
+    res,
+    goal,
+    with_angle,
+    model,
+    steps,
+    opts,
+    tol,
+    solves,
+    start_solves,
+    history,
+    goal_pos=None,
 ):
     real = res if model == "real" else _forward(rod, system.with_currents(I), steps, opts)
     tip = real.tip[-1]
-    miss = float(np.linalg.norm(tip[:2] - goal[:2]))
+    goal_pos = goal[:2] if goal_pos is None else goal_pos  # (x, y) or (x, y, z) held, m
+    miss = float(np.linalg.norm(tip[: goal_pos.size] - goal_pos))
     try:
         power = float(system.power(I))
     except ValueError:

@@ -457,14 +457,38 @@ class SpatialRod(PathProblem):
         return idx
 
     def _scatter(self, k: int, blocks: dict) -> np.ndarray:
-        """LAPACK band storage (2 kl + ku + 1, k size) of the stacked Jacobians."""
-        shape = (2 * self.kl + self.ku + 1, k * self.size)
-        ab = np.zeros(shape, order="F")
-        offs = (np.arange(k) * self.size)[:, None, None, None]
-        for name, values in blocks.items():
-            r, c = self._index[name]
-            vals = np.broadcast_to(values, (k,) + r.shape)
-            ab[np.broadcast_to(r, vals.shape), c + offs] = vals
+        """LAPACK band storage (2 kl + ku + 1, k size) of the stacked Jacobians: a template
+        holding the constant blocks (cached per k), the state-dependent ones written through
+        precomputed flat indices in one assignment."""
+        key = ("scatter", k, tuple(blocks))
+        cached = self._band_cache.get(key)
+        if cached is None:
+            rows = 2 * self.kl + self.ku + 1
+            template = np.zeros((rows, k * self.size), order="F")
+            flat = template.ravel(order="K")
+            member = (np.arange(k) * self.size * rows)[:, None]
+            varying = []
+            for name, values in blocks.items():
+                r, c = self._index[name]
+                idx = (r + c * rows).reshape(1, -1) + member  # (k, entries)
+                if np.ndim(values) == 2:  # a constant 3x3 block
+                    flat[idx] = np.broadcast_to(values, r.shape).reshape(1, -1)
+                else:
+                    varying.append((name, idx))
+            order = [name for name, _ in varying]
+            index = np.concatenate([i for _, i in varying], axis=1) if varying else None
+            cached = self._band_cache[key] = (template, order, index)
+        template, order, index = cached
+        ab = template.copy(order="F")
+        if index is not None:
+            vals = np.concatenate(
+                [
+                    np.broadcast_to(blocks[name], (k,) + self._index[name][0].shape).reshape(k, -1)
+                    for name in order
+                ],
+                axis=1,
+            )
+            ab.ravel(order="K")[index] = vals
         return ab
 
     def _assemble(self, U: np.ndarray, S: np.ndarray, tangent: bool):
@@ -588,7 +612,7 @@ class SpatialRod(PathProblem):
                     "m_F": -half[1:] * That[:, 1:-1],
                     "f_F": I3,
                     "f_Fnext": -I3,
-                    "f_xnext": (-cwL * L * mH)[:, 1:] if Hs is not None else 0.0,
+                    "f_xnext": (-cwL * L * mH)[:, 1:] if Hs is not None else np.zeros((3, 3)),
                     "f_phinext": (cwL * GtM)[:, 1:] @ Jl[:, 1:],
                 }
             )
