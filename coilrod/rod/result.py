@@ -70,6 +70,7 @@ class RodResult:
     _solution: object = field(default=None, repr=False)
     model: str = "planar"
     _frames: np.ndarray | None = field(default=None, repr=False)
+    _contact: dict | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.scales)
@@ -84,6 +85,32 @@ class RodResult:
     def centerline(self, k: int) -> np.ndarray:
         """Centreline of state ``k`` at the nodes :attr:`s`, shape (n, 3), m."""
         return self._points[k].copy()
+
+    def _contact_item(self, name: str, k: int):
+        if self._contact is None:
+            raise ValueError("this result has no obstacles (solve_rod(..., obstacles=[...]))")
+        return self._contact[name][k].copy()
+
+    def contact_force(self, k: int) -> np.ndarray:
+        """Contact force per unit length on the rod at the nodes :attr:`s` of state ``k``,
+        shape (n, 3), N/m (summed over the obstacles; frictionless: along each wall's
+        normal).  A contact at a single point appears as one node's force over its
+        trapezoid weight; :meth:`obstacle_forces` gives the mesh-independent totals."""
+        return self._contact_item("force", k).sum(axis=1)
+
+    def obstacle_forces(self, k: int) -> list[np.ndarray]:
+        """Total force the rod exerts on each obstacle in state ``k``: one (3,) array per
+        obstacle, N (minus the contact force on the rod, integrated along it)."""
+        return list(self._contact_item("totals", k))
+
+    def gaps(self, k: int) -> np.ndarray:
+        """Gap of each node to each obstacle in state ``k``, shape (n, n_obstacles), m (>= 0
+        up to the Newton tolerance: no penetration at the nodes)."""
+        return self._contact_item("gap", k)
+
+    def contact_set(self, k: int) -> np.ndarray:
+        """Nodes in contact with each obstacle in state ``k``, bool (n, n_obstacles)."""
+        return self._contact_item("active", k)
 
     def frames(self, k: int) -> np.ndarray:
         """Cross-section frames of state ``k`` at the nodes :attr:`s`, shape (n, 3, 3): the

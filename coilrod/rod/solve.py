@@ -108,6 +108,7 @@ def build_spatial_problem(
     clamp_rotation,
     tol: float = 1e-9,
     mixed: bool = False,
+    obstacles=(),
 ):
     """The spatial discrete problem of ``rod`` in ``field`` on ``mesh`` (non-dimensional)."""
     from .spatial import SpatialRod
@@ -115,7 +116,16 @@ def build_spatial_problem(
     L = rod.length
     mu = _node_magnetization3(rod, mesh) * (rod.area * L**2 / rod.bending_stiffness)
     return SpatialRod(
-        mesh, mu, rod_stiffnesses(rod), field, L, clamp_position, clamp_rotation, tol, mixed
+        mesh,
+        mu,
+        rod_stiffnesses(rod),
+        field,
+        L,
+        clamp_position,
+        clamp_rotation,
+        tol,
+        mixed,
+        obstacles,
     )
 
 
@@ -130,6 +140,7 @@ def solve_rod(
     clamp_position=(0.0, 0.0, 0.0),
     clamp_angle: float = 0.0,
     clamp_rotation=None,
+    obstacles=None,
     tol: float = 1e-9,
     max_iter: int = 15,
     stability: bool = True,
@@ -168,6 +179,14 @@ def solve_rod(
     clamp_rotation : (3, 3) array or scipy.spatial.transform.Rotation, optional
         Clamp frame in 3D (columns: tangent, normal, binormal of the unloaded rod); orthonormal
         to 1e-9 with determinant +1.  Give either this or ``clamp_angle``.
+    obstacles : sequence, optional
+        Rigid obstacles (:class:`coilrod.Wall`, :class:`coilrod.Vessel`, or any object with
+        ``gap``, ``gap_gradient``, ``gap_hessian`` of points in m): frictionless contact at the
+        nodes, solved inside Newton as the complementarity ``min(lam, g) = 0`` (semi-smooth
+        Newton, exact Jacobian of the gap).  Contact runs on the spatial rod (whose planar
+        states are the planar rod's); the unloaded straight rod must be admissible.  The
+        result then has ``contact_force(k)``, ``obstacle_forces(k)``, ``gaps(k)`` and
+        ``contact_set(k)``.
     tol : float
         Newton tolerance on the scaled residual (non-dimensional, > 0); each equation also
         has a round-off floor that follows its own segment length.
@@ -246,7 +265,15 @@ def solve_rod(
     )
     max_iter = _int_option(max_iter, "max_iter", 1)
     R0 = clamp_frame(angle, clamp_rotation)
+    obstacles = _check_obstacles(obstacles)
     chosen = choose_model(model, rod, field, clamp, R0)
+    if obstacles:
+        if model == "planar":
+            raise ValueError(
+                "contact (obstacles) runs on the spatial rod: use model='auto' or 'spatial' "
+                "(a planar load keeps the spatial rod's state planar)"
+            )
+        chosen = "spatial"
     if chosen == "planar" and clamp_rotation is not None:
         angle = float(np.arctan2(R0[1, 0], R0[0, 0]))
     mesh = make_mesh(rod, nodes)
@@ -255,7 +282,12 @@ def solve_rod(
         problems = [build_problem(rod, field, m, clamp, angle, tol) for m in meshes]
         finish = _result
     else:
-        problems = [build_spatial_problem(rod, field, m, clamp, R0, tol) for m in meshes]
+        problems = [
+            build_spatial_problem(rod, field, m, clamp, R0, tol, obstacles=obstacles)
+            for m in meshes
+        ]
+        if obstacles:
+            _check_start(problems, obstacles)
         finish = _result_spatial
     opts = PathOptions(newton=NewtonOptions(max_iter=max_iter), stability=bool(stability))
     bar = None
@@ -288,6 +320,44 @@ def solve_rod(
     result = finish(rod, problems, run.points, run.iterations, run.events, opts)
     warn_events(result.instabilities, stacklevel=3)
     return result
+
+
+def _check_obstacles(obstacles) -> tuple:
+    """The obstacles as a tuple (ValueError for an object without the gap interface)."""
+    if obstacles is None:
+        return ()
+    if hasattr(obstacles, "gap"):
+        obstacles = [obstacles]
+    out = tuple(obstacles)
+    for i, ob in enumerate(out):
+        for name in ("gap", "gap_gradient", "gap_hessian"):
+            if not callable(getattr(ob, name, None)):
+                raise ValueError(
+                    f"obstacles[{i}] must be an obstacle (coilrod.Wall, coilrod.Vessel or an "
+                    f"object with gap, gap_gradient and gap_hessian); {type(ob).__name__} has "
+                    f"no {name}()"
+                )
+    return out
+
+
+def _check_start(problems, obstacles) -> None:
+    """ValueError unless the straight unloaded rod (every mesh's nodes) is admissible."""
+    for problem in problems:
+        pts = problem.points(problem.node_positions(problem.straight()[None])[0])
+        for i, ob in enumerate(obstacles):
+            check = getattr(ob, "check_start", None)
+            if callable(check):
+                check(pts)
+                continue
+            gap = np.asarray(ob.gap(pts), float)
+            bad = np.flatnonzero(~(gap >= -1e-12 * problem.L))
+            if bad.size:
+                j = int(bad[0])
+                raise ValueError(
+                    f"obstacles[{i}] leaves no admissible straight start: the unloaded rod's "
+                    f"node at s = {problem.mesh.s[j] * problem.L:.4g} m, "
+                    f"{np.round(pts[j], 6).tolist()} m, lies {-gap[j]:.3g} m inside it"
+                )
 
 
 def _refine(problems, states, scales, opts):
@@ -420,7 +490,31 @@ def _result_spatial(rod, problems, points, iterations, events, opts) -> RodResul
         ),
         model="spatial",
         _frames=frames,
+        _contact=_contact_data(problems, states, fine_states, rod),
     )
+
+
+def _contact_data(problems, states, fine_states, rod):
+    """Contact of each state on the finest mesh solved, at the output nodes: force per length
+    (k, n, nc, 3) N/m, gaps (k, n, nc) m, active set (k, n, nc); and the total force the rod
+    exerts on each obstacle (k, nc, 3) N (all nodes of that mesh).  None without obstacles."""
+    problem = problems[-1]
+    if not getattr(problem, "nc", 0):
+        return None
+    U = states if fine_states is None else fine_states
+    force, gaps, active = problem.contact_state(U)
+    EI, L = rod.bending_stiffness, rod.length
+    per_length = force * (EI / L**3)  # EI_z / L^3 units -> N/m
+    w = problem.mesh.w * L  # m
+    totals = -np.einsum("n,knoi->koi", w, per_length)  # the rod pushes the walls back
+    step = 1 if fine_states is None else 2
+    return {
+        "force": per_length[:, ::step],
+        "gap": gaps[:, ::step] * L,
+        "active": active[:, ::step],
+        "totals": totals,
+        "min_gap": gaps.min(axis=1) * L,
+    }
 
 
 def _tip_azimuth(tip_frames: np.ndarray, tip_phi: np.ndarray, R0: np.ndarray) -> np.ndarray:

@@ -114,6 +114,7 @@ class SpatialRod(PathProblem):
         clamp_rotation,
         tol=1e-9,
         mixed=False,
+        obstacles=(),
     ):
         self.mesh = mesh
         self.mu = np.asarray(mu, float)
@@ -123,13 +124,16 @@ class SpatialRod(PathProblem):
         self.clamp = np.asarray(clamp_position, float)
         self.R0 = np.asarray(clamp_rotation, float)
         self.tol = float(tol)
-        self.uniform = bool(field.uniform) and not mixed
+        self.obstacles = tuple(obstacles)
+        self.nc = len(self.obstacles)  # contact multipliers per node, one per obstacle
+        if self.nc:  # semi-smooth Newton: a step that switches contacts may raise the residual
+            self.full_step_growth = 1e3
+        self.uniform = bool(field.uniform) and not mixed and not self.obstacles
         self.linear = bool(field.linear or field.uniform)
         self.cheap_tangent = False
         self.n = n = mesh.n
-        self.nv = 3 if self.uniform else 9
+        self.nv = 3 if self.uniform else 9 + self.nc
         self.size = self.nv * n
-        self.kl = self.ku = 5 if self.uniform else 11
         h, w = mesh.h, mesh.w
         self._inv_h = 1.0 / h
         self._inv_w = 1.0 / w
@@ -142,11 +146,16 @@ class SpatialRod(PathProblem):
         self.last_failure = ""
         if self.uniform:
             self._b_uniform = np.asarray(field.B(self.clamp)[0], float)
-        self._index = self._band_indices()
+        entries = self._block_entries()
+        diff = np.concatenate([(r - c).ravel() for r, c in entries.values()])
+        self.kl, self.ku = int(max(diff.max(), 1)), int(max(-diff.min(), 1))
+        kk = self.kl + self.ku
+        self._index = {name: (kk + r - c, c) for name, (r, c) in entries.items()}
 
     # -- layout -----------------------------------------------------------------------------
     def _slots(self):
-        """Offsets of (x, phi, F) within a node's unknowns (None where absent)."""
+        """Offsets of (x, phi, F) within a node's unknowns (None where absent); the contact
+        multipliers (one per obstacle) follow from offset 9."""
         return (None, 0, None) if self.uniform else (0, 3, 6)
 
     def rotations(self, u: np.ndarray) -> np.ndarray:
@@ -172,7 +181,7 @@ class SpatialRod(PathProblem):
         U = np.atleast_2d(U)
         if self.uniform:
             return self.positions_from_frames(self.frames(U))
-        return U.reshape(U.shape[0], self.n, 9)[:, :, 0:3]
+        return U.reshape(U.shape[0], self.n, self.nv)[:, :, 0:3]
 
     def points(self, x: np.ndarray) -> np.ndarray:
         """Physical points (..., 3) in m from positions relative to the clamp in units of L."""
@@ -192,7 +201,7 @@ class SpatialRod(PathProblem):
             return phi.ravel().copy()
         R = expm(phi) @ self.R0
         x = self.positions_from_frames(R)
-        u = np.zeros((self.n, 9))
+        u = np.zeros((self.n, self.nv))
         u[:, 0:3], u[:, 3:6] = x, phi
         if scale != 0.0:
             _, G, _ = self._field(x[None], False)
@@ -211,6 +220,11 @@ class SpatialRod(PathProblem):
         out = np.empty((v.shape[0], fine.n, self.nv))
         out[:, ::2] = v
         out[:, 1::2] = 0.5 * (v[:, :-1] + v[:, 1:])
+        if self.nc:
+            # contact force per length: a distributed contact keeps it, a point contact keeps
+            # the node's force (w lam) -- the mean of the two is a start Newton corrects fast
+            ratio = self.mesh.w / fine.mesh.w[::2]
+            out[:, ::2, 9:] *= (0.5 * (1.0 + ratio))[None, :, None]
         out = out.reshape(v.shape[0], -1)
         return out[0] if np.ndim(u) == 1 else out
 
@@ -316,6 +330,8 @@ class SpatialRod(PathProblem):
             out[:] = v * self._inv_w[:, None]
             out[:, 0] = 0.0
             return out
+        if self.nc:
+            out[:, :, 9:] = v[:, :, 9:]
         out[:, :, 3:6] = v[:, :, 3:6] * self._inv_w[:, None]
         out[:, 0, 3:6] = 0.0
         out[:, 1:, 0:3] = v[:, 1:, 0:3] * self._inv_h[:, None]
@@ -359,6 +375,40 @@ class SpatialRod(PathProblem):
         w = np.zeros((self.n, self.nv))
         w[:, self._slots()[1] : self._slots()[1] + 3] = 1.0 / self.n
         return w.ravel()
+
+    #: Scale of the gap against the contact force per length in the complementarity
+    #: function min(lam, kappa g) (non-dimensional; any positive value has the same solutions).
+    kappa = 1.0
+
+    def _contact_terms(self, V: np.ndarray, x: np.ndarray, hessian: bool):
+        """Contact multipliers lam (k, n, nc) (force per length, EI_z / L^3 units), gaps
+        (k, n, nc) (units of L), unit normals (k, n, nc, 3) and gap hessians
+        (k, n, nc, 3, 3) (1/m, times L: per unit of L) at the nodes."""
+        k, n = V.shape[0], self.n
+        pts = self.points(x).reshape(-1, 3)
+        lam = V[:, :, 9 : 9 + self.nc]
+        gaps = np.empty((k, n, self.nc))
+        normals = np.empty((k, n, self.nc, 3))
+        hess = np.zeros((k, n, self.nc, 3, 3)) if hessian else None
+        for o, ob in enumerate(self.obstacles):
+            gaps[:, :, o] = np.asarray(ob.gap(pts), float).reshape(k, n) / self.L
+            normals[:, :, o] = np.asarray(ob.gap_gradient(pts), float).reshape(k, n, 3)
+            if hessian:
+                hess[:, :, o] = np.asarray(ob.gap_hessian(pts), float).reshape(k, n, 3, 3)
+        return lam, gaps, normals, hess
+
+    def contact_state(self, U: np.ndarray):
+        """Contact of states (k, size): force per length on the rod at the nodes (k, n, nc, 3)
+        in EI_z / L^3 units (times w_i: the node forces), gaps (k, n, nc) in units of L, and
+        the active set (k, n, nc) (nodes where the gap is closed and the wall pushes)."""
+        U = np.atleast_2d(U)
+        V = U.reshape(U.shape[0], self.n, self.nv)
+        lam, gaps, normals, _ = self._contact_terms(V, V[:, :, 0:3], False)
+        force = lam[..., None] * normals
+        force[:, 0] = 0.0
+        active = self.kappa * gaps < lam
+        active[:, 0] = False
+        return force, gaps, active
 
     # -- derivatives of the tip (sensitivities) --------------------------------------------------
     def tip_gradients(self, U: np.ndarray) -> np.ndarray:
@@ -417,18 +467,18 @@ class SpatialRod(PathProblem):
         return out.reshape(k, -1, p)
 
     # -- assembly -----------------------------------------------------------------------------
-    def _band_indices(self):
-        """Band-storage rows and columns (member 0) of every Jacobian block, by block kind:
-        arrays (nblocks, 3, 3) for the row/column of each entry."""
-        n, nv = self.n, self.nv
+    def _block_entries(self):
+        """Rows and columns (member 0) of every Jacobian block's entries, by block kind:
+        arrays (nblocks, rows, cols)."""
+        n, nv, nc = self.n, self.nv, self.nc
         ox, op, of = self._slots()
-        kk = self.kl + self.ku
-        ii, jj = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
+        ol = 9  # contact multipliers
 
-        def block(rnodes, roff, cnodes, coff):
+        def block(rnodes, roff, cnodes, coff, nr=3, ncol=3):
+            ii, jj = np.meshgrid(np.arange(nr), np.arange(ncol), indexing="ij")
             r = (nv * np.asarray(rnodes) + roff)[:, None, None] + ii
             c = (nv * np.asarray(cnodes) + coff)[:, None, None] + jj
-            return kk + r - c, c
+            return r, c
 
         j = np.arange(1, n)  # free nodes
         idx = {
@@ -452,6 +502,15 @@ class SpatialRod(PathProblem):
                     "f_Fnext": block(j - 1, of, j, of),
                     "f_xnext": block(j - 1, of, j, ox),
                     "f_phinext": block(j - 1, of, j, op),
+                }
+            )
+        if nc:
+            idx.update(
+                {
+                    "clamp_lam": block([0], ol, [0], ol, nc, nc),
+                    "f_lamnext": block(j - 1, of, j, ol, 3, nc),
+                    "c_x": block(j, ol, j, ox, nc, 3),
+                    "c_lam": block(j, ol, j, ol, nc, nc),
                 }
             )
         return idx
@@ -549,6 +608,14 @@ class SpatialRod(PathProblem):
             R1[:, :-1, 6:9] = f1[:, 1:]
             R[:, :-1, 6:9] = F[:, :-1] - F[:, 1:] + Sc * f1[:, 1:]
             R[:, -1, 6:9] = F[:, -1]
+            if self.nc:
+                contact = self._contact_terms(V, x, tangent)
+                lam, gaps, normals, _ = contact
+                # the walls push node j along their normals: w_j lam_j n_j (force rows j - 1)
+                R[:, :-1, 6:9] -= w[1:, None] * np.einsum("kno,knoi->kni", lam, normals)[:, 1:]
+                # complementarity: min(lam, kappa g) = 0 (node 0 is in the clamp: lam_0 = 0)
+                R[:, :, 9:] = np.minimum(lam, self.kappa * gaps)
+                R[:, 0, 9:] = lam[:, 0]
         R = R.reshape(k, -1)
         R1 = R1.reshape(k, -1)
         if not tangent:
@@ -600,6 +667,27 @@ class SpatialRod(PathProblem):
                 mH = np.einsum("kni,kniac->knac", m, Hs)
             else:
                 mH = 0.0
+            f_x = (-cwL * L * mH)[:, 1:] if Hs is not None else np.zeros((k, n - 1, 3, 3))
+            if self.nc:
+                lam, gaps, normals, hess = contact
+                # d/dx of -w lam grad g: -w lam L hess(gap)
+                f_x = f_x - (w[1:, None, None] * L) * np.einsum(
+                    "kno,knoij->knij", lam[:, 1:], hess[:, 1:]
+                )
+                active = self.kappa * gaps < lam  # the min picks the gap
+                act = active[:, 1:]
+                nc = self.nc
+                c_x = np.where(act[..., None], self.kappa * normals[:, 1:], 0.0)  # (k, N, nc, 3)
+                c_lam = np.zeros((k, n - 1, nc, nc))
+                c_lam[..., np.arange(nc), np.arange(nc)] = np.where(act, 0.0, 1.0)
+                blocks.update(
+                    {
+                        "clamp_lam": np.eye(nc),
+                        "f_lamnext": -w[1:, None, None] * np.swapaxes(normals[:, 1:], -1, -2),
+                        "c_x": c_x,
+                        "c_lam": c_lam,
+                    }
+                )
             blocks.update(
                 {
                     "clamp_x": I3,
@@ -612,7 +700,7 @@ class SpatialRod(PathProblem):
                     "m_F": -half[1:] * That[:, 1:-1],
                     "f_F": I3,
                     "f_Fnext": -I3,
-                    "f_xnext": (-cwL * L * mH)[:, 1:] if Hs is not None else np.zeros((3, 3)),
+                    "f_xnext": f_x,
                     "f_phinext": (cwL * GtM)[:, 1:] @ Jl[:, 1:],
                 }
             )
@@ -623,10 +711,10 @@ class SpatialRod(PathProblem):
             sym = (diag[:, 1:], A_ab[:, 1:])
         else:
             nf = n - 1
-            D = np.zeros((k, nf, 9, 9))
-            E = np.zeros((k, max(nf - 1, 0), 9, 9))
-            if Hs is not None:
-                D[:, :, 0:3, 0:3] = (-cwL * L * mH)[:, 1:]
+            b = 9 + self.nc
+            D = np.zeros((k, nf, b, b))
+            E = np.zeros((k, max(nf - 1, 0), b, b))
+            D[:, :, 0:3, 0:3] = f_x
             D[:, :, 0:3, 3:6] = I3
             D[:, :, 3:6, 0:3] = I3
             D[:, :, 0:3, 6:9] = (cwL * GtM)[:, 1:]
@@ -637,6 +725,12 @@ class SpatialRod(PathProblem):
             E[:, :, 0:3, 3:6] = -I3
             E[:, :, 6:9, 3:6] = -half[1:] * That[:, 1:-1]
             E[:, :, 6:9, 6:9] = A_ab[:, 1:]
+            if self.nc:  # active contacts: constraints -w g(x) >= 0; inactive: lam fixed
+                coupling = -w[1:, None, None] * np.swapaxes(normals[:, 1:], -1, -2)  # (k,N,3,nc)
+                coupling = np.where(act[:, :, None, :], coupling, 0.0)
+                D[:, :, 0:3, 9:] = coupling
+                D[:, :, 9:, 0:3] = np.swapaxes(coupling, -1, -2)
+                D[:, :, 9:, 9:] = c_lam
             sym = (D, E)
         return R, R1, self._scatter(k, blocks), sym
 
@@ -669,7 +763,13 @@ class SpatialRod(PathProblem):
         D, E = lin.tangent.blocks
         neg, _ = block_tridiagonal_inertia(D, E)
         if not self.uniform:  # the Lagrangian's Hessian has one negative per constraint
-            neg = np.where(neg >= 0, neg - 3 * (self.n - 1), neg)
+            constraints = 3 * (self.n - 1)
+            if self.nc:  # and one per active contact
+                c_lam = D[:, :, 9:, 9:]
+                constraints = constraints + np.count_nonzero(
+                    np.einsum("knii->kni", c_lam) == 0.0, axis=(1, 2)
+                )
+            neg = np.where(neg >= 0, neg - constraints, neg)
         return neg
 
     def inertia_signs(self, lin: Linearization) -> np.ndarray:
