@@ -497,16 +497,23 @@ def _result_spatial(rod, problems, points, iterations, events, opts) -> RodResul
 def _contact_data(problems, states, fine_states, rod):
     """Contact of each state on the finest mesh solved, at the output nodes: force per length
     (k, n, nc, 3) N/m, gaps (k, n, nc) m, active set (k, n, nc); and the total force the rod
-    exerts on each obstacle (k, nc, 3) N (all nodes of that mesh).  None without obstacles."""
+    exerts on each obstacle (k, nc, 3) N (Richardson-extrapolated from the two meshes like
+    the tip).  None without obstacles."""
     problem = problems[-1]
     if not getattr(problem, "nc", 0):
         return None
+    EI, L = rod.bending_stiffness, rod.length
+
+    def totals_of(p, U):
+        force = p.contact_state(U)[0] * (EI / L**3)  # N/m
+        return -np.einsum("n,knoi->koi", p.mesh.w * L, force)  # the rod pushes the walls back
+
     U = states if fine_states is None else fine_states
     force, gaps, active = problem.contact_state(U)
-    EI, L = rod.bending_stiffness, rod.length
     per_length = force * (EI / L**3)  # EI_z / L^3 units -> N/m
-    w = problem.mesh.w * L  # m
-    totals = -np.einsum("n,knoi->koi", w, per_length)  # the rod pushes the walls back
+    totals = totals_of(problem, U)
+    if fine_states is not None:  # Richardson, as the tip
+        totals = (4 * totals - totals_of(problems[0], states)) / 3
     step = 1 if fine_states is None else 2
     return {
         "force": per_length[:, ::step],

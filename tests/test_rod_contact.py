@@ -1,0 +1,144 @@
+"""Contact of the rod with rigid obstacles: a cantilever pushed by its field against a flat
+wall (closed-form elastica with the tip reaction), global equilibrium, mesh independence of
+the total force, no penetration, and bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+import coils
+from coilrod import Circle, Magnetization, Rod, solve_rod
+from coilrod.rod.elastica import elastica
+
+L = 0.04
+
+
+class _Wall:
+    """A plane through ``point`` with unit ``normal`` (the admissible side); the minimal
+    obstacle interface (gap, gradient, hessian of points in m)."""
+
+    def __init__(self, point, normal):
+        self.p = np.asarray(point, float)
+        self.n = np.asarray(normal, float) / np.linalg.norm(normal)
+
+    def gap(self, x):
+        return (np.asarray(x) - self.p) @ self.n
+
+    def gap_gradient(self, x):
+        return np.broadcast_to(self.n, np.shape(x)).copy()
+
+    def gap_hessian(self, x):
+        return np.zeros(np.shape(x) + (3,))
+
+
+def _rod():
+    return Rod(L, 1e6, Circle(2e-3), Magnetization(128e3, 0.0))
+
+
+def _tip_wall_reference(rod, lam, d):
+    """M axial in a field along +y, a frictionless wall y = d touched at the tip: the bending
+    moment is (M B A - F)(x_L - x(s)) with F the wall's (downward) tip force, the free
+    elastica's moment with a smaller load -- so the shape is the free elastica at the
+    lambda_eff whose tip height is d, and F = (lambda - lambda_eff) EI / L^2 (closed form,
+    elliptic integrals)."""
+
+    def height(le):
+        return elastica(le, np.pi / 2, length=L).tip[1] - d
+
+    lam_eff = brentq(height, 1e-9, lam, xtol=1e-15, rtol=1e-14)
+    force = (lam - lam_eff) * rod.bending_stiffness / L**2
+    return lam_eff, force
+
+
+class TestTipContact:
+    def test_force_and_shape_against_the_closed_form(self):
+        rod = _rod()
+        d = 0.2 * L
+        wall = _Wall((0, d, 0), (0, -1, 0))
+        lams = np.array([1.5, 3.0, 6.0])
+        b = rod.field_for_lambda(1.0)
+        res = solve_rod(rod, coils.UniformField(B=(0, b, 0)), lams, obstacles=[wall])
+        for k, lam in enumerate(lams):
+            lam_eff, force = _tip_wall_reference(rod, lam, d)
+            ref = elastica(lam_eff, np.pi / 2, length=L)
+            total = res.obstacle_forces(k)[0]
+            assert abs(total[1] / force - 1) < 1e-6, (total, force)
+            assert abs(total[0]) < 1e-12 and abs(total[2]) < 1e-12
+            assert abs(res.tip[k, 0] - ref.tip[0]) < 1e-7 * L
+            assert abs(res.tip[k, 1] - d) < 1e-9 * L
+            active = res.contact_set(k)[:, 0]
+            assert active[-1] and not active[:-1].any()  # the tip only
+            assert res.gaps(k).min() >= -1e-6 * L
+
+    def test_small_deflection_by_hand(self):
+        # linear beam: a uniform couple m (N m/m) and a tip force F (N) bend it alike,
+        # w(L) = (m - F) L^3 / (3 EI); with the tip held at d: F = m - 3 EI d / L^3
+        rod = _rod()
+        lam = 1e-3
+        d = 0.5 * lam * L / 3  # half the free deflection
+        wall = _Wall((0, d, 0), (0, -1, 0))
+        res = solve_rod(
+            rod, coils.UniformField(B=(0, rod.field_for_lambda(lam), 0)), [1.0], obstacles=wall
+        )
+        m = lam * rod.bending_stiffness / L**2
+        expected = m - 3 * rod.bending_stiffness * d / L**3
+        assert abs(res.obstacle_forces(0)[0][1] / expected - 1) < 2e-3
+
+    def test_total_force_is_mesh_independent(self):
+        rod = _rod()
+        wall = _Wall((0, 0.2 * L, 0), (0, -1, 0))
+        field = coils.UniformField(B=(0, rod.field_for_lambda(3.0), 0))
+        forces = [
+            solve_rod(rod, field, [1.0], nodes=n, obstacles=[wall]).obstacle_forces(0)[0][1]
+            for n in (32, 64, 128)
+        ]
+        assert abs(forces[1] / forces[2] - 1) < 1e-4
+        assert abs(forces[0] / forces[2] - 1) < 1e-4
+
+
+class TestEquilibrium:
+    def test_clamp_reaction_magnetic_and_contact_forces_balance(self):
+        # a gradient field: a magnetic body force as well as the couple
+        rod = _rod()
+        G = 0.4 * np.array([[-0.5, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -0.5]])
+        field = coils.LinearField(B0=(0.0, rod.field_for_lambda(4.0), 0.0), gradient=G)
+        wall = _Wall((0, 0.15 * L, 0), (0, -1, 0.1))
+        res = solve_rod(rod, field, [1.0], obstacles=[wall], richardson=False)
+        P = res._solution.problems[0]
+        U = res._solution.states[0]
+        V = U.reshape(P.n, P.nv)
+        EI = rod.bending_stiffness
+        clamp = V[0, 6:9] * EI / L**2  # internal force of the first segment: the support's
+        R = P.frames(U)[0]
+        m = np.einsum("nij,nj->ni", R, P.mu)
+        Gs = field.gradient(P.points(V[:, 0:3]))
+        f = np.einsum("nij,ni->nj", Gs, m) * L  # per unit scale, EI/L^2 per unit length
+        magnetic = np.sum(P.mesh.w[1:, None] * f[1:], axis=0) * EI / L**2
+        contact = -res.obstacle_forces(0)[0]
+        total = clamp - magnetic - contact
+        assert np.abs(total).max() < 1e-9 * np.abs(clamp).max()
+
+
+class TestBadInput:
+    def test_no_admissible_straight_start(self):
+        wall = _Wall((0.5 * L, 0, 0), (-1, 0, 0))  # cuts the straight rod
+        with pytest.raises(ValueError, match="admissible straight start"):
+            solve_rod(_rod(), coils.UniformField(B=(0, 1e-3, 0)), [1.0], obstacles=[wall])
+
+    def test_not_an_obstacle(self):
+        with pytest.raises(ValueError, match=r"obstacles\[0\]"):
+            solve_rod(_rod(), coils.UniformField(B=(0, 1e-3, 0)), [1.0], obstacles=[object()])
+
+    def test_planar_model_with_obstacles(self):
+        wall = _Wall((0, 0.2 * L, 0), (0, -1, 0))
+        with pytest.raises(ValueError, match="spatial"):
+            solve_rod(
+                _rod(), coils.UniformField(B=(0, 1e-3, 0)), [1.0], obstacles=[wall], model="planar"
+            )
+
+    def test_no_contact_data_without_obstacles(self):
+        res = solve_rod(_rod(), coils.UniformField(B=(0, 1e-3, 0)), [1.0], nodes=8)
+        with pytest.raises(ValueError, match="no obstacles"):
+            res.contact_force(0)
