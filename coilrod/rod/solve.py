@@ -289,7 +289,10 @@ def solve_rod(
         if obstacles:
             _check_start(problems, obstacles)
         finish = _result_spatial
-    opts = PathOptions(newton=NewtonOptions(max_iter=max_iter), stability=bool(stability))
+    newton_opts = NewtonOptions(max_iter=max_iter)
+    if obstacles:  # semi-smooth Newton: the error may stall while the contact set settles
+        newton_opts = NewtonOptions(max_iter=max(max_iter, 40), stagnation=12)
+    opts = PathOptions(newton=newton_opts, stability=bool(stability))
     bar = None
     tick = None
     if progress:
@@ -306,10 +309,11 @@ def solve_rod(
         )
     except ConvergenceError as err:
         err.result = None
-        if err.points:
+        points = getattr(err, "points", None)
+        if points:
             try:
                 err.result = finish(
-                    rod, problems, err.points, np.zeros(len(err.points), int), err.events, opts
+                    rod, problems, points, np.zeros(len(points), int), err.events, opts
                 )
             except ConvergenceError:
                 pass

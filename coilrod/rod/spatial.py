@@ -128,6 +128,10 @@ class SpatialRod(PathProblem):
         self.nc = len(self.obstacles)  # contact multipliers per node, one per obstacle
         if self.nc:  # semi-smooth Newton: a step that switches contacts may raise the residual
             self.full_step_growth = 1e3
+            # gap scale of the complementarity: a contact force per length lam against the
+            # local bending stiffness of a wave of the mesh's length, ~ 1/h^4 (times h^2:
+            # tested robust from 4/h^2 to 1e3/h^2 in insertions through curved walls)
+            self.kappa = 100.0 / float(np.min(mesh.h)) ** 2
         self.uniform = bool(field.uniform) and not mixed and not self.obstacles
         self.linear = bool(field.linear or field.uniform)
         self.cheap_tangent = False
@@ -377,8 +381,25 @@ class SpatialRod(PathProblem):
         return w.ravel()
 
     #: Scale of the gap against the contact force per length in the complementarity
-    #: function min(lam, kappa g) (non-dimensional; any positive value has the same solutions).
+    #: function of (lam, kappa g) (non-dimensional; any positive value has the same solutions;
+    #: a contact problem sets 100 / h_min^2).
     kappa = 1.0
+
+    #: Complementarity function: "min" (min(lam, kappa g)) or "fb" (Fischer-Burmeister).
+    ncp = "fb"
+
+    def _ncp(self, lam: np.ndarray, gaps: np.ndarray):
+        """Complementarity function of (lam, kappa g) and its partial derivatives in lam and
+        in kappa g (semismooth; zero iff lam >= 0, g >= 0, lam g = 0)."""
+        a, b = lam, self.kappa * gaps
+        if self.ncp == "min":
+            pick = b < a
+            return np.minimum(a, b), np.where(pick, 0.0, 1.0), np.where(pick, 1.0, 0.0)
+        r = np.hypot(a, b)
+        safe = np.where(r > 0, r, 1.0)
+        da = np.where(r > 0, 1.0 - a / safe, 1.0 - 2**-0.5)
+        db = np.where(r > 0, 1.0 - b / safe, 1.0 - 2**-0.5)
+        return a + b - r, da, db
 
     def _contact_terms(self, V: np.ndarray, x: np.ndarray, hessian: bool):
         """Contact multipliers lam (k, n, nc) (force per length, EI_z / L^3 units), gaps
@@ -614,7 +635,7 @@ class SpatialRod(PathProblem):
                 # the walls push node j along their normals: w_j lam_j n_j (force rows j - 1)
                 R[:, :-1, 6:9] -= w[1:, None] * np.einsum("kno,knoi->kni", lam, normals)[:, 1:]
                 # complementarity: min(lam, kappa g) = 0 (node 0 is in the clamp: lam_0 = 0)
-                R[:, :, 9:] = np.minimum(lam, self.kappa * gaps)
+                R[:, :, 9:] = self._ncp(lam, gaps)[0]
                 R[:, 0, 9:] = lam[:, 0]
         R = R.reshape(k, -1)
         R1 = R1.reshape(k, -1)
@@ -674,12 +695,13 @@ class SpatialRod(PathProblem):
                 f_x = f_x - (w[1:, None, None] * L) * np.einsum(
                     "kno,knoij->knij", lam[:, 1:], hess[:, 1:]
                 )
-                active = self.kappa * gaps < lam  # the min picks the gap
+                active = self.kappa * gaps < lam  # contact closed, the wall pushes
                 act = active[:, 1:]
                 nc = self.nc
-                c_x = np.where(act[..., None], self.kappa * normals[:, 1:], 0.0)  # (k, N, nc, 3)
+                _, d_lam, d_gap = self._ncp(lam[:, 1:], gaps[:, 1:])
+                c_x = (d_gap * self.kappa)[..., None] * normals[:, 1:]  # (k, N, nc, 3)
                 c_lam = np.zeros((k, n - 1, nc, nc))
-                c_lam[..., np.arange(nc), np.arange(nc)] = np.where(act, 0.0, 1.0)
+                c_lam[..., np.arange(nc), np.arange(nc)] = d_lam
                 blocks.update(
                     {
                         "clamp_lam": np.eye(nc),
@@ -730,7 +752,8 @@ class SpatialRod(PathProblem):
                 coupling = np.where(act[:, :, None, :], coupling, 0.0)
                 D[:, :, 0:3, 9:] = coupling
                 D[:, :, 9:, 0:3] = np.swapaxes(coupling, -1, -2)
-                D[:, :, 9:, 9:] = c_lam
+                D[:, :, 9:, 9:] = 0.0
+                D[:, :, 9:, 9:][..., np.arange(nc), np.arange(nc)] = np.where(act, 0.0, 1.0)
             sym = (D, E)
         return R, R1, self._scatter(k, blocks), sym
 

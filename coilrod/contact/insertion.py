@@ -1,0 +1,419 @@
+"""Quasi-static insertion of a rod into a vessel: the clamp (an introducer at the vessel's
+entry) feeds material, the free length grows, and the field is set per insertion step."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from coils._validate import as_array
+from coils.field import Field
+
+from ..errors import ConvergenceError
+from ..path.corrector import NewtonOptions, newton
+from ..robot.magnetization import Magnetization
+from ..robot.rod import Rod
+
+__all__ = ["insert", "Insertion", "free_part"]
+
+#: Largest number of halvings of an insertion step before the insertion stops.
+MAX_HALVINGS = 12
+
+
+@dataclasses.dataclass
+class Insertion:
+    """Shapes and wall forces along an insertion (:func:`insert`).
+
+    Attributes
+    ----------
+    lengths : ndarray, shape (m,)
+        Free length of each step, m.
+    tip : ndarray, shape (m, 3)
+        Tip positions, m.
+    wall_force : ndarray, shape (m, 3)
+        Total force the rod exerts on the vessel wall, N.
+    max_contact_force : ndarray, shape (m,)
+        Largest contact force per unit length along the rod, N/m.
+    contact_nodes : list of ndarray of bool
+        Nodes in contact with the wall, per step (n_k,).
+    min_gap : ndarray, shape (m,)
+        Smallest node gap to the wall, m (>= -1e-6 L: no penetration).
+    stable : ndarray of bool, shape (m,)
+        Positive second variation (active contacts as constraints).
+    substeps : ndarray of int, shape (m,)
+        Newton solves each step took (1 without step cutting).
+    """
+
+    lengths: np.ndarray
+    tip: np.ndarray
+    wall_force: np.ndarray
+    max_contact_force: np.ndarray
+    contact_nodes: list
+    min_gap: np.ndarray
+    stable: np.ndarray
+    substeps: np.ndarray
+    _s: list = dataclasses.field(repr=False, default_factory=list)
+    _shapes: list = dataclasses.field(repr=False, default_factory=list)
+    _frames: list = dataclasses.field(repr=False, default_factory=list)
+    _forces: list = dataclasses.field(repr=False, default_factory=list)
+    vessel: object = dataclasses.field(repr=False, default=None)
+
+    def __len__(self) -> int:
+        return len(self.lengths)
+
+    def centerline(self, k: int) -> np.ndarray:
+        """Centreline of step ``k``, shape (n_k, 3), m."""
+        return self._shapes[k].copy()
+
+    def frames(self, k: int) -> np.ndarray:
+        """Frames of step ``k``, shape (n_k, 3, 3) (columns tangent, normal, binormal)."""
+        return self._frames[k].copy()
+
+    def contact_force(self, k: int) -> np.ndarray:
+        """Contact force per unit length on the rod at the nodes of step ``k``, (n_k, 3), N/m."""
+        return self._forces[k].copy()
+
+    def s(self, k: int) -> np.ndarray:
+        """Arc length of the nodes of step ``k`` from the clamp, (n_k,), m."""
+        return self._s[k].copy()
+
+    def plot(self, steps=None, ax=None, force_range=(0.1, 0.4)):
+        """Shapes of ``steps`` (default: about eight) in the x-y plane over the vessel, nodes
+        in contact marked, and the total wall force per step against the clinical range
+        ``force_range`` (N) in a second panel.  Returns the figure."""
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+        else:
+            axes = ax
+            fig = axes[0].figure
+        if self.vessel is not None and hasattr(self.vessel, "plot"):
+            self.vessel.plot(ax=axes[0])
+        m = len(self)
+        steps = np.unique(np.linspace(0, m - 1, min(8, m)).astype(int)) if steps is None else steps
+        cmap = plt.get_cmap("viridis")
+        for i, k in enumerate(steps):
+            x = self._shapes[k] * 1e3
+            color = cmap(i / max(len(steps) - 1, 1))
+            axes[0].plot(
+                x[:, 0], x[:, 1], color=color, lw=1.5, label=f"{self.lengths[k] * 1e3:.0f} mm"
+            )
+            on = self.contact_nodes[k]
+            axes[0].plot(x[on, 0], x[on, 1], "o", color="crimson", ms=3)
+        axes[0].set_aspect("equal")
+        axes[0].set_xlabel("x (mm)")
+        axes[0].set_ylabel("y (mm)")
+        axes[0].legend(fontsize=7, title="free length")
+        force = np.linalg.norm(self.wall_force, axis=1)
+        axes[1].plot(self.lengths * 1e3, force, "-o", ms=3)
+        axes[1].axhspan(*force_range, color="0.9", label="clinical range")
+        axes[1].set_xlabel("free length (mm)")
+        axes[1].set_ylabel("wall force (N)")
+        axes[1].legend()
+        fig.tight_layout()
+        return fig
+
+
+def free_part(rod: Rod, length: float) -> Rod:
+    """The distal ``length`` (m) of ``rod`` as a rod clamped at its proximal end: the part
+    out of the introducer.  Its magnetization is the rod's, shifted so that the tips coincide
+    (segment profiles stay segments)."""
+    off = rod.length - length
+    if not 0 < length <= rod.length * (1 + 1e-12):
+        raise ValueError(f"free length must lie in (0, {rod.length:g}] m; got {length!r}")
+    off = max(off, 0.0)
+    mag = rod.magnetization
+    edges = getattr(mag, "segment_edges", None)
+    if edges is not None:
+        cut = np.clip(edges - off, 0.0, None)
+        keep = np.flatnonzero(np.diff(cut) > 0)
+        kw = {}
+        if hasattr(mag, "segment_elevations"):
+            kw["elevations"] = np.asarray(mag.segment_elevations)[keep]
+        new = Magnetization.segments(
+            np.diff(cut)[keep],
+            np.asarray(mag.segment_magnitudes)[keep],
+            np.asarray(mag.segment_angles)[keep],
+            **kw,
+        )
+    else:
+        kw = {}
+        if hasattr(mag, "elevation") and not getattr(mag, "is_planar", True):
+            kw["elevation"] = lambda s: mag.elevation(np.asarray(s) + off)
+        new = Magnetization(
+            lambda s: mag.magnitude(np.asarray(s) + off),
+            lambda s: mag.angle(np.asarray(s) + off),
+            breakpoints=[b - off for b in mag.breakpoints if off < b < rod.length],
+            **kw,
+        )
+    extra = {}
+    if hasattr(rod, "poisson_ratio"):
+        extra["poisson_ratio"] = rod.poisson_ratio
+    return Rod(length, rod.youngs_modulus, rod.section, new, **extra)
+
+
+def _fields(field_schedule, m: int) -> Callable[[int, float], Field]:
+    if isinstance(field_schedule, Field):
+        return lambda k, length: field_schedule
+    if callable(field_schedule):
+
+        def call(k, length):
+            out = field_schedule(k, length)
+            if not isinstance(out, Field):
+                raise ValueError(
+                    f"field_schedule({k}, {length:g}) must return a coils.Field; got "
+                    f"{type(out).__name__}"
+                )
+            return out
+
+        return call
+    if isinstance(field_schedule, Sequence):
+        if len(field_schedule) != m:
+            raise ValueError(
+                f"field_schedule holds {len(field_schedule)} fields for {m} insertion steps"
+            )
+        for i, f in enumerate(field_schedule):
+            if not isinstance(f, Field):
+                raise ValueError(f"field_schedule[{i}] must be a coils.Field; got {f!r}")
+        return lambda k, length: field_schedule[k]
+    raise ValueError(
+        "field_schedule must be a coils.Field, a list of fields (one per step) or a callable "
+        f"(step, free length) -> Field; got {type(field_schedule).__name__}"
+    )
+
+
+def _default_clamp(vessel):
+    pts = np.asarray(getattr(vessel, "points", None), float)
+    if pts.ndim != 2 or pts.shape[0] < 2:
+        raise ValueError("give clamp_position and clamp_rotation: the vessel has no centreline")
+    t = pts[1] - pts[0]
+    t /= np.linalg.norm(t)
+    ref = np.array([0.0, 0.0, 1.0]) if abs(t[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    b = ref - (ref @ t) * t
+    b /= np.linalg.norm(b)
+    n = np.cross(b, t)
+    return pts[0].copy(), np.column_stack([t, n, b])
+
+
+def _carry(prev_problem, prev_u, problem, scale_of_state=1.0):
+    """A start for ``problem`` (a longer or shorter free length) from a solved state of
+    ``prev_problem``: rotations and contact forces per length follow the arc length from
+    the clamp (follow-the-leader), extended along the old tip beyond its length."""
+    s_old = prev_problem.mesh.s * prev_problem.L
+    s_new = problem.mesh.s * problem.L
+    V = prev_u.reshape(prev_problem.n, prev_problem.nv)
+    phi = np.stack([np.interp(s_new, s_old, V[:, 3 + i]) for i in range(3)], axis=1)
+    u = problem.from_rotations(phi, scale_of_state).reshape(problem.n, problem.nv)
+    # internal forces of the segments (at their start nodes) and contact forces per length
+    for i in range(3):
+        u[:, 6 + i] = np.interp(s_new, s_old, V[:, 6 + i], right=0.0)
+    u[-1, 6:9] = 0.0
+    for o in range(problem.nc):
+        u[:, 9 + o] = np.interp(s_new, s_old, V[:, 9 + o], right=0.0)
+    return u.ravel()
+
+
+def insert(
+    rod: Rod,
+    vessel,
+    lengths,
+    field_schedule,
+    *,
+    clamp_position=None,
+    clamp_rotation=None,
+    nodes: int = 64,
+    tol: float = 1e-9,
+    progress: bool = False,
+) -> Insertion:
+    """Quasi-static insertion of ``rod`` into ``vessel``.
+
+    The clamp is an introducer at the vessel's entry; at step k the distal ``lengths[k]`` of
+    the rod are out of it (:func:`free_part`) and the field is ``field_schedule`` of step k.
+    Each step starts from the previous shape (follow-the-leader: the rotations and contact
+    forces as functions of the arc length from the clamp, extended along the old tip) and is
+    solved by the contact Newton method of the spatial rod
+    (:class:`~coilrod.rod.spatial.SpatialRod`; frictionless, contact at the nodes); a step
+    that fails is split in halves (free length and field blended linearly), up to
+    :data:`MAX_HALVINGS` times.  The first step is loaded from the straight rod by
+    :func:`~coilrod.solve_rod`.
+
+    Parameters
+    ----------
+    rod : Rod
+        The whole device; its distal part leaves the introducer.
+    vessel : Vessel or obstacle
+        The lumen (any obstacle with the gap interface; :class:`coilrod.Vessel`).
+    lengths : array-like, shape (m,)
+        Free lengths, m, each in (0, rod.length].
+    field_schedule : coils.Field, sequence of m fields, or callable (k, length) -> Field
+        The applied field at each step.
+    clamp_position, clamp_rotation : optional
+        The introducer's pose (default: the vessel's first centreline point, tangent along
+        its first segment).
+    nodes : int
+        Segments of each step's mesh (one mesh, second order in the segment length).
+    tol : float
+        Newton tolerance (as :func:`~coilrod.solve_rod`).
+    progress : bool
+        Show a tqdm progress bar.
+
+    Returns
+    -------
+    Insertion
+
+    Raises
+    ------
+    ValueError
+        Bad input, or an introducer pose outside the vessel.
+    coilrod.ConvergenceError
+        A step could not be reached even after :data:`MAX_HALVINGS` halvings; ``result`` holds
+        the :class:`Insertion` up to the last step reached.
+    """
+    from ..rod.model import as_rotation
+    from ..rod.solve import build_spatial_problem, make_mesh, solve_rod
+
+    lengths = as_array(lengths, "lengths", ("m",))
+    if lengths.size == 0 or not np.all(np.isfinite(lengths)):
+        raise ValueError(f"lengths must be a non-empty sequence of finite lengths; got {lengths}")
+    if np.any(lengths <= 0) or np.any(lengths > rod.length * (1 + 1e-12)):
+        raise ValueError(f"lengths must lie in (0, {rod.length:g}] m (the rod's length)")
+    schedule = _fields(field_schedule, lengths.size)
+    if clamp_position is None or clamp_rotation is None:
+        p0, R0 = _default_clamp(vessel)
+        clamp = p0 if clamp_position is None else as_array(clamp_position, "clamp_position", (3,))
+        R0 = R0 if clamp_rotation is None else as_rotation(clamp_rotation)
+    else:
+        clamp = as_array(clamp_position, "clamp_position", (3,))
+        R0 = as_rotation(clamp_rotation)
+    check = getattr(vessel, "check_start", None)
+    if callable(check):
+        check(clamp[None], "the clamp (introducer)")
+    # semi-smooth Newton: the error may stall for a few iterations while the contact set
+    # settles (then it converges quadratically)
+    opts = NewtonOptions(max_iter=40, stagnation=12)
+    out = dict(
+        tip=[], wall=[], fmax=[], nodes=[], gap=[], stable=[], sub=[], s=[], x=[], R=[], f=[]
+    )
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=lengths.size, desc="insert", unit="step")
+
+    def record(problem, u, free):
+        V = u.reshape(problem.n, problem.nv)
+        R = problem.frames(u[None])[0]
+        x = problem.points(V[:, 0:3])
+        force, gaps, active = problem.contact_state(u[None])
+        EI, L = free.bending_stiffness, free.length
+        per_length = force[0].sum(axis=1) * (EI / L**3)
+        lin = problem.linearize(u[None], np.array([1.0]))
+        out["tip"].append(x[-1].copy())
+        out["wall"].append(-np.sum(problem.mesh.w[:, None] * L * per_length, axis=0))
+        out["fmax"].append(float(np.max(np.linalg.norm(per_length, axis=1))))
+        out["nodes"].append(active[0].any(axis=1))
+        out["gap"].append(float(gaps.min() * L))
+        out["stable"].append(bool(problem.stability(lin)[0] > 0))
+        out["s"].append(problem.mesh.s * L)
+        out["x"].append(x)
+        out["R"].append(R)
+        out["f"].append(per_length)
+
+    def build(length, field):
+        free = free_part(rod, length)
+        mesh = make_mesh(free, nodes)
+        return free, build_spatial_problem(free, field, mesh, clamp, R0, tol, obstacles=[vessel])
+
+    def result():
+        return Insertion(
+            lengths=lengths[: len(out["tip"])].copy(),
+            tip=np.array(out["tip"]).reshape(-1, 3),
+            wall_force=np.array(out["wall"]).reshape(-1, 3),
+            max_contact_force=np.array(out["fmax"]),
+            contact_nodes=out["nodes"],
+            min_gap=np.array(out["gap"]),
+            stable=np.array(out["stable"], dtype=bool),
+            substeps=np.array(out["sub"], dtype=int),
+            _s=out["s"],
+            _shapes=out["x"],
+            _frames=out["R"],
+            _forces=out["f"],
+            vessel=vessel,
+        )
+
+    try:
+        # step 0: load the straight free part from zero field
+        field0 = schedule(0, float(lengths[0]))
+        free0 = free_part(rod, float(lengths[0]))
+        try:
+            first = solve_rod(
+                free0,
+                field0,
+                [1.0],
+                nodes=nodes,
+                richardson=False,
+                clamp_position=clamp,
+                clamp_rotation=R0,
+                obstacles=[vessel],
+                tol=tol,
+                model="spatial",
+            )
+        except ConvergenceError as err:
+            err.result = None
+            raise
+        problem = first._solution.problems[0]
+        u = first._solution.states[0][0]
+        record(problem, u, free0)
+        out["sub"].append(1)
+        if bar is not None:
+            bar.update(1)
+        prev_len, prev_field = float(lengths[0]), field0
+        for k in range(1, lengths.size):
+            target_len, target_field = float(lengths[k]), schedule(k, float(lengths[k]))
+            t, dt, solves, halvings = 0.0, 1.0, 0, 0
+            cur_problem, cur_u = problem, u
+            while t < 1.0:
+                t1 = min(1.0, t + dt)
+                length = prev_len + t1 * (target_len - prev_len)
+                field = target_field if t1 == 1.0 else prev_field * (1 - t1) + target_field * t1
+                free, trial = build(length, field)
+                guess = _carry(cur_problem, cur_u, trial)
+                res = newton(trial, guess, 1.0, opts)
+                solves += 1
+                if res.ok:
+                    t, cur_problem, cur_u = t1, trial, res.u
+                    dt = min(1.0 - t, 2 * dt) if t < 1.0 else dt
+                    continue
+                halvings += 1
+                if halvings > MAX_HALVINGS:
+                    raise ConvergenceError(
+                        f"insert could not reach free length {target_len:.6g} m (step {k}): "
+                        f"it stopped at {prev_len + t * (target_len - prev_len):.6g} m after "
+                        f"{MAX_HALVINGS} halvings (error {float(res.error):.3g} of the "
+                        f"tolerance){_reason(trial)}",
+                        reached=prev_len + t * (target_len - prev_len),
+                        target=target_len,
+                        residual=float(res.error),
+                    )
+                dt /= 2
+            problem, u = cur_problem, cur_u
+            record(problem, u, free)
+            out["sub"].append(solves)
+            prev_len, prev_field = target_len, target_field
+            if bar is not None:
+                bar.update(1)
+    except ConvergenceError as err:
+        err.result = result() if out["tip"] else None
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+    return result()
+
+
+def _reason(problem) -> str:
+    why = getattr(problem, "last_failure", "")
+    return f"; {why}" if why else ""
