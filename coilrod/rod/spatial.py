@@ -572,6 +572,123 @@ class SpatialRod(PathProblem):
         return ab
 
     def _assemble(self, U: np.ndarray, S: np.ndarray, tangent: bool):
+        """Residual (k, size), load rate (k, size), band storage and symmetric blocks of a
+        stack: the per-node algebra compiled (:mod:`coilrod.rod._compiled_spatial`), the
+        contact terms added here.  :meth:`_assemble_numpy` is the same in numpy."""
+        from ._compiled_spatial import spatial_core
+
+        k, n, nv = U.shape[0], self.n, self.nv
+        h, w, L = self.mesh.h, self.mesh.w, self.L
+        V = U.reshape(k, n, nv)
+        phi = np.ascontiguousarray(self.rotations(U))
+        if self.uniform:
+            B = np.broadcast_to(self._b_uniform, (k, n, 3))
+            G = np.zeros((k, n, 3, 3))
+            Hs = None
+            X = F = np.zeros((k, n, 3))
+        else:
+            X = np.ascontiguousarray(V[:, :, 0:3])
+            F = np.ascontiguousarray(V[:, :, 6:9])
+            B, G, Hs = self._field_by_member(X, tangent)
+            B, G = B.reshape(k, n, 3), G.reshape(k, n, 3, 3)
+            if Hs is not None:
+                Hs = Hs.reshape(k, n, 3, 3, 3)
+        frames = np.empty((k, n, 3, 3))
+        R = np.zeros((k, n, nv))
+        R1 = np.zeros((k, n, nv))
+        blk = np.zeros((k, n, 10, 3, 3)) if tangent else np.zeros((1, 1, 10, 3, 3))
+        diag = np.zeros((k, n, 3, 3)) if tangent else np.zeros((1, 1, 3, 3))
+        A_ab = np.zeros((k, n - 1, 3, 3)) if tangent else np.zeros((1, 1, 3, 3))
+        m = np.empty((k, n, 3))
+        has_h = Hs is not None
+        spatial_core(
+            phi, X, F, np.asarray(S, float), np.ascontiguousarray(B), G,
+            Hs if has_h else np.zeros((1, 1, 3, 3, 3)), has_h, self.uniform, tangent,
+            self.mu, self.K, h, w, self.R0, L, frames, R, R1, blk, diag, A_ab, m,
+        )  # fmt: skip
+        contact = None
+        if self.nc:
+            contact = self._contact_terms(V, X, tangent)
+            lam, gaps, normals, _ = contact
+            R[:, :-1, 6:9] -= w[1:, None] * np.einsum("kno,knoi->kni", lam, normals)[:, 1:]
+            R[:, :, 9:] = self._ncp(lam, gaps)[0]
+            R[:, 0, 9:] = lam[:, 0]
+        R = R.reshape(k, -1)
+        R1 = R1.reshape(k, -1)
+        if not tangent:
+            return R, R1, None, None
+        I3 = np.eye(3)
+        blocks = {
+            "clamp_phi": I3,
+            "m_prev": blk[:, 1:, 0],
+            "m_diag": blk[:, 1:, 1],
+            "m_next": blk[:, 1:-1, 2],
+        }
+        if self.uniform:
+            return R, R1, self._scatter(k, blocks), (diag[:, 1:], A_ab[:, 1:])
+        f_x = blk[:, 1:, 8]
+        if self.nc:
+            lam, gaps, normals, hess = contact
+            f_x = f_x - (w[1:, None, None] * L) * np.einsum(
+                "kno,knoij->knij", lam[:, 1:], hess[:, 1:]
+            )
+            act = (self.kappa * gaps < lam)[:, 1:]
+            nc = self.nc
+            _, d_lam, d_gap = self._ncp(lam[:, 1:], gaps[:, 1:])
+            c_lam = np.zeros((k, n - 1, nc, nc))
+            c_lam[..., np.arange(nc), np.arange(nc)] = d_lam
+            blocks.update(
+                {
+                    "clamp_lam": np.eye(nc),
+                    "f_lamnext": -w[1:, None, None] * np.swapaxes(normals[:, 1:], -1, -2),
+                    "c_x": (d_gap * self.kappa)[..., None] * normals[:, 1:],
+                    "c_lam": c_lam,
+                }
+            )
+        blocks.update(
+            {
+                "clamp_x": I3,
+                "p_x": I3,
+                "p_xprev": -I3,
+                "p_phiprev": blk[:, 1:, 3],
+                "p_phi": blk[:, 1:, 4],
+                "m_x": blk[:, 1:, 5],
+                "m_Fprev": blk[:, 1:, 6],
+                "m_F": blk[:, 1:-1, 7],
+                "f_F": I3,
+                "f_Fnext": -I3,
+                "f_xnext": f_x,
+                "f_phinext": blk[:, 1:, 9],
+            }
+        )
+        # the second variation (Lagrangian Hessian) in blocks Z_j = (x_j, F_{j-1}, d_j, lam_j)
+        nf, b = n - 1, 9 + self.nc
+        D = np.zeros((k, nf, b, b))
+        E = np.zeros((k, max(nf - 1, 0), b, b))
+        t = frames[:, :, :, 0]
+        half_that = 0.5 * h[:, None, None] * hat(t[:, 1:])
+        cwL = S[:, None, None, None] * (w[None, 1:, None, None] * L)
+        D[:, :, 0:3, 0:3] = f_x
+        D[:, :, 0:3, 3:6] = I3
+        D[:, :, 3:6, 0:3] = I3
+        D[:, :, 0:3, 6:9] = cwL * (np.swapaxes(G[:, 1:], -1, -2) @ hat(m[:, 1:]))
+        D[:, :, 6:9, 0:3] = np.swapaxes(D[:, :, 0:3, 6:9], -1, -2)
+        D[:, :, 3:6, 6:9] = half_that
+        D[:, :, 6:9, 3:6] = -half_that
+        D[:, :, 6:9, 6:9] = diag[:, 1:]
+        E[:, :, 0:3, 3:6] = -I3
+        E[:, :, 6:9, 3:6] = -0.5 * h[1:, None, None] * hat(t[:, 1:-1])
+        E[:, :, 6:9, 6:9] = A_ab[:, 1:]
+        if self.nc:
+            coupling = -w[1:, None, None] * np.swapaxes(normals[:, 1:], -1, -2)
+            coupling = np.where(act[:, :, None, :], coupling, 0.0)
+            D[:, :, 0:3, 9:] = coupling
+            D[:, :, 9:, 0:3] = np.swapaxes(coupling, -1, -2)
+            D[:, :, 9:, 9:][..., np.arange(nc), np.arange(nc)] = np.where(act, 0.0, 1.0)
+        return R, R1, self._scatter(k, blocks), (D, E)
+
+    def _assemble_numpy(self, U: np.ndarray, S: np.ndarray, tangent: bool):
+        """:meth:`_assemble` in numpy (the reference the compiled pass is tested against)."""
         k, n, nv = U.shape[0], self.n, self.nv
         h, w, L = self.mesh.h, self.mesh.w, self.L
         V = U.reshape(k, n, nv)

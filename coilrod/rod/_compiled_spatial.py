@@ -1,0 +1,406 @@
+"""Compiled per-node algebra of the spatial rod (numba, cached on disk).
+
+One pass over the members of a stack and the nodes of the mesh computes what
+:meth:`coilrod.rod.spatial.SpatialRod._assemble` needs: the node frames, the bending terms of
+every segment (``psi = log(R_i^T R_{i+1})``, the moment ``p`` it carries and its Hessian
+block ``P``), the residual and its load derivative, the Jacobian blocks (world rotations,
+times ``J_l(phi)``) and the symmetric blocks of the second variation.  The equations are
+those of :mod:`coilrod.rod.spatial` (see there); this module only evaluates them without
+numpy's per-call overhead.  Imported on the first spatial solve.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+_SMALL = 0.05
+_C_SMALL = 1.0
+_C_SERIES = np.array(
+    [
+        0.08333333333333333,
+        0.001388888888888889,
+        3.306878306878307e-05,
+        8.267195767195768e-07,
+        2.08767569878681e-08,
+        5.284190138687493e-10,
+        1.3382536530684679e-11,
+        3.3896802963225827e-13,
+        8.586062056277845e-15,
+        2.174868698558062e-16,
+        5.5090028283602295e-18,
+        1.3954464685812522e-19,
+    ]
+)
+
+
+@nb.njit(cache=True, inline="always")
+def _hat(v, out):
+    out[0, 0] = 0.0
+    out[0, 1] = -v[2]
+    out[0, 2] = v[1]
+    out[1, 0] = v[2]
+    out[1, 1] = 0.0
+    out[1, 2] = -v[0]
+    out[2, 0] = -v[1]
+    out[2, 1] = v[0]
+    out[2, 2] = 0.0
+
+
+@nb.njit(cache=True, inline="always")
+def _cross(a, b, out):
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+
+
+@nb.njit(cache=True)
+def _mm(A, B, out):
+    for i in range(3):
+        for j in range(3):
+            acc = 0.0
+            for q in range(3):
+                acc += A[i, q] * B[q, j]
+            out[i, j] = acc
+
+
+@nb.njit(cache=True)
+def _coefficients(theta):
+    t2 = theta * theta
+    if theta < _SMALL:
+        a = 1 - t2 / 6 * (1 - t2 / 20 * (1 - t2 / 42))
+        b = 0.5 - t2 / 24 * (1 - t2 / 30 * (1 - t2 / 56))
+        c = 1 / 6 - t2 / 120 * (1 - t2 / 42 * (1 - t2 / 72))
+    else:
+        a = math.sin(theta) / theta
+        b = (1 - math.cos(theta)) / t2
+        c = (theta - math.sin(theta)) / (t2 * theta)
+    return a, b, c
+
+
+@nb.njit(cache=True)
+def _exp_and_jl(phi, Q, J):
+    """Q = exp(hat(phi)), J = J_l(phi)."""
+    theta = math.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
+    a, b, c = _coefficients(theta)
+    K = np.empty((3, 3))
+    _hat(phi, K)
+    K2 = np.empty((3, 3))
+    _mm(K, K, K2)
+    for i in range(3):
+        for j in range(3):
+            eye = 1.0 if i == j else 0.0
+            Q[i, j] = eye + a * K[i, j] + b * K2[i, j]
+            J[i, j] = eye + b * K[i, j] + c * K2[i, j]
+
+
+@nb.njit(cache=True)
+def _log(R, out):
+    v0 = 0.5 * (R[2, 1] - R[1, 2])
+    v1 = 0.5 * (R[0, 2] - R[2, 0])
+    v2 = 0.5 * (R[1, 0] - R[0, 1])
+    s = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    c = 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0)
+    theta = math.atan2(s, c)
+    if theta > math.pi - 1e-3:  # axis from the symmetric part (R + R^T)/2 - cos(t) I
+        best, col = -1.0, 0
+        for i in range(3):
+            d = R[i, i] - c
+            if d > best:
+                best, col = d, i
+        ax = np.empty(3)
+        for i in range(3):
+            ax[i] = 0.5 * (R[i, col] + R[col, i]) - (c if i == col else 0.0)
+        nrm = math.sqrt(ax[0] ** 2 + ax[1] ** 2 + ax[2] ** 2)
+        sign = 1.0 if ax[0] * v0 + ax[1] * v1 + ax[2] * v2 >= 0 else -1.0
+        for i in range(3):
+            out[i] = sign * theta * ax[i] / nrm
+        return
+    if theta < _SMALL:
+        t2 = theta * theta
+        f = 1 + t2 / 6 * (1 + 7 * t2 / 60 * (1 + 31 * t2 / 294))
+    else:
+        f = theta / s
+    out[0] = f * v0
+    out[1] = f * v1
+    out[2] = f * v2
+
+
+@nb.njit(cache=True)
+def _c_coefficients(theta):
+    if theta < _C_SMALL:
+        t2 = theta * theta
+        c = 0.0
+        dc = 0.0
+        for k in range(_C_SERIES.size - 1, -1, -1):
+            c = c * t2 + _C_SERIES[k]
+            if k >= 1:
+                dc = dc * t2 + 2 * k * _C_SERIES[k]
+        return c, dc
+    cot = math.cos(theta / 2) / math.sin(theta / 2)
+    csc2 = 1.0 / math.sin(theta / 2) ** 2
+    c = 1 / theta**2 - cot / (2 * theta)
+    dc = (-2 / theta**3 + cot / (2 * theta**2) + csc2 / (4 * theta)) / theta
+    return c, dc
+
+
+@nb.njit(cache=True)
+def _sym_term(a, b, scale, out):
+    """out += scale * ((a b^T + b a^T) / 2 - (a . b) I)."""
+    d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    for i in range(3):
+        for j in range(3):
+            out[i, j] += scale * (0.5 * (a[i] * b[j] + b[i] * a[j]) - (d if i == j else 0.0))
+
+
+@nb.njit(cache=True)
+def spatial_core(
+    phi, X, F, S, B, G, H, has_h, uniform, tangent, mu, K, h, w, R0, L,
+    frames, R, R1, blk, diag, A_ab, m_out,
+):  # fmt: skip
+    """Frames (k, n, 3, 3), residual R and R1 (k, n, 9 or 3; moment, position and force
+    slots), and with ``tangent``: the Jacobian blocks ``blk`` (k, n, 10, 3, 3) -- 0 m_prev,
+    1 m_diag, 2 m_next, 3 p_phiprev, 4 p_phi, 5 m_x, 6 m_Fprev, 7 m_F, 8 f_xnext,
+    9 f_phinext, each at the node of its row (m_next, m_F at row j: node j; f_* at row j - 1:
+    node j) -- the world-rotation diagonal ``diag`` (k, n, 3, 3) and ``A_ab`` (k, n - 1, 3, 3)
+    of the second variation, and the world magnetization ``m_out`` (k, n, 3)."""
+    k, n = phi.shape[0], phi.shape[1]
+    op = 0 if uniform else 3
+    Q = np.empty((3, 3))
+    Jl = np.empty((k, n, 3, 3))
+    psi = np.empty(3)
+    g = np.empty(3)
+    tmp = np.empty(3)
+    tmp2 = np.empty(3)
+    Jg = np.empty(3)
+    p = np.empty((n - 1, 3))
+    P = np.empty((n - 1, 3, 3))
+    Delta = np.empty((3, 3))
+    Psi = np.empty((3, 3))
+    Psi2 = np.empty((3, 3))
+    Minv = np.empty((3, 3))
+    Nm = np.empty((3, 3))
+    Gh = np.empty((3, 3))
+    M1 = np.empty((3, 3))
+    M2 = np.empty((3, 3))
+    tau = np.empty(3)
+    hF = np.empty(3)
+    t = np.empty(3)
+    for m in range(k):
+        s_m = S[m]
+        for i in range(n):
+            _exp_and_jl(phi[m, i], Q, Jl[m, i])
+            _mm(Q, R0, frames[m, i])
+            for a in range(3):
+                acc = 0.0
+                for q in range(3):
+                    acc += frames[m, i, a, q] * mu[i, q]
+                m_out[m, i, a] = acc
+        # segments
+        for i in range(n - 1):
+            Ra = frames[m, i]
+            Rb = frames[m, i + 1]
+            for a in range(3):
+                for b in range(3):
+                    acc = 0.0
+                    for q in range(3):
+                        acc += Ra[q, a] * Rb[q, b]
+                    Delta[a, b] = acc
+            _log(Delta, psi)
+            for a in range(3):
+                g[a] = psi[a] * K[a] / h[i]
+            theta = math.sqrt(psi[0] ** 2 + psi[1] ** 2 + psi[2] ** 2)
+            cc, dc = _c_coefficients(theta)
+            _cross(psi, g, tmp)  # psi x g
+            _cross(psi, tmp, tmp2)
+            for a in range(3):
+                Jg[a] = g[a] - 0.5 * tmp[a] + cc * tmp2[a]
+            for a in range(3):
+                acc = 0.0
+                for q in range(3):
+                    acc += Rb[a, q] * Jg[q]
+                p[i, a] = acc
+            if not tangent:
+                continue
+            _hat(psi, Psi)
+            _mm(Psi, Psi, Psi2)
+            for a in range(3):
+                for b in range(3):
+                    Minv[a, b] = (1.0 if a == b else 0.0) + 0.5 * Psi[a, b] + cc * Psi2[a, b]
+            # N = -hat(g)/2 - c hat(g) hat(psi) - c hat(g x psi) + dc psi (psi^2 g)^T
+            _hat(g, Gh)
+            _mm(Gh, Psi, M1)
+            _cross(g, psi, tmp)
+            _hat(tmp, M2)
+            for a in range(3):
+                acc = 0.0
+                for q in range(3):
+                    acc += Psi2[a, q] * g[q]
+                tmp2[a] = acc
+            for a in range(3):
+                for b in range(3):
+                    Nm[a, b] = -0.5 * Gh[a, b] - cc * (M1[a, b] + M2[a, b]) + dc * psi[a] * tmp2[b]
+            # inner = Minv^T diag(K/h) Minv + sym(Minv^T N)
+            for a in range(3):
+                for b in range(3):
+                    acc = 0.0
+                    acc2 = 0.0
+                    acc3 = 0.0
+                    for q in range(3):
+                        acc += Minv[q, a] * K[q] / h[i] * Minv[q, b]
+                        acc2 += Minv[q, a] * Nm[q, b]
+                        acc3 += Minv[q, b] * Nm[q, a]
+                    M1[a, b] = acc + 0.5 * (acc2 + acc3)
+            # P = Rb inner Rb^T
+            _mm(Rb, M1, M2)
+            for a in range(3):
+                for b in range(3):
+                    acc = 0.0
+                    for q in range(3):
+                        acc += M2[a, q] * Rb[b, q]
+                    P[i, a, b] = acc
+        # residual: moments
+        for i in range(n):
+            for a in range(3):
+                t[a] = frames[m, i, a, 0]
+            _cross(m_out[m, i], B[m, i], tau)
+            for a in range(3):
+                r1 = -w[i] * tau[a]
+                val = s_m * r1
+                if i >= 1:
+                    val += p[i - 1, a]
+                if i <= n - 2:
+                    val -= p[i, a]
+                R1[m, i, op + a] = r1 if i > 0 else 0.0
+                R[m, i, op + a] = val
+            if not uniform:
+                if i >= 1:
+                    for a in range(3):
+                        hF[a] = 0.5 * h[i - 1] * F[m, i - 1, a]
+                    _cross(t, hF, tmp)
+                    for a in range(3):
+                        R[m, i, op + a] -= tmp[a]
+                if i <= n - 2:
+                    for a in range(3):
+                        hF[a] = 0.5 * h[i] * F[m, i, a]
+                    _cross(t, hF, tmp)
+                    for a in range(3):
+                        R[m, i, op + a] -= tmp[a]
+        for a in range(3):
+            R[m, 0, op + a] = phi[m, 0, a]
+        if not uniform:
+            for a in range(3):
+                R[m, 0, a] = X[m, 0, a]
+                R[m, n - 1, 6 + a] = F[m, n - 1, a]
+                R1[m, n - 1, 6 + a] = 0.0
+                R1[m, 0, a] = 0.0
+            for i in range(1, n):
+                for a in range(3):
+                    R[m, i, a] = (
+                        X[m, i, a]
+                        - X[m, i - 1, a]
+                        - 0.5 * h[i - 1] * (frames[m, i - 1, a, 0] + frames[m, i, a, 0])
+                    )
+                    R1[m, i, a] = 0.0
+                # force row i - 1: F_{i-1} - F_i - c w_i L G_i^T m_i
+                for a in range(3):
+                    acc = 0.0
+                    for q in range(3):
+                        acc += G[m, i, q, a] * m_out[m, i, q]
+                    f1 = -w[i] * L * acc
+                    R1[m, i - 1, 6 + a] = f1
+                    R[m, i - 1, 6 + a] = F[m, i - 1, a] - F[m, i, a] + s_m * f1
+        if not tangent:
+            continue
+        # Jacobian blocks
+        for i in range(n):
+            for a in range(3):
+                t[a] = frames[m, i, a, 0]
+            D = diag[m, i]
+            for a in range(3):
+                for b in range(3):
+                    D[a, b] = 0.0
+            if i >= 1:
+                for a in range(3):
+                    for b in range(3):
+                        D[a, b] += P[i - 1, a, b]
+            if i <= n - 2:
+                for a in range(3):
+                    for b in range(3):
+                        D[a, b] += P[i, a, b]
+            _sym_term(m_out[m, i], B[m, i], -s_m * w[i], D)
+            if not uniform:
+                if i >= 1:
+                    for a in range(3):
+                        hF[a] = 0.5 * h[i - 1] * F[m, i - 1, a]
+                    _sym_term(t, hF, -1.0, D)
+                if i <= n - 2:
+                    for a in range(3):
+                        hF[a] = 0.5 * h[i] * F[m, i, a]
+                    _sym_term(t, hF, -1.0, D)
+            for a in range(3):
+                tmp[a] = R[m, i, op + a]
+            _hat(tmp, M1)
+            for a in range(3):
+                for b in range(3):
+                    D[a, b] -= 0.5 * M1[a, b]
+        for i in range(n - 1):
+            _hat(p[i], M1)
+            for a in range(3):
+                for b in range(3):
+                    A_ab[m, i, a, b] = -P[i, a, b] + 0.5 * M1[a, b]
+        for i in range(1, n):
+            # m_prev: A_ba(seg i-1) Jl_{i-1}; m_diag: diag_i Jl_i; m_next: A_ab(seg i) Jl_{i+1}
+            for a in range(3):
+                for b in range(3):
+                    A_ba = -P[i - 1, a, b] - (A_ab[m, i - 1, a, b] + P[i - 1, a, b])
+                    M1[a, b] = A_ba
+            _mm(M1, Jl[m, i - 1], blk[m, i, 0])
+            _mm(diag[m, i], Jl[m, i], blk[m, i, 1])
+            if i <= n - 2:
+                _mm(A_ab[m, i], Jl[m, i + 1], blk[m, i, 2])
+            if uniform:
+                continue
+            hh = 0.5 * h[i - 1]
+            for a in range(3):
+                tmp[a] = frames[m, i - 1, a, 0]
+            _hat(tmp, M1)
+            for a in range(3):
+                for b in range(3):
+                    M1[a, b] *= hh
+            _mm(M1, Jl[m, i - 1], blk[m, i, 3])
+            for a in range(3):
+                t[a] = frames[m, i, a, 0]
+            _hat(t, M2)
+            for a in range(3):
+                for b in range(3):
+                    M1[a, b] = hh * M2[a, b]
+            _mm(M1, Jl[m, i], blk[m, i, 4])
+            # m_x = -c w L hat(m) G ; m_Fprev = -(h_{i-1}/2) hat(t); m_F = -(h_i/2) hat(t)
+            _hat(m_out[m, i], M1)
+            cwL = s_m * w[i] * L
+            for a in range(3):
+                for b in range(3):
+                    acc = 0.0
+                    for q in range(3):
+                        acc += M1[a, q] * G[m, i, q, b]
+                    blk[m, i, 5, a, b] = -cwL * acc
+                    blk[m, i, 6, a, b] = -hh * M2[a, b]
+                    if i <= n - 2:
+                        blk[m, i, 7, a, b] = -0.5 * h[i] * M2[a, b]
+            # f_xnext (row i - 1, column x_i): -c w L^2 sum_q m_q H[q, a, b]
+            # f_phinext: c w L G^T hat(m) Jl_i
+            for a in range(3):
+                for b in range(3):
+                    acc = 0.0
+                    if has_h:
+                        for q in range(3):
+                            acc += m_out[m, i, q] * H[m, i, q, a, b]
+                    blk[m, i, 8, a, b] = -cwL * L * acc
+                    acc2 = 0.0
+                    for q in range(3):
+                        acc2 += G[m, i, q, a] * M1[q, b]
+                    Nm[a, b] = cwL * acc2
+            _mm(Nm, Jl[m, i], blk[m, i, 9])
