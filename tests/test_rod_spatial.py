@@ -430,3 +430,50 @@ class TestAgainstFEM:
         assert np.allclose(np.arctan2(fem.tip[:, 2], fem.tip[:, 1]), beta, atol=2e-3)
         planar = solve_rod(rod, coils.UniformField(B=(0.0, b * np.cos(beta), 0.0)), lams)
         assert (np.linalg.norm(fem.tip - planar.tip, axis=1) / rod.length).min() > 0.2
+
+
+class TestAgainstBVP:
+    """Out-of-plane equilibria against an independent solve_bvp of the 3D Kirchhoff equations
+    (tests/rod3d_bvp_reference.py, tol 1e-10): <= 1e-6 L with default settings."""
+
+    @staticmethod
+    def _reference(rod, field, scales, **kw):
+        from rod3d_bvp_reference import spatial_reference
+
+        K = rod_stiffnesses(rod) * rod.bending_stiffness
+        mag = rod.magnetization
+
+        def body(s):
+            v = mag.vector3(s) if hasattr(mag, "vector3") else np.c_[mag.vector(s), 0 * s]
+            return np.asarray(v, float).reshape(len(s), 3)
+
+        return spatial_reference(rod.length, K, rod.area, body, field, scales, **kw)
+
+    @pytest.mark.parametrize("kind", ["uniform", "linear", "maxwell"])
+    def test_out_of_plane_fields(self, kind):
+        rod = _rod(Rectangle(3e-3, 1.5e-3), angle=0.3)
+        B = rod.field_for_lambda(5.0) * _unit([0.3, 1.0, 0.5])
+        field = {
+            "uniform": coils.UniformField(B=B),
+            "linear": coils.LinearField(B0=B, gradient=0.05 * GRADIENT),
+            "maxwell": coils.MaxwellPair(0.05, 300, 2.0, axis="z", center=(0.01, 0.0, -0.02))
+            + coils.UniformField(B=B),
+        }[kind]
+        scales = [0.5, 1.0]
+        res = solve_rod(rod, field, scales)
+        assert res.model == "spatial"
+        ref = self._reference(rod, field, scales)
+        for k in range(len(scales)):
+            assert np.abs(res.tip[k] - ref[k]["tip"]).max() < 1e-6 * L
+            assert np.abs(res.frames(k)[-1] - ref[k]["R"][-1]).max() < 1e-6
+
+    def test_clamp_rotation_and_position(self):
+        rod = _rod(Rectangle(3e-3, 1.5e-3), angle=-0.4)
+        Q = Rotation.from_euler("zyx", [30, -50, 20], degrees=True).as_matrix()
+        field = coils.LinearField(
+            B0=rod.field_for_lambda(4.0) * _unit([0.2, -1.0, 0.4]), gradient=0.05 * GRADIENT
+        )
+        clamp = (0.003, -0.002, 0.004)
+        res = solve_rod(rod, field, [1.0], clamp_rotation=Q, clamp_position=clamp)
+        ref = self._reference(rod, field, [1.0], clamp_rotation=Q, clamp_position=clamp)
+        assert np.abs(res.tip[0] - ref[0]["tip"]).max() < 1e-6 * L
