@@ -1,0 +1,198 @@
+"""The spatial rod and contact: time against tip error, next to the obvious alternatives.
+
+Prints (and writes to benchmarks/results/rod3d.md):
+
+1. planar cases solved by both models (M(1) in a uniform field and in a Helmholtz pair's real
+   field): the spatial rod's time over the planar rod's (goal <= 5x) and their tip difference;
+2. a genuinely 3D state (magnetization with an elevation, an oblique field, a rectangular
+   section): time and tip error against the node count, next to scipy ``solve_bvp`` on the 3D
+   Kirchhoff equations (tests/rod3d_bvp_reference.py) at tol 1e-6 and 1e-8; the error
+   reference is that solve at tol 1e-11;
+3. PyElastica 1.0 dynamic relaxation of the same non-dimensional problem
+   (benchmarks/peers/pyelastica_spatial.py, run in its own environment; its JSON in
+   benchmarks/results/pyelastica_spatial.json): time and tip error against ours;
+4. contact: a state pushed against a wall against the free state at the same node count
+   (goal <= 3x), and an insertion of 50 steps through a bend (goal <= 2 s on one core).
+
+Run:  python benchmarks/bench_rod3d.py
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+import coils
+import coilrod
+from coilrod import Circle, Magnetization, Rectangle, Rod, presets, solve_rod
+
+HERE = Path(__file__).parent
+sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parent / "tests"))
+from _machine import best_wall, machine_info  # noqa: E402
+from rod3d_bvp_reference import spatial_reference  # noqa: E402
+
+REPEAT = 5
+OUT = HERE / "results" / "rod3d.md"
+L = 0.04
+
+
+def _unit(v):
+    v = np.asarray(v, float)
+    return v / np.linalg.norm(v)
+
+
+def planar_cases(lines):
+    lines += ["## 1. Planar cases by both models", ""]
+    lines += ["| case | planar (s) | spatial (s) | ratio | tip difference / L |", "|---|---|---|---|---|"]
+    rod = presets.seed_rod(presets.M1())
+    cases = {
+        "M(1), uniform field, lambda = 5": coils.UniformField(B=(0, rod.field_for_lambda(5), 0)),
+        "M(1), Helmholtz pair (real field)": coils.HelmholtzPair(0.05, 100, 2.0, axis="y"),
+        "M(1), uniform, 10-step sweep": coils.UniformField(B=(0, rod.field_for_lambda(10), 0)),
+    }
+    ratios = []
+    for name, field in cases.items():
+        scales = np.linspace(0.1, 1, 10) if "sweep" in name else [1.0]
+        tp, rp = best_wall(lambda f=field, s=scales: solve_rod(rod, f, s, model="planar"), REPEAT)
+        ts, rs = best_wall(lambda f=field, s=scales: solve_rod(rod, f, s, model="spatial"), REPEAT)
+        diff = np.abs(rp.tip - rs.tip).max() / rod.length
+        ratios.append(ts / tp)
+        lines.append(f"| {name} | {tp:.4f} | {ts:.4f} | {ts / tp:.1f}x | {diff:.1e} |")
+    lines += ["", f"Spatial / planar: **{min(ratios):.1f}-{max(ratios):.1f}x** (goal <= 5x).", ""]
+
+
+def _case():
+    """The 3D case: rectangular section, M with angle 0.3 and elevation 0.4 rad, oblique
+    uniform field at lambda = 3 (as the PyElastica script, non-dimensionally the same)."""
+    rod = Rod(L, 1e6, Circle(2e-3), Magnetization(128e3, 0.3, elevation=0.4), poisson_ratio=0.5)
+    field = coils.UniformField(B=rod.field_for_lambda(3.0) * _unit([0.3, 1.0, 0.5]))
+    return rod, field
+
+
+def _reference(rod, field, tol):
+    K = np.asarray(rod.stiffnesses, float)
+    return spatial_reference(
+        rod.length, K, rod.area, rod.magnetization.vector3, field, [1.0], tol=tol
+    )[0]
+
+
+def spatial_case(lines):
+    rod, field = _case()
+    ref = _reference(rod, field, 1e-11)["tip"]
+    lines += ["## 2. A 3D state: time and tip error against node count", ""]
+    lines += [
+        "M with angle 0.3 rad and elevation 0.4 rad, circular section (GJ = EI / 1.5), uniform "
+        "field along (0.3, 1, 0.5) at lambda = 3; reference: solve_bvp on the 3D Kirchhoff "
+        "equations at tol 1e-11.",
+        "",
+        "| method | time (s) | tip error / L |",
+        "|---|---|---|",
+    ]
+    out = {}
+    for n in (8, 16, 32, 64, 128, 256):
+        for rich in (False, True):
+            t, res = best_wall(
+                lambda n=n, r=rich: solve_rod(rod, field, [1.0], nodes=n, richardson=r), REPEAT
+            )
+            err = np.linalg.norm(res.tip[0] - ref) / L
+            label = f"solve_rod, {n} segments" + (" + Richardson" if rich else "")
+            if n == 64 and rich:
+                label += " (defaults)"
+                out["ours"] = (t, err)
+            lines.append(f"| {label} | {t:.4f} | {err:.1e} |")
+    for tol in (1e-6, 1e-8):
+        t, r = best_wall(lambda tol=tol: _reference(rod, field, tol), 3)
+        err = np.linalg.norm(r["tip"] - ref) / L
+        out[f"bvp{tol:g}"] = (t, err)
+        lines.append(f"| scipy solve_bvp (3D Kirchhoff, quaternions), tol {tol:g} | {t:.4f} | {err:.1e} |")
+    t_ours = out["ours"][0]
+    lines += [
+        "",
+        f"solve_bvp tol 1e-6 / solve_rod: **{out['bvp1e-06'][0] / t_ours:.0f}x** the time; tol "
+        f"1e-8: {out['bvp1e-08'][0] / t_ours:.0f}x.",
+        "",
+    ]
+    return out, ref
+
+
+def pyelastica(lines, ours, ref):
+    path = HERE / "results" / "pyelastica_spatial.json"
+    lines += ["## 3. PyElastica 1.0 (dynamic relaxation), the same problem", ""]
+    if not path.exists():
+        lines += ["(no PyElastica run found: see benchmarks/peers/pyelastica_spatial.py)", ""]
+        return
+    runs = json.loads(path.read_text())
+    t_ours, e_ours = ours
+    lines += [
+        "PyElastica's rod is extensible and shearable (effects ~1e-4 at L/r = 40) and stops "
+        "when the tip moves < 1e-6 L per period of the first mode; numbers from "
+        "benchmarks/results/pyelastica_spatial.json (same machine).",
+        "",
+        "| n_elem | time (s) | tip error / L | time / ours | error / ours |",
+        "|---|---|---|---|---|",
+    ]
+    for r in runs:
+        err = float(np.linalg.norm(np.asarray(r["tip"]) - ref / L))
+        lines.append(
+            f"| {r['n_elem']} | {r['wall_s']:.2f} | {err:.1e} | {r['wall_s'] / t_ours:.0f}x | "
+            f"{err / e_ours:.0e}x |"
+        )
+    lines += ["", f"Ours (defaults): {t_ours:.4f} s at {e_ours:.1e} L.", ""]
+
+
+def contact(lines):
+    lines += ["## 4. Contact", ""]
+    rod = presets.seed_rod(presets.M1())
+    field = coils.UniformField(B=(0, rod.field_for_lambda(3.0), 0))
+    wall = coilrod.Wall(point=(0, 0.2 * rod.length, 0), normal=(0, -1, 0))
+    t_free, _ = best_wall(lambda: solve_rod(rod, field, [1.0], model="spatial"), REPEAT)
+    t_wall, res = best_wall(lambda: solve_rod(rod, field, [1.0], obstacles=[wall]), REPEAT)
+    lines += [
+        "| state | time (s) |",
+        "|---|---|",
+        f"| M(1), lambda = 3, free (spatial rod) | {t_free:.4f} |",
+        f"| the same against a wall at y = 0.2 L (tip contact) | {t_wall:.4f} |",
+        "",
+        f"Contact / free: **{t_wall / t_free:.1f}x** (goal <= 3x); wall force "
+        f"{res.obstacle_forces(0)[0][1] * 1e3:.4f} mN.",
+        "",
+    ]
+    vessel = coilrod.Vessel.bend(
+        bend_radius=0.02, angle=np.pi / 2, radius=0.002, straight_before=0.02,
+        straight_after=0.03,
+    )  # fmt: skip
+    tip = Magnetization.segments([0.04, 0.01], [0.0, 128e3], [0.0, 0.0])
+    cath = Rod(0.05, 1e6, Circle(1e-3), tip)
+    lengths = np.linspace(0.012, 0.05, 50)
+
+    def schedule(k, length):
+        a = np.pi / 2 * min(1.0, max(0.0, (length - 0.015) / 0.02))
+        return coils.UniformField(B=0.01 * np.array([np.cos(a), np.sin(a), 0.0]))
+
+    t_ins, ins = best_wall(lambda: coilrod.insert(cath, vessel, lengths, schedule, nodes=48), 3)
+    force = np.linalg.norm(ins.wall_force, axis=1)
+    lines += [
+        f"Insertion through a 90 deg bend (radius 20 mm, lumen 2 mm), 50 steps, 48 segments: "
+        f"**{t_ins:.2f} s** (goal <= 2 s on one core); {int(ins.substeps.sum())} Newton solves; "
+        f"largest wall force {force.max() * 1e3:.2f} mN; smallest gap {ins.min_gap.min():.1e} m.",
+        "",
+    ]
+
+
+def main():
+    lines = ["# Spatial rod and contact benchmark", "", f"Machine: {machine_info()}", ""]
+    planar_cases(lines)
+    ours, ref = spatial_case(lines)
+    pyelastica(lines, ours["ours"], ref)
+    contact(lines)
+    text = "\n".join(lines)
+    print(text)
+    OUT.write_text(text + "\n")
+
+
+if __name__ == "__main__":
+    main()
