@@ -6,6 +6,7 @@ models) driven by ``path`` (the one path-following engine) -> results; ``design`
 """
 
 from . import _moved  # noqa: F401  (old 0.1 module paths stay importable)
+from .contact import Vessel, VesselNetwork, Wall
 from .control import ControlResult, solve_currents
 from .design.calibrate import Calibration, IdentifiabilityError, calibrate
 from .design.optimize import MagnetizationDesign, optimize_magnetization
@@ -46,4 +47,7 @@ __all__ = [
     "calibrate",
     "Calibration",
     "IdentifiabilityError",
+    "Wall",
+    "Vessel",
+    "VesselNetwork",
 ]
