@@ -412,10 +412,15 @@ class SpatialRod(PathProblem):
         normals = np.empty((k, n, self.nc, 3))
         hess = np.zeros((k, n, self.nc, 3, 3)) if hessian else None
         for o, ob in enumerate(self.obstacles):
-            gaps[:, :, o] = np.asarray(ob.gap(pts), float).reshape(k, n) / self.L
-            normals[:, :, o] = np.asarray(ob.gap_gradient(pts), float).reshape(k, n, 3)
+            if hasattr(ob, "evaluate"):  # one nearest-point search for all three
+                g, grad, hs = ob.evaluate(pts, order=2 if hessian else 1)
+            else:
+                g, grad = ob.gap(pts), ob.gap_gradient(pts)
+                hs = ob.gap_hessian(pts) if hessian else None
+            gaps[:, :, o] = np.asarray(g, float).reshape(k, n) / self.L
+            normals[:, :, o] = np.asarray(grad, float).reshape(k, n, 3)
             if hessian:
-                hess[:, :, o] = np.asarray(ob.gap_hessian(pts), float).reshape(k, n, 3, 3)
+                hess[:, :, o] = np.asarray(hs, float).reshape(k, n, 3, 3)
         return lam, gaps, normals, hess
 
     def contact_state(self, U: np.ndarray):

@@ -1,0 +1,94 @@
+"""Several vessels joined into one lumen (a branching network): the union of their lumens."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .obstacle import Obstacle
+
+__all__ = ["VesselNetwork"]
+
+
+class VesselNetwork(Obstacle):
+    """The union of the admissible regions of several obstacles (typically
+    :class:`~coilrod.contact.Vessel` s joined at junctions): ``gap = max`` of the members' gaps.
+
+    A point is admissible if it is inside any member.  The gap is the exact penetration depth
+    outside all members (the distance to the union); at a junction, where two tubes' walls
+    cross, the gap is continuous and its gradient jumps (the member with the larger gap gives
+    the gradient and hessian; at a tie, the first).  Contrast a list of obstacles handed to a
+    solver, whose admissible regions intersect.
+
+    Parameters
+    ----------
+    vessels : sequence of Obstacle
+        At least one.
+
+    Examples
+    --------
+    >>> from coilrod.contact import Vessel
+    >>> main = Vessel([[0, 0, 0], [0.04, 0, 0]], 1e-3)
+    >>> side = Vessel([[0.02, 0, 0], [0.02, 0.02, 0]], 1e-3, ends=("round", "extend"))
+    >>> net = VesselNetwork([main, side])
+    >>> net.contains([[0.02, 0.01, 0.0], [0.01, 0.01, 0.0]]).tolist()
+    [True, False]
+    """
+
+    _outside = "outside the vessels"
+
+    def __init__(self, vessels):
+        try:
+            members = list(vessels)
+        except TypeError:
+            raise ValueError(
+                f"vessels must be a sequence of obstacles; got {type(vessels).__name__}"
+            ) from None
+        if not members:
+            raise ValueError("vessels must hold at least one obstacle; got none")
+        for k, v in enumerate(members):
+            if not isinstance(v, Obstacle):
+                raise ValueError(
+                    f"vessels[{k}] must be a Vessel (or another obstacle); got {type(v).__name__}"
+                )
+        self.vessels = tuple(members)
+
+    def __repr__(self) -> str:
+        return f"VesselNetwork([{', '.join(repr(v) for v in self.vessels)}])"
+
+    def __len__(self) -> int:
+        return len(self.vessels)
+
+    def _evaluate(self, points: np.ndarray, order: int):
+        gaps = np.stack([v._evaluate(points, 0)[0] for v in self.vessels], axis=1)
+        who = np.argmax(gaps, axis=1)
+        gap = gaps[np.arange(len(points)), who]
+        if order == 0:
+            return gap, None, None
+        grad = np.empty((len(points), 3))
+        hess = np.empty((len(points), 3, 3)) if order >= 2 else None
+        for k, v in enumerate(self.vessels):
+            rows = np.flatnonzero(who == k)
+            if rows.size:
+                _, gr, he = v._evaluate(points[rows], order)
+                grad[rows] = gr
+                if order >= 2:
+                    hess[rows] = he
+        return gap, grad, hess
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """Box (2, 3) enclosing every member's box, m."""
+        boxes = np.stack([v.bounds for v in self.vessels])
+        return np.array([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
+
+    def _draw(self, ax, **kwargs):
+        """The outline of the union of the vessels' lumens (the walls across a junction's
+        opening are not drawn) and the other members."""
+        from .vessel import Vessel, _draw_lumens
+
+        vessels = [v for v in self.vessels if isinstance(v, Vessel)]
+        if vessels:
+            _draw_lumens(ax, vessels, **kwargs)
+        for v in self.vessels:
+            if not isinstance(v, Vessel):
+                v._draw(ax, **kwargs)

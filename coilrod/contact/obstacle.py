@@ -1,0 +1,192 @@
+"""What every rigid obstacle offers a contact model: the gap function and its derivatives.
+
+The **gap** ``g(p)`` (m) is the signed distance of a point from the obstacle's wall: ``g > 0``
+on the admissible side (inside a vessel, on the side a wall's normal points to), ``g < 0`` for
+a point that penetrates it (``-g`` is then how far it is from the admissible region).  Its
+gradient is the unit normal pointing into the admissible side, its hessian the wall's
+curvature seen from the point.  A contact model needs nothing else:
+
+=====================  ====================================================================
+``evaluate(p, order)``  gap, gradient and hessian together (one nearest-point search)
+``gap(p)``              (n,) m
+``gap_gradient(p)``     (n, 3), unit vectors
+``gap_hessian(p)``      (n, 3, 3), 1/m
+``contains(p)``         (n,) bool, ``gap >= 0``
+``check_start(p)``      ValueError if a starting configuration is not admissible
+``bounds``              (2, 3) box, m
+``plot(ax)``            the outline in the x-y plane
+=====================  ====================================================================
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from coils._validate import as_count, as_points, nonnegative
+
+__all__ = ["Obstacle", "GapEvaluation"]
+
+
+def _mm(x: float) -> str:
+    return f"{1e3 * x:.4g} mm"
+
+
+def _point_mm(p) -> str:
+    return "(" + ", ".join(f"{1e3 * v:.4g}" for v in p) + ") mm"
+
+
+class GapEvaluation(NamedTuple):
+    """Gap of ``n`` points and, if asked for, its derivatives.
+
+    Attributes
+    ----------
+    gap : ndarray, shape (n,)
+        Signed distance to the wall, m (> 0 admissible).
+    gradient : ndarray, shape (n, 3), or None
+        ``d gap / d p``: the unit normal into the admissible side.
+    hessian : ndarray, shape (n, 3, 3), or None
+        ``d2 gap / d p2``, 1/m (symmetric).
+    """
+
+    gap: np.ndarray
+    gradient: np.ndarray | None
+    hessian: np.ndarray | None
+
+
+class Obstacle:
+    """Base class of rigid obstacles (:class:`~coilrod.contact.Wall`,
+    :class:`~coilrod.contact.Vessel`, :class:`~coilrod.contact.VesselNetwork`).
+
+    Subclasses implement ``_evaluate(points, order)`` on validated points (shape (n, 3), n >= 1)
+    returning ``(gap, gradient or None, hessian or None)``, the property ``bounds`` and
+    ``_draw(ax, **kwargs)``; the public methods are defined here once.
+    """
+
+    #: How a point with a negative gap is described in messages ("outside the vessel").
+    _outside = "outside the obstacle"
+
+    # -- the gap and its derivatives ------------------------------------------------------------
+    def evaluate(self, points, order: int = 2) -> GapEvaluation:
+        """Gap of ``points`` and its derivatives up to ``order``, from one nearest-point search.
+
+        Parameters
+        ----------
+        points : array-like, shape (n, 3) or (3,)
+            Points, m (a single point is treated as shape (1, 3)).
+        order : int
+            0: the gap only; 1: and its gradient; 2: and its hessian.
+
+        Returns
+        -------
+        GapEvaluation
+            ``gap`` (n,) m, ``gradient`` (n, 3) or None, ``hessian`` (n, 3, 3) 1/m or None.
+        """
+        order = as_count(order, "order", minimum=0, maximum=2)
+        pts = as_points(points)
+        n = len(pts)
+        if n == 0:
+            return GapEvaluation(
+                np.zeros(0),
+                np.zeros((0, 3)) if order >= 1 else None,
+                np.zeros((0, 3, 3)) if order >= 2 else None,
+            )
+        return GapEvaluation(*self._evaluate(pts, order))
+
+    def gap(self, points) -> np.ndarray:
+        """Signed distance to the wall, shape (n,), m: > 0 admissible, < 0 penetration.
+
+        Parameters
+        ----------
+        points : array-like, shape (n, 3) or (3,)
+            m.
+        """
+        return self.evaluate(points, 0).gap
+
+    def gap_gradient(self, points) -> np.ndarray:
+        """``d gap / d point``, shape (n, 3): the unit normal into the admissible side."""
+        return self.evaluate(points, 1).gradient
+
+    def gap_hessian(self, points) -> np.ndarray:
+        """``d2 gap / d point2``, shape (n, 3, 3), 1/m: zero for a wall, the wall's curvature
+        terms for a tube; exact where the gap is twice differentiable."""
+        return self.evaluate(points, 2).hessian
+
+    def contains(self, points) -> np.ndarray:
+        """True where ``gap >= 0`` (the point is admissible), shape (n,)."""
+        return self.gap(points) >= 0.0
+
+    def check_start(self, points, name: str = "points", tol: float = 0.0) -> None:
+        """Raise ValueError unless every point is admissible (``gap >= -tol``).
+
+        Parameters
+        ----------
+        points : array-like, shape (n, 3) or (3,)
+            E.g. a straight rod's nodes or the clamp, m.
+        name : str
+            What the points are, for the message ("clamp", "rod nodes").
+        tol : float
+            Penetration accepted (m), e.g. rounding of nodes lying on a wall.
+
+        Raises
+        ------
+        ValueError
+            "clamp at (0, 4.2, 0) mm lies 3.2 mm outside the vessel", or for several points
+            "rod nodes[17] at (...) mm lies 0.8 mm outside the vessel (5 of 41 rod nodes are;
+            the deepest, rod nodes[40], by 2.1 mm)".
+        """
+        if not isinstance(name, str):
+            raise ValueError(f"name must be a string; got {name!r}")
+        tol = nonnegative(tol, "tol")
+        pts = as_points(points, name)
+        gap = self.gap(pts)
+        bad = np.flatnonzero(gap < -tol)
+        if bad.size == 0:
+            return
+        first = int(bad[0])
+        label = name if len(pts) == 1 else f"{name}[{first}]"
+        msg = f"{label} at {_point_mm(pts[first])} lies {_mm(-gap[first])} {self._outside}"
+        if len(pts) > 1 and bad.size > 1:
+            deep = int(bad[np.argmin(gap[bad])])
+            msg += (
+                f" ({bad.size} of {len(pts)} {name} are; the deepest, {name}[{deep}], by "
+                f"{_mm(-gap[deep])})"
+            )
+        raise ValueError(msg)
+
+    # -- geometry -------------------------------------------------------------------------------
+    @property
+    def bounds(self) -> np.ndarray:  # pragma: no cover - abstract
+        """Axis-aligned bounding box, shape (2, 3) (lower, upper), m."""
+        raise NotImplementedError
+
+    def plot(self, ax=None, **kwargs):
+        """Draw the obstacle in the x-y plane (projection along z) with matplotlib.
+
+        Parameters
+        ----------
+        ax : matplotlib.axes.Axes, optional
+            New axes if None.
+        **kwargs
+            Line properties of the walls (``color``, ``linewidth``, ...).
+
+        Returns
+        -------
+        matplotlib.axes.Axes
+        """
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots()
+        self._draw(ax, **kwargs)
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        return ax
+
+    def _evaluate(self, points: np.ndarray, order: int):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _draw(self, ax, **kwargs):  # pragma: no cover - abstract
+        raise NotImplementedError
