@@ -80,10 +80,11 @@ class Insertion:
         return self._s[k].copy()
 
     def plot(self, steps=None, ax=None, force_range=(0.1, 0.4)):
-        """Shapes of ``steps`` (default: about eight) in the x-y plane over the vessel, nodes
-        in contact marked, and the total wall force per step against the clinical range
-        ``force_range`` (N) in a second panel.  Returns the figure."""
+        """Shapes of ``steps`` (default: about eight) in the x-y plane over the vessel (mm),
+        nodes in contact marked, and the total wall force per step (mN, log scale) against
+        the clinical range ``force_range`` (N) in a second panel.  Returns the figure."""
         import matplotlib.pyplot as plt
+        from matplotlib.ticker import FuncFormatter
 
         if ax is None:
             fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
@@ -91,27 +92,30 @@ class Insertion:
             axes = ax
             fig = axes[0].figure
         if self.vessel is not None and hasattr(self.vessel, "plot"):
-            self.vessel.plot(ax=axes[0])
+            self.vessel.plot(ax=axes[0], color="0.6")
         m = len(self)
         steps = np.unique(np.linspace(0, m - 1, min(8, m)).astype(int)) if steps is None else steps
         cmap = plt.get_cmap("viridis")
         for i, k in enumerate(steps):
-            x = self._shapes[k] * 1e3
+            x = self._shapes[k]
             color = cmap(i / max(len(steps) - 1, 1))
-            axes[0].plot(
-                x[:, 0], x[:, 1], color=color, lw=1.5, label=f"{self.lengths[k] * 1e3:.0f} mm"
-            )
+            label = f"{self.lengths[k] * 1e3:.0f} mm"
+            axes[0].plot(x[:, 0], x[:, 1], color=color, lw=1.5, label=label)
             on = self.contact_nodes[k]
             axes[0].plot(x[on, 0], x[on, 1], "o", color="crimson", ms=3)
+        mm = FuncFormatter(lambda v, _pos: f"{v * 1e3:g}")
+        axes[0].xaxis.set_major_formatter(mm)
+        axes[0].yaxis.set_major_formatter(mm)
         axes[0].set_aspect("equal")
         axes[0].set_xlabel("x (mm)")
         axes[0].set_ylabel("y (mm)")
         axes[0].legend(fontsize=7, title="free length")
-        force = np.linalg.norm(self.wall_force, axis=1)
-        axes[1].plot(self.lengths * 1e3, force, "-o", ms=3)
-        axes[1].axhspan(*force_range, color="0.9", label="clinical range")
+        force = np.linalg.norm(self.wall_force, axis=1) * 1e3
+        axes[1].semilogy(self.lengths * 1e3, np.maximum(force, 1e-6), "-o", ms=3)
+        axes[1].axhspan(force_range[0] * 1e3, force_range[1] * 1e3, color="0.9",
+                        label="clinical range")  # fmt: skip
         axes[1].set_xlabel("free length (mm)")
-        axes[1].set_ylabel("wall force (N)")
+        axes[1].set_ylabel("wall force (mN)")
         axes[1].legend()
         fig.tight_layout()
         return fig
