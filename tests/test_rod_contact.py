@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
+import coilrod
 import coils
-from coilrod import Circle, Magnetization, Rod, solve_rod
+from coilrod import Circle, Magnetization, Rod, Vessel, Wall, solve_rod
 from coilrod.rod.elastica import elastica
 
 L = 0.04
@@ -53,10 +54,16 @@ def _tip_wall_reference(rod, lam, d):
 
 
 class TestTipContact:
-    def test_force_and_shape_against_the_closed_form(self):
+    @pytest.mark.parametrize("kind", ["wall", "duck", "tube"])
+    def test_force_and_shape_against_the_closed_form(self, kind):
         rod = _rod()
         d = 0.2 * L
-        wall = _Wall((0, d, 0), (0, -1, 0))
+        wall = {
+            "wall": Wall((0, d, 0), (0, -1, 0)),
+            "duck": _Wall((0, d, 0), (0, -1, 0)),  # the bare gap interface
+            # a straight tube around the x axis: in the plane z = 0 its wall is y = +-d
+            "tube": Vessel.straight(2 * L, d, start=(-0.5 * L, 0, 0)),
+        }[kind]
         lams = np.array([1.5, 3.0, 6.0])
         b = rod.field_for_lambda(1.0)
         res = solve_rod(rod, coils.UniformField(B=(0, b, 0)), lams, obstacles=[wall])
@@ -144,3 +151,52 @@ class TestBadInput:
         res = solve_rod(_rod(), coils.UniformField(B=(0, 1e-3, 0)), [1.0], nodes=8)
         with pytest.raises(ValueError, match="no obstacles"):
             res.contact_force(0)
+
+
+class TestInsertion:
+    @staticmethod
+    def _catheter():
+        mag = Magnetization.segments([0.04, 0.01], [0.0, 128e3], [0.0, 0.0])
+        return Rod(0.05, 1e6, Circle(1e-3), mag)
+
+    def test_through_a_bend(self):
+        vessel = Vessel.bend(
+            bend_radius=0.02, angle=np.pi / 2, radius=0.002, straight_before=0.02,
+            straight_after=0.03,
+        )  # fmt: skip
+
+        def schedule(k, length):
+            a = np.pi / 2 * min(1.0, max(0.0, (length - 0.015) / 0.02))
+            return coils.UniformField(B=0.01 * np.array([np.cos(a), np.sin(a), 0.0]))
+
+        lengths = np.linspace(0.012, 0.05, 20)
+        ins = coilrod.insert(self._catheter(), vessel, lengths, schedule, nodes=48)
+        assert len(ins) == lengths.size
+        assert ins.min_gap.min() >= -1e-6 * 0.05
+        for k in range(len(ins)):  # every node inside the lumen, the free length as asked
+            assert vessel.gap(ins.centerline(k)).min() >= -1e-6 * 0.05
+            seg = np.linalg.norm(np.diff(ins.centerline(k), axis=0), axis=1).sum()
+            assert abs(seg / lengths[k] - 1) < 1e-3  # chord sum of an inextensible rod
+        # the tip has gone round the bend: beyond the arc's end (y > bend radius)
+        assert ins.tip[-1, 1] > 0.02
+        assert np.linalg.norm(ins.wall_force, axis=1).max() > 0
+
+    def test_zero_field_in_a_straight_tube(self):
+        vessel = Vessel.straight(0.1, 0.002, start=(0.0, 0.0, 0.0))
+        ins = coilrod.insert(
+            self._catheter(), vessel, [0.01, 0.02, 0.03], coils.UniformField(B=(0, 0, 0))
+        )
+        assert np.abs(ins.tip - np.array([[0.01, 0, 0], [0.02, 0, 0], [0.03, 0, 0]])).max() < 1e-12
+        assert np.abs(ins.wall_force).max() == 0.0
+
+    def test_bad_input(self):
+        vessel = Vessel.straight(0.1, 0.002)
+        cath = self._catheter()
+        field = coils.UniformField(B=(0, 0, 0))
+        with pytest.raises(ValueError, match="lengths"):
+            coilrod.insert(cath, vessel, [0.01, 0.2], field)
+        with pytest.raises(ValueError, match="field_schedule"):
+            coilrod.insert(cath, vessel, [0.01, 0.02], [field])
+        with pytest.raises(ValueError, match="outside"):
+            coilrod.insert(cath, vessel, [0.01], field, clamp_position=(0, 0.01, 0),
+                           clamp_rotation=np.eye(3))  # fmt: skip
