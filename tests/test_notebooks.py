@@ -373,3 +373,48 @@ def test_calibration_notebook():
     far = B180 > 9e-3
     assert np.abs(pred[far] - d180[far]).max() < 0.02
     assert r["E180"] / E == pytest.approx(1.12, abs=0.03)
+
+
+def test_navigation_notebook():
+    """Steering through a bend and into a side branch: every insertion reaches its last step,
+    the final shapes lie inside the lumen by the vessel geometry's own distance (tested
+    against closed forms in test_contact_geometry.py) and keep their length, the tips end
+    beyond the bend and inside the branch, and the wall forces stay below the clinical range
+    the notebook compares them with."""
+    import coilrod
+
+    r = execute("navigation.ipynb")
+    start = np.array([-0.025, 0.0, 0.0])
+    vessels = {
+        "bend": coilrod.Vessel.bend(
+            bend_radius=0.02,
+            angle=np.pi / 2,
+            radius=0.003,
+            straight_before=0.005,
+            straight_after=0.03,
+            start=start,
+        ),  # fmt: skip
+        "branch": coilrod.Vessel.branch(
+            0.08, 0.003, 0.04, branch_angle=np.pi / 4, branch_at=0.02, start=start
+        ),
+    }
+    L = 0.04
+    assert len(r["runs"]) == 8
+    for key, run in r["runs"].items():
+        _robot, vname, _model = key.split("|")
+        assert run["steps"] == r["n_lengths"]
+        x = np.asarray(run["centerline"])
+        assert vessels[vname].gap(x).min() >= -1e-6 * L
+        chord = np.linalg.norm(np.diff(x, axis=0), axis=1).sum()
+        assert chord == pytest.approx(run["lengths"][0], rel=2e-3)
+        assert run["min_gap"] >= -1e-6 * L
+        assert 0 < run["max_force"] < 0.1  # N: below the clinical 0.1-0.4 N
+        tip = np.asarray(run["tip"])
+        if vname == "bend":
+            assert tip[1] > 0.02  # past the 90 deg arc of radius 20 mm
+        else:  # in the 45 deg branch from (-5, 0) mm, off the main vessel's lumen
+            branch = vessels["branch"].vessels[1]
+            main = vessels["branch"].vessels[0]
+            assert branch.gap(tip[None])[0] >= -1e-6 * L  # (it may touch the wall)
+            assert main.gap(tip[None])[0] < 0
+    assert all(v < 1e-3 for v in r["diff"].values())

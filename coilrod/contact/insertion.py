@@ -190,16 +190,26 @@ def _fields(field_schedule, m: int) -> Callable[[int, float], Field]:
 
 
 def _default_clamp(vessel):
-    pts = np.asarray(getattr(vessel, "points", None), float)
-    if pts.ndim != 2 or pts.shape[0] < 2:
-        raise ValueError("give clamp_position and clamp_rotation: the vessel has no centreline")
-    t = pts[1] - pts[0]
-    t /= np.linalg.norm(t)
+    """The introducer's pose: the entry of the vessel (of a network's first vessel), tangent
+    along its centreline; the normal completes a right-handed frame with the binormal as
+    close to +z as the tangent allows."""
+    first = vessel.vessels[0] if hasattr(vessel, "vessels") else vessel
+    if hasattr(first, "position") and hasattr(first, "tangent"):
+        p0 = np.asarray(first.position(0.0), float).reshape(3)
+        t = np.asarray(first.tangent(0.0), float).reshape(3)
+    else:
+        pts = np.asarray(getattr(first, "points", None), float)
+        if pts.ndim != 2 or pts.shape[0] < 2:
+            raise ValueError(
+                "give clamp_position and clamp_rotation: the obstacle has no centreline"
+            )
+        p0, t = pts[0].copy(), pts[1] - pts[0]
+    t = t / np.linalg.norm(t)
     ref = np.array([0.0, 0.0, 1.0]) if abs(t[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
     b = ref - (ref @ t) * t
     b /= np.linalg.norm(b)
     n = np.cross(b, t)
-    return pts[0].copy(), np.column_stack([t, n, b])
+    return p0, np.column_stack([t, n, b])
 
 
 def _carry(prev_problem, prev_u, problem, scale_of_state=1.0):
