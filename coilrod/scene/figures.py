@@ -8,7 +8,14 @@ import numpy as np
 
 from .strength import field_strength
 
-__all__ = ["plot_tip_vs_field", "plot_scene_shapes", "plot_control_shapes", "centerline_of"]
+__all__ = [
+    "plot_tip_vs_field",
+    "plot_scene_shapes",
+    "plot_scene_shapes_3d",
+    "plot_control_shapes",
+    "centerline_of",
+    "leaves_plane",
+]
 
 _STYLE = {"coils": "-", "ideal": "--"}
 _COLOR = {"rod": "tab:blue", "fem2d": "tab:orange", "fem3d": "tab:green"}
@@ -141,6 +148,44 @@ def plot_scene_shapes(result, ax=None, k: int = -1):
     ax.legend(fontsize=7, loc="best")
     ax.set_title(scene.name, fontsize=10)
     return ax
+
+
+def leaves_plane(result, tol: float = 1e-9) -> bool:
+    """True if a rod shape of the scene result leaves the plane z = 0 by more than ``tol`` L."""
+    L = result.scene.rod.length
+    for r in result.runs:
+        if r.result is None or not len(r.scales):
+            continue
+        c = centerline_of(r, -1)
+        if np.max(np.abs(c[:, 2] - c[0, 2])) > tol * L:
+            return True
+    return False
+
+
+def plot_scene_shapes_3d(result, k: int = -1):
+    """The last shapes of a scene whose rod leaves its plane: two projections (x-y and x-z,
+    mm) side by side; returns the first axis."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+    L = result.scene.rod.length
+    for r in result.runs:
+        if r.result is None or not len(r.scales):
+            continue
+        c = 1e3 * centerline_of(r, k)
+        style = dict(color=_COLOR.get(r.model, "k"), lw=2)
+        label = f"{r.model}, {r.field_label} (scale {r.scales[k]:.3g})"
+        axes[0].plot(c[:, 0], c[:, 1], _STYLE.get(r.field_label, ":"), label=label, **style)
+        axes[1].plot(c[:, 0], c[:, 2], _STYLE.get(r.field_label, ":"), **style)
+    for ax, (a, b) in zip(axes, (("x", "y"), ("x", "z")), strict=True):
+        ax.plot([0, 1e3 * L], [0, 0], color="0.6", lw=1)
+        ax.plot(0, 0, "ks", ms=6)
+        ax.set_aspect("equal")
+        ax.set_xlabel(f"{a} (mm)")
+        ax.set_ylabel(f"{b} (mm)")
+    axes[0].legend(fontsize=7, loc="best")
+    fig.suptitle(f"{result.scene.name}: the rod leaves its plane", fontsize=10)
+    return axes[0]
 
 
 _CONTROL_STYLE = {"real": ("-", "tab:blue"), "ideal": ("--", "tab:red")}

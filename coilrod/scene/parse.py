@@ -984,20 +984,56 @@ def _parse_models(data, p: _Problems):
 
 def _parse_rod_options(data, p: _Problems):
     data = _table(data, "rod")
-    p.take(_unknown_keys, data, "rod", {"nodes"})
-    if "nodes" not in data:
-        return {}
-    nodes = p.take(
-        _number,
-        data,
-        "nodes",
-        "rod",
-        integer=True,
-        low=limits.MIN_NODES,
-        high=limits.MAX_NODES,
-        what="segments of the rod mesh",
-    )
-    return {"nodes": nodes} if _ok(nodes) else _BAD
+    p.take(_unknown_keys, data, "rod", {"nodes", "model", "clamp_rotation"})
+    out: dict[str, Any] = {}
+    if "nodes" in data:
+        out["nodes"] = p.take(
+            _number,
+            data,
+            "nodes",
+            "rod",
+            integer=True,
+            low=limits.MIN_NODES,
+            high=limits.MAX_NODES,
+            what="segments of the rod mesh",
+        )
+    if "model" in data:
+        from ..rod.model import MODELS
+
+        model = data["model"]
+        if not isinstance(model, str) or model not in MODELS:
+            p.add(f"rod.model: expected one of {list(MODELS)}; got {_show(model)}")
+            out["model"] = _BAD
+        else:
+            out["model"] = model
+    if "clamp_rotation" in data:
+        out["clamp_rotation"] = p.take(_clamp_rotation, data["clamp_rotation"])
+    return out if _ok(*out.values()) else _BAD
+
+
+def _clamp_rotation(value) -> np.ndarray:
+    """``{ axis = [x, y, z], angle = "30 deg" }``: the clamp frame as a rotation matrix."""
+    key = "rod.clamp_rotation"
+    if not isinstance(value, dict) or set(value) != {"axis", "angle"}:
+        raise SceneError(
+            f'{key}: expected a table {{ axis = [0, 0, 1], angle = "30 deg" }}; got {_show(value)}'
+        )
+    axis = value["axis"]
+    if (
+        not isinstance(axis, list)
+        or len(axis) != 3
+        or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in axis)
+    ):
+        raise SceneError(f"{key}.axis: expected 3 numbers, e.g. [0, 0, 1]; got {_show(axis)}")
+    axis = np.array(axis, float)
+    norm = float(np.linalg.norm(axis))
+    if not np.isfinite(norm) or norm == 0.0:
+        shown = _show(value["axis"])
+        raise SceneError(f"{key}.axis: must be a finite non-zero vector; got {shown}")
+    angle = _value(value["angle"], "angle", f"{key}.angle", kind="angle")
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_rotvec(angle * axis / norm).as_matrix()
 
 
 def _parse_fem_options(data, p: _Problems):
@@ -1029,10 +1065,13 @@ def _parse_fem_options(data, p: _Problems):
 
 def _parse_outputs(data, p: _Problems):
     data = _table(data, "output")
-    p.take(_unknown_keys, data, "output", {"figures", "tables"})
+    p.take(_unknown_keys, data, "output", {"figures", "tables", "vtk"})
     figures = p.take(_boolean, data, "figures", "output", True)
     tables = p.take(_boolean, data, "tables", "output", True)
-    return {"figures": figures, "tables": tables} if _ok(figures, tables) else _BAD
+    vtk = p.take(_boolean, data, "vtk", "output", False)
+    if not _ok(figures, tables, vtk):
+        return _BAD
+    return {"figures": figures, "tables": tables, "vtk": vtk}
 
 
 def _parse_control_scene(data: dict, robot, info, scales, models, p: _Problems):
@@ -1134,6 +1173,14 @@ def parse_scene(data: dict, source: str = "<embedded>") -> Scene:
     scales = p.take(_parse_load, data.get("load", {}), p)
     models = p.take(_parse_models, data.get("models", {"run": ["rod"]}), p)
     rod_options = p.take(_parse_rod_options, data.get("rod", {}), p)
+    if _ok(rod_options, models) and "clamp_rotation" in rod_options:
+        fem = [m for m in models if m != "rod"]
+        if fem:
+            p.add(
+                f"rod.clamp_rotation: the continuum models ({', '.join(fem)}) clamp the robot "
+                "along +x; a rotated clamp applies to rod runs only -- run the rod alone"
+            )
+            rod_options = _BAD
     fem_options = p.take(_parse_fem_options, data.get("fem", {}), p)
     outputs = p.take(_parse_outputs, data.get("output", {}), p)
     control = None

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConvergenceError
-from .figures import plot_scene_shapes, plot_tip_vs_field
+from .figures import leaves_plane, plot_scene_shapes, plot_scene_shapes_3d, plot_tip_vs_field
 from .outputs import prepare_output_dir
 from .parse import Scene
 from .planner import Plan, plan_scene
@@ -220,13 +220,21 @@ class SceneResult:
                 )
             )
             written.append(path)
+        if self.scene.outputs.get("vtk", False):
+            from ..rod.export import write_vtk
+
+            for r in self.runs:
+                if r.model != "rod" or r.result is None or not len(r.scales):
+                    continue
+                label = "".join(ch if ch.isalnum() else "_" for ch in r.field_label)
+                written += write_vtk(r.result, out / f"rod_{label}.vtu")
         if self.scene.outputs.get("figures", True):
             import matplotlib.pyplot as plt
 
-            for name, fn in (
-                ("tip_vs_field.png", plot_tip_vs_field),
-                ("shapes.png", plot_scene_shapes),
-            ):
+            figures = [("tip_vs_field.png", plot_tip_vs_field), ("shapes.png", plot_scene_shapes)]
+            if leaves_plane(self):
+                figures.append(("shapes_3d.png", plot_scene_shapes_3d))
+            for name, fn in figures:
                 ax = fn(self)
                 path = out / name
                 ax.figure.savefig(path, dpi=120, bbox_inches="tight")
