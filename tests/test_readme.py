@@ -74,3 +74,36 @@ def test_quick_start_test_command_is_what_ci_runs():
     assert test_command == "python -m pytest"
     assert ci.strip().splitlines()[-1].strip() == test_command
     assert 'pip install -e ".[test]"' in ci
+
+
+def _block(marker):
+    text = README.read_text(encoding="utf-8")
+    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
+    namespace: dict = {}
+    exec(compile(blocks[0], "README.md", "exec"), namespace)  # noqa: S102
+    exec(compile(next(b for b in blocks if marker in b), "README.md", "exec"), namespace)  # noqa: S102
+    return namespace
+
+
+def test_spatial_example_runs():
+    """The 3D example: out-of-plane field and elevation take the spatial model; the frames
+    are rotations."""
+    ns = _block("clamp_rotation=")
+    res = ns["res"]
+    assert res.model == "spatial"
+    R = res.frames(9)
+    assert np.abs(np.swapaxes(R, -1, -2) @ R - np.eye(3)).max() < 1e-12
+    assert abs(res.tip[-1, 2]) > 1e-4
+
+
+def test_contact_example_runs():
+    """The contact example: the tip rests on the wall (8 mm) with a positive force on it, and
+    the insertion gets round the bend without penetrating the wall."""
+    ns = _block("obstacles=[wall]")
+    res, ins = ns["res"], ns["ins"]
+    L = ns["rod"].length
+    assert res.gaps(1).min() >= -1e-6 * L
+    assert abs(res.tip[1, 1] - 0.008) < 1e-9
+    assert res.obstacle_forces(1)[0][1] > 0
+    assert ins.min_gap.min() >= -1e-6 * L
+    assert ins.tip[-1, 1] > 0.02
