@@ -258,7 +258,8 @@ def solve_currents(
     Raises
     ------
     ValueError
-        Bad input (naming the argument), or a system that cannot make an in-plane field.
+        Bad input (naming the argument), a system that cannot make an in-plane field, or a
+        magnetization with an out-of-plane elevation (the planar rod is steered).
     coilrod.ConvergenceError
         The target is not reachable (within the current limits): the message gives the closest
         reachable tip found and its distance; ``err.result`` is the ControlResult there.
@@ -275,6 +276,7 @@ def solve_currents(
     """
     if not isinstance(rod, Rod):
         raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
+    rod.magnetization.check_planar("solve_currents (planar rod)")
     if not all(hasattr(system, a) for a in ("unit_fields", "with_currents", "currents_for")):
         raise ValueError(
             "system must be a coil system under current control (a coils.CoilSystem); got "

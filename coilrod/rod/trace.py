@@ -117,6 +117,9 @@ def trace_rod(
 
     Raises
     ------
+    ValueError
+        Bad input (naming the argument); a magnetization with an out-of-plane elevation
+        (the traced rod is planar).
     coilrod.ConvergenceError
         If the first point cannot be found.
     """
@@ -125,6 +128,7 @@ def trace_rod(
     _, nodes, clamp, angle, tol = check_inputs(
         rod, field, [c0], nodes, clamp_position, clamp_angle, tol
     )
+    rod.magnetization.check_planar("trace_rod")
     if direction not in (1, -1) or isinstance(direction, bool):
         raise ValueError(f"direction must be 1 or -1; got {direction!r}")
     if not lo <= c0 <= hi:
