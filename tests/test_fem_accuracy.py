@@ -7,6 +7,10 @@
   sees an end-loaded cantilever.  2D strip, 3D box and 3D O-grid circle (whose discrete
   section's area and second moment are integrated here); tolerance 1e-4 of the deflection,
   so a 1 % error in the magnetic load fails 100 times over.
+* Out of the plane (3D box, nu = 0): M along the binormal (elevation pi/2) in a field along
+  the tangent bends the beam in the x-z plane toward -z (torque m x B = |M| B e_y), by a
+  distributed couple instead of an end shear: beam theory with the shear of the uniform couple
+  state, and exactly (on any mesh) the in-plane case minus a uniform shear.
 * The clamp layer in 3D (nu = 0.4995, nearly incompressible): the fully clamped face stops
   the section's lateral contraction, which stiffens the body over a length of about its
   thickness -- an O(h/L) effect, about -1 % of the deflection at L/h = 20.  A mesh
@@ -105,3 +109,45 @@ def test_clamp_layer_is_order_h_over_L_and_vanishes_in_the_rod_limit():
     assert 1.7 < gap20 / gap40 < 2.3, (gap20, gap40)
     # ... so the continuum tends to the rod as h/L -> 0 (linear extrapolation in h/L)
     assert abs(2 * gap40 - gap20) < 1.5e-3, (gap20, gap40)
+
+
+def test_out_of_plane_magnetization_bends_in_the_x_z_plane():
+    """M = |M| e_z (elevation pi/2) in B = B e_x.  Torque per volume m x B = |M| B e_y: a
+    rotation about +y, which turns the tip toward -z.  The magnetic stress -B (x) M loads the
+    faces z = +-h/2 with the tractions B (M . n) = +-|M| B e_x: a couple |M| B A per length, no
+    end shear.  With nu = 0 this is exactly (i) the uniform shear sigma_xz = |M| B, affine,
+    u_z = |M| B x / G, plus (ii) the cantilever with the end force -|M| B A e_z (the end shear
+    of the test above), so tip_z / (lambda L / 3) = -(1 + s / kappa) + s, s = 3 E I / (G A L^2),
+    kappa Cowper's: (ii) at its discretisation error, and the sum with the in-plane case
+    (M axial, B along y) equal to s to round-off on the same mesh.  The FEM sensitivity to B_x
+    of this linear response is tip_z / B_x; magnitudes and angles of a non-planar
+    magnetization are refused."""
+    import math
+
+    section = coilrod.Rectangle(L / 20, L / 20)
+    lifted = coilrod.Rod(L, 1e6, section, coilrod.Magnetization(128e3, 0.0, math.pi / 2))
+    b = lifted.field_for_lambda(1.0)
+    res = coilrod.solve_fem(
+        lifted,
+        coils.UniformField((b, 0.0, 0.0)),
+        [LAM],
+        dim=3,
+        elements=(20, 1, 1),
+        poisson_ratio=0.0,
+    )
+    ratio = res.tip[0] / (LAM * L / 3)
+    A, I = lifted.area, section.second_moment_y
+    s = 3 * 2 * I / (A * L**2)  # E / G = 2 (1 + nu) = 2
+    kappa = _cowper(section, 0.0)
+    assert ratio[2] == pytest.approx(-(1 + s / kappa) + s, rel=1e-4)
+    assert ratio[2] < -0.99  # toward -z, the size of lambda L / 3
+    assert abs(ratio[1]) < 1e-12  # no in-plane deflection
+    # the in-plane case on the same mesh differs by the uniform shear state only
+    in_plane, _ = _deflection_ratio(coilrod.Rod(L, 1e6, section, presets.M1()), 0.0, 3, (20, 1, 1))
+    assert in_plane + ratio[2] == pytest.approx(s, abs=1e-8)
+    # FEM sensitivities: the response is linear in B_x; planar groups are refused
+    d = coilrod.sensitivities(res, 0, wrt="B")
+    assert d.tip[0, 2] == pytest.approx(res.tip[0, 2] / b, rel=1e-5)  # at scale LAM
+    assert "angles" not in coilrod.sensitivities(res, 0).groups
+    with pytest.raises(ValueError, match="out-of-plane elevation"):
+        coilrod.sensitivities(res, 0, wrt=["scale", "angles"])

@@ -473,3 +473,90 @@ def test_huge_values_give_short_lines():
         "robot.length: missing unit in an integer of about 401 digits; write it as a string with "
         "a unit, e.g. '40 mm'"
     ]
+
+
+# -- out-of-plane magnetization and the Poisson ratio ------------------------------------------
+UNIFORM = {"magnitude": "128 kA/m", "angle": "10 deg"}
+
+
+def test_elevation_is_read_with_its_unit():
+    s = np.linspace(0.0, 0.04, 5)
+    m = parse_scene(
+        scene_with(robot__magnetization={**UNIFORM, "elevation": "30 deg"})
+    ).rod.magnetization
+    np.testing.assert_allclose(m.elevation(s), math.pi / 6, rtol=1e-15)
+    np.testing.assert_allclose(m.angle(s), math.pi / 18, rtol=1e-15)
+    assert not m.is_planar
+    # absent, or written as a plain 0 like an angle: planar
+    assert parse_scene(scene_with(robot__magnetization=UNIFORM)).rod.magnetization.is_planar
+    m = parse_scene(scene_with(robot__magnetization={**UNIFORM, "elevation": 0})).rod.magnetization
+    assert m.is_planar
+
+
+def test_segment_elevations_are_read_per_segment():
+    segs = [
+        {"length": "10 mm", "magnitude": "64 kA/m", "angle": "0 deg", "elevation": "-45 deg"},
+        {"length": "30 mm", "magnitude": "128 kA/m", "elevation": "0.5 rad"},
+    ]
+    m = parse_scene(scene_with(robot__magnetization={"segments": segs})).rod.magnetization
+    np.testing.assert_allclose(m.segment_elevations, [-math.pi / 4, 0.5], rtol=1e-15)
+    np.testing.assert_allclose(m.elevation(np.array([0.005, 0.03])), [-math.pi / 4, 0.5])
+
+
+@pytest.mark.parametrize(
+    ("magnetization", "message"),
+    [
+        ({**UNIFORM, "elevation": "30"}, "robot.magnetization.elevation: missing unit"),
+        ({**UNIFORM, "elevation": "nan deg"}, "robot.magnetization.elevation: "),
+        ({**UNIFORM, "elevation": "30 mm"}, "robot.magnetization.elevation: "),
+        ({**UNIFORM, "elevation": True}, "robot.magnetization.elevation: "),
+        ({**UNIFORM, "elevation": "720 deg"}, "robot.magnetization.elevation: "),
+        (
+            {"preset": "M1", "elevation": "10 deg"},
+            "robot.magnetization.elevation: not used with a preset",
+        ),
+        (
+            {"segments": [{"length": "40 mm", "magnitude": "1 kA/m"}], "elevation": "10 deg"},
+            "robot.magnetization.elevation: not used with segments",
+        ),
+        (
+            {"segments": [{"length": "40 mm", "magnitude": "1 kA/m", "elevation": "x"}]},
+            "robot.magnetization.segments[0].elevation: ",
+        ),
+    ],
+)
+def test_bad_elevation_names_its_key(magnetization, message):
+    lines = problems_of(scene_with(robot__magnetization=magnetization))
+    assert len(lines) == 1
+    assert lines[0].startswith(message)
+
+
+def test_planar_models_refuse_an_out_of_plane_magnetization():
+    lifted = {**UNIFORM, "elevation": "30 deg"}
+    lines = problems_of(scene_with(robot__magnetization=lifted, models={"run": ["fem2d"]}))
+    assert lines == [
+        "robot.magnetization: has an out-of-plane elevation; the planar fem2d supports only "
+        "planar magnetizations (elevation 0)"
+    ]
+    assert parse_scene(scene_with(robot__magnetization=lifted, models={"run": ["fem3d"]}))
+
+
+def test_poisson_ratio_reaches_the_rod_and_the_fem():
+    scene = parse_scene(scene_with(robot__poisson_ratio=0.3))
+    assert scene.rod.poisson_ratio == 0.3
+    assert scene.poisson_ratio == 0.3  # the FEM's (runner: solve_fem(poisson_ratio=...))
+    assert scene.rod.shear_modulus == pytest.approx(1e6 / 2.6, rel=1e-15)
+    scene = parse_scene(scene_with())
+    assert scene.rod.poisson_ratio == 0.5  # the Rod's default; the FEM keeps its own
+    assert scene.poisson_ratio is None
+    # incompressible: fine for the rod, not for the FEM's bulk modulus
+    assert parse_scene(scene_with(robot__poisson_ratio=0.5)).rod.poisson_ratio == 0.5
+    lines = problems_of(scene_with(robot__poisson_ratio=0.5, models={"run": ["rod", "fem3d"]}))
+    assert lines == [
+        "robot.poisson_ratio: 0.5 is incompressible, which the FEM (fem3d) cannot take "
+        "(infinite bulk modulus); give e.g. 0.4995"
+    ]
+    for bad in (0.51, -1.0, "0.3", True):
+        assert problems_of(scene_with(robot__poisson_ratio=bad))[0].startswith(
+            "robot.poisson_ratio: "
+        )

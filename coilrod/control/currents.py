@@ -280,7 +280,8 @@ def solve_currents(
     Raises
     ------
     ValueError
-        Bad input (naming the argument), or a system that cannot make an in-plane field.
+        Bad input (naming the argument), a system that cannot make an in-plane field, or a
+        magnetization with an out-of-plane elevation (the planar rod is steered).
     coilrod.ConvergenceError
         The target is not reachable (within the current limits): the message gives the closest
         reachable tip found and its distance; ``err.result`` is the ControlResult there.

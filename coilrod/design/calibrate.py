@@ -143,8 +143,10 @@ class _Model:
         if "magnitude" in values:
             m = rod.magnetization
             angle = float(m.angle(np.zeros(1))[0])
+            elevation = float(m.elevation(np.zeros(1))[0])
             rod = dataclasses.replace(
-                rod, magnetization=Magnetization(values["magnitude"], angle, label=m.label)
+                rod,
+                magnetization=Magnetization(values["magnitude"], angle, elevation, label=m.label),
             )
         return rod, values.get("field_angle", self.field_angle)
 
@@ -579,7 +581,8 @@ def calibrate(
     Raises
     ------
     ValueError
-        Bad input (shapes, NaN, non-positive values, unknown names, fewer than p + 1 points).
+        Bad input (shapes, NaN, non-positive values, unknown names, fewer than p + 1 points);
+        a magnetization with an out-of-plane elevation (the planar rod is fitted).
     IdentifiabilityError
         (a ValueError) The Jacobian is rank deficient at the start or at the fit: the data
         cannot separate the parameters (E and |M| always; a parameter with no effect).
@@ -632,6 +635,7 @@ def calibrate(
     """
     if not isinstance(rod, Rod):
         raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
+    rod.magnetization.check_planar("calibration (planar rod)")
     fields = as_array(fields, "fields", ("k", 3))
     k = fields.shape[0]
     measured = as_array(measured, "measured", ("k",))

@@ -150,7 +150,8 @@ def optimize_magnetization(
     Parameters
     ----------
     rod : Rod
-        Geometry and modulus (its own magnetization is replaced).
+        Geometry and modulus (its own magnetization is replaced; it must be planar, as the
+        designs and their workspaces are: an out-of-plane elevation is a ValueError).
     segments : int
         Equal segments from the clamp to the tip (>= 1).
     b_max : float
@@ -186,6 +187,7 @@ def optimize_magnetization(
 
     if not isinstance(rod, Rod):
         raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
+    rod.magnetization.check_planar("optimize_magnetization (planar workspaces)")
     segments = as_count(segments, "segments", 1, 64)
     b_max = positive(b_max, "b_max")
     if method not in ("gradient", "evolution"):

@@ -520,7 +520,7 @@ def _fem_available(result) -> list[str]:
     field = asm.field
     rod = result._asm.rod
     out = ["scale", "youngs_modulus"]
-    if _segments(rod.magnetization, rod.length) is not None:
+    if rod.magnetization.is_planar and _segments(rod.magnetization, rod.length) is not None:
         out += ["magnitudes", "angles"]
     if isinstance(field, coils.UniformField):
         out.append("B")
@@ -543,6 +543,10 @@ def _fem_sensitivities(result, k: int, wrt) -> Sensitivities:
 
     asm = result._asm
     rod = asm.rod
+    if not rod.magnetization.is_planar:  # the segment rates below are those of planar M
+        asked = [wrt] if isinstance(wrt, str) else list(wrt or ())
+        if "magnitudes" in asked or "angles" in asked:
+            rod.magnetization.check_planar("FEM sensitivities to magnitudes and angles")
     groups = _groups(wrt, _fem_available(result), f"FEM, field {type(asm.field).__name__}")
     z, s = result._states[k], float(result.scales[k])
     problem = FEMProblem(asm, 1e-8, 1e-8)
@@ -666,7 +670,8 @@ def sensitivities(result, k: int, wrt: Sequence[str] | str | None = None) -> Sen
     Raises
     ------
     ValueError
-        An unknown group, a group the state does not have, a bad index.
+        An unknown group, a group the state does not have, a bad index; a rod result (or
+        FEM magnitudes and angles) of a magnetization with an out-of-plane elevation.
     SingularStateError
         The state is at a bifurcation or limit point (the derivative does not exist).
 

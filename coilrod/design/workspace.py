@@ -261,6 +261,7 @@ class _Solution:
 def _check(rod, b_max, directions, magnitudes, nodes, clamp_position, clamp_angle):
     if not isinstance(rod, Rod):
         raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
+    rod.magnetization.check_planar("workspace")
     b_max = positive(b_max, "b_max")
     lam = rod.magnetoelastic_number(b_max)
     if lam > MAX_LAMBDA:
@@ -338,6 +339,12 @@ def workspace(
     -------
     Workspace
         See the module docstring for the definition.
+
+    Raises
+    ------
+    ValueError
+        Bad input (naming the argument); a magnetization with an out-of-plane elevation (the
+        workspace is that of the planar rod).
 
     Notes
     -----

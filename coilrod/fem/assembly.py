@@ -147,11 +147,18 @@ class Assembler:
         self._N_a_q = np.ascontiguousarray(self.N.transpose(0, 2, 1))
         self.X = np.ascontiguousarray(np.asarray(basis.global_coordinates()).transpose(1, 2, 0))
         self.nodes = np.asarray(basis.doflocs)
-        # magnetization in the reference configuration at the quadrature points
+        # magnetization in the reference configuration at the quadrature points (e, q, dim):
+        # |M| (cos th cos psi, sin th cos psi, sin psi) in 3D, the planar (cos th, sin th) in 2D
+        if dim == 2:
+            rod.magnetization.check_planar("2D FEM")
         s = self.X[..., 0]
         mg = rod.magnetization.magnitude(s)
         an = rod.magnetization.angle(s)
         M = np.zeros(s.shape + (dim,))
+        if dim == 3 and not rod.magnetization.is_planar:
+            el = rod.magnetization.elevation(s)
+            M[..., 2] = mg * np.sin(el)
+            mg = mg * np.cos(el)
         M[..., 0], M[..., 1] = mg * np.cos(an), mg * np.sin(an)
         self.M = M
         # vector dofs of each element, (e, a*dim + i)

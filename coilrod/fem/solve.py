@@ -64,7 +64,8 @@ def solve_fem(
     scales : sequence of float, shape (n,)
         Field multipliers, continued in order from the unloaded state.
     dim : {2, 3}
-        2D over length x thickness (plane stress by default) or 3D over the section.
+        2D over length x thickness (plane stress by default) or 3D over the section.  2D
+        needs a planar magnetization (``rod.magnetization.is_planar``; else ValueError).
     order : {1, 2}
         Element order (quadrilaterals/hexahedra); quadratic by default (linear ones lock in
         bending).
@@ -78,7 +79,9 @@ def solve_fem(
         all, at least one per piece; :func:`~coilrod.fem.length_layers`), so no element
         straddles a jump of |M| or of its angle.
     poisson_ratio : float
-        nu in (-1, 0.5); sets G = E / (2(1 + nu)) and K = E / (3(1 - 2 nu)).
+        nu in (-1, 0.5); sets G = E / (2(1 + nu)) and K = E / (3(1 - 2 nu)).  The continuum's
+        own value, independent of ``rod.poisson_ratio`` (the rod's torsional stiffness, which
+        may be the incompressible 0.5 that K cannot take).
     plane : {"stress", "strain"}
         2D assumption.  Plane stress has the rod's bending stiffness E I; plane strain is
         stiffer by 1/(1 - nu^2).  In 2D a Circle section is the strip of equal I/A
@@ -120,10 +123,12 @@ def solve_fem(
 
         W(F, x) = G/2 (J^(-2/3) tr(F^T F) - 3) + K/2 (J - 1)^2 - (F M) . B(x),  x = X + u
 
-    with M(X) the reference magnetization, ``|M|(s) (cos theta_m, sin theta_m, 0)`` at
-    s = X_1.  First Piola stress ``P = dW_nH/dF - B (x) M``, body force ``G^T (F M)``
-    (G = grad B); the tangent includes the gradient terms of seed eq. (13) and the field's
-    second derivatives ``field.hessian`` for non-linear fields.  For a uniform field the
+    with M(X) the reference magnetization,
+    ``|M|(s) (cos theta_m cos psi_m, sin theta_m cos psi_m, sin psi_m)`` at s = X_1 (psi_m the
+    elevation; ``|M| (cos theta_m, sin theta_m)`` in 2D).  First Piola stress
+    ``P = dW_nH/dF - B (x) M``, body force ``G^T (F M)`` (G = grad B); the tangent includes
+    the gradient terms of seed eq. (13) and the field's second derivatives ``field.hessian``
+    for non-linear fields.  For a uniform field the
     magnetic load is dead and the tangent purely elastic.
 
     The load path is followed by the shared engine :mod:`coilrod.path` (tangent predictor,
@@ -148,6 +153,8 @@ def solve_fem(
     scales = _scales(scales)
     if isinstance(dim, bool) or dim not in (2, 3):
         raise ValueError(f"dim must be 2 or 3; got {dim!r}")
+    if dim == 2:
+        rod.magnetization.check_planar("2D FEM (dim=2)")
     if isinstance(order, bool) or order not in (1, 2):
         raise ValueError(f"order must be 1 or 2; got {order!r}")
     if plane not in ("stress", "strain"):

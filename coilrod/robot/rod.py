@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from coils._validate import positive
+from coils._validate import finite_scalar, positive
 
 from .magnetization import Magnetization
 from .sections import Circle, Rectangle
@@ -23,9 +23,12 @@ class Rod:
     youngs_modulus : float
         E in Pa.
     section : Circle or Rectangle
-        Cross-section (area A in m^2, second moment I in m^4).
+        Cross-section (area A in m^2, second moments I_z, I_y and torsion constant J in m^4).
     magnetization : Magnetization
-        |M|(s) in A/m and theta_m(s) in rad.
+        |M|(s) in A/m, theta_m(s) and the elevation psi_m(s) in rad.
+    poisson_ratio : float, optional
+        nu, dimensionless, in (-1, 0.5]; sets the shear modulus G = E / (2 (1 + nu)) of the
+        torsional stiffness G J.  Default 0.5: an incompressible elastomer (G = E / 3).
 
     Examples
     --------
@@ -33,12 +36,15 @@ class Rod:
     >>> rod = Rod(0.04, 1e6, Circle(2e-3), Magnetization(128e3, 0.0))
     >>> f"{rod.bending_stiffness:.4e}"   # E I = E pi D^4 / 64 in N m^2
     '7.8540e-07'
+    >>> [f"{k:.4e}" for k in rod.stiffnesses]   # (G J, E I_y, E I_z), G = E / 3
+    ['5.2360e-07', '7.8540e-07', '7.8540e-07']
     """
 
     length: float
     youngs_modulus: float
     section: Circle | Rectangle
     magnetization: Magnetization
+    poisson_ratio: float = 0.5
 
     def __post_init__(self):
         object.__setattr__(self, "length", positive(self.length, "length"))
@@ -52,6 +58,10 @@ class Rod:
                 f"magnetization must be a coilrod.Magnetization; got {self.magnetization!r}"
             )
         self.magnetization.check_length(self.length)
+        nu = finite_scalar(self.poisson_ratio, "poisson_ratio")
+        if not -1.0 < nu <= 0.5:
+            raise ValueError(f"poisson_ratio must lie in (-1, 0.5]; got {nu!r}")
+        object.__setattr__(self, "poisson_ratio", nu)
 
     @property
     def area(self) -> float:
@@ -60,8 +70,30 @@ class Rod:
 
     @property
     def bending_stiffness(self) -> float:
-        """E I in N m^2."""
+        """E I_z in N m^2 (bending in the x-y plane)."""
         return self.youngs_modulus * self.section.second_moment
+
+    @property
+    def shear_modulus(self) -> float:
+        """G = E / (2 (1 + nu)) in Pa."""
+        return self.youngs_modulus / (2.0 * (1.0 + self.poisson_ratio))
+
+    @property
+    def torsional_stiffness(self) -> float:
+        """G J in N m^2 (Saint-Venant torsion; J of :attr:`section`)."""
+        return self.shear_modulus * self.section.torsion_constant
+
+    @property
+    def stiffnesses(self) -> tuple[float, float, float]:
+        """(G J, E I_y, E I_z) in N m^2: the diagonal of the body-frame stiffness in the
+        frame (tangent, normal, binormal) -- twist, bending out of the x-y plane (about the
+        normal y), bending in it (about the binormal z)."""
+        E = self.youngs_modulus
+        return (
+            self.torsional_stiffness,
+            E * self.section.second_moment_y,
+            E * self.section.second_moment,
+        )
 
     def magnetoelastic_number(self, B: float) -> float:
         """lambda = |M|max |B| A L^2 / (E I) for a field magnitude ``B`` (T); dimensionless."""

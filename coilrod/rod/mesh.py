@@ -85,9 +85,29 @@ def _one_sided(mesh: RodMesh, length: float):
     return np.clip(s - d_left, 0.0, L), np.clip(s + d_right, 0.0, L), hl, hr
 
 
-def node_magnetization(magnetization, mesh: RodMesh, length: float) -> np.ndarray:
-    """Trapezoid node magnetization in the body frame, shape (n, 2), A/m.
+def node_magnetization(magnetization, mesh: RodMesh, length: float, dim: int = 2) -> np.ndarray:
+    """Trapezoid node magnetization in the body frame, shape (n, dim), A/m.
 
+    Parameters
+    ----------
+    magnetization : coilrod.Magnetization
+        The profile along the rod.
+    mesh : RodMesh
+        Nodes as fractions of the rod length.
+    length : float
+        Rod length L, m.
+    dim : {2, 3}
+        2: the (tangent, normal) components of :meth:`Magnetization.vector`, the projection of
+        M on the bending plane (the planar rod); 3: the (tangent, normal, binormal)
+        components of :meth:`Magnetization.vector3`.
+
+    Returns
+    -------
+    ndarray, shape (n, dim)
+        A/m.
+
+    Notes
+    -----
     At a node the one-sided limits of the profile are weighted by the adjacent half-segments,
     so a jump at a node (every breakpoint is one) is integrated exactly by the trapezoid rule.
     The one-sided limits are read a small distance inside each adjacent segment
@@ -95,8 +115,11 @@ def node_magnetization(magnetization, mesh: RodMesh, length: float) -> np.ndarra
     node that lands a few ulp beside a breakpoint still reads each side's own value, so the
     result is continuous in the breakpoint position.
     """
+    if isinstance(dim, bool) or dim not in (2, 3):
+        raise ValueError(f"dim must be 2 or 3; got {dim!r}")
+    vector = magnetization.vector if dim == 2 else magnetization.vector3
     left, right, hl, hr = _one_sided(mesh, length)
-    return hl[:, None] * magnetization.vector(left) + hr[:, None] * magnetization.vector(right)
+    return hl[:, None] * vector(left) + hr[:, None] * vector(right)
 
 
 def segment_weights(edges: np.ndarray, mesh: RodMesh, length: float) -> np.ndarray:

@@ -140,6 +140,9 @@ def trace_rod(
 
     Raises
     ------
+    ValueError
+        Bad input (naming the argument); a magnetization with an out-of-plane elevation
+        (the traced rod is planar).
     coilrod.ConvergenceError
         If the first point cannot be found.
     """

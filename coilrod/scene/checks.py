@@ -9,6 +9,9 @@ and ``coilrod run`` stop at the same problems (:func:`coilrod.scene.parse_scene`
 - the clamp and the undeformed robot keep clear of every coil winding, and the real field is
   finite on the undeformed centreline (the problem names the coil);
 - FEM meshes resolve the magnetization segments and stay within the element limits;
+- a magnetization with an out-of-plane elevation is not given to a planar model (fem2d, the
+  planar rod a control scene steers), and the FEM is not given the incompressible
+  ``robot.poisson_ratio = 0.5``;
 - a coil system under control (``field.type = "system"``) can make every in-plane field at its
   centre, where the ideal controller takes its field, and that centre is off the windings.
 """
@@ -247,6 +250,27 @@ def _fem(scene) -> list[str]:
     return problems
 
 
+def _planar_and_incompressible(scene) -> list[str]:
+    """A non-planar magnetization given to a planar model; nu = 0.5 given to the FEM."""
+    problems = []
+    planar = ["fem2d"] if "fem2d" in scene.models else []
+    if scene.control is not None:
+        planar.append("rod of [control] (solve_currents)")
+    if not scene.rod.magnetization.is_planar:
+        problems += [
+            f"robot.magnetization: has an out-of-plane elevation; the planar {what} supports "
+            "only planar magnetizations (elevation 0)"
+            for what in planar
+        ]
+    fem = [m for m in scene.models if m.startswith("fem")]
+    if scene.poisson_ratio == 0.5 and fem:
+        problems.append(
+            "robot.poisson_ratio: 0.5 is incompressible, which the FEM "
+            f"({', '.join(fem)}) cannot take (infinite bulk modulus); give e.g. 0.4995"
+        )
+    return problems
+
+
 def _control_system(scene, key) -> list[str]:
     """A coil system under control: its centre off the windings, every in-plane field there."""
     system = scene.fields["coils"]
@@ -287,7 +311,7 @@ def scene_problems(scene, coil_keys=(), strength_key: str = "field") -> list[str
         One line per problem, each starting with the key to change.
     """
     if scene.field_kind == "system":  # the currents are to be found: no field strength yet
-        problems = _clearance(scene, list(coil_keys))
+        problems = _planar_and_incompressible(scene) + _clearance(scene, list(coil_keys))
         return problems or _control_system(scene, strength_key)
     zero = _zero_field(scene, list(coil_keys), strength_key)
     if zero:
@@ -297,4 +321,5 @@ def scene_problems(scene, coil_keys=(), strength_key: str = "field") -> list[str
         problems += _in_plane(scene, strength_key)
     problems += _magnetoelastic(scene, strength_key)
     problems += _fem(scene)
+    problems += _planar_and_incompressible(scene)
     return problems

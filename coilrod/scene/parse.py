@@ -141,6 +141,9 @@ class Scene:
         ``figures`` and ``tables`` booleans.
     source : str
         Where the scene came from (path or "<embedded>").
+    poisson_ratio : float or None
+        ``robot.poisson_ratio`` if the scene gives it (also in ``rod.poisson_ratio``, and the
+        FEM's; which cannot take 0.5), else None (the Rod's default 0.5 and the FEM's own).
     data : dict or None
         A copy of the TOML data the scene was parsed from (what :func:`coilrod.sweep` varies).
     control : ControlSpec or None
@@ -403,15 +406,20 @@ def _parse_magnetization(data, length, key: str, p: _Problems):
     """The Magnetization of ``robot.magnetization`` (``length`` may be _BAD: then the checks
     that need it are skipped)."""
     data = _table(data, key)
-    p.take(_unknown_keys, data, key, {"preset", "magnitude", "angle", "segments", *_PRESET_KEYS})
+    p.take(
+        _unknown_keys,
+        data,
+        key,
+        {"preset", "magnitude", "angle", "elevation", "segments", *_PRESET_KEYS},
+    )
     if "preset" in data:
         return _parse_preset(data, length, key, p)
     if "segments" in data:
-        for k in ("magnitude", "angle", *_PRESET_KEYS):
+        for k in ("magnitude", "angle", "elevation", *_PRESET_KEYS):
             if k in data:
                 why = (
-                    "each segment has its own magnitude and angle"
-                    if k in ("magnitude", "angle")
+                    "each segment has its own magnitude, angle and elevation"
+                    if k in ("magnitude", "angle", "elevation")
                     else "it is a parameter of the presets"
                 )
                 p.add(f"{key}.{k}: not used with segments ({why}); remove it")
@@ -430,24 +438,26 @@ def _parse_magnetization(data, length, key: str, p: _Problems):
         return _BAD
     magnitude = p.take(_quantity, data, "magnitude", "magnetization", key, kind="magnetization")
     angle = p.take(_quantity, data, "angle", "angle", key, kind="angle", default=0.0)
+    elevation = p.take(_quantity, data, "elevation", "angle", key, kind="angle", default=0.0)
     if magnitude is not _BAD and magnitude == 0:
         p.add(
             f"{key}.magnitude: is zero: a rod without magnetization feels no field (nothing "
             "to solve)"
         )
         return _BAD
-    if not _ok(magnitude, angle):
+    if not _ok(magnitude, angle, elevation):
         return _BAD
-    return Magnetization(magnitude, angle, label=f"uniform {magnitude:g} A/m")
+    return Magnetization(magnitude, angle, elevation, label=f"uniform {magnitude:g} A/m")
 
 
 def _parse_preset(data: dict, length, key: str, p: _Problems):
     preset = data["preset"]
-    for k in ("magnitude", "angle", "segments"):
+    for k in ("magnitude", "angle", "elevation", "segments"):
         if k in data:
             p.add(
-                f"{key}.{k}: not used with a preset (the preset sets the magnetization); "
-                "give either a preset or magnitude and angle or segments"
+                f"{key}.{k}: not used with a preset (the preset sets the magnetization, in the "
+                "bending plane); give either a preset or magnitude and angle (and elevation) "
+                "or segments"
             )
     if not isinstance(preset, str) or preset not in PRESETS:
         p.add(f"{key}.preset: unknown preset {_show(preset)} (one of {', '.join(PRESETS)})")
@@ -525,26 +535,29 @@ def _parse_segments(segs, length, key: str, p: _Problems):
     if not isinstance(segs, list) or not segs:
         p.add(
             f"{key}: expected a non-empty list of tables "
-            "{ length = '10 mm', magnitude = '64 kA/m', angle = '0 deg' }"
+            "{ length = '10 mm', magnitude = '64 kA/m', angle = '0 deg', elevation = '0 deg' }"
         )
         return _BAD
     if len(segs) > limits.MAX_SEGMENTS:
         p.add(f"{key}: at most {limits.MAX_SEGMENTS} segments; got {len(segs)}")
         return _BAD
-    lengths, mags, angles = [], [], []
+    lengths, mags, angles, elevations = [], [], [], []
     for i, seg in enumerate(segs):
         sk = f"{key}[{i}]"
         seg = p.take(_table, seg, sk)
         if seg is _BAD:
             lengths.append(_BAD)
             continue
-        p.take(_unknown_keys, seg, sk, {"length", "magnitude", "angle"})
+        p.take(_unknown_keys, seg, sk, {"length", "magnitude", "angle", "elevation"})
         lengths.append(
             p.take(_quantity, seg, "length", "length", sk, kind="robot length", positive=True)
         )
         mags.append(p.take(_quantity, seg, "magnitude", "magnetization", sk, kind="magnetization"))
         angles.append(p.take(_quantity, seg, "angle", "angle", sk, kind="angle", default=0.0))
-    if not _ok(*lengths, *mags, *angles):
+        elevations.append(
+            p.take(_quantity, seg, "elevation", "angle", sk, kind="angle", default=0.0)
+        )
+    if not _ok(*lengths, *mags, *angles, *elevations):
         return _BAD
     if length is not _BAD:
         # exact to rounding: each length carries at most two roundings (decimal, unit factor)
@@ -561,7 +574,7 @@ def _parse_segments(segs, length, key: str, p: _Problems):
             "field (nothing to solve)"
         )
         return _BAD
-    return Magnetization.segments(lengths, mags, angles, label="custom segments")
+    return Magnetization.segments(lengths, mags, angles, elevations, label="custom segments")
 
 
 def _parse_robot(data, p: _Problems):
@@ -623,8 +636,8 @@ def _parse_robot(data, p: _Problems):
             "poisson_ratio",
             key,
             low=-0.99,
-            high=0.4999999,
-            what="0.5 is incompressible, which the FEM cannot take",
+            high=0.5,
+            what="0.5 is incompressible",
         )
     if "magnetization" in data:
         mag = p.take(_parse_magnetization, data["magnetization"], length, f"{key}.magnetization", p)
@@ -637,7 +650,8 @@ def _parse_robot(data, p: _Problems):
     if not _ok(length, E, section, nu, mag):
         return _BAD
     try:
-        return Rod(length, E, section, mag), nu
+        given = {} if nu is None else {"poisson_ratio": nu}  # else the Rod's default
+        return Rod(length, E, section, mag, **given), nu
     except ValueError as exc:  # the library's own checks (e.g. segments spanning the rod)
         p.add(f"{key}: {exc}")
         return _BAD
