@@ -414,6 +414,21 @@ class TestAgainstFEM:
     offset from rod theory is about 0.5 % L for the seed robot (L/D = 20; the planar
     comparisons in test_fem_rod.py see the same)."""
 
+    def test_elevation(self):
+        from coilrod import presets, solve_fem
+
+        base = presets.seed_rod(presets.M1())
+        mag = Magnetization(base.magnetization.max_magnitude(base.length), 0.0, elevation=0.5)
+        rod = Rod(base.length, base.youngs_modulus, base.section, mag)
+        lams = [2.0, 5.0]
+        field = coils.UniformField(B=(0.0, rod.field_for_lambda(1.0), 0.0))
+        fem = solve_fem(rod, field, lams, dim=3, order=2, elements=(20, 1, 1))
+        res = solve_rod(rod, field, lams)
+        assert res.model == "spatial"
+        gap = np.linalg.norm(fem.tip - res.tip, axis=1) / rod.length
+        assert gap.max() < 0.0075, gap
+        assert np.all(np.abs(res.tip[:, 2]) > 0.05 * rod.length)  # the elevation lifts it
+
     def test_out_of_plane_field(self):
         from coilrod import presets, solve_fem
 
@@ -443,11 +458,7 @@ class TestAgainstBVP:
         K = rod_stiffnesses(rod) * rod.bending_stiffness
         mag = rod.magnetization
 
-        def body(s):
-            v = mag.vector3(s) if hasattr(mag, "vector3") else np.c_[mag.vector(s), 0 * s]
-            return np.asarray(v, float).reshape(len(s), 3)
-
-        return spatial_reference(rod.length, K, rod.area, body, field, scales, **kw)
+        return spatial_reference(rod.length, K, rod.area, mag.vector3, field, scales, **kw)
 
     @pytest.mark.parametrize("kind", ["uniform", "linear", "maxwell"])
     def test_out_of_plane_fields(self, kind):
@@ -466,6 +477,19 @@ class TestAgainstBVP:
         for k in range(len(scales)):
             assert np.abs(res.tip[k] - ref[k]["tip"]).max() < 1e-6 * L
             assert np.abs(res.frames(k)[-1] - ref[k]["R"][-1]).max() < 1e-6
+
+    def test_elevation_and_rectangle(self):
+        # an elevated magnetization on a rectangle (EI_y = 4 EI_z, GJ from the exact series)
+        rod = Rod(L, 1e6, Rectangle(3e-3, 1.5e-3), Magnetization(128e3, 0.3, elevation=0.4))
+        field = coils.UniformField(B=rod.field_for_lambda(5.0) * _unit([0.3, 1.0, 0.5]))
+        res = solve_rod(rod, field, [0.5, 1.0])
+        ref = self._reference(rod, field, [0.5, 1.0])
+        for k in range(2):
+            assert np.abs(res.tip[k] - ref[k]["tip"]).max() < 1e-6 * L
+        planar_guess = solve_rod(
+            Rod(L, 1e6, Rectangle(3e-3, 1.5e-3), Magnetization(128e3, 0.3)), field, [1.0]
+        )
+        assert np.abs(planar_guess.tip[0] - ref[1]["tip"]).max() > 1e-2 * L  # it matters
 
     def test_clamp_rotation_and_position(self):
         rod = _rod(Rectangle(3e-3, 1.5e-3), angle=-0.4)

@@ -83,21 +83,9 @@ def build_problem(
     return PlanarRod(mesh, mu, field, L, clamp_position, clamp_angle, tol)
 
 
-def _node_magnetization3(rod: Rod, mesh: RodMesh) -> np.ndarray:
-    """Body-frame node magnetization (n, 3), A/m (tangent, normal, binormal)."""
-    try:
-        return node_magnetization(rod.magnetization, mesh, rod.length, dim=3)
-    except TypeError:  # a planar-only profile description
-        mu = node_magnetization(rod.magnetization, mesh, rod.length)
-        return np.concatenate([mu, np.zeros((mu.shape[0], 1))], axis=1)
-
-
 def rod_stiffnesses(rod: Rod) -> np.ndarray:
     """(GJ, EI_y, EI_z) / EI_z of ``rod`` (torsion, out-of-plane and in-plane bending)."""
-    stiff = getattr(rod, "stiffnesses", None)
-    if stiff is None:  # circle, nu = 0.5: GJ = E/3 * 2 I
-        return np.array([2.0 / 3.0, 1.0, 1.0])
-    return np.asarray(stiff, float) / rod.bending_stiffness
+    return np.asarray(rod.stiffnesses, float) / rod.bending_stiffness
 
 
 def build_spatial_problem(
@@ -114,7 +102,9 @@ def build_spatial_problem(
     from .spatial import SpatialRod
 
     L = rod.length
-    mu = _node_magnetization3(rod, mesh) * (rod.area * L**2 / rod.bending_stiffness)
+    mu = node_magnetization(rod.magnetization, mesh, L, dim=3) * (
+        rod.area * L**2 / rod.bending_stiffness
+    )
     return SpatialRod(
         mesh,
         mu,
