@@ -358,10 +358,6 @@ CENTRE_ON_WIRE = [
          "field.type: a control scene drives a coil system"),
         ({k: v for k, v in CONTROL.items() if k != "control"},
          "control: missing required table (e.g. target = ['20 mm', '30 mm'])"),
-        (control_with(robot={**CONTROL["robot"], "magnetization": {
-            "magnitude": "128 kA/m", "elevation": "20 deg"}}),
-         "robot.magnetization: has an out-of-plane elevation; the planar rod of [control] "
-         "(solve_currents) supports only planar magnetizations (elevation 0)"),
     ],
 )  # fmt: skip
 def test_each_problem_names_its_key(data, message):

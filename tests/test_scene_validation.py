@@ -98,7 +98,7 @@ def test_output_booleans_must_be_toml_booleans(key, value):
 
 def test_false_is_honoured():
     scene = parse_scene(scene_with(output={"figures": False, "tables": False}))
-    assert scene.outputs == {"figures": False, "tables": False}
+    assert scene.outputs == {"figures": False, "tables": False, "vtk": False}
 
 
 @pytest.mark.parametrize(
@@ -392,14 +392,19 @@ def test_zero_magnetization_is_nothing_to_solve():
 
 
 def test_field_out_of_the_bending_plane_is_an_error_for_planar_models():
-    lines = problems_of(scene_with(field__direction="z"))
+    planar = {"model": "planar"}
+    lines = problems_of(scene_with(field__direction="z", rod=planar))
+    assert lines[0].startswith("field.direction: the field has no component in the bending")
+    lines = problems_of(scene_with(field__direction="z", models={"run": ["fem2d"]}))
     assert lines[0].startswith("field.direction: the field has no component in the bending")
     scene = parse_scene(scene_with(field__direction="z", models={"run": ["fem3d"]}))
     assert scene.models == ("fem3d",)
+    # the rod's default model takes the spatial rod for it
+    assert parse_scene(scene_with(field__direction="z")).models == ("rod",)
     # a coil with its axis along z: in its own plane its field is along z only
     coil = {"type": "coil", "radius": "60 mm", "turns": 100, "current": "5 A", "axis": "z"}
     coil["center"] = ["20 mm", "0 mm", "0 mm"]
-    lines = problems_of(coil_scene(coil))
+    lines = problems_of({**coil_scene(coil), "rod": planar})
     assert lines[0].startswith("field.coil[0].current: the field has no component in the bending")
     # 10 mm out of its plane the real field has a radial part that bends the rod (its ideal
     # field, taken at the centre, is still along z): the comparison is meaningful, so accepted

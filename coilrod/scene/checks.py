@@ -4,13 +4,14 @@ Everything a run would trip over is found here, before any solve, so that ``coil
 and ``coilrod run`` stop at the same problems (:func:`coilrod.scene.parse_scene` calls
 :func:`scene_problems` last):
 
-- the field is not zero, and the planar models (rod, fem2d) see some of it in their plane;
+- the field is not zero, and the planar models (fem2d, a rod with model "planar") see some of
+  it in their plane;
 - the magneto-elastic number at the top load stays within :data:`limits.MAX_MAGNETOELASTIC`;
 - the clamp and the undeformed robot keep clear of every coil winding, and the real field is
   finite on the undeformed centreline (the problem names the coil);
 - FEM meshes resolve the magnetization segments and stay within the element limits;
-- a magnetization with an out-of-plane elevation is not given to a planar model (fem2d, the
-  planar rod a control scene steers), and the FEM is not given the incompressible
+- a magnetization with an out-of-plane elevation is not given to a planar model (fem2d, a rod
+  with model "planar"), and the FEM is not given the incompressible
   ``robot.poisson_ratio = 0.5``;
 - a coil system under control (``field.type = "system"``) can make every in-plane field at its
   centre, where the ideal controller takes its field, and that centre is off the windings.
@@ -94,9 +95,12 @@ def _zero_field(scene, coil_keys, strength_key) -> list[str]:
 
 
 def _in_plane(scene, strength_key) -> list[str]:
-    """The planar models (rod, fem2d) see only B_x, B_y and their x-y derivatives: a scene in
-    which no field has any of them along the robot gives them nothing to solve."""
-    planar = [m for m in scene.models if m in ("rod", "fem2d")]
+    """The planar models (fem2d; the rod when ``rod.model = "planar"``) see only B_x, B_y and
+    their x-y derivatives: a scene in which no field has any of them along the robot gives them
+    nothing to solve.  (The rod's default model takes the spatial rod for such a field.)"""
+    planar = ["fem2d"] if "fem2d" in scene.models else []
+    if "rod" in scene.models and scene.rod_options.get("model") == "planar":
+        planar.insert(0, "rod")
     if not planar:
         return []
     pts = centerline_points(scene.rod.length, FIELD_SAMPLES)
@@ -254,8 +258,8 @@ def _planar_and_incompressible(scene) -> list[str]:
     """A non-planar magnetization given to a planar model; nu = 0.5 given to the FEM."""
     problems = []
     planar = ["fem2d"] if "fem2d" in scene.models else []
-    if scene.control is not None:
-        planar.append("rod of [control] (solve_currents)")
+    if "rod" in scene.models and scene.rod_options.get("model") == "planar":
+        planar.append("rod (rod.model = 'planar')")
     if not scene.rod.magnetization.is_planar:
         problems += [
             f"robot.magnetization: has an out-of-plane elevation; the planar {what} supports "
