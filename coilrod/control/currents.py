@@ -117,12 +117,9 @@ def _weights_for(with_angle: bool, length: float, with_z: bool = False) -> np.nd
 def _leaves_plane(system, clamp: np.ndarray, length: float) -> bool:
     """True if some channel of ``system`` makes B_z (or dB_z/dx, dB_z/dy) on the rod's plane
     within its reach: the tip can then leave the plane and z is controlled too."""
-    r = np.linspace(0.0, length, 9)
-    a = np.linspace(0.0, 2 * np.pi, 24, endpoint=False)
-    pts = np.zeros((r.size * a.size, 3))
-    pts[:, 0] = clamp[0] + np.outer(r, np.cos(a)).ravel()
-    pts[:, 1] = clamp[1] + np.outer(r, np.sin(a)).ravel()
-    pts[:, 2] = clamp[2]
+    from ..rod.model import reach_disc
+
+    pts = reach_disc(clamp, length, radii=9, angles=24)
     try:
         B, G = system.unit_fields(pts)
     except ValueError:  # a winding in the disc: judge the clamp

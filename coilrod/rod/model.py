@@ -73,6 +73,18 @@ def _in_plane_rotation(R0: np.ndarray) -> bool:
     )
 
 
+def reach_disc(clamp: np.ndarray, length: float, radii: int = 17, angles: int = 48) -> np.ndarray:
+    """Points (radii * angles, 3) m on the disc of radius ``length`` around ``clamp`` in the
+    plane z = clamp_z: where a planar rod clamped there can reach."""
+    r = np.linspace(0.0, length, radii)
+    a = np.linspace(0.0, 2 * np.pi, angles, endpoint=False)
+    pts = np.zeros((r.size * a.size, 3))
+    pts[:, 0] = clamp[0] + np.outer(r, np.cos(a)).ravel()
+    pts[:, 1] = clamp[1] + np.outer(r, np.sin(a)).ravel()
+    pts[:, 2] = clamp[2]
+    return pts
+
+
 def _field_reasons(field: Field, clamp: np.ndarray, length: float) -> list[str]:
     """Why ``field`` would push a rod clamped at ``clamp`` out of the plane z = clamp_z (empty
     if it does not): B_z or dB_z/dx, dB_z/dy nonzero on the disc of radius ``length`` the rod
@@ -84,12 +96,7 @@ def _field_reasons(field: Field, clamp: np.ndarray, length: float) -> list[str]:
         if B[2] != 0.0 and abs(B[2]) > PLANAR_FIELD_TOL * np.linalg.norm(B):
             return [f"the field has an out-of-plane component B_z = {B[2]:.3g} T"]
         return []
-    r = np.linspace(0.0, length, 17)
-    a = np.linspace(0.0, 2 * np.pi, 48, endpoint=False)
-    pts = np.zeros((r.size * a.size, 3))
-    pts[:, 0] = clamp[0] + np.outer(r, np.cos(a)).ravel()
-    pts[:, 1] = clamp[1] + np.outer(r, np.sin(a)).ravel()
-    pts[:, 2] = clamp[2]
+    pts = reach_disc(clamp, length)
     try:
         B, G = field.B_and_gradient(pts)
     except ValueError:  # a winding inside the reachable disc: judge the clamp only

@@ -39,7 +39,8 @@ from scipy.linalg import eigvalsh_tridiagonal
 from scipy.linalg.lapack import dgttrf, dgttrs
 from scipy.linalg.lapack import dstebz as _stebz
 
-from ..path.protocol import Linearization, PathProblem
+from ..path.protocol import Linearization
+from .discrete import DiscreteRod
 
 __all__ = ["PlanarRod", "RodTangent"]
 
@@ -200,7 +201,7 @@ class RodTangent:
         return out
 
 
-class PlanarRod(PathProblem):
+class PlanarRod(DiscreteRod):
     """The discrete problem for one rod, field and mesh (non-dimensional).
 
     Parameters
@@ -428,43 +429,6 @@ class PlanarRod(PathProblem):
         return g_mu, g_b, g_G
 
     # -- field ---------------------------------------------------------------------------------
-    def _field(self, x: np.ndarray, hessian: bool):
-        """B (k n, 3) T, G (k n, 3, 3) T/m and H (k n, 3, 3, 3) T/m^2 (None where not needed)
-        at the positions x (k, n, 2) (units of L); raises ValueError from the field."""
-        pts = self.points(x).reshape(-1, 3)
-        if hessian and not self.linear:
-            return self.field.B_gradient_hessian(pts)
-        B, G = self.field.B_and_gradient(pts)
-        return B, G, None
-
-    def _field_by_member(self, x: np.ndarray, hessian: bool):
-        """Like :meth:`_field`, but members whose field cannot be evaluated get NaN (and the
-        field's message is kept in ``last_failure``)."""
-        try:
-            with np.errstate(all="ignore"):
-                return self._field(x, hessian)
-        except ValueError as exc:
-            self.last_failure = f"the field could not be evaluated at the trial states ({exc})"
-        k, n = x.shape[0], self.n
-        B = np.full((k, n, 3), np.nan)
-        G = np.full((k, n, 3, 3), np.nan)
-        H = np.full((k, n, 3, 3, 3), np.nan) if hessian and not self.linear else None
-        for j in range(k):
-            try:
-                with np.errstate(all="ignore"):
-                    Bj, Gj, Hj = self._field(x[j : j + 1], hessian)
-            except ValueError as exc:
-                self.last_failure = f"the field could not be evaluated at the trial states ({exc})"
-                continue
-            B[j], G[j] = Bj, Gj
-            if H is not None:
-                H[j] = Hj
-        return (
-            B.reshape(-1, 3),
-            G.reshape(-1, 3, 3),
-            None if H is None else H.reshape(-1, 3, 3, 3),
-        )
-
     # -- the protocol -----------------------------------------------------------------------------
     def linearize(self, u, scale, tangent: bool = True) -> Linearization:
         """Residual (k, size), admissibility (k,) and the tangent of a stack of states."""
@@ -489,13 +453,6 @@ class PlanarRod(PathProblem):
         lin.field_values = field_values  # mixed layout: B (k, n, 3), G (k, n, 3, 3) at the nodes
         return lin
 
-    def solve(self, lin: Linearization, rhs: np.ndarray) -> np.ndarray:
-        return lin.tangent.solve(np.atleast_2d(rhs))
-
-    def residual(self, u: np.ndarray, scale) -> np.ndarray:
-        """``R(u, scale)`` with the shape of ``u`` ((size,) or (k, size))."""
-        return self.linearize(u, scale, tangent=False).residual.reshape(np.shape(u))
-
     def dense_jacobian(self, u: np.ndarray, scale: float) -> np.ndarray:
         """The Jacobian of one state as a dense (size, size) array (tests, small problems)."""
         tan = self.linearize(u, scale).tangent
@@ -509,20 +466,6 @@ class PlanarRod(PathProblem):
             diag = ab[_DIAG - off, max(off, 0) : N + min(off, 0)]
             J += np.diag(diag, off)
         return J
-
-    def d_residual_d_scale(self, lin: Linearization) -> np.ndarray:
-        return lin.load_rate
-
-    def take(self, lin: Linearization, rows) -> Linearization:
-        """Members ``rows`` of a stacked linearization (the factorisation is sliced, not
-        recomputed: the stacked Jacobian is block diagonal)."""
-        rows = np.asarray(rows, dtype=int)
-        out = Linearization(
-            u=lin.u[rows], scale=lin.scale[rows], residual=lin.residual[rows], ok=lin.ok[rows]
-        )
-        out.load_rate = lin.load_rate[rows]
-        out.tangent = None if lin.tangent is None else _take_tangent(lin.tangent, rows)
-        return out
 
     def error(self, lin: Linearization, du) -> np.ndarray:
         """max over equations of |scaled residual| / (tol + its round-off floor), shape (k,)."""
@@ -589,39 +532,6 @@ class PlanarRod(PathProblem):
         if self.uniform:
             return self._stability_tridiagonal(lin)
         return self._stability_mixed(lin, signs)
-
-    def near_fold(self, lin: Linearization) -> bool:
-        """True if the smallest second-variation eigenvalue is below 5 % of the straight
-        rod's: failing load steps there mean the branch turns back (a limit point)."""
-        try:
-            mu = float(self.stability(lin, precise=True)[0])
-        except (np.linalg.LinAlgError, ValueError, FloatingPointError):
-            return False
-        return bool(mu < 0.05 * self.mu0)
-
-    def fold_hint(self, lin: Linearization) -> str:
-        """Say whether the state of ``lin`` is close to a limit point (fold)."""
-        try:
-            mu = float(self.stability(lin, precise=True)[0])
-        except (np.linalg.LinAlgError, ValueError, FloatingPointError):
-            return ""
-        if not np.isfinite(mu):
-            return ""
-        if mu < 0.05 * self.mu0:
-            return (
-                f"; the smallest eigenvalue of the second variation there is {mu:.3g}: "
-                "a limit point (fold), the rod snaps through beyond it -- trace it with "
-                "coilrod.trace_rod"
-            )
-        return f"; smallest second-variation eigenvalue there {mu:.3g}"
-
-    @property
-    def mu0(self) -> float:
-        """Smallest second-variation eigenvalue of the straight unloaded rod (~ pi^2 / 4)."""
-        if self._mu0 is None:
-            lin = self.linearize(self.straight(), 0.0)
-            self._mu0 = float(self.stability(lin, precise=True)[0])
-        return self._mu0
 
     def det_reference(self) -> float:
         """Sign of det J of the straight unloaded rod, whose second variation is positive: +1

@@ -40,7 +40,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..path.protocol import Linearization, PathProblem
+from ..path.protocol import Linearization
+from .discrete import DiscreteRod
 from .planar import RodTangent, _lowest_from_inverse, _take_tangent
 from .so3 import cross, expm, hat, inv_right_jacobian_coefficients, left_jacobian, logm
 
@@ -70,7 +71,7 @@ def _sym_term(a, b):
     return out
 
 
-class SpatialRod(PathProblem):
+class SpatialRod(DiscreteRod):
     """The discrete spatial rod for one rod, field and mesh (non-dimensional).
 
     Parameters
@@ -233,40 +234,6 @@ class SpatialRod(PathProblem):
         return out[0] if np.ndim(u) == 1 else out
 
     # -- field ------------------------------------------------------------------------------
-    def _field(self, x: np.ndarray, hessian: bool):
-        pts = self.points(x).reshape(-1, 3)
-        if hessian and not self.linear:
-            return self.field.B_gradient_hessian(pts)
-        B, G = self.field.B_and_gradient(pts)
-        return B, G, None
-
-    def _field_by_member(self, x: np.ndarray, hessian: bool):
-        """:meth:`_field` with NaN for members whose field cannot be evaluated."""
-        try:
-            with np.errstate(all="ignore"):
-                return self._field(x, hessian)
-        except ValueError as exc:
-            self.last_failure = f"the field could not be evaluated at the trial states ({exc})"
-        k, n = x.shape[0], self.n
-        B = np.full((k, n, 3), np.nan)
-        G = np.full((k, n, 3, 3), np.nan)
-        H = np.full((k, n, 3, 3, 3), np.nan) if hessian and not self.linear else None
-        for j in range(k):
-            try:
-                with np.errstate(all="ignore"):
-                    Bj, Gj, Hj = self._field(x[j : j + 1], hessian)
-            except ValueError as exc:
-                self.last_failure = f"the field could not be evaluated at the trial states ({exc})"
-                continue
-            B[j], G[j] = Bj, Gj
-            if H is not None:
-                H[j] = Hj
-        return (
-            B.reshape(-1, 3),
-            G.reshape(-1, 3, 3),
-            None if H is None else H.reshape(-1, 3, 3, 3),
-        )
-
     # -- the protocol -------------------------------------------------------------------------
     def linearize(self, u, scale, tangent: bool = True) -> Linearization:
         """Residual (k, size), admissibility (k,) and the tangent of a stack of states."""
@@ -295,26 +262,6 @@ class SpatialRod(PathProblem):
         lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
         lin.load_rate = R1
         return lin
-
-    def solve(self, lin: Linearization, rhs: np.ndarray) -> np.ndarray:
-        return lin.tangent.solve(np.atleast_2d(rhs))
-
-    def d_residual_d_scale(self, lin: Linearization) -> np.ndarray:
-        return lin.load_rate
-
-    def take(self, lin: Linearization, rows) -> Linearization:
-        """Members ``rows`` of a stacked linearization (factors sliced)."""
-        rows = np.asarray(rows, dtype=int)
-        out = Linearization(
-            u=lin.u[rows], scale=lin.scale[rows], residual=lin.residual[rows], ok=lin.ok[rows]
-        )
-        out.load_rate = lin.load_rate[rows]
-        out.tangent = None if lin.tangent is None else _take_tangent(lin.tangent, rows)
-        return out
-
-    def residual(self, u: np.ndarray, scale) -> np.ndarray:
-        """``R(u, scale)`` with the shape of ``u``."""
-        return self.linearize(u, scale, tangent=False).residual.reshape(np.shape(u))
 
     def dense_jacobian(self, u: np.ndarray, scale: float) -> np.ndarray:
         """The Jacobian of one state as a dense (size, size) array (tests, small problems)."""
@@ -952,39 +899,6 @@ class SpatialRod(PathProblem):
         sigma = eigsh(op, k=1, which="LM", tol=1e-10, return_eigenvectors=False)[0]
         mu = 1.0 / sigma
         return float(-abs(mu) if (mu > 0 and sign < 0) else mu)
-
-    @property
-    def mu0(self) -> float:
-        """Smallest second-variation eigenvalue of the straight unloaded rod (about
-        min(GJ, EI_y, EI_z) / EI_z pi^2 / 4)."""
-        if self._mu0 is None:
-            lin = self.linearize(self.straight(), 0.0)
-            self._mu0 = float(self.stability(lin, precise=True)[0])
-        return self._mu0
-
-    def near_fold(self, lin: Linearization) -> bool:
-        """True if the smallest second-variation eigenvalue is below 5 % of the straight
-        rod's."""
-        try:
-            mu = float(self.stability(lin, precise=True)[0])
-        except (np.linalg.LinAlgError, ValueError, FloatingPointError):
-            return False
-        return bool(mu < 0.05 * self.mu0)
-
-    def fold_hint(self, lin: Linearization) -> str:
-        """Say whether the state of ``lin`` is close to a limit point (fold)."""
-        try:
-            mu = float(self.stability(lin, precise=True)[0])
-        except (np.linalg.LinAlgError, ValueError, FloatingPointError):
-            return ""
-        if not np.isfinite(mu):
-            return ""
-        if mu < 0.05 * self.mu0:
-            return (
-                f"; the smallest eigenvalue of the second variation there is {mu:.3g}: "
-                "a limit point (fold) or a bifurcation -- trace it with coilrod.trace_rod"
-            )
-        return f"; smallest second-variation eigenvalue there {mu:.3g}"
 
 
 def _solve_many(tan: RodTangent, rhs: np.ndarray) -> np.ndarray:
