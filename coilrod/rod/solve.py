@@ -280,9 +280,13 @@ def solve_rod(
             _check_start(problems, obstacles)
         finish = _result_spatial
     newton_opts = NewtonOptions(max_iter=max_iter)
+    path_kw = {}
     if obstacles:  # semi-smooth Newton: the error may stall while the contact set settles
         newton_opts = NewtonOptions(max_iter=max(max_iter, 40), stagnation=12)
-    opts = PathOptions(newton=newton_opts, stability=bool(stability))
+        # the path has kinks where contacts close or open: the trapezoidal smoothness check
+        # of a step would cut every step across one down to the tolerance
+        path_kw["relative_correction"] = 1.0
+    opts = PathOptions(newton=newton_opts, stability=bool(stability), **path_kw)
     bar = None
     tick = None
     if progress:
