@@ -22,7 +22,9 @@ class RodResult:
     tip : ndarray, shape (k, 3)
         Tip positions, m (Richardson-extrapolated when enabled).
     tip_angle : ndarray, shape (k,)
-        Tangent angle at the tip, rad.
+        Tangent angle at the tip, rad (spatial model: the azimuth of the tip tangent about z,
+        ``atan2(t_y, t_x)``, continued from the clamp's; see :meth:`frames` for the full
+        orientation).
     converged : ndarray of bool, shape (k,)
         True where Newton reached the tolerance (always True for returned states: a scale that
         cannot be reached raises :class:`~coilrod.ConvergenceError`).
@@ -83,7 +85,8 @@ class RodResult:
         return self._min_eigenvalue
 
     def centerline(self, k: int) -> np.ndarray:
-        """Centreline of state ``k`` at the nodes :attr:`s`, shape (n, 3), m."""
+        """Centreline of state ``k`` at the nodes :attr:`s`, shape (n, 3), m (Richardson-
+        extrapolated like the tip)."""
         return self._points[k].copy()
 
     def _contact_item(self, name: str, k: int):
