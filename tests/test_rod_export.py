@@ -39,6 +39,11 @@ def test_collection_lists_the_states_with_their_scales(result, tmp_path):
     assert [float(d.get("timestep")) for d in sets] == [0.5, 1.0]
 
 
+def test_result_method(result, tmp_path):
+    files = result.write_vtk(tmp_path / "m.vtu", states=[1])
+    assert [f.name for f in files] == ["m_001.vtu", "m.pvd"]
+
+
 def test_one_state(result, tmp_path):
     files = write_vtk(result, tmp_path / "one.vtu", states=-1, frames=False)
     assert files == [tmp_path / "one.vtu"]

@@ -115,6 +115,14 @@ class RodResult:
         """Nodes in contact with each obstacle in state ``k``, bool (n, n_obstacles)."""
         return self._contact_item("active", k)
 
+    def write_vtk(self, path, states=None, *, frames: bool = True):
+        """Write the centrelines (and frames) of ``states`` (default: all) as VTK polylines for
+        ParaView, with a .pvd collection over the load path: see
+        :func:`coilrod.rod.export.write_vtk`.  Returns the files written."""
+        from .export import write_vtk
+
+        return write_vtk(self, path, states, frames=frames)
+
     def frames(self, k: int) -> np.ndarray:
         """Cross-section frames of state ``k`` at the nodes :attr:`s`, shape (n, 3, 3): the
         columns of ``frames(k)[i]`` are the tangent, normal and binormal at node i in world
