@@ -402,35 +402,47 @@ def _result(rod, problems, points, iterations, events, opts) -> RodResult:
     else:
         thetas, x = thetas_c, x_c
         fine_states = None
-    points_xyz = coarse.points(x)
+    return _assemble_result(
+        rod, problems, points, events, opts, states, fine_states, iterations, residual,
+        points_xyz=coarse.points(x), tip_angle=thetas[:, -1].copy(), _theta=thetas,
+    )  # fmt: skip
+
+
+def _assemble_result(
+    rod, problems, points, events, opts, states, fine_states, iterations, residual, **fields
+) -> RodResult:
+    """The RodResult shared by both models: stability (the exact sign now, the eigenvalues
+    on first access), refined events, the solution kept for the sensitivities; ``fields``
+    adds the model's own (points_xyz, tip_angle, _theta, model, _frames, _contact)."""
+    coarse = problems[0]
+    scales = np.array([p.scale for p in points])
     if not opts.stability:
         mu = np.full(scales.size, np.nan)
         stable = np.ones(scales.size, dtype=bool)
-    else:  # the exact sign now, the eigenvalues on first access
+    else:
         stable = np.array([p.stability > 0 for p in points], dtype=bool)
         fine = (problems[1], fine_states) if len(problems) == 2 else None
         mu = _eigenvalues_later(coarse, states, scales, fine)
-    instabilities = [_refine_event(e, scales, mu, coarse) for e in events]
+    points_xyz = fields.pop("points_xyz")
     return RodResult(
         scales=scales,
         s=coarse.mesh.s * rod.length,
         tip=points_xyz[:, -1, :].copy(),
-        tip_angle=thetas[:, -1].copy(),
         converged=np.ones(scales.size, dtype=bool),
         stable=stable,
         residual=residual,
         _min_eigenvalue=mu,
         iterations=iterations,
         segments=coarse.mesh.counts.sum(),
-        _theta=thetas,
         _points=points_xyz,
-        instabilities=instabilities,
+        instabilities=[_refine_event(e, scales, mu, coarse) for e in events],
         _solution=RodSolution(
             rod,
-            problems[0].field,
+            coarse.field,
             tuple(problems),
             (states,) + ((fine_states,) if len(problems) == 2 else ()),
         ),
+        **fields,
     )
 
 
@@ -457,39 +469,13 @@ def _result_spatial(rod, problems, points, iterations, events, opts) -> RodResul
         frames = R_f @ expm(-logm(np.swapaxes(R_f, -1, -2) @ R_c) / 3)
     else:
         x, frames = x_c, R_c
-    points_xyz = coarse.points(x)
-    if not opts.stability:
-        mu = np.full(scales.size, np.nan)
-        stable = np.ones(scales.size, dtype=bool)
-    else:
-        stable = np.array([p.stability > 0 for p in points], dtype=bool)
-        fine = (problems[1], fine_states) if len(problems) == 2 else None
-        mu = _eigenvalues_later(coarse, states, scales, fine)
-    instabilities = [_refine_event(e, scales, mu, coarse) for e in events]
-    return RodResult(
-        scales=scales,
-        s=coarse.mesh.s * rod.length,
-        tip=points_xyz[:, -1, :].copy(),
+    return _assemble_result(
+        rod, problems, points, events, opts, states, fine_states, iterations, residual,
+        points_xyz=coarse.points(x),
         tip_angle=_tip_azimuth(frames[:, -1], coarse.rotations(states)[:, -1], coarse.R0),
-        converged=np.ones(scales.size, dtype=bool),
-        stable=stable,
-        residual=residual,
-        _min_eigenvalue=mu,
-        iterations=iterations,
-        segments=coarse.mesh.counts.sum(),
-        _theta=None,
-        _points=points_xyz,
-        instabilities=instabilities,
-        _solution=RodSolution(
-            rod,
-            coarse.field,
-            tuple(problems),
-            (states,) + ((fine_states,) if len(problems) == 2 else ()),
-        ),
-        model="spatial",
-        _frames=frames,
+        _theta=None, model="spatial", _frames=frames,
         _contact=_contact_data(problems, states, fine_states, rod),
-    )
+    )  # fmt: skip
 
 
 def _contact_data(problems, states, fine_states, rod):
