@@ -523,11 +523,13 @@ class SpatialRod(DiscreteRod):
             ab.ravel(order="K")[index] = vals
         return ab
 
-    def _assemble(self, U: np.ndarray, S: np.ndarray, tangent: bool):
+    def _assemble(self, U: np.ndarray, S: np.ndarray, tangent: bool, core=None):
         """Residual (k, size), load rate (k, size), band storage and symmetric blocks of a
-        stack: the per-node algebra compiled (:mod:`coilrod.rod._compiled_spatial`), the
-        contact terms added here.  :meth:`_assemble_numpy` is the same in numpy."""
-        from ._compiled_spatial import spatial_core
+        stack: the per-node algebra by ``core`` (default: the compiled pass of
+        :mod:`coilrod.rod._compiled_spatial`; :func:`numpy_core` is the same in numpy), the
+        contact terms and the second variation's blocks added here."""
+        if core is None:
+            from ._compiled_spatial import spatial_core as core
 
         k, n, nv = U.shape[0], self.n, self.nv
         h, w, L = self.mesh.h, self.mesh.w, self.L
@@ -553,7 +555,7 @@ class SpatialRod(DiscreteRod):
         A_ab = np.zeros((k, n - 1, 3, 3)) if tangent else np.zeros((1, 1, 3, 3))
         m = np.empty((k, n, 3))
         has_h = Hs is not None
-        spatial_core(
+        core(
             phi, X, F, np.asarray(S, float), np.ascontiguousarray(B), G,
             Hs if has_h else np.zeros((1, 1, 3, 3, 3)), has_h, self.uniform, tangent,
             self.mu, self.K, h, w, self.R0, L, frames, R, R1, blk, diag, A_ab, m,
@@ -638,193 +640,6 @@ class SpatialRod(DiscreteRod):
             D[:, :, 9:, 0:3] = np.swapaxes(coupling, -1, -2)
             D[:, :, 9:, 9:][..., np.arange(nc), np.arange(nc)] = np.where(act, 0.0, 1.0)
         return R, R1, self._scatter(k, blocks), (D, E)
-
-    def _assemble_numpy(self, U: np.ndarray, S: np.ndarray, tangent: bool):
-        """:meth:`_assemble` in numpy (the reference the compiled pass is tested against)."""
-        k, n, nv = U.shape[0], self.n, self.nv
-        h, w, L = self.mesh.h, self.mesh.w, self.L
-        V = U.reshape(k, n, nv)
-        phi = self.rotations(U)
-        Q = expm(phi)
-        Rm = Q @ self.R0  # (k, n, 3, 3)
-        t = Rm[..., :, 0]
-        m = _matvec(Rm, self.mu)  # (k, n, 3)
-        # bending: psi_i = log(R_i^T R_{i+1}), p_i = R_{i+1} J_l^-1(psi_i) K psi_i / h_i
-        Ra, Rb = Rm[:, :-1], Rm[:, 1:]
-        psi = logm(np.swapaxes(Ra, -1, -2) @ Rb)  # (k, n-1, 3)
-        g = psi * self.K * self._inv_h[:, None]
-        theta = np.sqrt(np.einsum("kni,kni->kn", psi, psi))
-        cc, dc = inv_right_jacobian_coefficients(theta)
-        psi_g = cross(psi, g)
-        Jg = g - 0.5 * psi_g + cc[..., None] * cross(psi, psi_g)  # J_l^-1(psi) g
-        p = _matvec(Rb, Jg)
-        # field at the nodes
-        if self.uniform:
-            b = np.broadcast_to(self._b_uniform, (k, n, 3))
-            G = Hs = None
-            x = F = None
-        else:
-            x, F = V[:, :, 0:3], V[:, :, 6:9]
-            B, G, Hs = self._field_by_member(x, tangent)
-            b = B.reshape(k, n, 3)
-            G = G.reshape(k, n, 3, 3)
-            if Hs is not None:
-                Hs = Hs.reshape(k, n, 3, 3, 3)
-        tau = cross(m, b)  # torque per unit load and weight
-        Sc = S[:, None, None]
-        # moment rows
-        M1 = -w[:, None] * tau
-        M = Sc * M1
-        M[:, 1:] += p
-        M[:, :-1] -= p
-        if not self.uniform:
-            hF = 0.5 * h[:, None] * F[:, :-1]  # h_i F_i / 2, (k, n-1, 3)
-            M[:, 1:] -= cross(t[:, 1:], hF)
-            M[:, :-1] -= cross(t[:, :-1], hF)
-        M[:, 0] = phi[:, 0]
-        M1[:, 0] = 0.0
-        R = np.empty((k, n, nv))
-        R1 = np.zeros((k, n, nv))
-        if self.uniform:
-            R[:] = M
-            R1[:] = M1
-        else:
-            R[:, :, 3:6], R1[:, :, 3:6] = M, M1
-            # positions: C_{j-1} = x_j - x_{j-1} - h (t_{j-1} + t_j) / 2
-            R[:, 0, 0:3] = x[:, 0]
-            R[:, 1:, 0:3] = x[:, 1:] - x[:, :-1] - 0.5 * h[:, None] * (t[:, :-1] + t[:, 1:])
-            # forces: F_j - F_{j+1} - c w_{j+1} L G_{j+1}^T m_{j+1}
-            f1 = -(w[:, None] * L) * np.einsum("knij,kni->knj", G, m)  # (k, n, 3)
-            R1[:, :-1, 6:9] = f1[:, 1:]
-            R[:, :-1, 6:9] = F[:, :-1] - F[:, 1:] + Sc * f1[:, 1:]
-            R[:, -1, 6:9] = F[:, -1]
-            if self.nc:
-                contact = self._contact_terms(V, x, tangent)
-                lam, gaps, normals, _ = contact
-                # the walls push node j along their normals: w_j lam_j n_j (force rows j - 1)
-                R[:, :-1, 6:9] -= w[1:, None] * np.einsum("kno,knoi->kni", lam, normals)[:, 1:]
-                # complementarity: min(lam, kappa g) = 0 (node 0 is in the clamp: lam_0 = 0)
-                R[:, :, 9:] = self._ncp(lam, gaps)[0]
-                R[:, 0, 9:] = lam[:, 0]
-        R = R.reshape(k, -1)
-        R1 = R1.reshape(k, -1)
-        if not tangent:
-            return R, R1, None, None
-        # -- Jacobian blocks (world rotations d), then columns times J_l(phi) --
-        # segment Hessian: P = Rb (M^T K/h M + S) Rb^T, M = J_r^-1(psi)
-        I3 = np.eye(3)
-        Kh = self.K[None, :, None] * self._inv_h[:, None, None]  # (n-1, 3, 3) rows scaled
-        Psi = hat(psi)
-        Minv = I3 + 0.5 * Psi + cc[..., None, None] * (Psi @ Psi)  # J_r^-1(psi)
-        KM = Kh * Minv  # diag(K/h) @ Minv
-        MtKM = np.swapaxes(Minv, -1, -2) @ KM
-        Gm = hat(g)
-        N = (
-            -0.5 * Gm
-            - cc[..., None, None] * (Gm @ Psi)
-            - cc[..., None, None] * hat(cross(g, psi))
-            + dc[..., None, None] * _outer(psi, _matvec(Psi @ Psi, g))
-        )
-        MtN = np.swapaxes(Minv, -1, -2) @ N
-        Sym = 0.5 * (MtN + np.swapaxes(MtN, -1, -2))
-        P = Rb @ (MtKM + Sym) @ np.swapaxes(Rb, -1, -2)  # (k, n-1, 3, 3)
-        hp = 0.5 * hat(p)
-        A_ab = -P + hp  # d(moment row i) / d(rotation i+1)
-        A_ba = -P - hp  # d(moment row i+1) / d(rotation i)
-        diag = np.zeros((k, n, 3, 3))
-        diag[:, 1:] += P
-        diag[:, :-1] += P
-        diag -= Sc[..., None] * w[:, None, None] * _sym_term(m, b)
-        if not self.uniform:
-            diag[:, 1:] -= _sym_term(t[:, 1:], hF)
-            diag[:, :-1] -= _sym_term(t[:, :-1], hF)
-        Mres = R.reshape(k, n, nv)[..., self._slots()[1] : self._slots()[1] + 3]
-        diag -= 0.5 * hat(Mres)
-        Jl = left_jacobian(phi)  # (k, n, 3, 3)
-        blocks = {
-            "clamp_phi": I3,
-            "m_prev": A_ba @ Jl[:, :-1],
-            "m_diag": diag[:, 1:] @ Jl[:, 1:],
-            "m_next": A_ab[:, 1:] @ Jl[:, 2:],
-        }
-        if not self.uniform:
-            half = 0.5 * h[:, None, None]
-            That = hat(t)
-            mhat = hat(m)
-            cwL = Sc[..., None] * (w[:, None, None] * L)
-            GtM = np.swapaxes(G, -1, -2) @ mhat  # G^T hat(m)
-            if Hs is not None:
-                mH = np.einsum("kni,kniac->knac", m, Hs)
-            else:
-                mH = 0.0
-            f_x = (-cwL * L * mH)[:, 1:] if Hs is not None else np.zeros((k, n - 1, 3, 3))
-            if self.nc:
-                lam, gaps, normals, hess = contact
-                # d/dx of -w lam grad g: -w lam L hess(gap)
-                f_x = f_x - (w[1:, None, None] * L) * np.einsum(
-                    "kno,knoij->knij", lam[:, 1:], hess[:, 1:]
-                )
-                active = self.kappa * gaps < lam  # contact closed, the wall pushes
-                act = active[:, 1:]
-                nc = self.nc
-                _, d_lam, d_gap = self._ncp(lam[:, 1:], gaps[:, 1:])
-                c_x = (d_gap * self.kappa)[..., None] * normals[:, 1:]  # (k, N, nc, 3)
-                c_lam = np.zeros((k, n - 1, nc, nc))
-                c_lam[..., np.arange(nc), np.arange(nc)] = d_lam
-                blocks.update(
-                    {
-                        "clamp_lam": np.eye(nc),
-                        "f_lamnext": -w[1:, None, None] * np.swapaxes(normals[:, 1:], -1, -2),
-                        "c_x": c_x,
-                        "c_lam": c_lam,
-                    }
-                )
-            blocks.update(
-                {
-                    "clamp_x": I3,
-                    "p_x": I3,
-                    "p_xprev": -I3,
-                    "p_phiprev": (half * That[:, :-1]) @ Jl[:, :-1],
-                    "p_phi": (half * That[:, 1:]) @ Jl[:, 1:],
-                    "m_x": (-cwL * (mhat @ G))[:, 1:],
-                    "m_Fprev": -half * That[:, 1:],
-                    "m_F": -half[1:] * That[:, 1:-1],
-                    "f_F": I3,
-                    "f_Fnext": -I3,
-                    "f_xnext": f_x,
-                    "f_phinext": (cwL * GtM)[:, 1:] @ Jl[:, 1:],
-                }
-            )
-        # second variation in world rotations (free nodes), symmetric block tridiagonal:
-        # uniform blocks d_j; mixed blocks Z_j = (x_j, F_{j-1}, d_j), j = 1..N (the Lagrangian's
-        # Hessian: positions, constraint multipliers, rotations)
-        if self.uniform:
-            sym = (diag[:, 1:], A_ab[:, 1:])
-        else:
-            nf = n - 1
-            b = 9 + self.nc
-            D = np.zeros((k, nf, b, b))
-            E = np.zeros((k, max(nf - 1, 0), b, b))
-            D[:, :, 0:3, 0:3] = f_x
-            D[:, :, 0:3, 3:6] = I3
-            D[:, :, 3:6, 0:3] = I3
-            D[:, :, 0:3, 6:9] = (cwL * GtM)[:, 1:]
-            D[:, :, 6:9, 0:3] = np.swapaxes(D[:, :, 0:3, 6:9], -1, -2)
-            D[:, :, 3:6, 6:9] = half * That[:, 1:]
-            D[:, :, 6:9, 3:6] = -half * That[:, 1:]
-            D[:, :, 6:9, 6:9] = diag[:, 1:]
-            E[:, :, 0:3, 3:6] = -I3
-            E[:, :, 6:9, 3:6] = -half[1:] * That[:, 1:-1]
-            E[:, :, 6:9, 6:9] = A_ab[:, 1:]
-            if self.nc:  # active contacts: constraints -w g(x) >= 0; inactive: lam fixed
-                coupling = -w[1:, None, None] * np.swapaxes(normals[:, 1:], -1, -2)  # (k,N,3,nc)
-                coupling = np.where(act[:, :, None, :], coupling, 0.0)
-                D[:, :, 0:3, 9:] = coupling
-                D[:, :, 9:, 0:3] = np.swapaxes(coupling, -1, -2)
-                D[:, :, 9:, 9:] = 0.0
-                D[:, :, 9:, 9:][..., np.arange(nc), np.arange(nc)] = np.where(act, 0.0, 1.0)
-            sym = (D, E)
-        return R, R1, self._scatter(k, blocks), sym
 
     # -- stability ------------------------------------------------------------------------------
     def stability(self, lin: Linearization, precise: bool = False) -> np.ndarray:
@@ -911,3 +726,93 @@ def _solve_many(tan: RodTangent, rhs: np.ndarray) -> np.ndarray:
     x = np.ascontiguousarray(rhs.T)
     band_solve(lu[0], tan.kl, tan.ku, lu[1], x)
     return x.T
+
+
+def numpy_core(
+    phi, X, F, S, B, G, H, has_h, uniform, tangent, mu, K, h, w, R0, L,
+    frames, R, R1, blk, diag, A_ab, m_out,
+):  # fmt: skip
+    """:func:`coilrod.rod._compiled_spatial.spatial_core` in numpy, with the same arguments and
+    outputs: the reference the compiled pass is tested against (the equations are in the
+    module docstring)."""
+    op = 0 if uniform else 3
+    inv_h = 1.0 / h
+    Rm = expm(phi) @ R0  # (k, n, 3, 3)
+    frames[:] = Rm
+    t = Rm[..., :, 0]
+    m = _matvec(Rm, mu)  # (k, n, 3)
+    m_out[:] = m
+    # bending: psi_i = log(R_i^T R_{i+1}), p_i = R_{i+1} J_l^-1(psi_i) K psi_i / h_i
+    Rb = Rm[:, 1:]
+    psi = logm(np.swapaxes(Rm[:, :-1], -1, -2) @ Rb)  # (k, n-1, 3)
+    g = psi * K * inv_h[:, None]
+    theta = np.sqrt(np.einsum("kni,kni->kn", psi, psi))
+    cc, dc = inv_right_jacobian_coefficients(theta)
+    psi_g = cross(psi, g)
+    p = _matvec(Rb, g - 0.5 * psi_g + cc[..., None] * cross(psi, psi_g))
+    Sc = S[:, None, None]
+    M1 = -w[:, None] * cross(m, B)  # moment rows per unit scale
+    M = Sc * M1
+    M[:, 1:] += p
+    M[:, :-1] -= p
+    if not uniform:
+        hF = 0.5 * h[:, None] * F[:, :-1]  # h_i F_i / 2, (k, n-1, 3)
+        M[:, 1:] -= cross(t[:, 1:], hF)
+        M[:, :-1] -= cross(t[:, :-1], hF)
+    M[:, 0] = phi[:, 0]
+    M1[:, 0] = 0.0
+    R[:, :, op : op + 3], R1[:, :, op : op + 3] = M, M1
+    if not uniform:
+        # positions: C_{j-1} = x_j - x_{j-1} - h (t_{j-1} + t_j) / 2
+        R[:, 0, 0:3] = X[:, 0]
+        R[:, 1:, 0:3] = X[:, 1:] - X[:, :-1] - 0.5 * h[:, None] * (t[:, :-1] + t[:, 1:])
+        # forces: F_j - F_{j+1} - c w_{j+1} L G_{j+1}^T m_{j+1}
+        f1 = -(w[:, None] * L) * np.einsum("knij,kni->knj", G, m)  # (k, n, 3)
+        R1[:, :-1, 6:9] = f1[:, 1:]
+        R[:, :-1, 6:9] = F[:, :-1] - F[:, 1:] + Sc * f1[:, 1:]
+        R[:, -1, 6:9] = F[:, -1]
+    if not tangent:
+        return
+    # segment Hessian: P = Rb (M^T K/h M + S) Rb^T, M = J_r^-1(psi)
+    I3 = np.eye(3)
+    Psi = hat(psi)
+    Minv = I3 + 0.5 * Psi + cc[..., None, None] * (Psi @ Psi)  # J_r^-1(psi)
+    MtKM = np.swapaxes(Minv, -1, -2) @ ((K[None, :, None] * inv_h[:, None, None]) * Minv)
+    Gm = hat(g)
+    N = (
+        -0.5 * Gm
+        - cc[..., None, None] * (Gm @ Psi)
+        - cc[..., None, None] * hat(cross(g, psi))
+        + dc[..., None, None] * _outer(psi, _matvec(Psi @ Psi, g))
+    )
+    MtN = np.swapaxes(Minv, -1, -2) @ N
+    P = Rb @ (MtKM + 0.5 * (MtN + np.swapaxes(MtN, -1, -2))) @ np.swapaxes(Rb, -1, -2)
+    hp = 0.5 * hat(p)
+    A_ab[:] = -P + hp  # d(moment row i) / d(rotation i+1)
+    A_ba = -P - hp  # d(moment row i+1) / d(rotation i)
+    diag[:] = 0.0
+    diag[:, 1:] += P
+    diag[:, :-1] += P
+    diag -= Sc[..., None] * w[:, None, None] * _sym_term(m, B)
+    if not uniform:
+        diag[:, 1:] -= _sym_term(t[:, 1:], hF)
+        diag[:, :-1] -= _sym_term(t[:, :-1], hF)
+    diag -= 0.5 * hat(M)
+    Jl = left_jacobian(phi)  # (k, n, 3, 3)
+    blk[:, 1:, 0] = A_ba @ Jl[:, :-1]
+    blk[:, 1:, 1] = diag[:, 1:] @ Jl[:, 1:]
+    blk[:, 1:-1, 2] = A_ab[:, 1:] @ Jl[:, 2:]
+    if uniform:
+        return
+    half = 0.5 * h[:, None, None]
+    That = hat(t)
+    mhat = hat(m)
+    cwL = Sc[..., None] * (w[:, None, None] * L)
+    blk[:, 1:, 3] = (half * That[:, :-1]) @ Jl[:, :-1]
+    blk[:, 1:, 4] = (half * That[:, 1:]) @ Jl[:, 1:]
+    blk[:, 1:, 5] = (-cwL * (mhat @ G))[:, 1:]
+    blk[:, 1:, 6] = -half * That[:, 1:]
+    blk[:, 1:-1, 7] = -half[1:] * That[:, 1:-1]
+    if has_h:
+        blk[:, 1:, 8] = (-cwL * L * np.einsum("kni,kniac->knac", m, H))[:, 1:]
+    blk[:, 1:, 9] = (cwL * (np.swapaxes(G, -1, -2) @ mhat))[:, 1:] @ Jl[:, 1:]
