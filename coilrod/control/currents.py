@@ -117,18 +117,10 @@ def _weights_for(with_angle: bool, length: float, with_z: bool = False) -> np.nd
 def _leaves_plane(system, clamp: np.ndarray, length: float) -> bool:
     """True if some channel of ``system`` makes B_z (or dB_z/dx, dB_z/dy) on the rod's plane
     within its reach: the tip can then leave the plane and z is controlled too."""
-    from ..rod.model import reach_disc
+    from ..rod.model import leaves_plane, reach_fields
 
-    pts = reach_disc(clamp, length, radii=9, angles=24)
-    try:
-        B, G = system.unit_fields(pts)
-    except ValueError:  # a winding in the disc: judge the clamp
-        B, G = system.unit_fields(clamp[None])
-    size = max(float(np.max(np.abs(B))), 1e-300)
-    return bool(
-        np.max(np.abs(B[:, 2])) > 1e-12 * size
-        or np.max(np.abs(G[:, 2, :2])) * length > 1e-12 * size
-    )
+    B, G = reach_fields(system.unit_fields, clamp, length, radii=9, angles=24)
+    return leaves_plane(B, G, length)
 
 
 def _uniform_start(rod, goal, with_angle, steps, opts, b_cap):

@@ -310,19 +310,15 @@ def _mesh_derivatives(problem, U, S, rod, groups, field_groups, lin=None):
 def _pushes_out_of_plane(sol, rows, groups, field_groups) -> bool:
     """True if a field parameter of ``groups`` changes B_z or dB_z/dx, dB_z/dy at the nodes
     of the planar states ``rows`` (relative 1e-12 of the field's own size)."""
+    from ..rod.model import leaves_plane
+
     problem, U = sol.problems[0], sol.states[0][rows]
     points = problem.points(problem.node_positions(U)).reshape(-1, 3)
-    for group in groups:
-        if group not in field_groups:
-            continue
-        Bp, Gp = field_groups[group][2](points)
-        Bp, Gp = np.asarray(Bp), np.asarray(Gp)
-        size = max(float(np.max(np.abs(Bp))), 1e-300)
-        if np.max(np.abs(Bp[:, 2])) > 1e-12 * size:
-            return True
-        if np.max(np.abs(Gp[:, 2, :2])) * sol.rod.length > 1e-12 * size:
-            return True
-    return False
+    return any(
+        leaves_plane(*field_groups[group][2](points), sol.rod.length)
+        for group in groups
+        if group in field_groups
+    )
 
 
 def _as_spatial(sol, rows, S, mixed=False):

@@ -7,7 +7,17 @@ import numpy as np
 
 from coils.field import Field
 
-__all__ = ["MODELS", "as_rotation", "clamp_frame", "choose_model", "planar_reasons"]
+__all__ = [
+    "MODELS",
+    "as_rotation",
+    "clamp_frame",
+    "choose_model",
+    "planar_reasons",
+    "reach_disc",
+    "reach_fields",
+    "plane_leak",
+    "leaves_plane",
+]
 
 MODELS = ("auto", "planar", "spatial")
 #: Out-of-plane field (|B_z|, and L |dB_z/dx|, L |dB_z/dy|) on the plane of the rod, relative
@@ -85,6 +95,35 @@ def reach_disc(clamp: np.ndarray, length: float, radii: int = 17, angles: int = 
     return pts
 
 
+def reach_fields(evaluate, clamp: np.ndarray, length: float, radii: int = 17, angles: int = 48):
+    """``evaluate(points)`` -> (B, G) on the :func:`reach_disc` (at the clamp alone where a
+    coil winding lies in the disc and the field cannot be evaluated there)."""
+    try:
+        return evaluate(reach_disc(clamp, length, radii, angles))
+    except ValueError:
+        return evaluate(np.asarray(clamp, float)[None])
+
+
+def plane_leak(B, G, length: float, scale: float | None = None):
+    """How far fields leave the plane: largest |B_z| (T), largest ``length`` |dB_z/dx|,
+    ``length`` |dB_z/dy| (T), and the field's size (T; default the largest |B| entry) of
+    fields B (n, 3, ...) and gradients G (n, 3, 3, ...) (trailing axes: per parameter or
+    channel)."""
+    B, G = np.asarray(B), np.asarray(G)
+    bz = float(np.max(np.abs(B[:, 2])))
+    gz = float(np.max(np.abs(G[:, 2, :2]))) * length
+    if scale is None:
+        scale = float(np.max(np.abs(B)))
+    return bz, gz, max(scale, 1e-300)
+
+
+def leaves_plane(B, G, length: float, scale: float | None = None) -> bool:
+    """True if the fields B, G (see :func:`plane_leak`) have B_z or dB_z/dx, dB_z/dy above
+    :data:`PLANAR_FIELD_TOL` of their size."""
+    bz, gz, size = plane_leak(B, G, length, scale)
+    return bz > PLANAR_FIELD_TOL * size or gz > PLANAR_FIELD_TOL * size
+
+
 def _field_reasons(field: Field, clamp: np.ndarray, length: float) -> list[str]:
     """Why ``field`` would push a rod clamped at ``clamp`` out of the plane z = clamp_z (empty
     if it does not): B_z or dB_z/dx, dB_z/dy nonzero on the disc of radius ``length`` the rod
@@ -96,14 +135,8 @@ def _field_reasons(field: Field, clamp: np.ndarray, length: float) -> list[str]:
         if B[2] != 0.0 and abs(B[2]) > PLANAR_FIELD_TOL * np.linalg.norm(B):
             return [f"the field has an out-of-plane component B_z = {B[2]:.3g} T"]
         return []
-    pts = reach_disc(clamp, length)
-    try:
-        B, G = field.B_and_gradient(pts)
-    except ValueError:  # a winding inside the reachable disc: judge the clamp only
-        B, G = field.B_and_gradient(clamp[None])
-    scale = max(float(np.max(np.linalg.norm(B, axis=1))), 1e-300)
-    bz = float(np.max(np.abs(B[:, 2])))
-    gz = float(np.max(np.abs(G[:, 2, :2]))) * length
+    B, G = reach_fields(field.B_and_gradient, clamp, length)
+    bz, gz, scale = plane_leak(B, G, length, float(np.max(np.linalg.norm(B, axis=1))))
     reasons = []
     if bz > PLANAR_FIELD_TOL * scale:
         reasons.append(f"the field has an out-of-plane component |B_z| up to {bz:.3g} T")
