@@ -35,6 +35,7 @@ from coils._validate import as_array, as_choice, as_count, finite_scalar, positi
 from ..errors import ConvergenceError
 from ..robot.magnetization import Magnetization
 from ..robot.rod import Rod
+from ..rod.so3 import about_z
 from ..rod.solve import solve_rod
 from .sensitivity import SingularStateError, tip_derivatives
 
@@ -67,11 +68,6 @@ class IdentifiabilityError(ValueError):
 
 class UnstableStateError(ValueError):
     """A model state at a data point is unstable (a branch no experiment can stay on)."""
-
-
-def _rotation_z(angle: float) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 @dataclass(frozen=True)
@@ -155,7 +151,7 @@ class _Model:
         """RodResult of ``rod`` along the group's direction (turned by ``angle``) at the
         field magnitudes (ascending), and the field parameter B (3,) of the path."""
         b_ref = float(group.magnitudes.max())
-        B = b_ref * (_rotation_z(angle) @ group.direction)
+        B = b_ref * (about_z(angle) @ group.direction)
         field = coils.UniformField(B=B)
         self.solves += 1
         try:

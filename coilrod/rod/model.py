@@ -70,8 +70,9 @@ def clamp_frame(clamp_angle: float, clamp_rotation) -> np.ndarray:
                 f"(clamp_angle = {clamp_angle!r})"
             )
         return as_rotation(clamp_rotation, "clamp_rotation")
-    c, s = np.cos(clamp_angle), np.sin(clamp_angle)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    from .so3 import about_z
+
+    return about_z(clamp_angle)
 
 
 def _in_plane_rotation(R0: np.ndarray) -> bool:

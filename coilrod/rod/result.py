@@ -129,13 +129,9 @@ class RodResult:
         coordinates (planar: rotations by the tangent angle about z)."""
         if self._frames is not None:
             return self._frames[k].copy()
-        th = self._theta[k]
-        c, s = np.cos(th), np.sin(th)
-        out = np.zeros((th.size, 3, 3))
-        out[:, 0, 0], out[:, 1, 0] = c, s
-        out[:, 0, 1], out[:, 1, 1] = -s, c
-        out[:, 2, 2] = 1.0
-        return out
+        from .so3 import about_z
+
+        return about_z(self._theta[k])
 
     def theta(self, k: int) -> np.ndarray:
         """Tangent angle of state ``k`` at the nodes :attr:`s`, shape (n,), rad (planar model

@@ -17,6 +17,7 @@ __all__ = [
     "expm",
     "logm",
     "left_jacobian",
+    "about_z",
     "inv_right_jacobian_coefficients",
 ]
 
@@ -64,6 +65,18 @@ def expm(phi: np.ndarray) -> np.ndarray:
     out[..., 0, 0] += 1.0
     out[..., 1, 1] += 1.0
     out[..., 2, 2] += 1.0
+    return out
+
+
+def about_z(theta: np.ndarray) -> np.ndarray:
+    """Rotations by angles ``theta`` (..., rad) about z, shape (..., 3, 3): the frames
+    (tangent, normal, binormal) of a planar rod with tangent angles ``theta``."""
+    theta = np.asarray(theta, float)
+    c, s = np.cos(theta), np.sin(theta)
+    out = np.zeros(theta.shape + (3, 3))
+    out[..., 0, 0], out[..., 1, 0] = c, s
+    out[..., 0, 1], out[..., 1, 1] = -s, c
+    out[..., 2, 2] = 1.0
     return out
 
 

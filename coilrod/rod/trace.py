@@ -68,12 +68,9 @@ class RodPath:
         binormal in world coordinates)."""
         if self._frames is not None:
             return self._frames[k].copy()
-        th = self._theta[k]
-        out = np.zeros((th.size, 3, 3))
-        out[:, 0, 0], out[:, 1, 0] = np.cos(th), np.sin(th)
-        out[:, 0, 1], out[:, 1, 1] = -np.sin(th), np.cos(th)
-        out[:, 2, 2] = 1.0
-        return out
+        from .so3 import about_z
+
+        return about_z(self._theta[k])
 
     def centerline(self, k: int) -> np.ndarray:
         """Centreline of point ``k``, shape (n, 3), m."""
