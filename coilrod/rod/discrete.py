@@ -56,6 +56,18 @@ class DiscreteRod(PathProblem):
             None if H is None else H.reshape(-1, 3, 3, 3),
         )
 
+    @staticmethod
+    def _stack(u, scale) -> tuple[np.ndarray, np.ndarray]:
+        """States (k, size) and scales (k,) of one state or a stack (a scalar scale serves
+        every member)."""
+        U = np.asarray(u, dtype=float)
+        if U.ndim == 1:
+            U = U[None]
+        S = np.asarray(scale, dtype=float)
+        if S.shape != (U.shape[0],):
+            S = np.full(U.shape[0], float(S)) if S.ndim == 0 else S.reshape(U.shape[0])
+        return U, S
+
     def solve(self, lin: Linearization, rhs: np.ndarray) -> np.ndarray:
         return lin.tangent.solve(np.atleast_2d(rhs))
 

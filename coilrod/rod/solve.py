@@ -382,26 +382,34 @@ def _refine(problems, states, scales, opts):
     return res.u, res.iterations, fine.residual_norm(res.lin.residual)
 
 
-def _result(rod, problems, points, iterations, events, opts) -> RodResult:
-    """RodResult from the coarse path points: refined-mesh states, Richardson, stability."""
+def _solved_states(problems, points, iterations, opts):
+    """The coarse states of the path points (k, size), the refined mesh's (None without
+    Richardson), the Newton iterations (k,) of both and the larger scaled residual (k,)."""
     coarse = problems[0]
     scales = np.array([p.scale for p in points])
     states = np.array([p.u for p in points])
     iterations = np.array(iterations, dtype=int)
     residual = coarse.residual_norm(np.array([p.residual for p in points]))
-    thetas_c = coarse.theta(states)
-    x_c = coarse.positions(thetas_c)
+    fine_states = None
     if len(problems) == 2:
-        fine = problems[1]
         fine_states, its, fine_res = _refine(problems, states, scales, opts)
         iterations = iterations + its
         residual = np.maximum(residual, fine_res)
-        th_f = fine.theta(fine_states)
+    return states, fine_states, iterations, residual
+
+
+def _result(rod, problems, points, iterations, events, opts) -> RodResult:
+    """RodResult from the coarse path points: refined-mesh states, Richardson, stability."""
+    coarse = problems[0]
+    states, fine_states, iterations, residual = _solved_states(problems, points, iterations, opts)
+    thetas_c = coarse.theta(states)
+    x_c = coarse.positions(thetas_c)
+    if len(problems) == 2:
+        th_f = problems[1].theta(fine_states)
         thetas = (4 * th_f[:, ::2] - thetas_c) / 3
-        x = (4 * fine.positions(th_f)[:, ::2] - x_c) / 3
+        x = (4 * problems[1].positions(th_f)[:, ::2] - x_c) / 3
     else:
         thetas, x = thetas_c, x_c
-        fine_states = None
     return _assemble_result(
         rod, problems, points, events, opts, states, fine_states, iterations, residual,
         points_xyz=coarse.points(x), tip_angle=thetas[:, -1].copy(), _theta=thetas,
@@ -450,18 +458,11 @@ def _result_spatial(rod, problems, points, iterations, events, opts) -> RodResul
     """RodResult of the spatial model: refined-mesh states, Richardson extrapolation of the
     positions and of the frames (on SO(3)), stability."""
     coarse = problems[0]
-    scales = np.array([p.scale for p in points])
-    states = np.array([p.u for p in points])
-    iterations = np.array(iterations, dtype=int)
-    residual = coarse.residual_norm(np.array([p.residual for p in points]))
+    states, fine_states, iterations, residual = _solved_states(problems, points, iterations, opts)
     R_c = coarse.frames(states)
     x_c = coarse.positions_from_frames(R_c)
-    fine_states = None
     if len(problems) == 2:
         fine = problems[1]
-        fine_states, its, fine_res = _refine(problems, states, scales, opts)
-        iterations = iterations + its
-        residual = np.maximum(residual, fine_res)
         R_f = fine.frames(fine_states)
         x = (4 * fine.positions_from_frames(R_f)[:, ::2] - x_c) / 3
         R_f = R_f[:, ::2]

@@ -237,12 +237,7 @@ class SpatialRod(DiscreteRod):
     # -- the protocol -------------------------------------------------------------------------
     def linearize(self, u, scale, tangent: bool = True) -> Linearization:
         """Residual (k, size), admissibility (k,) and the tangent of a stack of states."""
-        U = np.asarray(u, dtype=float)
-        if U.ndim == 1:
-            U = U[None]
-        S = np.asarray(scale, dtype=float)
-        if S.shape != (U.shape[0],):
-            S = np.full(U.shape[0], float(S)) if S.ndim == 0 else S.reshape(U.shape[0])
+        U, S = self._stack(u, scale)
         with np.errstate(all="ignore"):
             R, R1, ab, sym = self._assemble(U, S, tangent)
             ok = np.all(np.isfinite(R), axis=1)
