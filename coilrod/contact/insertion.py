@@ -326,7 +326,7 @@ def insert(
         per_length = force[0].sum(axis=1) * (EI / L**3)
         lin = problem.linearize(u[None], np.array([1.0]))
         out["tip"].append(x[-1].copy())
-        out["wall"].append(-np.sum(problem.mesh.w[:, None] * L * per_length, axis=0))
+        out["wall"].append(problem.contact_totals(force)[0].sum(axis=0) * (EI / L**2))
         out["fmax"].append(float(np.max(np.linalg.norm(per_length, axis=1))))
         out["nodes"].append(active[0].any(axis=1))
         out["gap"].append(float(gaps.min() * L))

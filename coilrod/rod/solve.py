@@ -488,17 +488,14 @@ def _contact_data(problems, states, fine_states, rod):
     if not getattr(problem, "nc", 0):
         return None
     EI, L = rod.bending_stiffness, rod.length
-
-    def totals_of(p, U):
-        force = p.contact_state(U)[0] * (EI / L**3)  # N/m
-        return -np.einsum("n,knoi->koi", p.mesh.w * L, force)  # the rod pushes the walls back
-
     U = states if fine_states is None else fine_states
     force, gaps, active = problem.contact_state(U)
     per_length = force * (EI / L**3)  # EI_z / L^3 units -> N/m
-    totals = totals_of(problem, U)
+    totals = problem.contact_totals(force)
     if fine_states is not None:  # Richardson, as the tip
-        totals = (4 * totals - totals_of(problems[0], states)) / 3
+        coarse = problems[0]
+        totals = (4 * totals - coarse.contact_totals(coarse.contact_state(states)[0])) / 3
+    totals = totals * (EI / L**2)  # N
     step = 1 if fine_states is None else 2
     return {
         "force": per_length[:, ::step],

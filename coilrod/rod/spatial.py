@@ -378,6 +378,12 @@ class SpatialRod(DiscreteRod):
         active[:, 0] = False
         return force, gaps, active
 
+    def contact_totals(self, force: np.ndarray) -> np.ndarray:
+        """Total force the rod exerts on each obstacle, (k, nc, 3) in EI_z / L^2 units, from
+        the contact force per length on the rod (k, n, nc, 3) of :meth:`contact_state` (minus
+        its trapezoid integral)."""
+        return -np.einsum("n,knoi->koi", self.mesh.w, force)
+
     # -- derivatives of the tip (sensitivities) --------------------------------------------------
     def tip_gradients(self, U: np.ndarray) -> np.ndarray:
         """Derivatives of the tip (x_N, y_N, z_N in units of L relative to the clamp; the tip
