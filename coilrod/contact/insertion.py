@@ -204,11 +204,11 @@ def _default_clamp(vessel):
                 "give clamp_position and clamp_rotation: the obstacle has no centreline"
             )
         p0, t = pts[0].copy(), pts[1] - pts[0]
+    from .presets import _frame
+
     t = t / np.linalg.norm(t)
     ref = np.array([0.0, 0.0, 1.0]) if abs(t[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    b = ref - (ref @ t) * t
-    b /= np.linalg.norm(b)
-    n = np.cross(b, t)
+    t, b, n = _frame(t, ref)  # the binormal is ref made perpendicular, n = b x t
     return p0, np.column_stack([t, n, b])
 
 

@@ -20,6 +20,7 @@ curvature seen from the point.  A contact model needs nothing else:
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from typing import NamedTuple
 
 import numpy as np
@@ -55,7 +56,7 @@ class GapEvaluation(NamedTuple):
     hessian: np.ndarray | None
 
 
-class Obstacle:
+class Obstacle(ABC):
     """Base class of rigid obstacles (:class:`~coilrod.contact.Wall`,
     :class:`~coilrod.contact.Vessel`, :class:`~coilrod.contact.VesselNetwork`).
 
@@ -157,9 +158,9 @@ class Obstacle:
 
     # -- geometry -------------------------------------------------------------------------------
     @property
-    def bounds(self) -> np.ndarray:  # pragma: no cover - abstract
+    @abstractmethod
+    def bounds(self) -> np.ndarray:
         """Axis-aligned bounding box, shape (2, 3) (lower, upper), m."""
-        raise NotImplementedError
 
     def plot(self, ax=None, **kwargs):
         """Draw the obstacle in the x-y plane (projection along z) with matplotlib.
@@ -185,8 +186,10 @@ class Obstacle:
         ax.set_ylabel("y (m)")
         return ax
 
-    def _evaluate(self, points: np.ndarray, order: int):  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abstractmethod
+    def _evaluate(self, points: np.ndarray, order: int):
+        """(gap, gradient or None, hessian or None) of validated points (n, 3)."""
 
-    def _draw(self, ax, **kwargs):  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abstractmethod
+    def _draw(self, ax, **kwargs):
+        """Draw the obstacle's walls in the x-y plane on ``ax``."""
