@@ -17,6 +17,8 @@ __all__ = [
     "reach_fields",
     "plane_leak",
     "leaves_plane",
+    "clamp_azimuth",
+    "resolve_clamp_and_model",
 ]
 
 MODELS = ("auto", "planar", "spatial")
@@ -178,3 +180,19 @@ def choose_model(model: str, rod, field: Field, clamp: np.ndarray, R0: np.ndarra
             + " -- use model='auto' or 'spatial'"
         )
     return "spatial" if reasons else "planar"
+
+
+def clamp_azimuth(R0: np.ndarray) -> float:
+    """Angle (rad) of the clamp tangent about z, ``atan2(t_y, t_x)``, in (-pi, pi]."""
+    return float(np.arctan2(R0[1, 0], R0[0, 0]))
+
+
+def resolve_clamp_and_model(model: str, rod, field: Field, clamp, clamp_angle, clamp_rotation):
+    """(the model to run, the clamp frame (3, 3), the planar clamp angle): the frame of
+    ``clamp_angle`` or ``clamp_rotation`` (:func:`clamp_frame`), the model of
+    :func:`choose_model`, and for a planar run of a rotated clamp its angle about z."""
+    R0 = clamp_frame(clamp_angle, clamp_rotation)
+    chosen = choose_model(model, rod, field, clamp, R0)
+    if chosen == "planar" and clamp_rotation is not None:
+        clamp_angle = clamp_azimuth(R0)
+    return chosen, R0, clamp_angle

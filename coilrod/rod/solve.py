@@ -16,7 +16,7 @@ from ..path.events import warn_events
 from ..path.stepping import PathOptions, follow_load
 from ..robot.rod import Rod
 from .mesh import RodMesh, node_magnetization
-from .model import choose_model, clamp_frame
+from .model import clamp_azimuth, resolve_clamp_and_model
 from .planar import PlanarRod
 from .result import RodResult
 from .so3 import expm, logm
@@ -254,9 +254,8 @@ def solve_rod(
         rod, field, scales, nodes, clamp_position, clamp_angle, tol
     )
     max_iter = _int_option(max_iter, "max_iter", 1)
-    R0 = clamp_frame(angle, clamp_rotation)
     obstacles = _check_obstacles(obstacles)
-    chosen = choose_model(model, rod, field, clamp, R0)
+    chosen, R0, angle = resolve_clamp_and_model(model, rod, field, clamp, angle, clamp_rotation)
     if obstacles:
         if model == "planar":
             raise ValueError(
@@ -264,8 +263,6 @@ def solve_rod(
                 "(a planar load keeps the spatial rod's state planar)"
             )
         chosen = "spatial"
-    if chosen == "planar" and clamp_rotation is not None:
-        angle = float(np.arctan2(R0[1, 0], R0[0, 0]))
     mesh = make_mesh(rod, nodes)
     meshes = [mesh, mesh.refined()] if richardson else [mesh]
     if chosen == "planar":
@@ -512,7 +509,7 @@ def _tip_azimuth(tip_frames: np.ndarray, tip_phi: np.ndarray, R0: np.ndarray) ->
     planar model's unwrapped tip angle for a planar state)."""
     t = tip_frames[:, :, 0]
     raw = np.arctan2(t[:, 1], t[:, 0])
-    guess = np.arctan2(R0[1, 0], R0[0, 0]) + tip_phi[:, 2]
+    guess = clamp_azimuth(R0) + tip_phi[:, 2]
     return raw + 2 * np.pi * np.round((guess - raw) / (2 * np.pi))
 
 

@@ -11,7 +11,7 @@ from coils._validate import finite_scalar, positive
 from ..errors import ConvergenceError
 from ..path.arclength import ArcLength
 from ..path.corrector import NewtonOptions, newton
-from .model import choose_model, clamp_frame
+from .model import resolve_clamp_and_model
 from .solve import _tip_azimuth, build_problem, build_spatial_problem, check_inputs, make_mesh
 
 __all__ = ["trace_rod", "RodPath"]
@@ -156,11 +156,8 @@ def trace_rod(
         raise ValueError(f"max_steps must be a positive integer; got {max_steps!r}")
     span = max(hi - lo, 1e-300)
     ds = 0.02 * span if step is None else positive(step, "step")
-    R0 = clamp_frame(angle, clamp_rotation)
-    chosen = choose_model(model, rod, field, clamp, R0)
+    chosen, R0, angle = resolve_clamp_and_model(model, rod, field, clamp, angle, clamp_rotation)
     if chosen == "planar":
-        if clamp_rotation is not None:
-            angle = float(np.arctan2(R0[1, 0], R0[0, 0]))
         problem = build_problem(rod, field, make_mesh(rod, nodes), clamp, angle, tol)
         start = problem.from_theta(_initial_theta(problem, rod, initial), c0)
     else:
