@@ -248,21 +248,25 @@ def _check_wrt(result, wrt) -> list[str]:
 
 
 # -- the computation ----------------------------------------------------------------------------
-def _magnetization_rates(rod, mesh, group: str) -> np.ndarray:
-    """d(mu_i)/dp of the segment magnitudes or angles, shape (p, n, 2), in the problem's units
-    (1/T per A/m, or per rad)."""
+def _magnetization_rates(rod, mesh, group: str, dim: int = 2) -> np.ndarray:
+    """d(mu_i)/dp of the segment magnitudes or angles, shape (p, n, dim), in the problem's
+    units (1/T per A/m, or per rad): the body vector (cos a cos e, sin a cos e, sin e) of each
+    segment's angle a and elevation e (its first two components for the planar rod, whose
+    magnetization has e = 0)."""
     edges, mags, angs = _segments(rod.magnetization, rod.length)
+    elev = np.asarray(getattr(rod.magnetization, "segment_elevations", np.zeros_like(angs)))
     factor = rod.area * rod.length**2 / rod.bending_stiffness
     cache = mesh.__dict__.setdefault("_segment_weights", {})
     key = (tuple(edges), rod.length)
     if key not in cache:
         cache[key] = segment_weights(edges, mesh, rod.length)
     W = cache[key] * factor  # (n, p)
-    if group == "magnitudes":  # unit magnitude on segment j, its own angle
-        u = np.stack([np.cos(angs), np.sin(angs)], axis=-1)
-    else:  # |M_j| turned by a right angle on segment j
-        u = mags[:, None] * np.stack([-np.sin(angs), np.cos(angs)], axis=-1)
-    return W.T[:, :, None] * u[:, None, :]
+    ce = np.cos(elev)
+    if group == "magnitudes":  # unit magnitude on segment j, its own direction
+        u = np.stack([np.cos(angs) * ce, np.sin(angs) * ce, np.sin(elev)], axis=-1)
+    else:  # |M_j| turned by a right angle about the binormal on segment j
+        u = mags[:, None] * np.stack([-np.sin(angs) * ce, np.cos(angs) * ce, 0 * ce], axis=-1)
+    return W.T[:, :, None] * u[:, None, :dim]
 
 
 def _mesh_derivatives(problem, U, S, rod, groups, field_groups, lin=None):
@@ -345,21 +349,6 @@ def _as_spatial(sol, rows, S, mixed=False):
     return tuple(problems), tuple(states)
 
 
-def _spatial_magnetization_rates(rod, mesh, group: str) -> np.ndarray:
-    """d(mu_i)/dp of the segment magnitudes or angles in 3D, shape (p, n, 3) (the body vector
-    (cos a cos e, sin a cos e, sin e) of each segment's angle a and elevation e)."""
-    edges, mags, angs = _segments(rod.magnetization, rod.length)
-    elev = np.asarray(getattr(rod.magnetization, "segment_elevations", np.zeros_like(angs)))
-    factor = rod.area * rod.length**2 / rod.bending_stiffness
-    W = segment_weights(edges, mesh, rod.length) * factor  # (n, p)
-    ce = np.cos(elev)
-    if group == "magnitudes":
-        u = np.stack([np.cos(angs) * ce, np.sin(angs) * ce, np.sin(elev)], axis=-1)
-    else:
-        u = mags[:, None] * np.stack([-np.sin(angs) * ce, np.cos(angs) * ce, 0 * ce], axis=-1)
-    return W.T[:, :, None] * u[:, None, :]
-
-
 def _spatial_mesh_derivatives(problem, U, S, rod, groups, field_groups):
     """d(tip x, y, z [units of L], azimuth [rad])/dp of spatial states U (k, size) on one
     mesh by the adjoint of the state's Jacobian: shape (k, 4, p)."""
@@ -381,7 +370,7 @@ def _spatial_mesh_derivatives(problem, U, S, rod, groups, field_groups):
         else:
             if group in ("magnitudes", "angles"):
                 rates = problem.load_rates(
-                    U, dmu=_spatial_magnetization_rates(rod, problem.mesh, group)
+                    U, dmu=_magnetization_rates(rod, problem.mesh, group, dim=3)
                 )
             else:
                 _, _, evaluate = field_groups[group]
