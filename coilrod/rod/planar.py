@@ -664,8 +664,6 @@ class PlanarRod(DiscreteRod):
         product one banded solve), with the sign of det H (the parity of the number of
         negative eigenvalues) guarding against an unstable state whose closest-to-zero
         eigenvalue is positive."""
-        from scipy.sparse.linalg import LinearOperator, eigsh
-
         idx = _NV * np.arange(1, self.n) + _TH
         sq = np.sqrt(self.mesh.w[1:])
         rhs = np.zeros((1, self.size))
@@ -675,12 +673,22 @@ class PlanarRod(DiscreteRod):
             rhs[0, idx] = sq * np.ravel(v)
             return sq * tan.solve(rhs)[0, idx]
 
-        op = LinearOperator((self.n - 1, self.n - 1), matvec=matvec, dtype=float)
-        sigma = eigsh(op, k=1, which="LM", tol=1e-10, return_eigenvectors=False)[0]
-        mu = 1.0 / sigma
-        if mu > 0 and sign < 0:
-            return -abs(mu)
-        return float(mu)
+        return closest_to_zero(matvec, self.n - 1, sign)
+
+
+def closest_to_zero(matvec, size: int, sign: float) -> float:
+    """Eigenvalue mu closest to zero of H z = mu W z from products ``matvec(v)`` with
+    ``S = W^1/2 H^-1 W^1/2`` (size ``size``), by ARPACK on S's dominant eigenvalue 1 / mu;
+    ``sign`` < 0 (an unstable state) makes a positive result negative (its closest-to-zero
+    eigenvalue may be positive while another is negative)."""
+    from scipy.sparse.linalg import LinearOperator, eigsh
+
+    op = LinearOperator((size, size), matvec=matvec, dtype=float)
+    sigma = eigsh(op, k=1, which="LM", tol=1e-10, return_eigenvectors=False)[0]
+    mu = 1.0 / sigma
+    if mu > 0 and sign < 0:
+        return -abs(mu)
+    return float(mu)
 
 
 def _take_tangent(tan: RodTangent, rows) -> RodTangent:

@@ -42,7 +42,7 @@ import numpy as np
 
 from ..path.protocol import Linearization
 from .discrete import DiscreteRod
-from .planar import RodTangent, _lowest_from_inverse, _take_tangent
+from .planar import RodTangent, _lowest_from_inverse, _take_tangent, closest_to_zero
 from .so3 import cross, expm, hat, inv_right_jacobian_coefficients, left_jacobian, logm
 
 __all__ = ["SpatialRod"]
@@ -698,7 +698,7 @@ class SpatialRod(DiscreteRod):
         def apply(V):  # V (q, 3(n-1)) -> W^1/2 H^-1 W^1/2 V
             rhs = np.zeros((V.shape[0], self.size))
             rhs[:, rows] = sq * V
-            sol = tan.solve_many(rhs) if hasattr(tan, "solve_many") else _solve_many(tan, rhs)
+            sol = _solve_many(tan, rhs)
             dphi = sol[:, rows].reshape(V.shape[0], self.n - 1, 3)
             return sq * np.einsum("nij,qnj->qni", Jl, dphi).reshape(V.shape[0], -1)
 
@@ -709,12 +709,7 @@ class SpatialRod(DiscreteRod):
             if not np.all(np.isfinite(Sm)):
                 return float("nan")
             return _lowest_from_inverse(Sm)
-        from scipy.sparse.linalg import LinearOperator, eigsh
-
-        op = LinearOperator((nf, nf), matvec=lambda v: apply(np.ravel(v)[None])[0], dtype=float)
-        sigma = eigsh(op, k=1, which="LM", tol=1e-10, return_eigenvectors=False)[0]
-        mu = 1.0 / sigma
-        return float(-abs(mu) if (mu > 0 and sign < 0) else mu)
+        return closest_to_zero(lambda v: apply(np.ravel(v)[None])[0], nf, sign)
 
 
 def _solve_many(tan: RodTangent, rhs: np.ndarray) -> np.ndarray:
