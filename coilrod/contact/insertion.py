@@ -317,20 +317,19 @@ def insert(
 
         bar = tqdm(total=lengths.size, desc="insert", unit="step")
 
-    def record(problem, u, free):
+    def record(problem, u, free, stable):
         V = u.reshape(problem.n, problem.nv)
         R = problem.frames(u[None])[0]
         x = problem.points(V[:, 0:3])
         force, gaps, active = problem.contact_state(u[None])
         EI, L = free.bending_stiffness, free.length
         per_length = force[0].sum(axis=1) * (EI / L**3)
-        lin = problem.linearize(u[None], np.array([1.0]))
         out["tip"].append(x[-1].copy())
         out["wall"].append(problem.contact_totals(force)[0].sum(axis=0) * (EI / L**2))
         out["fmax"].append(float(np.max(np.linalg.norm(per_length, axis=1))))
         out["nodes"].append(active[0].any(axis=1))
         out["gap"].append(float(gaps.min() * L))
-        out["stable"].append(bool(problem.stability(lin)[0] > 0))
+        out["stable"].append(bool(stable))
         out["s"].append(problem.mesh.s * L)
         out["x"].append(x)
         out["R"].append(R)
@@ -380,7 +379,7 @@ def insert(
             raise
         problem = first._solution.problems[0]
         u = first._solution.states[0][0]
-        record(problem, u, free0)
+        record(problem, u, free0, first.stable[0])
         out["sub"].append(1)
         if bar is not None:
             bar.update(1)
@@ -388,7 +387,7 @@ def insert(
         for k in range(1, lengths.size):
             target_len, target_field = float(lengths[k]), schedule(k, float(lengths[k]))
             t, dt, solves, halvings = 0.0, 1.0, 0, 0
-            cur_problem, cur_u = problem, u
+            cur_problem, cur_u, cur_lin = problem, u, None
             while t < 1.0:
                 t1 = min(1.0, t + dt)
                 length = prev_len + t1 * (target_len - prev_len)
@@ -397,8 +396,8 @@ def insert(
                 guess = _carry(cur_problem, cur_u, trial)
                 res = newton(trial, guess, 1.0, opts)
                 solves += 1
-                if res.ok:
-                    t, cur_problem, cur_u = t1, trial, res.u
+                if res.ok:  # (its linearization carries the state's stability)
+                    t, cur_problem, cur_u, cur_lin = t1, trial, res.u, res.lin
                     dt = min(1.0 - t, 2 * dt) if t < 1.0 else dt
                     continue
                 halvings += 1
@@ -414,7 +413,7 @@ def insert(
                     )
                 dt /= 2
             problem, u = cur_problem, cur_u
-            record(problem, u, free)
+            record(problem, u, free, np.ravel(problem.stability(cur_lin))[0] > 0)
             out["sub"].append(solves)
             prev_len, prev_field = target_len, target_field
             if bar is not None:
