@@ -482,7 +482,7 @@ def _check_regular(result, sol, rows, S):
     mu = result._min_eigenvalue
     if callable(mu):
         lin = problem.linearize(sol.states[0][rows], S)
-        mu = np.asarray(problem.stability(lin, precise=True), float)
+        mu = np.asarray(problem.branch_stability(lin, precise=True), float)
     else:
         mu = np.asarray(mu, float)[rows]
     bad = np.flatnonzero(np.isfinite(mu) & (np.abs(mu) < SINGULAR * problem.mu0))

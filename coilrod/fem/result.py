@@ -23,7 +23,10 @@ class FEMResult:
         of the free end face, taken as the image of the section's y direction (least squares
         over the face nodes) turned by -pi/2 -- the rod model's tip angle.
     converged : ndarray, shape (n,)
-        True for every returned state (unreachable loads raise ``ConvergenceError``).
+        ``error <= 1``: the state passed Newton's convergence test (a state that does not is
+        never returned: unreachable loads raise ``ConvergenceError``).
+    error : ndarray, shape (n,)
+        The convergence measure Newton reached at each state (<= 1: converged).
     stable : ndarray, shape (n,)
         False where the (condensed) tangent has negative eigenvalues (none at the unloaded
         state): counted from the factorisation's inertia where it reveals it, else from the
@@ -40,7 +43,7 @@ class FEMResult:
         Counters (evaluations, factorisations, step cuts).
     """
 
-    def __init__(self, assembler, scales, states, stats, stable):
+    def __init__(self, assembler, scales, states, stats, stable, error):
         self._asm = assembler
         self.scales = np.asarray(scales, dtype=float)
         self._states = list(states)
@@ -51,7 +54,19 @@ class FEMResult:
         self.order = assembler.order
         self.tip = np.array([assembler.tip(u) for u in self._states]).reshape(-1, 3)
         self.tip_angle = self._tip_angles()
-        self.converged = np.ones(len(self._states), dtype=bool)
+        self.error = np.asarray(error, dtype=float)
+        self.converged = self.error <= 1.0
+        if not self.converged.all():
+            from ..errors import ConvergenceError
+
+            k = int(np.argmin(self.converged))
+            raise ConvergenceError(
+                f"solve_fem: the state at scale {self.scales[k]:g} (index {k}) does not meet "
+                f"the convergence test (error {self.error[k]:.3g} of the tolerance)",
+                reached=float(self.scales[k - 1]) if k else 0.0,
+                target=float(self.scales[k]),
+                residual=float(self.error[k]),
+            )
         self.stable = np.asarray(stable, dtype=bool)
         self.iterations = np.asarray(stats.iterations, dtype=int)
         #: Changes of stability and snap-throughs along the path (see coilrod.path.events).

@@ -230,4 +230,5 @@ def solve_fem(
 def _result(asm, points, stats) -> FEMResult:
     scales = np.array([p.scale for p in points])
     stable = np.array([p.stability > 0 for p in points], dtype=bool)
-    return FEMResult(asm, scales, [p.u for p in points], stats, stable)
+    error = np.array([p.error for p in points], dtype=float)
+    return FEMResult(asm, scales, [p.u for p in points], stats, stable, error)

@@ -143,6 +143,9 @@ class _OneAtATime(PathProblem):
     def stability(self, lin, precise=False):
         return np.array([self.problem.stability(p, precise) for p in lin.tangent])
 
+    def branch_stability(self, lin, precise=False):
+        return np.array([self.problem.branch_stability(p, precise) for p in lin.tangent])
+
     def step_limit(self, u, du):
         return np.array([self.problem.step_limit(u[j], du[j]) for j in range(len(u))])
 

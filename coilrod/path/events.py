@@ -6,7 +6,8 @@ The engine records each event as a dict (so results stay plain data):
   equilibrium continues (a branch point; the solver stays on its branch).  ``scale`` is the
   critical scale, located by cutting the load step to ``bifurcation_tol`` of the requested step
   (and interpolated with the model's stability measure); ``stable`` the new stability;
-  ``between`` the two requested scales around it.
+  ``between`` the two requested scales around it; the planar rod adds ``mode``
+  ("in-plane" or "out-of-plane").
 * ``kind = "snap"``: the branch ended at a limit point (fold); the path was followed around it
   by pseudo-arclength continuation until it was stable again beyond the fold.  ``scale`` is
   the fold scale (the extreme scale reached on the old branch), ``landing`` the scale at which
@@ -43,4 +44,10 @@ def warn_events(events: list[dict], what: str = "the equilibrium branch", stackl
                 f"critical scale {e['scale']:.6g}): a bifurcation or limit point; the solver "
                 "stays on its branch"
             )
+            if e.get("mode") == "out-of-plane":
+                msg += (
+                    " (an out-of-plane mode: the rod would buckle out of its plane; the planar "
+                    "solver stays on the planar branch -- model='spatial' with an imperfection "
+                    "follows the rod out of the plane)"
+                )
         warnings.warn(msg, StabilityWarning, stacklevel=stacklevel)

@@ -119,6 +119,13 @@ class PathProblem(ABC):
         (e.g. +-1 from the sign of the tangent's determinant relative to the unloaded state)."""
 
     # -- defaults -----------------------------------------------------------------------------
+    def branch_stability(self, lin: Linearization, precise: bool = False) -> float | np.ndarray:
+        """Stability among the states the model itself can follow (like :meth:`stability`),
+        for the engine's fold handling: an arclength run around a fold lands where this is
+        positive.  Default :meth:`stability`; a model whose :meth:`stability` also counts
+        modes it cannot follow (the planar rod's out-of-plane modes) gives its own here."""
+        return self.stability(lin, precise)
+
     def step_limit(self, u: np.ndarray, du: np.ndarray) -> float | np.ndarray:
         """Largest fraction (<= 1) of the Newton increment ``du`` to take from ``u``."""
         return 1.0 if np.ndim(u) == 1 else np.ones(len(u))

@@ -425,7 +425,9 @@ class _Tracker:
                     extreme = c  # still on the old branch, toward the fold
                 else:
                     turned = True
-            if (c - cur.scale) * direction > 0 and self.stable(float(self.P.stability(lin)[0])):
+            if (c - cur.scale) * direction > 0 and self.stable(
+                float(self.P.branch_stability(lin)[0])
+            ):
                 return (float(extreme) if turned else None), self.point(u, c, err, lin)
         return None
 

@@ -95,7 +95,7 @@ class DiscreteRod(PathProblem):
         """True if the smallest second-variation eigenvalue is below 5 % of the straight
         rod's: failing load steps there mean the branch turns back (a limit point)."""
         try:
-            mu = float(self.stability(lin, precise=True)[0])
+            mu = float(self.branch_stability(lin, precise=True)[0])
         except (np.linalg.LinAlgError, ValueError, FloatingPointError):
             return False
         return bool(mu < 0.05 * self.mu0)
@@ -103,7 +103,7 @@ class DiscreteRod(PathProblem):
     def fold_hint(self, lin: Linearization) -> str:
         """Say whether the state of ``lin`` is close to a limit point (fold)."""
         try:
-            mu = float(self.stability(lin, precise=True)[0])
+            mu = float(self.branch_stability(lin, precise=True)[0])
         except (np.linalg.LinAlgError, ValueError, FloatingPointError):
             return ""
         if not np.isfinite(mu):
@@ -117,9 +117,19 @@ class DiscreteRod(PathProblem):
         return f"; smallest second-variation eigenvalue there {mu:.3g}"
 
     @property
+    def mu0_stability(self) -> float:
+        """Smallest eigenvalue of :meth:`stability` (the planar rod's 3D figure included) at
+        the straight unloaded rod."""
+        cached = getattr(self, "_mu0_stability", None)
+        if cached is None:
+            lin = self.linearize(self.straight(), 0.0)
+            cached = self._mu0_stability = float(self.stability(lin, precise=True)[0])
+        return cached
+
+    @property
     def mu0(self) -> float:
         """Smallest second-variation eigenvalue of the straight unloaded rod (~ pi^2 / 4)."""
         if self._mu0 is None:
             lin = self.linearize(self.straight(), 0.0)
-            self._mu0 = float(self.stability(lin, precise=True)[0])
+            self._mu0 = float(self.branch_stability(lin, precise=True)[0])
         return self._mu0

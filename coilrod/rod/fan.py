@@ -107,6 +107,7 @@ class UniformFan(PathProblem):
             tangent=lin.tangent,
         )
         out.load_rate = self.members(lin.load_rate)
+        out.uniform_fields = self.member_fields(lin.u.shape[0])[:, 0, :]
         return out
 
     def solve(self, lin: Linearization, rhs: np.ndarray) -> np.ndarray:
@@ -149,9 +150,15 @@ class UniformFan(PathProblem):
         """Stability of every member, shape (k D,) (see :meth:`PlanarRod.stability`)."""
         return np.asarray(self.base.stability(self.member_linearization(lin), precise), float)
 
+    def branch_stability(self, lin: Linearization, precise: bool = False) -> np.ndarray:
+        """The worst member's in-plane stability (:meth:`PlanarRod.branch_stability`)."""
+        k = lin.u.shape[0]
+        mu = self.base.branch_stability(self.member_linearization(lin), precise)
+        return np.asarray(mu, float).reshape(k, self.D).min(axis=1)
+
     def near_fold(self, lin: Linearization) -> bool:
         try:
-            mu = float(np.min(self.stability(lin, precise=True)))
+            mu = float(np.min(self.branch_stability(lin, precise=True)))
         except (np.linalg.LinAlgError, ValueError, FloatingPointError):
             return False
         return bool(mu < 0.05 * self.base.mu0)

@@ -99,12 +99,38 @@ def reach_disc(clamp: np.ndarray, length: float, radii: int = 17, angles: int = 
 
 
 def reach_fields(evaluate, clamp: np.ndarray, length: float, radii: int = 17, angles: int = 48):
-    """``evaluate(points)`` -> (B, G) on the :func:`reach_disc` (at the clamp alone where a
-    coil winding lies in the disc and the field cannot be evaluated there)."""
+    """``evaluate(points)`` -> (B, G) on the :func:`reach_disc` of the rod.
+
+    Where the whole disc cannot be evaluated (a coil winding inside it, a gridded field whose
+    box does not cover it), the field is taken at every point of the disc where it can be
+    (ring by ring, then point by point): never at the clamp alone.  ValueError when no point
+    but the clamp can be evaluated."""
+    pts = reach_disc(clamp, length, radii, angles)
     try:
-        return evaluate(reach_disc(clamp, length, radii, angles))
+        return evaluate(pts)
     except ValueError:
-        return evaluate(np.asarray(clamp, float)[None])
+        pass
+    parts = []
+    for ring in np.split(pts, radii):
+        try:
+            parts.append(evaluate(ring))
+            continue
+        except ValueError:
+            pass
+        for p in ring:
+            try:
+                parts.append(evaluate(p[None]))
+            except ValueError:
+                continue
+    if len(parts) <= 1 and sum(len(p[0]) for p in parts) <= 1:
+        raise ValueError(
+            "the field cannot be evaluated on the plane around the clamp (the disc of radius "
+            f"{length:g} m the rod can reach): cannot tell whether it keeps the rod in its "
+            "plane -- give model='spatial' or a field defined there"
+        )
+    B = np.concatenate([p[0] for p in parts])
+    G = np.concatenate([p[1] for p in parts])
+    return B, G
 
 
 def plane_leak(B, G, length: float, scale: float | None = None):

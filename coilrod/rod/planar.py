@@ -445,7 +445,10 @@ class PlanarRod(DiscreteRod):
             tan.bad |= ~ok
         lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
         lin.load_rate = R1
-        lin.field_values = field_values  # mixed layout: B (k, n, 3), G (k, n, 3, 3) at the nodes
+        # mixed layout: B (k, n, 3), G (k, n, 3, 3) at the nodes; the hessian (k n, 3, 3, 3)
+        # or None (a linear field, or no tangent) for the 3D stability's twin
+        lin.field_values = None if field_values is None else field_values[:2]
+        lin.field_hessian = None if field_values is None else field_values[2]
         return lin
 
     def dense_jacobian(self, u: np.ndarray, scale: float) -> np.ndarray:
@@ -508,8 +511,62 @@ class PlanarRod(DiscreteRod):
         w[np.arange(self.n) * (self.size // self.n) + (0 if self.uniform else _TH)] = 1 / self.n
         return w
 
+    #: The spatial twin (:class:`~coilrod.rod.out_of_plane.OutOfPlane`) whose second
+    #: variation gives the 3D stability of the planar states; None: in-plane stability only.
+    out_of_plane = None
+
+    def with_out_of_plane(self, stiffness) -> PlanarRod:
+        """This problem with 3D stability: :meth:`stability` then counts the out-of-plane
+        modes too (``stiffness`` = (GJ, EI_y, EI_z) / EI_z); returns self."""
+        from .out_of_plane import OutOfPlane
+
+        self.out_of_plane = OutOfPlane(self, stiffness)
+        return self
+
     def stability(self, lin: Linearization, precise: bool = False) -> np.ndarray:
-        """Smallest eigenvalue mu of the second variation ``H z = mu W z`` (W = diag(w)).
+        """Stability of the states of ``lin`` in 3D when the problem has an
+        :attr:`out_of_plane` twin, else in the plane (:meth:`stability_in_plane`).
+
+        3D: the cheap indicator is +1 for a stable state and minus the number of negative
+        eigenvalues of the spatial second variation otherwise (0 where it cannot be
+        evaluated); ``precise``: its smallest eigenvalue (EI_z / L^3 units, the in-plane
+        figure's normalisation).  ``lin`` may carry ``uniform_fields`` (k, 3) T, one uniform
+        field per member (a fan of field directions)."""
+        if self.out_of_plane is None:
+            return self.stability_in_plane(lin, precise)
+        total = self.negative_counts(lin)[0]
+        signs = np.where(total == 0, 1.0, np.where(total > 0, -total.astype(float), 0.0))
+        if not precise:
+            return signs
+        lin3 = self.out_of_plane.linearize(lin, getattr(lin, "uniform_fields", None))
+        return self.out_of_plane.lowest(lin3, total)
+
+    def negative_counts(self, lin: Linearization):
+        """Negative eigenvalues of the 3D second variation at the states of ``lin``: (in all,
+        out of the plane), two int arrays (k,) (-1 where not finite); cached on ``lin``.
+
+        The in-plane count is the parity of the planar determinant's sign (the planar rod's
+        eigenvalues are simple); the out-of-plane one is exact (block LDL^T of the twin's
+        odd block, :meth:`~coilrod.rod.out_of_plane.OutOfPlane.odd_count`): reflection
+        through the plane decouples the two exactly.  Needs :attr:`out_of_plane`."""
+        cached = getattr(lin, "_counts_3d", None)
+        if cached is not None:
+            return cached
+        odd = self.out_of_plane.odd_count(lin, getattr(lin, "uniform_fields", None))
+        signs = lin.tangent.det_signs() * self.det_reference()
+        even = np.where(signs > 0, 0, np.where(signs < 0, 1, -1))
+        total = np.where((odd >= 0) & (even >= 0), odd + even, -1)
+        lin._counts_3d = (total, odd)
+        return lin._counts_3d
+
+    def branch_stability(self, lin: Linearization, precise: bool = False) -> np.ndarray:
+        """Stability among the states the model can follow (in the plane): the engine's
+        folds and snap landings are those of the planar branch."""
+        return self.stability_in_plane(lin, precise)
+
+    def stability_in_plane(self, lin: Linearization, precise: bool = False) -> np.ndarray:
+        """Smallest eigenvalue mu of the in-plane second variation ``H z = mu W z``
+        (W = diag(w)).
 
         H is the Hessian of the discrete energy in the free angles theta_1..theta_N
         (positions and forces eliminated); mu approximates the smallest eigenvalue of the
@@ -619,7 +676,7 @@ class PlanarRod(DiscreteRod):
             finite,
         )
         R[~finite] = np.nan
-        return R, R1, (ab if tangent else None), (B.reshape(k, n, 3), G.reshape(k, n, 3, 3))
+        return R, R1, (ab if tangent else None), (B.reshape(k, n, 3), G.reshape(k, n, 3, 3), H)
 
     def _stability_mixed(self, lin: Linearization, signs: np.ndarray) -> np.ndarray:
         """Smallest second-variation eigenvalue of each member (see :meth:`stability`).

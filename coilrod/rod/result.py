@@ -26,10 +26,20 @@ class RodResult:
         ``atan2(t_y, t_x)``, continued from the clamp's; see :meth:`frames` for the full
         orientation).
     converged : ndarray of bool, shape (k,)
-        True where Newton reached the tolerance (always True for returned states: a scale that
-        cannot be reached raises :class:`~coilrod.ConvergenceError`).
+        ``error <= 1``: the state passed the solver's convergence test on every mesh used (a
+        state that does not is never returned: a scale that cannot be reached raises
+        :class:`~coilrod.ConvergenceError`).
+    error : ndarray, shape (k,)
+        The convergence measure Newton reached at each state (largest over the meshes): the
+        scaled residual over the tolerance plus its round-off floor (<= 1: converged).
     stable : ndarray of bool, shape (k,)
         False where the second variation is not positive definite (unstable equilibrium).
+        Always in 3D: for the planar model the out-of-plane modes (twist and bending out of the
+        plane, from the spatial rod's second variation at the planar state) are counted too,
+        so a planar state that would buckle out of its plane is unstable.
+    stable_in_plane : ndarray of bool, shape (k,)
+        Planar model only: stability against in-plane perturbations alone (the planar rod's
+        own figure; computed on first access).  Equal to ``stable`` for the spatial model.
     residual : ndarray, shape (k,)
         Scaled residual max-norm of each state (largest over the meshes used), non-dimensional.
     min_eigenvalue : ndarray, shape (k,)
@@ -37,15 +47,17 @@ class RodResult:
         (non-dimensional); it crosses zero at a bifurcation or limit point.  The straight
         unloaded rod has pi^2 / 4.  Computed on the coarse mesh (extrapolated near a loss of
         stability for uniform fields); for large meshes in non-uniform fields it is the
-        eigenvalue closest to zero.  In non-uniform fields it is computed on first access
-        (the solve itself decides stability from the exact sign of the tangent's
-        determinant and does not need it).
+        eigenvalue closest to zero.  Computed on first access (the solve itself decides
+        stability from the exact inertia of the second variation and does not need it).  3D
+        like ``stable``; ``min_eigenvalue_in_plane`` is the planar model's in-plane figure.
     iterations : ndarray of int, shape (k,)
         Newton iterations spent on each scale (all meshes, all sub-steps).
     instabilities : list of dict
         One entry per change of stability between consecutive scales: ``index`` (first scale
         with the new stability), ``scale`` (critical scale estimated by linear interpolation of
-        ``min_eigenvalue``), ``stable`` (the new stability); and one per snap-through, with
+        ``min_eigenvalue``), ``stable`` (the new stability), and for the planar model ``mode``:
+        "in-plane" or "out-of-plane" (the rod would leave its plane there; the planar solver
+        stays on the planar branch); and one per snap-through, with
         ``kind`` "snap", ``scale`` (last converged scale before the fold) and ``landing``
         (scale at which the path, followed around the fold, was stable again).
     segments : int
@@ -73,9 +85,30 @@ class RodResult:
     model: str = "planar"
     _frames: np.ndarray | None = field(default=None, repr=False)
     _contact: dict | None = field(default=None, repr=False)
+    error: np.ndarray = field(default=None, repr=False)
+    #: planar model: a callable giving (stable in the plane, in-plane eigenvalue), or their pair
+    _in_plane: object = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.scales)
+
+    def _in_plane_pair(self):
+        if callable(self._in_plane):
+            self._in_plane = self._in_plane()
+        return self._in_plane
+
+    @property
+    def stable_in_plane(self) -> np.ndarray:
+        """See the class docstring; shape (k,)."""
+        pair = self._in_plane_pair()
+        return self.stable.copy() if pair is None else np.asarray(pair[0], bool)
+
+    @property
+    def min_eigenvalue_in_plane(self) -> np.ndarray:
+        """Smallest eigenvalue of the in-plane second variation (planar model; the 3D
+        ``min_eigenvalue`` for the spatial one), EI / L^3 units, shape (k,)."""
+        pair = self._in_plane_pair()
+        return self.min_eigenvalue if pair is None else np.asarray(pair[1], float)
 
     @property
     def min_eigenvalue(self) -> np.ndarray:

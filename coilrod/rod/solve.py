@@ -75,12 +75,23 @@ def make_mesh(rod: Rod, segments: int) -> RodMesh:
 
 
 def build_problem(
-    rod: Rod, field: Field, mesh: RodMesh, clamp_position, clamp_angle, tol: float = 1e-9
+    rod: Rod,
+    field: Field,
+    mesh: RodMesh,
+    clamp_position,
+    clamp_angle,
+    tol: float = 1e-9,
+    stability3d: bool = True,
 ) -> PlanarRod:
-    """The discrete problem of ``rod`` in ``field`` on ``mesh`` (non-dimensional)."""
+    """The discrete problem of ``rod`` in ``field`` on ``mesh`` (non-dimensional); with
+    ``stability3d`` (default) its stability counts the out-of-plane modes too
+    (:mod:`coilrod.rod.out_of_plane`)."""
     L = rod.length
     mu = node_magnetization(rod.magnetization, mesh, L) * (rod.area * L**2 / rod.bending_stiffness)
-    return PlanarRod(mesh, mu, field, L, clamp_position, clamp_angle, tol)
+    problem = PlanarRod(mesh, mu, field, L, clamp_position, clamp_angle, tol)
+    if stability3d:
+        problem.with_out_of_plane(rod_stiffnesses(rod))
+    return problem
 
 
 def rod_stiffnesses(rod: Rod) -> np.ndarray:
@@ -357,7 +368,7 @@ def _check_start(problems, obstacles) -> None:
 
 def _refine(problems, states, scales, opts):
     """Newton on the refined mesh from the interpolated coarse states: (states, iterations,
-    residual norms); ConvergenceError if a state cannot be reached."""
+    residual norms, convergence measures); ConvergenceError if a state cannot be reached."""
     coarse, fine = problems
     # the interpolated coarse solution is within O(h^2) of the fine one: chord iterations
     res = newton(
@@ -376,29 +387,48 @@ def _refine(problems, states, scales, opts):
             target=float(scales[k]),
             residual=float(res.error[k]),
         )
-    return res.u, res.iterations, fine.residual_norm(res.lin.residual)
+    return res.u, res.iterations, fine.residual_norm(res.lin.residual), np.asarray(res.error)
 
 
 def _solved_states(problems, points, iterations, opts):
     """The coarse states of the path points (k, size), the refined mesh's (None without
-    Richardson), the Newton iterations (k,) of both and the larger scaled residual (k,)."""
+    Richardson), the Newton iterations (k,) of both and the larger scaled residual (k,).
+
+    Also the convergence measure of each state (k,): the larger of the meshes' ``error``
+    (the model's test, <= 1 when converged) as Newton measured it.  Every state returned
+    must have passed it: ConvergenceError otherwise, so a result never carries an
+    unconverged state."""
     coarse = problems[0]
     scales = np.array([p.scale for p in points])
     states = np.array([p.u for p in points])
     iterations = np.array(iterations, dtype=int)
     residual = coarse.residual_norm(np.array([p.residual for p in points]))
+    measured = np.array([p.error for p in points], dtype=float)
     fine_states = None
     if len(problems) == 2:
-        fine_states, its, fine_res = _refine(problems, states, scales, opts)
+        fine_states, its, fine_res, fine_err = _refine(problems, states, scales, opts)
         iterations = iterations + its
         residual = np.maximum(residual, fine_res)
-    return states, fine_states, iterations, residual
+        measured = np.maximum(measured, fine_err)
+    bad = ~(measured <= 1.0)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise ConvergenceError(
+            f"solve_rod: the state at scale {scales[k]:g} (index {k}) does not meet the "
+            f"convergence test (error {measured[k]:.3g} of the tolerance)",
+            reached=float(scales[k - 1]) if k else 0.0,
+            target=float(scales[k]),
+            residual=float(measured[k]),
+        )
+    return states, fine_states, iterations, residual, measured
 
 
 def _result(rod, problems, points, iterations, events, opts) -> RodResult:
     """RodResult from the coarse path points: refined-mesh states, Richardson, stability."""
     coarse = problems[0]
-    states, fine_states, iterations, residual = _solved_states(problems, points, iterations, opts)
+    states, fine_states, iterations, residual, measured = _solved_states(
+        problems, points, iterations, opts
+    )
     thetas_c = coarse.theta(states)
     x_c = coarse.positions(thetas_c)
     if len(problems) == 2:
@@ -408,14 +438,15 @@ def _result(rod, problems, points, iterations, events, opts) -> RodResult:
     else:
         thetas, x = thetas_c, x_c
     return _assemble_result(
-        rod, problems, points, events, opts, states, fine_states, iterations, residual,
+        rod, problems, points, events, opts, states, fine_states, iterations, residual, measured,
         points_xyz=coarse.points(x), tip_angle=thetas[:, -1].copy(), _theta=thetas,
     )  # fmt: skip
 
 
 def _assemble_result(
-    rod, problems, points, events, opts, states, fine_states, iterations, residual, **fields
-) -> RodResult:
+    rod, problems, points, events, opts, states, fine_states, iterations, residual, measured,
+    **fields,
+) -> RodResult:  # fmt: skip
     """The RodResult shared by both models: stability (the exact sign now, the eigenvalues
     on first access), refined events, the solution kept for the sensitivities; ``fields``
     adds the model's own (points_xyz, tip_angle, _theta, model, _frames, _contact)."""
@@ -428,14 +459,20 @@ def _assemble_result(
         stable = np.array([p.stability > 0 for p in points], dtype=bool)
         fine = (problems[1], fine_states) if len(problems) == 2 else None
         mu = _eigenvalues_later(coarse, states, scales, fine)
+    in_plane = None
+    if getattr(coarse, "out_of_plane", None) is not None and opts.stability:
+        in_plane = _in_plane_later(coarse, states, scales, fine)
+        events = [_label_mode(e, coarse, states, scales) for e in events]
     points_xyz = fields.pop("points_xyz")
     return RodResult(
         scales=scales,
         s=coarse.mesh.s * rod.length,
         tip=points_xyz[:, -1, :].copy(),
-        converged=np.ones(scales.size, dtype=bool),
+        converged=measured <= 1.0,
         stable=stable,
         residual=residual,
+        error=measured,
+        _in_plane=in_plane,
         _min_eigenvalue=mu,
         iterations=iterations,
         segments=coarse.mesh.counts.sum(),
@@ -455,7 +492,9 @@ def _result_spatial(rod, problems, points, iterations, events, opts) -> RodResul
     """RodResult of the spatial model: refined-mesh states, Richardson extrapolation of the
     positions and of the frames (on SO(3)), stability."""
     coarse = problems[0]
-    states, fine_states, iterations, residual = _solved_states(problems, points, iterations, opts)
+    states, fine_states, iterations, residual, measured = _solved_states(
+        problems, points, iterations, opts
+    )
     R_c = coarse.frames(states)
     x_c = coarse.positions_from_frames(R_c)
     if len(problems) == 2:
@@ -468,7 +507,7 @@ def _result_spatial(rod, problems, points, iterations, events, opts) -> RodResul
     else:
         x, frames = x_c, R_c
     return _assemble_result(
-        rod, problems, points, events, opts, states, fine_states, iterations, residual,
+        rod, problems, points, events, opts, states, fine_states, iterations, residual, measured,
         points_xyz=coarse.points(x),
         tip_angle=_tip_azimuth(frames[:, -1], coarse.rotations(states)[:, -1], coarse.R0),
         _theta=None, model="spatial", _frames=frames,
@@ -524,29 +563,62 @@ class RodSolution:
     states: tuple
 
 
-def _eigenvalues_later(problem, states, scales, fine=None):
+def _eigenvalues_later(problem, states, scales, fine=None, in_plane=False):
     """A callable computing the smallest second-variation eigenvalues of ``states`` (all, or
-    the given rows), batched, for :attr:`RodResult.min_eigenvalue`.
+    the given rows), batched, for :attr:`RodResult.min_eigenvalue` (``in_plane``: the
+    planar rod's in-plane figure, :attr:`RodResult.min_eigenvalue_in_plane`).
 
     For uniform fields with a refined mesh ``fine = (problem, states)``, the eigenvalues near a
     loss of stability (below half the straight rod's) are Richardson-extrapolated, which
     locates a critical scale to fourth order."""
 
+    def measure(p, lin):
+        how = p.branch_stability if in_plane else p.stability
+        return np.asarray(how(lin, precise=True), float)
+
     def compute(rows=None):
         sel = np.arange(len(scales)) if rows is None else np.asarray(rows)
-        mu = np.asarray(
-            problem.stability(problem.linearize(states[sel], scales[sel]), precise=True), float
-        )
+        mu = measure(problem, problem.linearize(states[sel], scales[sel]))
         if fine is not None and problem.uniform:
-            near = np.abs(mu) < _EXTRAPOLATE_MU * problem.mu0
+            mu0 = problem.mu0 if in_plane else problem.mu0_stability
+            near = np.abs(mu) < _EXTRAPOLATE_MU * mu0
             if near.any():
                 fp, fstates = fine
                 flin = fp.linearize(fstates[sel[near]], scales[sel[near]])
-                mu_f = np.asarray(fp.stability(flin, precise=True), float)
+                mu_f = measure(fp, flin)
                 mu[near] = (4 * mu_f - mu[near]) / 3
         return mu
 
     return compute
+
+
+def _in_plane_later(problem, states, scales, fine):
+    """A callable giving (stable in the plane (k,), smallest in-plane eigenvalue (k,)) of
+    ``states``, for :attr:`RodResult.stable_in_plane` (computed on first access)."""
+
+    def compute():
+        lin = problem.linearize(states, scales)
+        signs = np.asarray(problem.stability_in_plane(lin), float)
+        return signs > 0, _eigenvalues_later(problem, states, scales, fine, in_plane=True)()
+
+    return compute
+
+
+def _label_mode(event: dict, problem, states, scales) -> dict:
+    """A bifurcation of a planar path labelled with its mode: "out-of-plane" where the
+    out-of-plane count changed between the requested scales around it, else "in-plane"."""
+    if event.get("kind") != "bifurcation":
+        return event
+    k = event["index"]
+    if k >= len(scales):
+        return event
+    rows = [k - 1, k] if k > 0 else [k]
+    lin = problem.linearize(states[rows], scales[rows])
+    _, odd = problem.negative_counts(lin)
+    before = int(odd[0]) if k > 0 else 0
+    event = dict(event)
+    event["mode"] = "out-of-plane" if int(odd[-1]) != before else "in-plane"
+    return event
 
 
 class _Bracket:

@@ -524,11 +524,15 @@ class SpatialRod(DiscreteRod):
             ab.ravel(order="K")[index] = vals
         return ab
 
-    def _assemble(self, U: np.ndarray, S: np.ndarray, tangent: bool, core=None):
+    def _assemble(
+        self, U: np.ndarray, S: np.ndarray, tangent: bool, core=None, band=True, fields=None
+    ):
         """Residual (k, size), load rate (k, size), band storage and symmetric blocks of a
         stack: the per-node algebra by ``core`` (default: the compiled pass of
         :mod:`coilrod.rod._compiled_spatial`; :func:`numpy_core` is the same in numpy), the
-        contact terms and the second variation's blocks added here."""
+        contact terms and the second variation's blocks added here.  ``band`` False: no
+        band storage (None; the blocks alone, for an inertia count).  ``fields``: (B (k n, 3),
+        G (k n, 3, 3), H (k n, 3, 3, 3) or None) at the nodes, already evaluated."""
         if core is None:
             from ._compiled_spatial import spatial_core as core
 
@@ -544,7 +548,7 @@ class SpatialRod(DiscreteRod):
         else:
             X = np.ascontiguousarray(V[:, :, 0:3])
             F = np.ascontiguousarray(V[:, :, 6:9])
-            B, G, Hs = self._field_by_member(X, tangent)
+            B, G, Hs = self._field_by_member(X, tangent) if fields is None else fields
             B, G = B.reshape(k, n, 3), G.reshape(k, n, 3, 3)
             if Hs is not None:
                 Hs = Hs.reshape(k, n, 3, 3, 3)
@@ -580,7 +584,8 @@ class SpatialRod(DiscreteRod):
             "m_next": blk[:, 1:-1, 2],
         }
         if self.uniform:
-            return R, R1, self._scatter(k, blocks), (diag[:, 1:], A_ab[:, 1:])
+            ab = self._scatter(k, blocks) if band else None
+            return R, R1, ab, (diag[:, 1:], A_ab[:, 1:])
         f_x = blk[:, 1:, 8]
         if self.nc:
             lam, gaps, normals, hess = contact
@@ -640,7 +645,7 @@ class SpatialRod(DiscreteRod):
             D[:, :, 0:3, 9:] = coupling
             D[:, :, 9:, 0:3] = np.swapaxes(coupling, -1, -2)
             D[:, :, 9:, 9:][..., np.arange(nc), np.arange(nc)] = np.where(act, 0.0, 1.0)
-        return R, R1, self._scatter(k, blocks), (D, E)
+        return R, R1, (self._scatter(k, blocks) if band else None), (D, E)
 
     # -- stability ------------------------------------------------------------------------------
     def stability(self, lin: Linearization, precise: bool = False) -> np.ndarray:

@@ -30,9 +30,13 @@ class RodPath:
     tip_angle : ndarray, shape (m,)
         Tip tangent angles, rad.
     stable : ndarray of bool, shape (m,)
-        Positive-definite second variation.
+        Positive-definite second variation, in 3D (a planar path's out-of-plane modes
+        included, as in :class:`~coilrod.RodResult`).
     min_eigenvalue : ndarray, shape (m,)
-        Smallest eigenvalue of the second variation (non-dimensional, see ``RodResult``).
+        Smallest eigenvalue of the second variation (non-dimensional, see ``RodResult``), 3D.
+    stable_in_plane, min_eigenvalue_in_plane : ndarray, shape (m,)
+        The same among in-plane perturbations alone (planar paths; equal to the 3D figures
+        for spatial ones).
     residual : ndarray, shape (m,)
         Scaled residual of each point.
     limit_points : list of dict
@@ -59,6 +63,8 @@ class RodPath:
     limit_points: list = field(default_factory=list)
     model: str = "planar"
     _frames: np.ndarray | None = field(default=None, repr=False)
+    stable_in_plane: np.ndarray | None = None
+    min_eigenvalue_in_plane: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.scale)
@@ -113,7 +119,7 @@ def trace_rod(
     scale_start : float
         Scale of the first point.
     scale_range : (float, float)
-        The trace stops when the scale leaves this interval.
+        (low, high), low < high: the trace stops when the scale leaves this interval.
     initial : callable or array-like, optional
         Starting guess: planar model ``theta(s)`` (s in m, returns rad) or node angles, shape
         (n,); spatial model: node rotation vectors relative to the clamp frame (rad, world
@@ -143,7 +149,7 @@ def trace_rod(
     coilrod.ConvergenceError
         If the first point cannot be found.
     """
-    lo, hi = sorted(finite_scalar(v, "scale_range") for v in scale_range)
+    lo, hi = _scale_range(scale_range)
     c0 = finite_scalar(scale_start, "scale_start")
     _, nodes, clamp, angle, tol = check_inputs(
         rod, field, [c0], nodes, clamp_position, clamp_angle, tol
@@ -183,6 +189,23 @@ def trace_rod(
     return _finish(problem, rod, pts_u, pts_c)
 
 
+def _scale_range(scale_range) -> tuple[float, float]:
+    """(low, high) of ``scale_range`` (ValueError unless two finite numbers, low < high)."""
+    try:
+        values = [finite_scalar(v, "scale_range") for v in scale_range]
+    except TypeError:
+        raise ValueError(f"scale_range must be (low, high); got {scale_range!r}") from None
+    if len(values) != 2:
+        raise ValueError(f"scale_range must be (low, high); got {scale_range!r}")
+    lo, hi = values
+    if not lo < hi:
+        raise ValueError(
+            f"scale_range must be (low, high) with low < high; got ({lo:g}, {hi:g})"
+            + (" (reversed: give the direction with direction=-1)" if lo > hi else "")
+        )
+    return lo, hi
+
+
 def _initial_theta(problem, rod, initial) -> np.ndarray:
     s = problem.mesh.s * rod.length
     if initial is None:
@@ -190,7 +213,18 @@ def _initial_theta(problem, rod, initial) -> np.ndarray:
     if callable(initial):
         theta = np.asarray(initial(s), dtype=float)
     else:
-        theta = np.asarray(initial, dtype=float)
+        try:
+            theta = np.asarray(initial, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"initial must be a callable theta(s) or node angles of shape ({problem.n},); "
+                f"got {type(initial).__name__}"
+            ) from None
+    if theta.shape not in ((), (problem.n,)):
+        raise ValueError(
+            f"initial must give node angles of shape ({problem.n},) (the mesh's nodes: "
+            f"nodes = {problem.n - 1} segments) or a scalar; got shape {theta.shape}"
+        )
     theta = np.broadcast_to(theta, s.shape).astype(float)
     if not np.all(np.isfinite(theta)):
         raise ValueError("initial must give finite angles")
@@ -232,6 +266,7 @@ def _finish(problem, rod, pts_u, pts_c) -> RodPath:
         points = problem.points(problem.positions(thetas))
         tip_angle = thetas[:, -1].copy()
     mu = np.asarray(problem.stability(lin, precise=True), float)
+    mu_plane = np.asarray(problem.branch_stability(lin, precise=True), float)
     residuals = problem.residual_norm(lin)
     path = RodPath(
         scale=scale,
@@ -245,6 +280,8 @@ def _finish(problem, rod, pts_u, pts_c) -> RodPath:
         _points=points,
         model="spatial" if spatial else "planar",
         _frames=frames,
+        stable_in_plane=mu_plane > 0,
+        min_eigenvalue_in_plane=mu_plane,
     )
     dc = np.diff(scale)
     events = {}

@@ -1,0 +1,157 @@
+"""Stability of planar states in 3D (issue "Decisions users can trust", item 1).
+
+A planar state can be stable among in-plane perturbations and buckle out of the plane.  The
+references here are independent of the solvers:
+
+* a finite-difference Hessian of the discrete 3D energy (bending about both section axes and
+  torsion, with the exact relative rotations from scipy's ``Rotation``) over out-of-plane
+  rotations of the nodes, at the planar solver's own states;
+* the spatial rod (``model="spatial"``), which follows the same planar path with every mode;
+* a property family over random magnetizations and field directions.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+import coils
+import coilrod
+from coilrod import presets
+from coilrod.path.events import StabilityWarning
+
+
+def _uniform(b, degrees):
+    a = np.deg2rad(degrees)
+    return coils.UniformField(B=(b * np.cos(a), b * np.sin(a), 0.0))
+
+
+def _energy_3d(rod, s, frames, B):
+    """Discrete 3D energy (J) of node frames (n, 3, 3) in a uniform field B (T): bending and
+    torsion sum psi^T K psi / (2 h) with psi = log(R_i^T R_{i+1}), magnetic -sum w A m . B
+    with the trapezoid weights w and the node magnetization M(s_i) in the body frame."""
+    h = np.diff(s)
+    w = np.zeros(s.size)
+    w[:-1] += h / 2
+    w[1:] += h / 2
+    rel = np.einsum("nji,njk->nik", frames[:-1], frames[1:])
+    psi = Rotation.from_matrix(rel).as_rotvec()
+    K = np.asarray(rod.stiffnesses, float)
+    bend = np.sum(np.einsum("ni,i,ni->n", psi, K, psi) / (2 * h))
+    M = rod.magnetization.vector3(s)
+    m = np.einsum("nij,nj->ni", frames, M)
+    return bend - rod.area * np.sum(w * (m @ np.asarray(B, float)))
+
+
+def _out_of_plane_hessian(rod, s, theta, B, d=1e-4):
+    """Central-difference Hessian (J/rad^2) of :func:`_energy_3d` in world rotations about x
+    and y of the free nodes, at the planar state with node angles theta."""
+    n = s.size
+    base = Rotation.from_euler("z", np.asarray(theta)[:, None]).as_matrix()
+    free = 2 * (n - 1)
+
+    def energy(v):
+        rv = np.zeros((n, 3))
+        rv[1:, :2] = v.reshape(n - 1, 2)
+        frames = Rotation.from_rotvec(rv).as_matrix() @ base
+        return _energy_3d(rod, s, frames, B)
+
+    H = np.zeros((free, free))
+    e = np.eye(free) * d
+    for i in range(free):
+        for j in range(i, free):
+            H[i, j] = H[j, i] = (
+                energy(e[i] + e[j]) - energy(e[i] - e[j]) - energy(-e[i] + e[j]) + energy(-e[i] - e[j])
+            ) / (4 * d * d)
+    return H
+
+
+class TestPlanarStatesIn3D:
+    def test_m2b_buckles_out_of_plane_against_a_finite_difference_hessian(self):
+        # the seed's M(2b) at 255 deg, 20 mT: stable in the plane at every scale, but the 3D
+        # energy's Hessian over out-of-plane rotations is indefinite from scale 0.25 on
+        rod = presets.seed_rod(presets.M2(variant="b"))
+        field = _uniform(20e-3, 255.0)
+        scales = np.array([0.125, 0.375, 0.625, 1.0])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", StabilityWarning)
+            res = coilrod.solve_rod(rod, field, scales, nodes=12, richardson=False)
+        assert res.model == "planar"
+        assert res.stable_in_plane.all()
+        ref = []
+        for k, c in enumerate(scales):
+            H = _out_of_plane_hessian(rod, res.s, res.theta(k), c * np.asarray(field.B([0, 0, 0]))[0])
+            ref.append(np.linalg.eigvalsh(H).min() > 0)
+        assert ref == [True, False, False, False]
+        np.testing.assert_array_equal(res.stable, ref)
+        # the eigenvalue is the 3D one: negative where the Hessian is indefinite
+        assert np.all((res.min_eigenvalue > 0) == np.array(ref))
+        assert np.all(res.min_eigenvalue_in_plane > 0)
+
+    def test_out_of_plane_bifurcation_is_reported_like_any_other(self):
+        # M(4.2) at 150 deg, 20 mT: unstable in 3D between scales ~0.22 and ~0.43; the planar
+        # solver reports both crossings (mode "out-of-plane"), at the spatial rod's scales
+        rod = presets.seed_rod(presets.M42())
+        field = _uniform(20e-3, 150.0)
+        scales = np.linspace(0.05, 0.6, 12)
+        with pytest.warns(StabilityWarning, match="out of its plane"):
+            planar = coilrod.solve_rod(rod, field, scales, nodes=24)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", StabilityWarning)
+            spatial = coilrod.solve_rod(rod, field, scales, nodes=24, model="spatial")
+        assert planar.model == "planar"
+        np.testing.assert_array_equal(planar.stable, spatial.stable)
+        assert planar.stable_in_plane.all()
+        assert not planar.stable.all()
+        kinds = [(e["kind"], e["mode"], e["stable"]) for e in planar.instabilities]
+        assert kinds == [("bifurcation", "out-of-plane", False), ("bifurcation", "out-of-plane", True)]
+        crit_p = [e["scale"] for e in planar.instabilities]
+        crit_s = [e["scale"] for e in spatial.instabilities]
+        np.testing.assert_allclose(crit_p, crit_s, rtol=1e-6)
+        assert 0.2 < crit_p[0] < 0.24 and 0.41 < crit_p[1] < 0.45
+        np.testing.assert_allclose(planar.min_eigenvalue, spatial.min_eigenvalue, rtol=1e-6, atol=1e-8)
+
+    def test_in_plane_figures_stay_available(self):
+        # the straight rod buckling in an antiparallel field is an in-plane bifurcation too
+        rod = presets.seed_rod(presets.M1())
+        lam_c = np.pi**2 / 4
+        field = coils.UniformField(B=(-rod.field_for_lambda(1.0), 1e-9 * rod.field_for_lambda(1.0), 0))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", StabilityWarning)
+            res = coilrod.solve_rod(rod, field, [0.5 * lam_c, 0.9 * lam_c], nodes=16)
+        assert res.stable.all() and res.stable_in_plane.all()
+        assert np.all(res.min_eigenvalue <= res.min_eigenvalue_in_plane + 1e-12)
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    angles=st.tuples(st.floats(-np.pi, np.pi), st.floats(-np.pi, np.pi)),
+    direction=st.floats(0.0, 360.0),
+    b=st.floats(2e-3, 25e-3),
+)
+def test_planar_and_spatial_agree_on_stability_of_in_plane_states(angles, direction, b):
+    rod = coilrod.Rod(
+        0.04,
+        1e6,
+        coilrod.Circle(2e-3),
+        coilrod.Magnetization.segments([0.02, 0.02], [128e3, 96e3], list(angles)),
+    )
+    field = _uniform(b, direction)
+    scales = np.linspace(0.25, 1.0, 4)
+    out = {}
+    for model in ("planar", "spatial"):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", StabilityWarning)
+                out[model] = coilrod.solve_rod(rod, field, scales, nodes=12, model=model)
+        except coilrod.ConvergenceError:
+            out[model] = None
+    if out["planar"] is None or out["spatial"] is None:
+        return  # a path that ends (both models would have to fail alike: not the point here)
+    np.testing.assert_allclose(out["planar"].tip, out["spatial"].tip, atol=1e-9 * rod.length)
+    np.testing.assert_array_equal(out["planar"].stable, out["spatial"].stable)
