@@ -111,18 +111,21 @@ def reach_fields(evaluate, clamp: np.ndarray, length: float, radii: int = 17, an
     except ValueError:
         pass
     parts = []
-    for ring in np.split(pts, radii):
+    beyond = 0  # points evaluated off the clamp
+    for i, ring in enumerate(np.split(pts, radii)):
         try:
             parts.append(evaluate(ring))
+            beyond += len(ring) if i else 0
             continue
         except ValueError:
             pass
         for p in ring:
             try:
                 parts.append(evaluate(p[None]))
+                beyond += 1 if i else 0
             except ValueError:
                 continue
-    if len(parts) <= 1 and sum(len(p[0]) for p in parts) <= 1:
+    if beyond == 0:
         raise ValueError(
             "the field cannot be evaluated on the plane around the clamp (the disc of radius "
             f"{length:g} m the rod can reach): cannot tell whether it keeps the rod in its "
