@@ -45,7 +45,9 @@ class RodResult:
     min_eigenvalue : ndarray, shape (k,)
         Smallest eigenvalue of the second variation per unit length, in EI / L^3 units
         (non-dimensional); it crosses zero at a bifurcation or limit point.  The straight
-        unloaded rod has pi^2 / 4.  Computed on the coarse mesh (extrapolated near a loss of
+        unloaded rod has pi^2 / 4 in the plane (bending) and, in 3D, the smaller of that, the
+        out-of-plane bending EI_y / EI_z pi^2 / 4 and the torsion GJ / EI_z pi^2 / 4 (pi^2 / 6
+        for a circle with nu = 1/2).  Computed on the coarse mesh (extrapolated near a loss of
         stability for uniform fields); for large meshes in non-uniform fields it is the
         eigenvalue closest to zero.  Computed on first access (the solve itself decides
         stability from the exact inertia of the second variation and does not need it).  3D
