@@ -20,8 +20,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-import coils
 import coilrod
+import coils
 from coilrod import presets
 from coilrod.path.events import StabilityWarning
 
@@ -66,7 +66,10 @@ def _out_of_plane_hessian(rod, s, theta, B, d=1e-4):
     for i in range(free):
         for j in range(i, free):
             H[i, j] = H[j, i] = (
-                energy(e[i] + e[j]) - energy(e[i] - e[j]) - energy(-e[i] + e[j]) + energy(-e[i] - e[j])
+                energy(e[i] + e[j])
+                - energy(e[i] - e[j])
+                - energy(-e[i] + e[j])
+                + energy(-e[i] - e[j])
             ) / (4 * d * d)
     return H
 
@@ -85,7 +88,9 @@ class TestPlanarStatesIn3D:
         assert res.stable_in_plane.all()
         ref = []
         for k, c in enumerate(scales):
-            H = _out_of_plane_hessian(rod, res.s, res.theta(k), c * np.asarray(field.B([0, 0, 0]))[0])
+            H = _out_of_plane_hessian(
+                rod, res.s, res.theta(k), c * np.asarray(field.B([0, 0, 0]))[0]
+            )
             ref.append(np.linalg.eigvalsh(H).min() > 0)
         assert ref == [True, False, False, False]
         np.testing.assert_array_equal(res.stable, ref)
@@ -109,22 +114,31 @@ class TestPlanarStatesIn3D:
         assert planar.stable_in_plane.all()
         assert not planar.stable.all()
         kinds = [(e["kind"], e["mode"], e["stable"]) for e in planar.instabilities]
-        assert kinds == [("bifurcation", "out-of-plane", False), ("bifurcation", "out-of-plane", True)]
+        assert kinds == [
+            ("bifurcation", "out-of-plane", False),
+            ("bifurcation", "out-of-plane", True),
+        ]
         crit_p = [e["scale"] for e in planar.instabilities]
         crit_s = [e["scale"] for e in spatial.instabilities]
         np.testing.assert_allclose(crit_p, crit_s, rtol=1e-6)
-        assert 0.2 < crit_p[0] < 0.24 and 0.41 < crit_p[1] < 0.45
-        np.testing.assert_allclose(planar.min_eigenvalue, spatial.min_eigenvalue, rtol=1e-6, atol=1e-8)
+        assert 0.2 < crit_p[0] < 0.24
+        assert 0.41 < crit_p[1] < 0.45
+        np.testing.assert_allclose(
+            planar.min_eigenvalue, spatial.min_eigenvalue, rtol=1e-6, atol=1e-8
+        )
 
     def test_in_plane_figures_stay_available(self):
         # the straight rod buckling in an antiparallel field is an in-plane bifurcation too
         rod = presets.seed_rod(presets.M1())
         lam_c = np.pi**2 / 4
-        field = coils.UniformField(B=(-rod.field_for_lambda(1.0), 1e-9 * rod.field_for_lambda(1.0), 0))
+        field = coils.UniformField(
+            B=(-rod.field_for_lambda(1.0), 1e-9 * rod.field_for_lambda(1.0), 0)
+        )
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", StabilityWarning)
             res = coilrod.solve_rod(rod, field, [0.5 * lam_c, 0.9 * lam_c], nodes=16)
-        assert res.stable.all() and res.stable_in_plane.all()
+        assert res.stable.all()
+        assert res.stable_in_plane.all()
         assert np.all(res.min_eigenvalue <= res.min_eigenvalue_in_plane + 1e-12)
 
 

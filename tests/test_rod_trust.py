@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import coils
 import coilrod
 import coilrod.rod.solve as rod_solve
+import coils
 from coilrod import presets
 
 
@@ -34,7 +34,8 @@ class TestModelChoice:
         clamp = np.zeros((1, 3))
         # the construction: planar at the clamp, not along the rod (independent evaluation)
         B0, G0 = field.B_and_gradient(clamp)
-        assert abs(B0[0, 2]) < 1e-15 and np.all(np.abs(G0[0, 2, :2]) < 1e-12)
+        assert abs(B0[0, 2]) < 1e-15
+        assert np.all(np.abs(G0[0, 2, :2]) < 1e-12)
         along = field.B(np.array([[0.02, 0.0, 0.0], [0.03, -0.01, 0.0]]))
         assert np.all(np.abs(along[:, 2]) > 1e-6)
         # the reach disc cannot be evaluated whole (the winding box lies in it)
