@@ -20,12 +20,14 @@ import math
 import os
 import platform
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
 import scipy
 from scipy.integrate import solve_bvp
 
+import coilrod
 import coils
 from coilrod import Circle, Magnetization, Rod, presets, solve_rod
 from coilrod.rod.elastica import elastica
@@ -80,7 +82,9 @@ def main() -> str:
     out()
 
     # -- 1. sweep against solve_bvp ---------------------------------------------------------------
-    rod = Rod(1.0, 1.0, Circle(1.0), Magnetization(1.0, 0.0))
+    with warnings.catch_warnings():  # the scale-free unit rod
+        warnings.simplefilter("ignore", coilrod.UnitsWarning)
+        rod = Rod(1.0, 1.0, Circle(1.0), Magnetization(1.0, 0.0))
     lams = np.linspace(0.0, 20.0, 51)[1:]
     field = coils.UniformField(B=(0.0, rod.field_for_lambda(1.0), 0.0))
     ref = np.array([elastica(lam, math.pi / 2).tip for lam in lams])

@@ -13,11 +13,11 @@ from .design.optimize import MagnetizationDesign, optimize_magnetization
 from .design.sensitivity import Sensitivities, SingularStateError, sensitivities
 from .design.sweep import SweepResult, sweep  # dask is imported only for a cluster
 from .design.workspace import Workspace, workspace
-from .errors import ConvergenceError
+from .errors import ConvergenceError, UnitsWarning
 from .fem import solve_fem  # scikit-fem itself is imported lazily, inside the call
 from .path.events import StabilityWarning
 from .robot import Circle, Magnetization, Rectangle, Rod, presets
-from .rod import RodPath, RodResult, elastica, solve_rod, trace_rod
+from .rod import RodPath, RodResult, elastica, solve_rod, trace_rod  # noqa: F401 (elastica: a module)
 
 __all__ = [
     "Rod",
@@ -32,7 +32,7 @@ __all__ = [
     "RodResult",
     "RodPath",
     "StabilityWarning",
-    "elastica",
+    "UnitsWarning",
     "sensitivities",
     "Sensitivities",
     "SingularStateError",
@@ -53,3 +53,9 @@ __all__ = [
     "insert",
     "Insertion",
 ]
+
+
+def __dir__() -> list[str]:
+    """The public API only (``__all__``): ``dir(coilrod)`` shows what users call; the
+    submodules stay importable (``coilrod.elastica``, ``coilrod.rod``, ...)."""
+    return sorted(__all__)

@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
-__all__ = ["ConvergenceError"]
+__all__ = ["ConvergenceError", "UnitsWarning"]
+
+
+class UnitsWarning(UserWarning):
+    """A value that no magnetic soft continuum robot has in the unit expected (a length over
+    1 m, a section over a third of the length, a modulus outside 1 kPa - 10 GPa, a
+    magnetization over 2 MA/m): most likely millimetres or MPa typed for metres or Pa."""
 
 
 class ConvergenceError(RuntimeError):

@@ -39,3 +39,9 @@ __all__ = [
     "GriddedField",
     "presets",
 ]
+
+
+def __dir__() -> list[str]:
+    """The public API only (``__all__``): ``dir(coils)`` lists the sources and helpers, not
+    the modules that implement them."""
+    return sorted(__all__)

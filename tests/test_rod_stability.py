@@ -34,9 +34,12 @@ from coilrod import (
     solve_rod,
     trace_rod,
 )
+from coilrod.errors import UnitsWarning
 from coilrod.rod.elastica import BUCKLING_LAMBDA, elastica, elastica_fold
 
-UNIT_ROD = Rod(1.0, 1.0, Circle(1.0), Magnetization(1.0, 0.0))
+with warnings.catch_warnings():  # a scale-free unit rod (L = E = D = |M| = 1): no units
+    warnings.simplefilter("ignore", UnitsWarning)
+    UNIT_ROD = Rod(1.0, 1.0, Circle(1.0), Magnetization(1.0, 0.0))
 
 
 def _field(rod, lam, phi):
@@ -272,7 +275,9 @@ def test_random_segment_profiles(n_seg, data, lam, phi):
     mags = data.draw(st.lists(st.floats(-1.0, 1.0), min_size=n_seg, max_size=n_seg))
     angles = data.draw(st.lists(st.floats(-math.pi, math.pi), min_size=n_seg, max_size=n_seg))
     mag = Magnetization.segments(fractions / fractions.sum(), mags, angles)
-    rod = Rod(1.0, 1.0, Circle(1.0), mag)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UnitsWarning)
+        rod = Rod(1.0, 1.0, Circle(1.0), mag)
     B = lam / 16.0  # lambda = 16 |M| B L^2 / (E D^2) for a circle: |M| <= 1 gives <= lam
     field = coils.UniformField(B=(B * math.cos(phi), B * math.sin(phi), 0.0))
     with warnings.catch_warnings():

@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+from coils._validate import positive
+
 from .magnetization import Magnetization
 from .rod import Rod
 from .sections import Circle
@@ -33,8 +35,12 @@ SEED_LENGTH = 0.04
 SEED_M0 = 640e3
 
 
-def M1(M0: float = SEED_M0, phi: float = 0.2) -> Magnetization:
-    """M(1): uniform axial magnetization |M| = M0 phi, theta_m = 0."""
+def M1(length: float = SEED_LENGTH, M0: float = SEED_M0, phi: float = 0.2) -> Magnetization:
+    """M(1): uniform axial magnetization |M| = M0 phi (A/m), theta_m = 0.
+
+    ``length`` (m) is accepted like the other presets' (M(1) does not depend on it; it is
+    checked to be a positive length)."""
+    positive(length, "length")
     return Magnetization(M0 * phi, 0.0, label=f"M(1) |M|={M0 * phi:g} A/m")
 
 
@@ -111,11 +117,24 @@ def seed_rod(
     magnetization: Magnetization | None = None,
     youngs_modulus: float = 1e6,
     length: float = SEED_LENGTH,
+    diameter: float | None = None,
 ) -> Rod:
-    """The seed's robot: L = 40 mm, circular, D = L/20, E = 1 MPa by default (M(1) if None)."""
+    """The seed's robot: L = 40 mm, circular, E = 1 MPa by default (M(1) if None).
+
+    Parameters
+    ----------
+    magnetization : Magnetization, optional
+    youngs_modulus : float
+        E, Pa.
+    length : float
+        L, m.  The section keeps the seed's slenderness: **the diameter is L / 20** (2 mm at
+        40 mm; 3 mm for ``length=0.06``) -- give ``diameter`` to fix it instead.
+    diameter : float, optional
+        D, m (default L / 20).
+    """
     return Rod(
         length=length,
         youngs_modulus=youngs_modulus,
-        section=Circle(diameter=length / 20),
+        section=Circle(diameter=length / 20 if diameter is None else diameter),
         magnetization=magnetization if magnetization is not None else M1(),
     )

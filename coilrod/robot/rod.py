@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 from coils._validate import finite_scalar, positive
 
+from ..errors import UnitsWarning
 from .magnetization import Magnetization
 from .sections import Circle, Rectangle
 
@@ -29,6 +31,14 @@ class Rod:
     poisson_ratio : float, optional
         nu, dimensionless, in (-1, 0.5]; sets the shear modulus G = E / (2 (1 + nu)) of the
         torsional stiffness G J.  Default 0.5: an incompressible elastomer (G = E / 3).
+
+    Warns
+    -----
+    coilrod.UnitsWarning
+        Where no robot of this kind can be -- a length over 1 m, a section larger than L/3, a
+        modulus outside 1 kPa - 10 GPa, a magnetization over 2 MA/m -- naming the value and
+        the unit expected (millimetres typed for metres are the usual cause).  Scale-free
+        studies with unit values may ignore it.
 
     Examples
     --------
@@ -62,6 +72,44 @@ class Rod:
         if not -1.0 < nu <= 0.5:
             raise ValueError(f"poisson_ratio must lie in (-1, 0.5]; got {nu!r}")
         object.__setattr__(self, "poisson_ratio", nu)
+        for message in self._unit_doubts():
+            warnings.warn(message, UnitsWarning, stacklevel=3)
+
+    def _unit_doubts(self) -> list[str]:
+        """What looks like a unit slip (see the class docstring's Warns)."""
+        L, E = self.length, self.youngs_modulus
+        doubts = []
+        if L > 1.0:
+            doubts.append(
+                f"length = {L:g} m: a magnetic continuum robot is shorter than 1 m -- lengths "
+                "are in metres (40 mm = 0.04)"
+            )
+        size = max(self.section.height, getattr(self.section, "width", self.section.height))
+        if size > L / 3:
+            what = "diameter" if isinstance(self.section, Circle) else "section side"
+            doubts.append(
+                f"{what} = {size:g} m is over L/3 = {L / 3:g} m: not a slender rod -- section "
+                "sizes are in metres (2 mm = 2e-3)"
+            )
+        if not 1e3 <= E <= 1e10:
+            doubts.append(
+                f"youngs_modulus = {E:g} Pa lies outside 1 kPa - 10 GPa -- the modulus is in Pa "
+                "(1 MPa = 1e6)"
+            )
+        M = self.magnetization.max_magnitude(L)
+        if M > 2e6:
+            doubts.append(
+                f"magnetization up to {M:g} A/m is over 2 MA/m (beyond NdFeB's remanence) -- "
+                "|M| is in A/m (128 kA/m = 128e3)"
+            )
+        return doubts
+
+    def __repr__(self) -> str:
+        return (
+            f"Rod(length={self.length:g} m, youngs_modulus={self.youngs_modulus:g} Pa, "
+            f"section={self.section!r}, magnetization={self.magnetization!r}, "
+            f"poisson_ratio={self.poisson_ratio:g})"
+        )
 
     @property
     def area(self) -> float:
