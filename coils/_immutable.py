@@ -41,15 +41,23 @@ def sealed(value, dtype=float) -> np.ndarray:
     return arr
 
 
+_PLAIN = frozenset({float, int, str, bool, type(None)})
+
+
 def _snapshot(value):
     """A parameter as stored for :meth:`Immutable.replace`: arrays as read-only copies and lists
     as tuples (recursively), so later changes to the caller's objects do not leak in."""
-    if isinstance(value, np.ndarray):
+    kind = type(value)
+    if kind in _PLAIN:
+        return value
+    if kind is np.ndarray:
         arr = value.copy()
         arr.setflags(write=False)
         return arr
     if isinstance(value, list | tuple):
         return tuple(_snapshot(v) for v in value)
+    if isinstance(value, np.ndarray):
+        return _snapshot(np.asarray(value))
     return value
 
 
@@ -61,16 +69,32 @@ def _show(value) -> str:
 
 
 @functools.cache
-def _signature(func) -> inspect.Signature:
-    return inspect.signature(func)
+def _layout(func) -> tuple[tuple[str, ...], int, dict, bool]:
+    """Parameter names of ``func`` (in order, ``*args`` and ``**kwargs`` left out), how many
+    can be given by position, their defaults, and whether it takes ``**kwargs``."""
+    names, defaults, n_positional, var_keyword = [], {}, 0, False
+    for p in inspect.signature(func).parameters.values():
+        if p.kind is p.VAR_KEYWORD:
+            var_keyword = True
+        elif p.kind is not p.VAR_POSITIONAL:
+            names.append(p.name)
+            n_positional += p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)
+            if p.default is not p.empty:
+                defaults[p.name] = p.default
+    return tuple(names), n_positional, defaults, var_keyword
 
 
-def _parameters(func, args, kwargs) -> dict:
-    """The arguments of a call of ``func`` (defaults included) by parameter name, snapshotted;
-    a leading ``self`` or ``cls`` is dropped by the caller passing ``args`` without it."""
-    bound = _signature(func).bind(*args, **kwargs)
-    bound.apply_defaults()
-    return {name: _snapshot(v) for name, v in bound.arguments.items()}
+def _parameters(func, args, kwargs) -> dict | None:
+    """The arguments of a successful call ``func(*args, **kwargs)`` by parameter name, defaults
+    included, snapshotted; None if some went to ``*args`` (they have no name to replace)."""
+    names, n_positional, defaults, _ = _layout(func)
+    if len(args) > n_positional:
+        return None
+    given = dict(zip(names, args, strict=False))
+    given.update(kwargs)
+    params = {name: given[name] if name in given else defaults[name] for name in names}
+    params.update((k, v) for k, v in kwargs.items() if k not in params)  # **kwargs
+    return {name: _snapshot(v) for name, v in params.items()}
 
 
 def _sealing(init):
@@ -94,7 +118,8 @@ def _sealing(init):
                 del state["_constructing"]
         if outermost and type(self)._immutable:
             params = _parameters(init, (self, *args), kwargs)
-            params.pop(next(iter(params)))  # self
+            if params is not None:
+                del params[next(iter(params))]  # self
             self._seal(params)
 
     __init__._seals = True
@@ -120,10 +145,10 @@ class Immutable:
             cls.__init__ = _sealing(init)
 
     # -- sealing -----------------------------------------------------------------------------------
-    def _seal(self, params: dict, builder=None) -> None:
-        """Make the ndarray attributes read-only, remember the construction parameters (and the
-        function that builds the object, if not its class) for :meth:`replace`, and forbid
-        assignment from now on."""
+    def _seal(self, params: dict | None, builder=None) -> None:
+        """Make the ndarray attributes read-only, remember the construction parameters (None:
+        unknown) and the function that builds the object, if not its class, for
+        :meth:`replace`, and forbid assignment from now on."""
         state = self.__dict__
         for value in state.values():
             if isinstance(value, np.ndarray):
@@ -195,15 +220,15 @@ class Immutable:
         if params is None:
             raise ValueError(
                 f"this {type(self).__name__} was not built by a constructor or a preset that "
-                f"records its parameters; build a new one instead of .replace()"
+                f"records its parameters by name; build a new one instead of .replace()"
             )
+        build = self.__dict__.get("_builder") or type(self)
         unknown = [name for name in changes if name not in params]
-        if unknown:
+        if unknown and not _layout(build.__init__ if isinstance(build, type) else build)[3]:
             raise ValueError(
                 f"{type(self).__name__}.replace got an unknown parameter {unknown[0]!r}; its "
                 f"parameters are {', '.join(params)}"
             )
-        build = self.__dict__.get("_builder") or type(self)
         return build(**{**params, **changes})
 
     def _evolve(self, params: dict, **attributes):

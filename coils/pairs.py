@@ -109,7 +109,8 @@ def _with_current(coil, current):
     built with that current (without validating the unchanged parameters again)."""
     current = finite_scalar(current, "current")
     fil, _ = coil._build(current)
-    return coil._evolve({**coil._params, "current": current}, current=current, filaments=fil)
+    params = None if coil._params is None else {**coil._params, "current": current}
+    return coil._evolve(params, current=current, filaments=fil)
 
 
 class _OneCurrent:

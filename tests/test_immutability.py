@@ -427,3 +427,27 @@ def test_a_users_field_is_not_sealed_unless_it_opts_in():
     total = Counting() + SOURCES["UniformField"]
     total.B(POINTS)
     assert total.parts[0].calls == 1
+
+
+def test_a_subclass_with_extra_parameters_replaces_by_name():
+    class Labelled(coils.HelmholtzPair):
+        def __init__(self, radius, turns, current, *, label="", **options):
+            super().__init__(radius, turns, current, **options)
+            self.label = label
+
+    pair = Labelled(0.08, 200, 6.7, label="main", axis="x")
+    with pytest.raises(AttributeError, match="Labelled is immutable"):
+        pair.label = "other"
+    moved = pair.replace(center=(0.0, 0.0, 0.01), label="moved")
+    assert moved.label == "moved"
+    _assert_same_field(moved, coils.HelmholtzPair(0.08, 200, 6.7, axis="x", center=(0, 0, 0.01)))
+    assert pair.with_current(1.0).replace(label="x").current == 1.0
+
+    class Positional(coils.Coil):
+        def __init__(self, *args):
+            super().__init__(*args)
+
+    coil = Positional(0.05, 10, 1.0)
+    with pytest.raises(ValueError, match="records its parameters by name"):
+        coil.replace(current=2.0)
+    assert coil.with_current(2.0).current == 2.0
