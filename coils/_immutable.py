@@ -61,6 +61,15 @@ def _snapshot(value):
     return value
 
 
+def _reseal(value) -> None:
+    """Make the arrays of a snapshotted parameter read-only again (after unpickling)."""
+    if isinstance(value, np.ndarray):
+        value.setflags(write=False)
+    elif isinstance(value, tuple):
+        for v in value:
+            _reseal(v)
+
+
 def _show(value) -> str:
     if isinstance(value, np.ndarray):
         value = value.tolist()
@@ -261,6 +270,8 @@ class Immutable:
             for value in state.values():
                 if isinstance(value, np.ndarray):
                     value.setflags(write=False)
+            for value in (state.get("_params") or {}).values():
+                _reseal(value)
 
 
 def remembers_recipe(func):

@@ -385,6 +385,9 @@ def test_copies_keep_the_numbers_and_the_immutability(name, how):
     for k, v in vars(clone).items():
         if isinstance(v, np.ndarray):
             assert not v.flags.writeable, k
+    for k, v in (clone._params or {}).items():  # what replace() builds from
+        if isinstance(v, np.ndarray):
+            assert not v.flags.writeable, k
     if type(obj).__repr__ is not object.__repr__:
         assert repr(clone) == repr(obj)
 
