@@ -17,8 +17,8 @@ classes that opt in (``_immutable = True``) are sealed at the end of constructio
 Lazily built internal caches (the compiled kernel's arguments, a system's unit channels) are
 derived from the sealed data only, start as None in the constructor and are set with
 :meth:`Immutable._set_cache`; a pickled or evolved copy gets them as None and rebuilds them on
-first use.  Subclasses of :class:`coils.Field` or
-:class:`coilrod.contact.Obstacle` written by users are not sealed unless they opt in.
+first use.  Subclasses of :class:`coils.Field` or :class:`coilrod.contact.Obstacle` written by
+users are not sealed unless they opt in.
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ def _snapshot(value):
         arr = value.copy()
         arr.setflags(write=False)
         return arr
-    if isinstance(value, list | tuple):
+    if kind is list or kind is tuple:
         return tuple(_snapshot(v) for v in value)
     if isinstance(value, np.ndarray):
         return _snapshot(np.asarray(value))
