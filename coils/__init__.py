@@ -8,6 +8,11 @@ A :class:`~coils.CoilSystem` is linear in the currents of its channels (coils an
 ``currents``, ``with_currents``, ``unit_fields``, ``power``, ``currents_for``;
 :mod:`coils.presets` builds real arrangements (three-axis Helmholtz, Helmholtz + Maxwell, an
 eight-coil hemisphere).
+
+Sources are immutable: assigning an attribute raises ``AttributeError`` and their arrays are
+read-only, so what a source says it is always matches the field it computes; change one with
+``with_current(I)`` (a coil or a pair), ``with_currents(I)`` (a system) or
+``replace(**changes)`` (any source), which return copies.
 """
 
 from . import presets

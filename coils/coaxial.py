@@ -64,8 +64,13 @@ class CoaxialCoils(Field):
     ``coils.multipole.SWITCH`` times the group radius (:mod:`coils.multipole`), to about
     ``1e-15`` relative at any distance.  One compiled pass over the points computes whichever
     of B, gradient and hessian is asked for (:mod:`coils._compiled`); its data are derived
-    from the arrays of the object once, so these are read-only.
+    from the arrays of the object once, so the object is immutable (:mod:`coils._immutable`):
+    its attributes cannot be assigned, its arrays (``filaments``, ``axis``, ``center``,
+    ``rotation``, ``windings``) are read-only, and ``replace(**changes)`` gives a changed copy.
     """
+
+    _immutable = True
+    _caches = ("_kernel_args",)
 
     def __init__(self, filaments, axis="z", center=(0.0, 0.0, 0.0), windings=()):
         fil = as_array(filaments, "filaments", ("f", 3)).copy()
@@ -157,7 +162,7 @@ class CoaxialCoils(Field):
             moments.n0,
             params,
         )
-        self._kernel_args = (_compiled.coaxial_field, args, 3 + len(self.windings))
+        self._set_cache("_kernel_args", (_compiled.coaxial_field, args, 3 + len(self.windings)))
         return self._kernel_args
 
     def _run(self, pts, flags, factor, B, G, H):

@@ -11,6 +11,10 @@ and says what it does not need to compute, so solvers can skip work:
 
 * ``uniform``: the gradient is identically zero (no force path, no gradient evaluation);
 * ``linear``: the gradient is constant (the hessian is identically zero).
+
+Every source of :mod:`coils` is immutable (:mod:`coils._immutable`): its attributes cannot be
+assigned and its arrays are read-only, so they always describe the field it computes; change
+one with ``with_current`` / ``with_currents`` or ``replace(**changes)``, which return copies.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
+from ._immutable import Immutable
 from ._validate import as_field, as_points, finite_scalar
 
 __all__ = ["Field", "FieldSum", "ScaledField"]
@@ -28,13 +33,18 @@ __all__ = ["Field", "FieldSum", "ScaledField"]
 CHUNK = 65536
 
 
-class Field(ABC):
+class Field(Immutable, ABC):
     """Base class of all magnetic field sources (a protocol with shared conveniences).
 
     Subclasses implement ``_B(points)`` and ``_gradient(points)`` on validated ``(n, 3)`` arrays;
     they may override ``_B_and_gradient`` and ``_B_gradient_hessian`` when the quantities share
     work, ``_hessian`` when a closed form exists, and ``_add_to`` to accumulate into a sum's
     arrays without temporaries.  Public methods validate once and dispatch.
+
+    The sources of :mod:`coils` are immutable (``_immutable = True``, see
+    :mod:`coils._immutable`): assigning an attribute raises ``AttributeError``, their arrays
+    are read-only, and :meth:`~coils._immutable.Immutable.replace` returns a changed copy.  A
+    user's subclass is sealed only if it sets ``_immutable = True``.
     """
 
     #: True if the gradient is identically zero everywhere.
@@ -194,8 +204,10 @@ class FieldSum(Field):
     Parameters
     ----------
     parts : sequence of Field
-        The fields to superpose (nested sums are flattened).
+        The fields to superpose (nested sums are flattened); stored as the tuple ``parts``.
     """
+
+    _immutable = True
 
     def __init__(self, parts):
         if isinstance(parts, Field | str) or not isinstance(parts, Iterable):
@@ -206,7 +218,7 @@ class FieldSum(Field):
             flat.extend(part.parts if type(part) is FieldSum else [part])
         if not flat:
             raise ValueError("a field sum needs at least one part")
-        self.parts = flat
+        self.parts = tuple(flat)
         self.uniform = all(p.uniform for p in flat)
         self.linear = all(p.linear or p.uniform for p in flat)
 
@@ -248,11 +260,21 @@ class FieldSum(Field):
         return self._sum(pts, True, True, True)
 
     def __repr__(self):
-        return f"{type(self).__name__}({self.parts!r})"
+        return f"{type(self).__name__}({list(self.parts)!r})"
 
 
 class ScaledField(Field):
-    """A field multiplied by a constant factor (e.g. a current scaling in a load sweep)."""
+    """A field multiplied by a constant factor (e.g. a current scaling in a load sweep).
+
+    Parameters
+    ----------
+    field : Field
+        The field scaled.
+    factor : float
+        The factor (finite).
+    """
+
+    _immutable = True
 
     def __init__(self, field: Field, factor: float):
         self.field = as_field(field)

@@ -31,6 +31,7 @@ import math
 
 import numpy as np
 
+from ._immutable import sealed
 from ._validate import (
     as_choice,
     as_count,
@@ -176,6 +177,9 @@ class GriddedField(Field):
 
     Notes
     -----
+    Immutable (:mod:`coils._immutable`): its arrays are read-only and ``replace(**changes)``
+    builds a new grid (e.g. ``grid.replace(field=system.with_currents(I))``).
+
     Interpolation error ``O(h^4)`` for B, ``O(h^3)`` for the gradient and ``O(h^2)`` for the
     hessian (node data: exact B and gradient, mixed derivatives to ``O(h^2)``; see the module
     docstring).  The gradient is the exact derivative of the interpolated B and the hessian that
@@ -195,6 +199,7 @@ class GriddedField(Field):
 
     uniform = False
     linear = False
+    _immutable = True
 
     def __init__(
         self,
@@ -210,8 +215,8 @@ class GriddedField(Field):
         max_cells: int = 200_000,
     ):
         self.field = as_field(field)
-        self.lower = as_vector(lower, "lower")
-        self.upper = as_vector(upper, "upper")
+        self.lower = sealed(as_vector(lower, "lower"))
+        self.upper = sealed(as_vector(upper, "upper"))
         if np.any(self.lower >= self.upper):
             raise ValueError(
                 f"lower must be below upper on every axis; got lower={self.lower.tolist()}, "
@@ -243,7 +248,7 @@ class GriddedField(Field):
             self._refine_to_tol()
         else:
             self._build(nodes)
-            self.error_estimate()
+            self._store_error_estimate()
 
     # -- construction ---------------------------------------------------------------------------
     def _nodes_for(self, h: np.ndarray) -> np.ndarray:
@@ -278,7 +283,7 @@ class GriddedField(Field):
             else:
                 at_limit = False
             self._build(self._within_limit(nodes, "the automatic refinement"))
-            eb, eg = self.error_estimate()
+            eb, eg = self._store_error_estimate()
             if eb <= self.tol and eg <= self.tol_gradient:
                 return
             if at_limit:
@@ -401,8 +406,9 @@ class GriddedField(Field):
         -------
         error_B, error_gradient : float
             ``max |B - B_field| / max |B_field|`` and the same for the gradient (largest entries
-            over the points).  Also stored as :attr:`error_B` and :attr:`error_gradient` when
-            ``points`` is None.
+            over the points).  The construction's estimate (``points`` None, ``seed`` 0) is
+            :attr:`error_B` and :attr:`error_gradient`; later calls do not change them (the
+            grid is immutable).
         """
         rng = np.random.default_rng(as_count(seed, "seed", 0))
         if points is None:
@@ -424,11 +430,13 @@ class GriddedField(Field):
             pts = as_points(points)
         B, G, _ = self._interpolate(self._check_inside(pts, force_raise=True), 1)
         Bf, Gf = self.field.B_and_gradient(pts)
-        eb = _relative(B - Bf, Bf)
-        eg = _relative(G - Gf, Gf)
-        if points is None:
-            self.error_B, self.error_gradient = eb, eg
-        return eb, eg
+        return _relative(B - Bf, Bf), _relative(G - Gf, Gf)
+
+    def _store_error_estimate(self) -> tuple[float, float]:
+        """The default :meth:`error_estimate`, stored as :attr:`error_B`, :attr:`error_gradient`
+        (during construction)."""
+        self.error_B, self.error_gradient = self.error_estimate()
+        return self.error_B, self.error_gradient
 
     # -- evaluation ----------------------------------------------------------------------------
     def _check_inside(self, pts: np.ndarray, force_raise: bool = False) -> np.ndarray:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._immutable import sealed
 from ._validate import as_array, as_count, as_field, as_vector, finite_scalar, nonnegative
 from .field import Field
 
@@ -24,6 +25,18 @@ class LinearField(Field):
     origin : array-like, shape (3,)
         Reference point, metres.
 
+    Attributes
+    ----------
+    B0, origin : ndarray, shape (3,)
+        Read-only copies of the parameters (T, m).
+    G : ndarray, shape (3, 3)
+        The gradient, T/m (read-only).
+
+    Notes
+    -----
+    Immutable (:mod:`coils._immutable`): change it with ``replace(B0=..., gradient=...,
+    origin=...)``.
+
     Examples
     --------
     >>> import numpy as np
@@ -34,12 +47,13 @@ class LinearField(Field):
     """
 
     linear = True
+    _immutable = True
 
     def __init__(self, B0=(0.0, 0.0, 0.0), gradient=None, origin=(0.0, 0.0, 0.0)):
-        self.B0 = as_vector(B0, "B0")
+        self.B0 = sealed(as_vector(B0, "B0"))
         G = np.zeros((3, 3)) if gradient is None else as_array(gradient, "gradient", (3, 3))
-        self.G = G.copy()
-        self.origin = as_vector(origin, "origin")
+        self.G = sealed(G)
+        self.origin = sealed(as_vector(origin, "origin"))
         self.uniform = not np.any(G)
 
     @property
@@ -72,7 +86,8 @@ class UniformField(LinearField):
     Parameters
     ----------
     B : array-like, shape (3,)
-        Flux density in tesla.
+        Flux density in tesla (the attribute ``B0``, read-only; change it with
+        ``replace(B=...)``).
 
     Examples
     --------

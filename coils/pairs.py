@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import copy
 import math
 
 import numpy as np
 from scipy.constants import mu_0
 
+from ._immutable import _show
 from ._validate import as_array, as_axis, as_counts, as_vector, finite_scalar, positive
 from .coaxial import CoaxialCoils
 from .copper import winding_resistance
@@ -106,18 +106,24 @@ def _winding_filaments(z0, radius, turns, current, section, model):
 def _with_current(coil, current):
     """A copy of ``coil`` (a Coil or a pair) at ``current`` A: same geometry, winding model and
     resistance; filaments rebuilt as the constructor builds them, so the copy equals a coil
-    built with that current."""
+    built with that current (without validating the unchanged parameters again)."""
     current = finite_scalar(current, "current")
-    new = copy.copy(coil)
-    new.current = current
     fil, _ = coil._build(current)
-    fil.setflags(write=False)
-    new.filaments = fil
-    new._kernel_args = None  # the compiled pass's data are derived from the filaments
-    return new
+    params = None if coil._params is None else {**coil._params, "current": current}
+    return coil._evolve(params, current=current, filaments=fil)
 
 
-class Coil(CoaxialCoils):
+class _OneCurrent:
+    """The "is immutable" hint of a coil or pair: a new current comes from ``with_current``."""
+
+    def _how_to_change(self, name: str, value) -> str:
+        if name == "current":
+            v = _show(value)
+            return f"use .with_current({v}) or .replace(current={v}) for a changed copy"
+        return super()._how_to_change(name, value)
+
+
+class Coil(_OneCurrent, CoaxialCoils):
     """A single multi-turn circular coil.
 
     Parameters
@@ -156,11 +162,30 @@ class Coil(CoaxialCoils):
         Ohm: given, from ``wire_diameter``, else from ``winding`` filled to pi/4 by copper
         (square-packed round wire, insulation neglected); None for a single filament without
         a wire (then :meth:`coils.CoilSystem.power` cannot be computed).
+    radius, turns, current, winding
+        The parameters (validated; ``axis`` and ``center`` are read-only arrays).
 
     Raises
     ------
     ValueError
         On a bad parameter, naming it (see :mod:`coils._validate`).
+
+    Notes
+    -----
+    Immutable: assigning an attribute raises ``AttributeError`` (the field would not follow);
+    :meth:`with_current` and ``replace(**changes)`` (any constructor parameter, validated
+    again) return changed copies.
+
+    Examples
+    --------
+    >>> from coils import Coil
+    >>> coil = Coil(0.05, 100, 1.0)
+    >>> coil.current = 2.0
+    Traceback (most recent call last):
+    ...
+    AttributeError: Coil is immutable (...): cannot set 'current'; use .with_current(2.0) or ...
+    >>> coil.replace(turns=50).turns
+    50.0
     """
 
     #: Coils in series in one current channel (one for a coil).
@@ -218,7 +243,7 @@ class Coil(CoaxialCoils):
         )
 
 
-class CoilPair(CoaxialCoils):
+class CoilPair(_OneCurrent, CoaxialCoils):
     """Two identical coaxial coils at ``center +- spacing/2 * axis``.
 
     ``sign = +1``: currents in the same sense (uniform field, Helmholtz);
@@ -240,6 +265,13 @@ class CoilPair(CoaxialCoils):
     ----------
     resistance : float or None
         Ohm, of both coils in series (see :class:`Coil`).
+    radius, turns, current, spacing, winding
+        The parameters (validated; ``axis`` and ``center`` are read-only arrays).
+
+    Notes
+    -----
+    Immutable like :class:`Coil`: ``with_current(I)`` and ``replace(**changes)`` return changed
+    copies (``pair.current = 3.35`` raises ``AttributeError`` saying so).
     """
 
     sign: float = 1.0

@@ -26,6 +26,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ._immutable import _show as _short
+from ._immutable import sealed
 from ._validate import _show, as_array, as_bool, as_limits, as_points, as_vector
 from .field import Field, FieldSum
 from .pairs import Coil, CoilPair
@@ -80,6 +82,12 @@ class CoilSystem(FieldSum):
     ValueError
         On a bad parameter (named), or if a channel's present current exceeds its limit.
 
+    Notes
+    -----
+    Immutable, like every source (:mod:`coils._immutable`): :meth:`with_currents`,
+    :meth:`with_limits` and ``replace(parts=..., center=..., max_current=..., names=...)``
+    return changed copies; ``center`` is a read-only array and ``parts`` a tuple.
+
     Examples
     --------
     >>> from coils import CoilSystem, HelmholtzPair, MaxwellPair, UniformField
@@ -93,12 +101,14 @@ class CoilSystem(FieldSum):
     array([5.])
     """
 
+    _caches = ("_units",)
+
     def __init__(self, parts, center=None, *, max_current=None, names=None):
         super().__init__(parts)
         if center is None:
             centres = [p.center for p in self.parts if hasattr(p, "center")]
             center = np.mean(centres, axis=0) if centres else np.zeros(3)
-        self.center = as_vector(center, "center")
+        self.center = sealed(as_vector(center, "center"))
         channels, fixed, limits, default_names = [], [], [], []
         for part in self.parts:
             if _is_channel(part):
@@ -121,13 +131,19 @@ class CoilSystem(FieldSum):
         limit.setflags(write=False)
         self._max_current = limit
         self._names = tuple(default_names) if names is None else self._as_names(names, m)
-        self._units = None  # the channels at 1 A, built on first use
+        self._units = None  # the channels at 1 A, built on first use (a cache)
         for j, ch in enumerate(self._channels):
             if abs(ch.current) > limit[j]:
                 raise ValueError(
                     f"channel {j} ({self._names[j]}) carries {ch.current:g} A, above its "
                     f"max_current {limit[j]:g} A"
                 )
+
+    def _how_to_change(self, name: str, value) -> str:
+        hint = {"currents": "with_currents", "max_current": "with_limits"}.get(name)
+        if hint is not None:
+            return f"use .{hint}({_short(value)}) for a changed copy"
+        return super()._how_to_change(name, value)
 
     @staticmethod
     def _as_names(names, m: int) -> tuple[str, ...]:
@@ -286,7 +302,7 @@ class CoilSystem(FieldSum):
 
     def _unit_channels(self):
         if self._units is None:
-            self._units = tuple(ch.with_current(1.0) for ch in self._channels)
+            self._set_cache("_units", tuple(ch.with_current(1.0) for ch in self._channels))
         return self._units
 
     # -- linearity in the currents --------------------------------------------------------------

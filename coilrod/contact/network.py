@@ -22,7 +22,8 @@ class VesselNetwork(Obstacle):
     Parameters
     ----------
     vessels : sequence of Obstacle
-        At least one.
+        At least one (stored as the tuple ``vessels``; immutable, ``replace(vessels=...)``
+        gives a changed copy).
 
     Examples
     --------
@@ -35,6 +36,7 @@ class VesselNetwork(Obstacle):
     """
 
     _outside = "outside the vessels"
+    _immutable = True
 
     def __init__(self, vessels):
         try:

@@ -16,6 +16,11 @@ curvature seen from the point.  A contact model needs nothing else:
 ``bounds``              (2, 3) box, m
 ``plot(ax)``            the outline in the x-y plane
 =====================  ====================================================================
+
+Obstacles are immutable (:mod:`coils._immutable`): their attributes cannot be assigned and
+their arrays are read-only, so a wall or a vessel always is the one its gaps describe; make a
+changed copy with ``replace(**changes)`` (the parameters of the constructor, or of the preset
+that built it: ``vessel.replace(radius=2e-3)``).
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from coils._immutable import Immutable
 from coils._validate import as_count, as_points, nonnegative
 
 __all__ = ["Obstacle", "GapEvaluation"]
@@ -56,13 +62,15 @@ class GapEvaluation(NamedTuple):
     hessian: np.ndarray | None
 
 
-class Obstacle(ABC):
+class Obstacle(Immutable, ABC):
     """Base class of rigid obstacles (:class:`~coilrod.contact.Wall`,
     :class:`~coilrod.contact.Vessel`, :class:`~coilrod.contact.VesselNetwork`).
 
     Subclasses implement ``_evaluate(points, order)`` on validated points (shape (n, 3), n >= 1)
     returning ``(gap, gradient or None, hessian or None)``, the property ``bounds`` and
-    ``_draw(ax, **kwargs)``; the public methods are defined here once.
+    ``_draw(ax, **kwargs)``; the public methods are defined here once.  The obstacles of
+    :mod:`coilrod.contact` are immutable (``_immutable = True``; a user's subclass opts in by
+    setting it): ``replace(**changes)`` returns a changed copy.
     """
 
     #: How a point with a negative gap is described in messages ("outside the vessel").

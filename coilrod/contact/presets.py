@@ -2,6 +2,9 @@
 treated exactly, an aneurysm (or a stenosis: a smooth local change of radius) and a
 side-branch junction.  Also available as ``Vessel.straight``, ``Vessel.bend``,
 ``Vessel.aneurysm`` and ``Vessel.branch``.
+
+A preset's vessel remembers how it was built: ``vessel.replace(**changes)`` calls the preset
+again with the changes (``presets.bend(0.02, 1.2, 1e-3).replace(angle=0.6)``).
 """
 
 from __future__ import annotations
@@ -10,6 +13,7 @@ import math
 
 import numpy as np
 
+from coils._immutable import remembers_recipe
 from coils._validate import as_axis, as_vector, finite_scalar, nonnegative, positive
 
 from .centerline import Pieces, arc_piece, line_pieces, split_lines
@@ -36,6 +40,7 @@ def _frame(direction, plane_normal) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return d, n, np.cross(n, d)
 
 
+@remembers_recipe
 def straight(length, radius, start=(0.0, 0.0, 0.0), direction=(1.0, 0.0, 0.0), ends="extend"):
     """A straight tube of constant ``radius`` from ``start`` along ``direction``.
 
@@ -68,6 +73,7 @@ def straight(length, radius, start=(0.0, 0.0, 0.0), direction=(1.0, 0.0, 0.0), e
     return Vessel(np.array([start, start + length * d]), radius, ends=ends)
 
 
+@remembers_recipe
 def bend(
     bend_radius,
     angle,
@@ -152,6 +158,7 @@ def bend(
     return Vessel._from_pieces(Pieces.concat(parts), ConstantSection(radius), ends, points)
 
 
+@remembers_recipe
 def aneurysm(
     length,
     radius,
@@ -226,6 +233,7 @@ def aneurysm(
         raise
 
 
+@remembers_recipe
 def branch(
     length,
     radius,

@@ -166,7 +166,7 @@ class Vessel(Obstacle):
         For a smooth radius (callable, aneurysm): the largest mismatch (m) of the spline fits of
         the radius and of the ball radius (about 1e-9 of the radius or less); 0 otherwise.
     points : ndarray, shape (n, 3)
-        The centreline points given (presets: the ends of their pieces), m.
+        The centreline points given (presets: the ends of their pieces), m; read-only.
 
     Notes
     -----
@@ -185,6 +185,7 @@ class Vessel(Obstacle):
     """
 
     _outside = "outside the vessel"
+    _immutable = True
 
     def __init__(self, centerline, radius, *, smooth: bool = False, ends="extend"):
         pts = as_points(centerline, "centerline")
@@ -217,8 +218,9 @@ class Vessel(Obstacle):
     def _from_pieces(cls, pieces: Pieces, section, ends, points) -> Vessel:
         """A vessel from ordered finite pieces (presets); validated like any other."""
         self = cls.__new__(cls)
-        self.points = np.asarray(points, dtype=float)
+        self.points = np.array(points, dtype=float)
         self._setup(pieces, section, _as_ends(ends), corners=None)
+        self._seal(None)  # the preset records its parameters (remembers_recipe)
         return self
 
     # -- presets (coilrod.contact.presets) ------------------------------------------------------

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from coils._immutable import sealed
 from coils._validate import as_axis, as_vector
 
 from .obstacle import Obstacle, _point_mm
@@ -24,6 +25,12 @@ class Wall(Obstacle):
         Normal towards the admissible side (normalised here), or an axis name ``"y"``,
         ``"-x"``; a zero, NaN or infinite normal raises ValueError naming ``normal``.
 
+    Attributes
+    ----------
+    point, normal : ndarray, shape (3,)
+        Read-only (m; unit vector).  A wall is immutable: ``wall.replace(point=...)`` gives a
+        moved copy.
+
     Examples
     --------
     >>> floor = Wall(point=(0, -0.01, 0), normal=(0, 2, 0))
@@ -34,10 +41,11 @@ class Wall(Obstacle):
     """
 
     _outside = "behind the wall"
+    _immutable = True
 
     def __init__(self, point, normal):
-        self.point = as_vector(point, "point").copy()
-        self.normal = as_axis(normal, "normal")
+        self.point = sealed(as_vector(point, "point"))
+        self.normal = sealed(as_axis(normal, "normal"))
         self._offset = float(self.normal @ self.point)
 
     def __repr__(self) -> str:
