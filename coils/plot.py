@@ -108,7 +108,11 @@ def plot_field_map(
         with np.errstate(divide="ignore"):
             data = np.log10(np.maximum(dev, 1e-12)).reshape(U.shape)
         im = ax.pcolormesh(U * 1e3, V * 1e3, data, cmap="viridis", shading="auto", vmin=-6, vmax=0)
-        label = "log10 relative deviation from ideal"
+        label = (
+            "log10 |grad B - G_ideal| / |G_ideal|"
+            if not np.any(field.ideal().B0)
+            else "log10 |B - B_ideal| / |B_ideal(centre)|"
+        )
     else:
         im = ax.pcolormesh(
             U * 1e3,

@@ -171,6 +171,17 @@ def test_maxwell_scene_rod_fem_and_bvp_agree():
     assert shift["fem2d"]["tip_shift_percent_L"] == pytest.approx(
         shift["rod"]["tip_shift_percent_L"], abs=0.1
     )
+    # its figures: the rod's curves visible next to the FEM's (they agree to ~1 % of L), the
+    # title clear of the colour bar
+    import matplotlib.pyplot as plt
+    from _figure_checks import assert_readable
+
+    from coilrod.scene.figures import plot_scene_shapes, plot_tip_vs_field
+
+    for plot in (plot_tip_vs_field, plot_scene_shapes):
+        fig = plot(result).figure
+        assert_readable(fig)
+        plt.close(fig)
 
 
 def test_runner_reports_buckling_in_both_models():

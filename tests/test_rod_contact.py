@@ -180,6 +180,19 @@ class TestInsertion:
         # the tip has gone round the bend: beyond the arc's end (y > bend radius)
         assert ins.tip[-1, 1] > 0.02
         assert np.linalg.norm(ins.wall_force, axis=1).max() > 0
+        # the plot draws no force where there is none (a log axis has no zero)
+        import matplotlib.pyplot as plt
+        from _figure_checks import assert_readable
+
+        force = np.linalg.norm(ins.wall_force, axis=1)
+        assert (force == 0).any()
+        fig = ins.plot()
+        (line,) = [ln for ln in fig.axes[1].get_lines() if ln.get_label() == "wall force"]
+        y = np.asarray(line.get_ydata(), float)
+        assert np.all(np.isnan(y[force == 0]))
+        np.testing.assert_allclose(y[force > 0], 1e3 * force[force > 0])
+        assert_readable(fig)
+        plt.close(fig)
 
     def test_zero_field_in_a_straight_tube(self):
         vessel = Vessel.straight(0.1, 0.002, start=(0.0, 0.0, 0.0))

@@ -58,3 +58,14 @@ def test_example_runs_spatial_and_writes_3d_outputs(tmp_path):
     assert "shapes_3d.png" in files
     assert any(name.endswith(".pvd") for name in files)
     assert any(name.endswith(".vtu") for name in files)
+    # the figures show what they claim: every labelled curve visible, no text over another,
+    # the suptitle says "leaves its plane" once, the x-z view is no strip and has a legend
+    import matplotlib.pyplot as plt
+    from _figure_checks import assert_readable
+
+    from coilrod.scene.figures import plot_scene_shapes, plot_scene_shapes_3d, plot_tip_vs_field
+
+    for plot in (plot_tip_vs_field, plot_scene_shapes, plot_scene_shapes_3d):
+        fig = plot(result).figure
+        assert_readable(fig)
+        plt.close(fig)

@@ -86,8 +86,8 @@ class Insertion:
         import matplotlib.pyplot as plt
         from matplotlib.ticker import FuncFormatter
 
-        if ax is None:
-            fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+        if ax is None:  # constrained layout: a suptitle added later keeps its own row
+            fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), layout="constrained")
         else:
             axes = ax
             fig = axes[0].figure
@@ -100,7 +100,9 @@ class Insertion:
             x = self._shapes[k]
             color = cmap(i / max(len(steps) - 1, 1))
             label = f"{self.lengths[k] * 1e3:.0f} mm"
-            axes[0].plot(x[:, 0], x[:, 1], color=color, lw=1.5, label=label)
+            # shorter shapes on top: follow-the-leader shapes share their proximal part, and
+            # a short one drawn first would vanish under the longer ones
+            axes[0].plot(x[:, 0], x[:, 1], color=color, lw=1.5, label=label, zorder=3 - i / 100)
             on = self.contact_nodes[k]
             axes[0].plot(x[on, 0], x[on, 1], "o", color="crimson", ms=3)
         mm = FuncFormatter(lambda v, _pos: f"{v * 1e3:g}")
@@ -111,13 +113,20 @@ class Insertion:
         axes[0].set_ylabel("y (mm)")
         axes[0].legend(fontsize=7, title="free length")
         force = np.linalg.norm(self.wall_force, axis=1) * 1e3
-        axes[1].semilogy(self.lengths * 1e3, np.maximum(force, 1e-6), "-o", ms=3)
+        # a step without contact has no force: nothing to draw on a log axis (a floor value
+        # would draw a force that is not there); such steps are marked on the axis instead
+        touching = force > 0
+        shown = np.where(touching, force, np.nan)
+        axes[1].semilogy(self.lengths * 1e3, shown, "-o", ms=3, label="wall force")
         axes[1].axhspan(force_range[0] * 1e3, force_range[1] * 1e3, color="0.9",
                         label="clinical range")  # fmt: skip
+        if not touching.all():
+            axes[1].plot(self.lengths[~touching] * 1e3, np.full((~touching).sum(), 0.0), "|",
+                         color="0.4", ms=8, transform=axes[1].get_xaxis_transform(),
+                         label="no contact")  # fmt: skip
         axes[1].set_xlabel("free length (mm)")
         axes[1].set_ylabel("wall force (mN)")
         axes[1].legend()
-        fig.tight_layout()
         return fig
 
 

@@ -19,6 +19,24 @@ __all__ = [
 
 _STYLE = {"coils": "-", "ideal": "--"}
 _COLOR = {"rod": "tab:blue", "fem2d": "tab:orange", "fem3d": "tab:green"}
+#: The rod's curves are drawn thin and on top, the FEM's wide, translucent and below: the two
+#: models agree to ~1 % of L, so curves of one width would hide each other.
+_WIDTH = {"rod": 1.4}
+_FEM = {"lw": 3.5, "alpha": 0.55, "zorder": 2}
+
+
+def _line_style(model: str, lw: float | None = None) -> dict:
+    """Width, transparency and drawing order of a model's curve (see :data:`_WIDTH`)."""
+    if model == "rod":
+        return {"lw": _WIDTH["rod"] if lw is None else lw, "zorder": 4}
+    return dict(_FEM)
+
+
+def _title(text: str, width: int = 52) -> str:
+    """A scene name wrapped to the width of one panel."""
+    import textwrap
+
+    return textwrap.fill(text, width)
 
 
 def centerline_of(run, k: int = -1) -> np.ndarray:
@@ -74,12 +92,13 @@ def plot_tip_vs_field(result, ax=None):
             marker="o" if r.model != "rod" else None,
             ms=3,
             label=f"{r.model}, {r.field_label} field",
+            **_line_style(r.model),
         )
     sym = r"$\lambda$" if kind == "B" else r"$\gamma$"
     unit = f"{1e3 * value:.3g} mT" if kind == "B" else f"{value:.3g} T/m"
     ax.set_xlabel(f"{sym} (scale 1 = {unit})")
     ax.set_ylabel("tip deflection $y_{tip}/L$")
-    ax.set_title(result.scene.name, fontsize=10)
+    ax.set_title(_title(result.scene.name), fontsize=10)
     ax.grid(alpha=0.3)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=8)
@@ -97,8 +116,11 @@ def plot_tip_vs_field(result, ax=None):
                 marker="o" if real.model != "rod" else None,
                 ms=3,
                 label=real.model,
+                **_line_style(real.model),
             )
-        shift_ax.set_ylabel("tip shift coils vs ideal (% of L)")
+        # the norm of a vector: where the real field's excess over the ideal one changes sign
+        # along the tip's path, the shift dips to zero and rises again (see the README)
+        shift_ax.set_ylabel("|tip(coils) - tip(ideal)| (% of L)")
         shift_ax.set_xlabel(ax.get_xlabel())
         ax.set_xlabel("")
         shift_ax.grid(alpha=0.3)
@@ -137,16 +159,16 @@ def plot_scene_shapes(result, ax=None, k: int = -1):
             1e3 * c[:, 1],
             _STYLE.get(r.field_label, ":"),
             color=_COLOR.get(r.model, "k"),
-            lw=2,
             label=f"{r.model}, {r.field_label} (scale {r.scales[k]:.3g})",
+            **_line_style(r.model, lw=2),
         )
-    ax.plot([0, 1e3 * L], [0, 0], color="0.6", lw=1, label="undeformed")
+    ax.plot([0, 1e3 * L], [0, 0], color="0.6", lw=1, label="undeformed", zorder=1.5)
     ax.plot(0, 0, "ks", ms=6)
     ax.set_aspect("equal")
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
     ax.legend(fontsize=7, loc="best")
-    ax.set_title(scene.name, fontsize=10)
+    ax.set_title(_title(scene.name), fontsize=10)
     return ax
 
 
@@ -167,24 +189,35 @@ def plot_scene_shapes_3d(result, k: int = -1):
     mm) side by side; returns the first axis."""
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.8), layout="constrained")
     L = result.scene.rod.length
+    z_extent = 0.0
     for r in result.runs:
         if r.result is None or not len(r.scales):
             continue
         c = 1e3 * centerline_of(r, k)
-        style = dict(color=_COLOR.get(r.model, "k"), lw=2)
+        style = dict(color=_COLOR.get(r.model, "k"), **_line_style(r.model, lw=2))
         label = f"{r.model}, {r.field_label} (scale {r.scales[k]:.3g})"
         axes[0].plot(c[:, 0], c[:, 1], _STYLE.get(r.field_label, ":"), label=label, **style)
-        axes[1].plot(c[:, 0], c[:, 2], _STYLE.get(r.field_label, ":"), **style)
+        axes[1].plot(c[:, 0], c[:, 2], _STYLE.get(r.field_label, ":"), label=label, **style)
+        z_extent = max(z_extent, float(np.ptp(c[:, 2])))
     for ax, (a, b) in zip(axes, (("x", "y"), ("x", "z")), strict=True):
-        ax.plot([0, 1e3 * L], [0, 0], color="0.6", lw=1)
+        ax.plot([0, 1e3 * L], [0, 0], color="0.6", lw=1, zorder=1.5)
         ax.plot(0, 0, "ks", ms=6)
-        ax.set_aspect("equal")
         ax.set_xlabel(f"{a} (mm)")
         ax.set_ylabel(f"{b} (mm)")
-    axes[0].legend(fontsize=7, loc="best")
-    fig.suptitle(f"{result.scene.name}: the rod leaves its plane", fontsize=10)
+        ax.legend(fontsize=7, loc="best")
+        ax.grid(alpha=0.3)
+    axes[0].set_aspect("equal")
+    # equal axes would make the x-z view a thin strip when the rod leaves its plane a little:
+    # the out-of-plane axis is stretched instead, and says so
+    if z_extent < 0.25 * 1e3 * L:
+        axes[1].set_title("x-z (z exaggerated)", fontsize=9)
+    else:
+        axes[1].set_aspect("equal")
+    name = result.scene.name
+    suffix = "" if "leaves its plane" in name else ": the rod leaves its plane"
+    fig.suptitle(_title(name + suffix, 110), fontsize=10)
     return axes[0]
 
 
