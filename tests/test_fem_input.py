@@ -7,6 +7,7 @@ import sys
 
 import numpy as np
 import pytest
+from _scenes import scene_with
 
 import coilrod
 import coils
@@ -245,3 +246,13 @@ def test_given_mesh_kind_and_the_generated_meshes_pass():
             (3, 2, (4, 1, 1)),
         ]:
             check_mesh(rod_mesh(r, dim, el, order), r, dim, order)
+
+
+def test_scene_check_refuses_the_linear_square_ogrid():
+    """check and run stop at the same problem: order 1 with core = 1 on a Circle."""
+    from coilrod.scene import SceneError, parse_scene
+
+    data = scene_with(models={"run": ["fem3d"]}, fem={"order": 1, "elements3d": [20, 1, 1]})
+    with pytest.raises(SceneError, match=r"fem.elements3d: elements \(20, 1, 1\).*core = 1"):
+        parse_scene(data)
+    parse_scene(scene_with(models={"run": ["fem3d"]}, fem={"order": 1, "elements3d": [20, 2, 1]}))

@@ -27,7 +27,7 @@ import numpy as np
 from coils.coaxial import coaxial_parts
 
 from ..fem.mesh import DEFAULT_ELEMENTS as FEM_DEFAULT_ELEMENTS
-from ..fem.mesh import default_elements
+from ..fem.mesh import default_elements, linear_circle_problem
 from ..robot.sections import Circle
 from . import limits
 from .strength import field_strength
@@ -262,6 +262,11 @@ def _fem(scene) -> list[str]:
         key = f"fem.elements{dim}d"
         elements, given = _fem_elements(scene, dim)
         what = f"{list(elements)}" if given else f"the default {list(elements)} of {model}"
+        linear = linear_circle_problem(
+            scene.rod.section, dim, scene.fem_options.get("order", 2), elements
+        )
+        if linear:
+            problems.append(f"{key}: {linear} (fem.order = 1)")
         cells = fem_cells(scene, dim, elements)
         if cells > limits.MAX_FEM_ELEMENTS[dim]:
             problems.append(
