@@ -4,9 +4,11 @@
   continuum's tip deflection is Euler-Bernoulli's ``lambda L / 3`` (M axial, B perpendicular)
   plus Timoshenko's shear deflection with Cowper's (1966) shear coefficient -- the magnetic
   load of a uniform field is a uniform shear traction on the end face, so the elastic body
-  sees an end-loaded cantilever.  2D strip, 3D box and 3D O-grid circle (whose discrete
-  section's area and second moment are integrated here); tolerance 1e-4 of the deflection,
-  so a 1 % error in the magnetic load fails 100 times over.
+  sees an end-loaded cantilever.  Every (section, dim, order) the API accepts, on three
+  meshes: the error falls under refinement, to below 1e-4 of the deflection for quadratic
+  elements in 3D (a 1 % error in the magnetic load fails 100 times over).  The O-grid
+  circle's discrete section (quadratic arcs, or the polygon of the linear mesh) has its area
+  and second moment computed by hand from its boundary.
 * Out of the plane (3D box, nu = 0): M along the binormal (elevation pi/2) in a field along
   the tangent bends the beam in the x-z plane toward -z (torque m x B = |M| B e_y), by a
   distributed couple instead of an end shear: beam theory with the shear of the uniform couple
@@ -24,11 +26,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from skfem import Basis, ElementHex2
+from skfem import Basis, ElementHex1, ElementHex2
 
 import coilrod
 import coils
 from coilrod import presets
+from coilrod.fem.mesh import equivalent_height
 
 L = 0.04
 LAM = 1e-3  # linear regime: geometric non-linearity ~ LAM^2
@@ -47,39 +50,114 @@ def _timoshenko_ratio(section, nu: float, area: float, second_moment: float) -> 
     return 3 * E_over_G * second_moment / (_cowper(section, nu) * area * L**2)
 
 
-def _deflection_ratio(rod, nu, dim, elements):
+def _deflection_ratio(rod, nu, dim, elements, order=2):
     """Tip deflection over ``LAM L / 3`` (``LAM`` from the rod's nominal A and I)."""
     field = coils.UniformField((0.0, rod.field_for_lambda(1.0), 0.0))
-    res = coilrod.solve_fem(rod, field, [LAM], dim=dim, elements=elements, poisson_ratio=nu)
+    res = coilrod.solve_fem(
+        rod, field, [LAM], dim=dim, order=order, elements=elements, poisson_ratio=nu
+    )
     return res.tip[0, 1] / (LAM * L / 3), res
 
 
-@pytest.mark.parametrize(
-    ("dim", "section", "elements"),
-    [
-        (2, coilrod.Rectangle(L / 20, L / 20), (40, 2)),
-        (3, coilrod.Rectangle(L / 20, L / 20), (20, 1, 1)),
-        (3, coilrod.Circle(L / 20), (20, 2, 1)),  # the default O-grid
-    ],
-)
-def test_small_load_matches_beam_theory_with_shear(dim, section, elements):
+def _ogrid_section(radius: float, core: int, quadratic: bool) -> tuple[float, float]:
+    """Area (m^2) and second moment about z (m^4) of the O-grid's section, from its boundary
+    alone: ``4 core`` vertices on the circle at -45 deg + k 90 deg / core, joined by straight
+    edges (linear mesh) or by the quadratic (Lagrange) arcs through the edge midpoints moved
+    radially onto the circle (quadratic mesh).  Green's theorem, ``A = oint y dz`` and
+    ``I = oint y^3 / 3 dz``, with Gauss-Legendre rules exact for the polynomial integrands."""
+    n = 4 * core
+    theta = np.radians(-45.0 + 90.0 / core * np.arange(n + 1))
+    t, w = np.polynomial.legendre.leggauss(4)
+    t, w = (t + 1) / 2, w / 2
+    area = second = 0.0
+    for k in range(n):
+        a, b = radius * np.array([[np.cos(theta[j]), np.sin(theta[j])] for j in (k, k + 1)])
+        if quadratic:
+            mid = 0.5 * (theta[k] + theta[k + 1])
+            m = radius * np.array([np.cos(mid), np.sin(mid)])
+            pts = np.outer((1 - t) * (1 - 2 * t), a) + np.outer(4 * t * (1 - t), m)
+            pts += np.outer(t * (2 * t - 1), b)
+            d = np.outer(4 * t - 3, a) + np.outer(4 - 8 * t, m) + np.outer(4 * t - 1, b)
+        else:
+            pts, d = np.outer(1 - t, a) + np.outer(t, b), np.tile(b - a, (t.size, 1))
+        area += np.sum(w * pts[:, 0] * d[:, 1])
+        second += np.sum(w * pts[:, 0] ** 3 / 3 * d[:, 1])
+    return area, second
+
+
+def test_ogrid_section_by_hand():
+    """The hand geometry above against closed forms: the polygon's area n R^2 sin(2 pi/n) / 2
+    and second moment n R^4 sin(2 pi / n) (2 + cos(2 pi / n)) / 24, and the quadratic arcs'
+    area, that of the polygon plus n parabolic segments (2/3 chord x sagitta, Archimedes)."""
+    R = 1.3e-3
+    for core in (1, 2, 3):
+        n, a = 4 * core, 2 * np.pi / (4 * core)
+        A1, I1 = _ogrid_section(R, core, False)
+        assert A1 == pytest.approx(n * R**2 * np.sin(a) / 2, rel=1e-13)
+        assert I1 == pytest.approx(n * R**4 * np.sin(a) * (2 + np.cos(a)) / 24, rel=1e-13)
+        A2, _ = _ogrid_section(R, core, True)
+        segment = 2 / 3 * (2 * R * np.sin(a / 2)) * (R * (1 - np.cos(a / 2)))
+        assert A2 == pytest.approx(A1 + n * segment, rel=1e-13)
+
+
+def _section_of_mesh(rod, dim: int, order: int, elements) -> tuple[float, float]:
+    """Area and second moment (about z; in 2D per unit width) of the section the mesh has,
+    by hand (not from the mesh), and the mesh's own quadrature of them must agree."""
+    sec = rod.section
+    if dim == 2:
+        h = equivalent_height(sec)
+        return h, h**3 / 12
+    if isinstance(sec, coilrod.Circle):
+        return _ogrid_section(sec.diameter / 2, elements[1], order == 2)
+    return sec.area, sec.second_moment
+
+
+# (section, dim, order, meshes from coarse to fine, largest error on the finest)
+CONVERGENCE = [
+    (coilrod.Rectangle(L / 20, L / 20), 2, 1, [(10, 1), (20, 1), (40, 1)], 0.15),
+    (coilrod.Rectangle(L / 20, L / 20), 2, 2, [(5, 1), (10, 1), (20, 1)], 1e-3),
+    (coilrod.Circle(L / 20), 2, 1, [(10, 1), (20, 1), (40, 1)], 0.15),
+    (coilrod.Circle(L / 20), 2, 2, [(5, 1), (10, 1), (20, 1)], 1e-3),
+    (coilrod.Rectangle(L / 20, L / 20), 3, 1, [(10, 1, 1), (20, 2, 2), (40, 4, 4)], 0.15),
+    (coilrod.Rectangle(L / 20, L / 20), 3, 2, [(5, 1, 1), (10, 1, 1), (20, 1, 1)], 1e-4),
+    (coilrod.Circle(L / 20), 3, 1, [(10, 2, 1), (20, 2, 2), (40, 2, 4)], 0.15),
+    (coilrod.Circle(L / 20), 3, 2, [(5, 2, 1), (10, 2, 1), (20, 2, 1)], 1e-4),
+]
+
+
+@pytest.mark.parametrize(("section", "dim", "order", "meshes", "finest"), CONVERGENCE)
+def test_small_load_converges_to_beam_theory_with_shear(section, dim, order, meshes, finest):
+    """Every (section, dim, order) solve_fem accepts, nu = 0 (no clamp layer): the tip over
+    ``LAM L / 3`` tends to Euler-Bernoulli with the section's own A and I (by hand:
+    ``_section_of_mesh``) plus Timoshenko's shear, the error falling under refinement (linear
+    elements lock in bending: slowly).  Linear elements on the quadratic O-grid (issue 23) gave
+    0.095, 0.099, 0.100 at 20, 40, 160 elements."""
     rod = coilrod.Rod(L, 1e6, section, presets.M1())
-    ratio, res = _deflection_ratio(rod, 0.0, dim, elements)
-    A, I = rod.area, rod.section.second_moment
-    lam_ratio = 1.0  # the mesh's lambda over the nominal one
-    if isinstance(section, coilrod.Circle):
-        # the O-grid's section (quadratic arcs) is a little smaller than the circle:
-        # integrate its area and second moment over the mesh, 4 x 4 x 4 points per element
-        basis = Basis(res.mesh, ElementHex2(), intorder=7)
-        y = basis.global_coordinates()[1]
-        A_h, I_h = basis.dx.sum() / L, (basis.dx * y**2).sum() / L
-        assert A_h / A - 1 == pytest.approx(-7.8e-4, abs=1e-4)  # what the docstring says
-        lam_ratio = (A_h / A) / (I_h / I)
-        A, I = A_h, I_h
-    expected = lam_ratio * (1 + _timoshenko_ratio(section, 0.0, A, I))
-    assert ratio == pytest.approx(expected, rel=1e-4), (ratio, expected)
-    assert expected - 1 > 1e-3  # the shear term is resolved, not below the tolerance
-    assert abs(res.tip[0, 0] - L) < 1e-5 * L  # shortening is second order
+    errors = []
+    for elements in meshes:
+        ratio, res = _deflection_ratio(rod, 0.0, dim, elements, order)
+        A_h, I_h = _section_of_mesh(rod, dim, order, elements)
+        if dim == 3:  # the mesh's own quadrature of its section agrees with the hand geometry
+            elem = ElementHex2() if order == 2 else ElementHex1()
+            basis = Basis(res.mesh, elem, intorder=7)
+            y = basis.global_coordinates()[1]
+            assert basis.dx.sum() / L == pytest.approx(A_h, rel=1e-12)
+            assert (basis.dx * y**2).sum() / L == pytest.approx(I_h, rel=1e-12)
+            A, I = rod.area, section.second_moment
+        else:
+            A, I = equivalent_height(section), equivalent_height(section) ** 3 / 12
+        # the load M B A_h over the stiffness E I_h, over the nominal lambda's M B A / (E I)
+        expected = (A_h / A) / (I_h / I) * (1 + _timoshenko_ratio(section, 0.0, A_h, I_h))
+        errors.append(abs(ratio / expected - 1))
+        assert abs(res.tip[0, 0] - L) < 1e-5 * L  # shortening is second order
+    assert all(b < a / 1.5 for a, b in zip(errors[:-1], errors[1:], strict=True)), errors
+    assert errors[-1] < finest, errors
+
+
+def test_shear_is_resolved():
+    """The Timoshenko term in the references above is larger than their tolerance."""
+    section = coilrod.Rectangle(L / 20, L / 20)
+    assert _timoshenko_ratio(section, 0.0, section.area, section.second_moment) > 1e-3
 
 
 def _clamp_gap(thickness_ratio: int):

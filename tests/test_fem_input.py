@@ -7,6 +7,7 @@ import sys
 
 import numpy as np
 import pytest
+from _scenes import scene_with
 
 import coilrod
 import coils
@@ -128,3 +129,130 @@ def test_circle_mesh_and_2d_circle(field):
     assert res3.mesh.t.shape[1] == 2 * (2 * 2 + 4 * 2 * 1)
     r = np.hypot(res3.nodes[1], res3.nodes[2])
     assert r.max() == pytest.approx(D / 2, rel=1e-12)
+
+
+# -- what the 2D FEM cannot represent (issue 23) ------------------------------------------------
+def _square_rod():
+    return coilrod.Rod(L, 1e6, coilrod.Rectangle(2e-3, 2e-3), presets.M1())
+
+
+def test_2d_refuses_an_out_of_plane_field_and_3d_is_the_rotated_elastica():
+    """B = (0, 2b, 3b): the 2D FEM kept (B_x, B_y) and put the tip 22.9 mm off.  It must refuse
+    (as the planar rod does), and the 3D FEM -- the square section bends alike about every
+    axis -- is the planar rod (an independent discretisation) in the plane of x and B,
+    lambda = sqrt(13), rotated back, within the continuum's known offset (clamp layer, shear:
+    about 1 % of L; tests/test_fem_accuracy.py)."""
+    rod = _square_rod()
+    b = rod.field_for_lambda(1.0)
+    field = coils.UniformField((0.0, 2 * b, 3 * b))
+    with pytest.raises(ValueError, match=r"dim=2 would drop.*B_z.*use dim=3"):
+        coilrod.solve_fem(rod, field, [1.0], dim=2, elements=(10, 1))
+    with pytest.raises(ValueError, match="B_z"):  # the same criterion
+        coilrod.solve_rod(rod, field, [1.0], model="planar")
+    fem = coilrod.solve_fem(rod, field, [1.0], dim=3, elements=(10, 1, 1))
+    planar = coilrod.solve_rod(rod, coils.UniformField((0.0, np.sqrt(13) * b, 0.0)), [1.0])
+    x, w = planar.tip[0, 0], planar.tip[0, 1]  # w along the field's unit (0, 2, 3) / sqrt(13)
+    expected = np.array([x, 2 * w / np.sqrt(13), 3 * w / np.sqrt(13)])
+    assert np.linalg.norm(fem.tip[0] - expected) < 0.005 * L, (fem.tip[0], expected)
+    assert expected[2] > 0.4 * L  # a large out-of-plane deflection, not a small one
+
+
+class _TwistField(coils.Field):
+    """B = g (z, 0, x) (curl- and divergence-free): B_z = 0 on the x axis but dB_z/dx = g, an
+    out-of-plane force on the rod's plane z = 0."""
+
+    def _B(self, p):
+        return 0.05 * np.stack([p[:, 2], 0.0 * p[:, 0], p[:, 0]], axis=1) + [0, 0.01, 0]
+
+    def _gradient(self, p):
+        G = np.zeros((p.shape[0], 3, 3))
+        G[:, 0, 2] = G[:, 2, 0] = 0.05
+        return G
+
+
+@pytest.mark.parametrize(
+    ("field", "refused"),
+    [
+        (coils.UniformField((0.0, 0.01, 1e-4)), True),
+        (_TwistField(), True),
+        (coils.UniformField((0.003, 0.01, 0.0)), False),
+        (coils.LinearField((0.0, 0.01, 0.0), coils.maxwell_gradient(0.5), (0.01, 0, 0)), False),
+    ],
+)
+def test_2d_fem_refuses_what_the_planar_rod_refuses(field, refused):
+    rod = _square_rod()
+    if refused:
+        with pytest.raises(ValueError, match="use dim=3"):
+            coilrod.solve_fem(rod, field, [0.0], dim=2, elements=(4, 1))
+        with pytest.raises(ValueError, match="model='planar' would drop"):
+            coilrod.solve_rod(rod, field, [0.0], model="planar")
+    else:
+        coilrod.solve_fem(rod, field, [0.0], dim=2, elements=(4, 1))
+        coilrod.solve_rod(rod, field, [0.0], model="planar")
+
+
+# -- a given mesh must be the rod's (issue 23) --------------------------------------------------
+def _box(x1, y0, y1, z0=-1e-3, z1=1e-3, x0=0.0):
+    from skfem import MeshHex1
+
+    return MeshHex1.init_tensor(
+        np.linspace(x0, x1, 5), np.linspace(y0, y1, 2), np.linspace(z0, z1, 2)
+    )
+
+
+@pytest.mark.parametrize(
+    ("mesh", "match"),
+    [
+        (_box(2 * L, -1e-3, 1e-3), r"span x in \[0, L\]"),  # tip taken inside the mesh
+        (_box(L, -1e-3, 1e-3, x0=-1e-3), r"span x in \[0, L\]"),
+        (_box(L, -0.8e-3, 1.2e-3), r"\|y\| = 0.0012"),  # off the axis
+        (_box(L, -1.5e-3, 1.5e-3), r"\|y\| = 0.0015"),  # too thick
+        (_box(L, -1e-3, 1e-3, -2e-3, 2e-3), r"\|z\| = 0.002"),  # too wide
+        (_box(L, -0.5e-3, 0.5e-3), r"area .* 50 %"),  # too thin
+    ],
+)
+def test_a_given_mesh_must_be_the_rods(mesh, match):
+    rod = _square_rod()
+    field = coils.UniformField((0.0, rod.field_for_lambda(1.0), 0.0))
+    with pytest.raises(ValueError, match="mesh") as err:
+        coilrod.solve_fem(rod, field, [0.0], dim=3, mesh=mesh)
+    assert err.match(match)
+    coilrod.solve_fem(rod, field, [0.0], dim=3, mesh=_box(L, -1e-3, 1e-3))  # the right one
+
+
+def test_given_mesh_kind_and_the_generated_meshes_pass():
+    from skfem import MeshHex1, MeshQuad1, MeshTri
+
+    from coilrod.fem.mesh import check_mesh, circle_mesh, rod_mesh
+
+    rod = _square_rod()
+    field = coils.UniformField((0.0, rod.field_for_lambda(1.0), 0.0))
+    with pytest.raises(ValueError, match="MeshQuad1 or MeshQuad2"):
+        coilrod.solve_fem(rod, field, [0.0], dim=2, mesh=MeshTri())
+    strip = MeshQuad1.init_tensor(np.linspace(0, L, 5), np.linspace(-1e-3, 1e-3, 2))
+    coilrod.solve_fem(rod, field, [0.0], dim=2, mesh=strip)
+    seed = presets.seed_rod()
+    quadratic = circle_mesh(seed.length, seed.section.diameter, 4, 2, 1)
+    with pytest.raises(ValueError, match="linear elements .* quadratic-geometry MeshHex2"):
+        coilrod.solve_fem(seed, field, [0.0], dim=3, order=1, mesh=quadratic)
+    coilrod.solve_fem(seed, field, [0.0], dim=3, order=1, mesh=MeshHex1(quadratic.p, quadratic.t))
+    with pytest.raises(ValueError, match="core = 1 has a square section"):
+        coilrod.solve_fem(seed, field, [0.0], dim=3, order=1, elements=(4, 1, 1))
+    for r in (rod, seed):
+        for dim, order, el in [
+            (2, 1, (4, 2)),
+            (2, 2, (4, 1)),
+            (3, 1, (4, 2, 2)),
+            (3, 2, (4, 1, 1)),
+        ]:
+            check_mesh(rod_mesh(r, dim, el, order), r, dim, order)
+
+
+def test_scene_check_refuses_the_linear_square_ogrid():
+    """check and run stop at the same problem: order 1 with core = 1 on a Circle."""
+    from coilrod.scene import SceneError, parse_scene
+
+    data = scene_with(models={"run": ["fem3d"]}, fem={"order": 1, "elements3d": [20, 1, 1]})
+    with pytest.raises(SceneError, match=r"fem.elements3d: elements \(20, 1, 1\).*core = 1"):
+        parse_scene(data)
+    parse_scene(scene_with(models={"run": ["fem3d"]}, fem={"order": 1, "elements3d": [20, 2, 1]}))

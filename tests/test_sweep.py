@@ -799,3 +799,41 @@ def sweep(scene, params, **kwargs):
         kwargs.setdefault("workers", 1)
     kwargs.setdefault("progress", False)
     return coilrod.sweep(scene, params, **kwargs)
+
+
+ELEVATION_SCENE = """\
+name = "uniform magnetization, no elevation set"
+[robot]
+length = "40 mm"
+diameter = "2 mm"
+youngs_modulus = "1 MPa"
+magnetization = { magnitude = "128 kA/m", angle = "0 deg" }
+[field]
+type = "uniform"
+B = "5 mT"
+[load]
+steps = 2
+"""
+
+
+@pytest.mark.parametrize(
+    ("param", "message"),
+    [
+        # a plain 0 passes for an angle: the first grid point alone did not show it (issue 23)
+        ("robot.magnetization.elevation=0:0.5:2", "missing unit in 0.5"),
+        ("robot.magnetization.elevation=0.1:0.5:2", "missing unit in 0.1"),
+        ("robot.magnetization.elevation=0mm:5mm:2", "unknown unit 'm'"),
+    ],
+)
+def test_cli_plain_number_for_a_key_the_scene_does_not_set(
+    tmp_path, capsys, no_solving, param, message
+):
+    scene = tmp_path / "scene.toml"
+    scene.write_text(ELEVATION_SCENE)
+    args = ["sweep", str(scene), "--param", param, "--out", str(tmp_path / "out")]
+    assert main(args) == 2
+    (line,) = errors(capsys)
+    assert line.startswith("sweep parameter robot.magnetization.elevation: "), line
+    assert message in line, line
+    assert "rad, deg" in line, line  # the unit expected
+    assert not (tmp_path / "out").exists()  # nothing created

@@ -259,27 +259,43 @@ def sweep_parameters(params: Mapping, scene: Scene) -> list[Parameter]:
 
 
 def _unknown_keys(found: list[Parameter], scene: Scene) -> dict[str, list[str]]:
-    """The parser's "unknown key" problems of each parameter.
+    """The parser's "unknown key" and unit problems of each parameter the scene does not set.
 
-    A key the scene does not set is put in (at the first grid point): the parser must know it,
-    else it is an error of the sweep, not of every row.
+    Such a key is put in (at the first grid point, and again with every plain-number parameter
+    at its first non-zero value, since a plain 0 passes for an angle): the parser must know it
+    and take its values' kind (a plain number where the scene needs a unit, ``elevation =
+    0.5``), else it is an error of the sweep, not of every row.
     """
     fresh = [p for p in found if lookup(scene.data, p.parts) is MISSING]
     if not fresh:
         return {}
-    data = point_data(scene.data, fresh, [p.values[0] for p in fresh])
-    try:
-        parse_scene(data, scene.source)
-    except SceneError as exc:
-        out = {}
-        for p in fresh:
-            n = len(p.parts)
-            prefixes = [f"{spell_key(p.parts[:i])}: unknown key" for i in range(1, n + 1)]
-            lines = [line for line in exc.problems if line.startswith(tuple(prefixes))]
-            if lines:
-                out[p.key] = [_about(p.key, p.parts, line) for line in lines]
-        return out
-    return {}
+    first = [p.values[0] for p in fresh]
+    points = [first]
+    nonzero = [
+        next((v for v in p.values if v != 0), p.values[0]) if p.dimension is None else v0
+        for p, v0 in zip(fresh, first, strict=True)
+    ]
+    if nonzero != first:
+        points.append(nonzero)
+    out: dict[str, list[str]] = {}
+    for values in points:
+        try:
+            parse_scene(point_data(scene.data, fresh, values), scene.source)
+        except SceneError as exc:
+            for p in fresh:
+                n = len(p.parts)
+                prefixes = [f"{spell_key(p.parts[:i])}: unknown key" for i in range(1, n + 1)]
+                own = f"{spell_key(p.parts)}: "
+                lines = [
+                    line
+                    for line in exc.problems
+                    if line.startswith(tuple(prefixes)) or (line.startswith(own) and "unit" in line)
+                ]
+                for line in lines:
+                    about = _about(p.key, p.parts, line)
+                    if about not in out.setdefault(p.key, []):
+                        out[p.key].append(about)
+    return {key: lines for key, lines in out.items() if lines}
 
 
 def point_data(base: dict, parameters: list[Parameter], values) -> dict:

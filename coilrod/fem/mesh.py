@@ -25,11 +25,23 @@ __all__ = [
     "circle_mesh",
     "rod_mesh",
     "check_elements",
+    "check_mesh",
+    "linear_circle_problem",
     "equivalent_height",
 ]
 
 #: Half-width of the O-grid's central square as a fraction of the radius.
 CORE_FRACTION = 0.5
+
+#: Tolerance (relative to L) of a given mesh's ends on x = 0 and x = L (as the clamp's).
+MESH_END_TOL = 1e-9
+#: Tolerance (relative to the section's size) of a given mesh's nodes on the section's bounds
+#: and of a Rectangle's (or the 2D strip's) mesh area.
+MESH_SECTION_TOL = 1e-6
+#: Smallest area of a given mesh of a Circle section over the circle's: the inscribed octagon
+#: (8 sin(pi/4) / (2 pi) = 0.9003), the coarsest section of coilrod's own O-grids (the linear
+#: one with ``core = 2``); a curved O-grid is 1.2 % short at most.
+MIN_CIRCLE_AREA_RATIO = 8 * math.sin(math.pi / 4) / (2 * math.pi) * (1 - 1e-9)
 
 #: ``solve_fem``'s default ``elements``: (length, thickness) in 2D (key 2), (length,
 #: thickness, width) for a 3D Rectangle (key 3) and (length, core, ring) for a 3D Circle (key
@@ -274,19 +286,24 @@ def circle_mesh(
     n_core: int = 1,
     n_ring: int = 1,
     breakpoints=(),
+    quadratic: bool = True,
 ):
-    """Mapped hexahedral mesh of a circular cylinder along x, with quadratic geometry.
+    """Mapped hexahedral mesh of a circular cylinder along x (O-grid section).
 
     The section is an O-grid (see ``_disc_quads``): ``n_core**2 + 4 n_core n_ring`` elements
     per section, extruded in about ``n_length`` layers that end at every breakpoint (arc
-    lengths, m; see :func:`length_layers`).  The mesh is a 27-node ``MeshHex2`` whose
-    lateral-surface nodes lie on the exact cylinder (isoparametric quadratic boundary).  The
-    circumference has ``4 n_core`` quadratic arcs: the section area is 1.2 % short with
-    ``n_core = 1`` (90-degree arcs), 0.08 % with 2 and 0.016 % with 3.
+    lengths, m; see :func:`length_layers`).  With ``quadratic`` (for quadratic elements) the
+    mesh is a 27-node ``MeshHex2`` whose lateral-surface nodes lie on the exact cylinder
+    (isoparametric quadratic boundary): the circumference has ``4 n_core`` parabolic arcs and
+    the section area is 1.2 % short with ``n_core = 1`` (90-degree arcs), 0.08 % with 2 and
+    0.016 % with 3.  Without (for linear elements) it is the ``MeshHex1`` of the same vertices:
+    the section is the inscribed ``4 n_core``-gon (area 36 % short with ``n_core = 1``, 10 %
+    with 2, 4.5 % with 3).  Linear elements need the linear mesh: on the quadratic geometry
+    they come out ~10 times too stiff (coilrod issue 23).
 
     Returns
     -------
-    skfem.MeshHex2
+    skfem.MeshHex2 or skfem.MeshHex1
     """
     from skfem import Basis, ElementHex2, MeshHex1, MeshHex2
 
@@ -305,6 +322,8 @@ def circle_mesh(
     # r0 along x, r1 = the quad's second direction, r2 = its first (positive Jacobian)
     t = np.stack([q00, q10, q01, Q00, q11, Q10, Q01, Q11])
     m1 = MeshHex1(p, t)
+    if not quadratic:
+        return m1
     m2 = MeshHex2.from_mesh(m1)
     # move lateral-surface nodes (edge, facet midpoints) radially onto the cylinder
     tol = 1e-9 * length
@@ -319,14 +338,103 @@ def circle_mesh(
     return MeshHex2(doflocs, m2.t)
 
 
-def rod_mesh(rod, dim: int, elements: tuple[int, ...]):
-    """The reference mesh of ``rod`` for a ``dim``-dimensional model.
+def linear_circle_problem(section, dim: int, order: int, elements) -> str:
+    """Why ``elements`` cannot mesh ``section`` for linear elements ("" if they can): a 3D
+    Circle of order 1 with ``core = 1`` is meshed by its inscribed square (the linear O-grid's
+    section, 36 % short of the circle's area); ``core >= 2`` gives at least the octagon."""
+    if dim == 3 and order == 1 and isinstance(section, Circle) and elements[1] < 2:
+        return (
+            f"elements {tuple(elements)}: a linear (order 1) O-grid with core = {elements[1]} "
+            "has a square section, 36 % short of the circle's area; give core >= 2 (an "
+            "octagon or finer) or order 2"
+        )
+    return ""
+
+
+def check_mesh(mesh, rod, dim: int, order: int) -> None:
+    """Raise ValueError unless ``mesh`` is a reference mesh of ``rod`` for ``solve_fem``.
+
+    The mesh must be a scikit-fem quadrilateral (2D) or hexahedral (3D) mesh, of linear
+    geometry for linear elements (linear elements on a quadratic-geometry mesh are ~10 times
+    too stiff), span x in [0, L] (to ``MESH_END_TOL`` L), keep its nodes within the section's
+    bounds centred on the x axis (|y| <= h / 2 with the strip's height h in 2D, the
+    Rectangle's |y| <= thickness / 2 and |z| <= width / 2, the Circle's radius; to
+    ``MESH_SECTION_TOL``), and have the section's area (volume / L; the 2D strip's height):
+    to ``MESH_SECTION_TOL`` for a Rectangle and the strip, between the inscribed octagon's
+    (:data:`MIN_CIRCLE_AREA_RATIO`) and the circle's for a Circle.
+
+    Parameters
+    ----------
+    mesh : skfem.Mesh
+    rod : coilrod.Rod
+    dim : {2, 3}
+    order : {1, 2}
+    """
+    import skfem
+
+    kinds = {2: (skfem.MeshQuad1, skfem.MeshQuad2), 3: (skfem.MeshHex1, skfem.MeshHex2)}[dim]
+    if not isinstance(mesh, kinds):
+        raise ValueError(
+            f"mesh must be a scikit-fem {' or '.join(k.__name__ for k in kinds)} for dim={dim}; "
+            f"got {type(mesh).__name__}"
+        )
+    if order == 1 and isinstance(mesh, kinds[1]):
+        raise ValueError(
+            f"mesh: linear elements (order=1) on a quadratic-geometry {type(mesh).__name__} are "
+            f"about 10 times too stiff; give its linear mesh ({kinds[0].__name__}(mesh.p, "
+            "mesh.t)) or order=2"
+        )
+    L = float(rod.length)
+    x = mesh.doflocs
+    lo, hi = float(x[0].min()), float(x[0].max())
+    if abs(lo) > MESH_END_TOL * L or abs(hi - L) > MESH_END_TOL * L:
+        raise ValueError(
+            f"mesh must span x in [0, L] = [0, {L:.6g}] m (the rod clamped at x = 0, its tip at "
+            f"x = L); it spans [{lo:.6g}, {hi:.6g}] m"
+        )
+    sec = rod.section
+    if dim == 2:
+        half = {"y": 0.5 * equivalent_height(sec)}
+    elif isinstance(sec, Rectangle):
+        half = {"y": 0.5 * sec.thickness, "z": 0.5 * sec.width}
+    else:
+        half = {"r": 0.5 * sec.diameter}
+    size = max(half.values())
+    for name, h in half.items():
+        coord = np.hypot(x[1], x[2]) if name == "r" else x[1 if name == "y" else 2]
+        far = float(np.max(np.abs(coord)))
+        if far > h + MESH_SECTION_TOL * size:
+            what = "radius sqrt(y^2 + z^2)" if name == "r" else f"|{name}|"
+            raise ValueError(
+                f"mesh nodes reach {what} = {far:.6g} m, beyond the section's {h:.6g} m (the "
+                f"section {sec!r}{' as the 2D strip' if dim == 2 else ''} is centred on the x "
+                "axis)"
+            )
+    area = float(skfem.Basis(mesh, mesh.elem(), intorder=5).dx.sum()) / L
+    nominal = equivalent_height(sec) if dim == 2 else sec.area
+    ratio = area / nominal
+    if isinstance(sec, Circle) and dim == 3:
+        ok, want = MIN_CIRCLE_AREA_RATIO <= ratio <= 1 + MESH_SECTION_TOL, "90 to 100 %"
+    else:
+        ok, want = abs(ratio - 1) <= MESH_SECTION_TOL, "100 %"
+    if not ok:
+        what = "height (area / L)" if dim == 2 else "section area (volume / L)"
+        raise ValueError(
+            f"mesh {what} is {area:.6g}, {100 * ratio:.4g} % of the section's {nominal:.6g} "
+            f"(must be {want}): the mesh does not fill the section {sec!r}"
+        )
+
+
+def rod_mesh(rod, dim: int, elements: tuple[int, ...], order: int = 2):
+    """The reference mesh of ``rod`` for a ``dim``-dimensional model of element ``order``.
 
     ``elements`` counts elements along (length, thickness) in 2D, (length, thickness, width)
     for a 3D Rectangle, and (length, core, ring) for a 3D Circle: ``core`` elements along each
     side of the O-grid's central square and ``ring`` radial layers around it.  The layers
     along the length end at the magnetization's breakpoints (:func:`length_layers`): there
-    are ``elements[0]`` of them, or one per piece between breakpoints if that is more.
+    are ``elements[0]`` of them, or one per piece between breakpoints if that is more.  A 3D
+    Circle has quadratic geometry (``MeshHex2``) for ``order`` 2 and the linear mesh of the
+    same vertices (``MeshHex1``, a polygonal section) for ``order`` 1 (:func:`circle_mesh`).
     """
     L = rod.length
     sec = rod.section
@@ -336,5 +444,8 @@ def rod_mesh(rod, dim: int, elements: tuple[int, ...]):
     if isinstance(sec, Rectangle):
         return box_mesh(L, sec.thickness, sec.width, *elements, breakpoints=br)
     if isinstance(sec, Circle):
-        return circle_mesh(L, sec.diameter, *elements, breakpoints=br)
+        problem = linear_circle_problem(sec, dim, order, elements)
+        if problem:
+            raise ValueError(problem)
+        return circle_mesh(L, sec.diameter, *elements, breakpoints=br, quadratic=order == 2)
     raise ValueError(f"unsupported section {sec!r}")

@@ -104,13 +104,7 @@ class FEMResult:
 
         u = self.displacement(k)
         npts = self.mesh.p.shape[1]
-        if u.shape[1] < npts:  # linear elements on a quadratic-geometry mesh: export vertices
-            from skfem import MeshHex1
-
-            mesh = MeshHex1(self.mesh.p[:, : self.mesh.t.max() + 1], self.mesh.t)
-            npts = mesh.p.shape[1]
-        else:
-            mesh = self.mesh
+        mesh = self.mesh
         disp = np.zeros((npts, 3))
         disp[:, : self.dim] = u[:, :npts].T
         return to_meshio(mesh, point_data={"displacement": disp})

@@ -12,9 +12,10 @@ from ..errors import ConvergenceError
 from ..path.corrector import NewtonOptions
 from ..path.events import warn_events
 from ..path.stepping import PathOptions, follow_load
+from ..rod.model import clamp_frame, planar_reasons
 from .assembly import Assembler
 from .material import moduli
-from .mesh import check_elements, default_elements, rod_mesh
+from .mesh import check_elements, check_mesh, default_elements, rod_mesh
 from .problem import FEMProblem
 from .result import FEMResult
 
@@ -65,10 +66,15 @@ def solve_fem(
         Field multipliers, continued in order from the unloaded state.
     dim : {2, 3}
         2D over length x thickness (plane stress by default) or 3D over the section.  2D
-        needs a planar magnetization (``rod.magnetization.is_planar``; else ValueError).
+        refuses (ValueError) what would leave the plane z = 0, by the planar rod model's
+        criterion (:func:`coilrod.rod.model.planar_reasons`, clamp at the origin along +x): a
+        non-planar magnetization (an elevation), or a field with B_z or dB_z/dx, dB_z/dy on
+        the disc of radius L around the clamp.
     order : {1, 2}
         Element order (quadrilaterals/hexahedra); quadratic by default (linear ones lock in
-        bending).
+        bending and converge slowly).  A 3D Circle is meshed with quadratic geometry for
+        order 2 and by the linear mesh of the same O-grid vertices (a polygonal section) for
+        order 1, which then needs ``core >= 2``.
     elements : tuple of int, optional
         Elements along (length, thickness) in 2D and (length, thickness, width) for a 3D
         Rectangle; for a 3D Circle (length, core, ring): ``core`` elements along each side
@@ -92,8 +98,10 @@ def solve_fem(
         volumetric locking.  "displacement": plain neo-Hookean displacement elements.
         Plane stress has no volumetric constraint and always uses displacements.
     mesh : skfem.Mesh, optional
-        A reference mesh to use instead of the generated one (must span x in [0, L], with
-        facets on x = 0 and x = L).
+        A reference mesh to use instead of the generated one: MeshQuad1/2 in 2D, MeshHex1/2
+        in 3D (of linear geometry for ``order=1``), spanning x in [0, L] with facets on x = 0
+        and x = L, within the section's bounds about the x axis and filling its area
+        (:func:`~coilrod.fem.mesh.check_mesh`; else ValueError saying what is off).
     rtol, utol : float
         Newton tolerances: residual relative to the force scale, increment relative to L.
     max_iterations, max_cuts : int
@@ -155,6 +163,12 @@ def solve_fem(
         raise ValueError(f"dim must be 2 or 3; got {dim!r}")
     if dim == 2:
         rod.magnetization.check_planar("2D FEM (dim=2)")
+        reasons = planar_reasons(rod, field, np.zeros(3), clamp_frame(0.0, None))
+        if reasons:
+            raise ValueError(
+                "dim=2 would drop out-of-plane loads (the 2D FEM sees only B_x, B_y and their "
+                "x-y derivatives): " + "; ".join(reasons) + " -- use dim=3"
+            )
     if isinstance(order, bool) or order not in (1, 2):
         raise ValueError(f"order must be 1 or 2; got {order!r}")
     if plane not in ("stress", "strain"):
@@ -173,9 +187,11 @@ def solve_fem(
     if mesh is None:
         if elements is None:
             elements = default_elements(rod, dim)
-        mesh = rod_mesh(rod, dim, check_elements(elements, dim))
-    elif mesh.p.shape[0] != dim:
+        mesh = rod_mesh(rod, dim, check_elements(elements, dim), order)
+    elif getattr(getattr(mesh, "p", None), "shape", (dim,))[0] != dim:
         raise ValueError(f"mesh must be {dim}-dimensional for dim={dim}; got {mesh.p.shape[0]}")
+    else:
+        check_mesh(mesh, rod, dim, order)
     G, K = moduli(rod.youngs_modulus, nu)
     asm = Assembler(mesh, order, rod, field, G, K, plane=plane, mixed=formulation == "mixed")
     # the field must be finite on the undeformed body

@@ -28,6 +28,10 @@ MODELS = ("auto", "planar", "spatial")
 PLANAR_FIELD_TOL = 1e-12
 #: Orthonormality tolerance of a clamp rotation matrix (max-norm of R^T R - I).
 ROTATION_TOL = 1e-9
+#: :func:`planar_reasons`' reasons about the magnetization and the clamp rotation (the others
+#: are the field's).
+MAGNETIZATION_REASON = "the magnetization has an out-of-plane elevation"
+CLAMP_REASON = "the clamp rotation turns the rod out of the x-y plane"
 
 
 def as_rotation(value, name: str = "clamp_rotation") -> np.ndarray:
@@ -185,9 +189,9 @@ def planar_reasons(rod, field: Field, clamp: np.ndarray, R0: np.ndarray) -> list
     reasons = []
     mag = rod.magnetization
     if not getattr(mag, "is_planar", True):
-        reasons.append("the magnetization has an out-of-plane elevation")
+        reasons.append(MAGNETIZATION_REASON)
     if not _in_plane_rotation(R0):
-        reasons.append("the clamp rotation turns the rod out of the x-y plane")
+        reasons.append(CLAMP_REASON)
     reasons += _field_reasons(field, np.asarray(clamp, float), rod.length)
     return reasons
 

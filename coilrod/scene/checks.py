@@ -5,7 +5,8 @@ and ``coilrod run`` stop at the same problems (:func:`coilrod.scene.parse_scene`
 :func:`scene_problems` last):
 
 - the field is not zero, and the planar models (fem2d, a rod with model "planar") see some of
-  it in their plane;
+  it in their plane and nothing out of it (B_z, dB_z/dx, dB_z/dy over the robot's reach: the
+  planar rod's criterion, :func:`coilrod.rod.model.planar_reasons`);
 - the magneto-elastic number at the top load stays within :data:`limits.MAX_MAGNETOELASTIC`;
 - the clamp and the undeformed robot keep clear of every coil winding, and the real field is
   finite on the undeformed centreline (the problem names the coil);
@@ -26,7 +27,7 @@ import numpy as np
 from coils.coaxial import coaxial_parts
 
 from ..fem.mesh import DEFAULT_ELEMENTS as FEM_DEFAULT_ELEMENTS
-from ..fem.mesh import default_elements
+from ..fem.mesh import default_elements, linear_circle_problem
 from ..robot.sections import Circle
 from . import limits
 from .strength import field_strength
@@ -39,11 +40,18 @@ CENTERLINE_SAMPLES = 2001
 FIELD_SAMPLES = 201
 
 
-def centerline_points(length: float, n: int = CENTERLINE_SAMPLES) -> np.ndarray:
-    """Points (n, 3) in m of the undeformed centreline, from the clamp (origin) along +x."""
-    pts = np.zeros((n, 3))
-    pts[:, 0] = np.linspace(0.0, length, n)
-    return pts
+def centerline_points(length: float, n: int = CENTERLINE_SAMPLES, tangent=(1.0, 0.0, 0.0)):
+    """Points (n, 3) in m of the undeformed centreline, from the clamp (origin) along the unit
+    ``tangent`` (default +x; the clamp frame's first column for a rotated clamp)."""
+    return np.outer(np.linspace(0.0, length, n), np.asarray(tangent, float))
+
+
+def clamp_tangent(scene) -> np.ndarray:
+    """The unit tangent (3,) of the undeformed robot at the clamp: +x, or the first column of
+    ``rod.clamp_rotation`` (rod runs only; the continuum models clamp along +x)."""
+    from ..rod.model import clamp_frame
+
+    return clamp_frame(0.0, scene.rod_options.get("clamp_rotation"))[:, 0]
 
 
 def body_radius(rod) -> float:
@@ -103,7 +111,7 @@ def _in_plane(scene, strength_key) -> list[str]:
         planar.insert(0, "rod")
     if not planar:
         return []
-    pts = centerline_points(scene.rod.length, FIELD_SAMPLES)
+    pts = centerline_points(scene.rod.length, FIELD_SAMPLES, clamp_tangent(scene))
     L = scene.rod.length
     for fld in scene.fields.values():
         try:
@@ -122,6 +130,34 @@ def _in_plane(scene, strength_key) -> list[str]:
         f"planar models ({', '.join(planar)}) would see no load; turn the field into the x-y "
         "plane or run fem3d only"
     ]
+
+
+def _out_of_plane(scene, strength_key) -> list[str]:
+    """The planar models (fem2d; the rod when ``rod.model = "planar"``) refuse a field that
+    would push the robot out of its plane, by :func:`coilrod.rod.model.planar_reasons` (the
+    magnetization's elevation is reported by :func:`_planar_and_incompressible`)."""
+    from ..rod.model import CLAMP_REASON, MAGNETIZATION_REASON, clamp_frame, planar_reasons
+
+    planar = {"fem2d": None} if "fem2d" in scene.models else {}
+    if "rod" in scene.models and scene.rod_options.get("model") == "planar":
+        planar["rod"] = scene.rod_options.get("clamp_rotation")
+    key = {"uniform": "field.direction", "gradient": "field.axis"}.get(
+        scene.field_kind, strength_key
+    )
+    problems = []
+    for model, rotation in planar.items():
+        R0 = clamp_frame(0.0, rotation)
+        for label, fld in scene.fields.items():
+            for reason in planar_reasons(scene.rod, fld, np.zeros(3), R0):
+                if reason == MAGNETIZATION_REASON:
+                    continue
+                where = "rod.clamp_rotation" if reason == CLAMP_REASON else key
+                fix = "run fem3d" if model == "fem2d" else "drop rod.model = 'planar'"
+                problems.append(
+                    f"{where}: {reason} ({label} field), which the planar {model} model would "
+                    f"drop; turn it into the x-y plane or {fix}"
+                )
+    return list(dict.fromkeys(problems))
 
 
 def _magnetoelastic(scene, strength_key) -> list[str]:
@@ -159,18 +195,18 @@ def _closest(dist, length: float) -> tuple[float, float]:
 
 
 def _clearance(scene, coil_keys) -> list[str]:
-    """The clamp and the undeformed body against every filament and winding of every coil."""
+    """The clamp and the undeformed body (along the clamp's tangent, :func:`clamp_tangent`)
+    against every filament and winding of every coil."""
     problems = []
     L = scene.rod.length
     r = body_radius(scene.rod)
+    tangent = clamp_tangent(scene)
     for c in coil_keys:
         worst = None  # (gap, s)
         for part in coaxial_parts(c.coil):
 
             def local(s, part=part):
-                pts = np.zeros((len(s), 3))
-                pts[:, 0] = s
-                loc = part.to_local(pts)
+                loc = part.to_local(np.outer(s, tangent))
                 return np.hypot(loc[:, 0], loc[:, 1]), loc[:, 2]
 
             # a finite winding's section (rho, z) holds its filaments; else the filaments
@@ -195,15 +231,17 @@ def _clearance(scene, coil_keys) -> list[str]:
                 if s <= 1e-9 * L
                 else f"the undeformed robot, at s = {_mm(s)} from the clamp,"
             )
+            rotated = "clamp_rotation" in scene.rod_options
+            along = " along the rotated clamp's tangent" if rotated else ""
             problems.append(
-                f"{c.key}: {where} touches the winding of {c.what} (the robot's body reaches "
-                f"{_mm(r)} from its centreline); move the coil (center, radius, spacing) or "
-                "change the robot"
+                f"{c.key}: {where}{along} touches the winding of {c.what} (the robot's body "
+                f"reaches {_mm(r)} from its centreline); move the coil (center, radius, "
+                f"spacing) or change the robot{' or rod.clamp_rotation' if rotated else ''}"
             )
             continue
         # the real field on the undeformed centreline, as the solvers will first evaluate it
         try:
-            B, G = c.coil.B_and_gradient(centerline_points(L, FIELD_SAMPLES))
+            B, G = c.coil.B_and_gradient(centerline_points(L, FIELD_SAMPLES, tangent))
         except ValueError as exc:
             problems.append(f"{c.key}: the field cannot be evaluated on the robot ({exc})")
             continue
@@ -224,6 +262,11 @@ def _fem(scene) -> list[str]:
         key = f"fem.elements{dim}d"
         elements, given = _fem_elements(scene, dim)
         what = f"{list(elements)}" if given else f"the default {list(elements)} of {model}"
+        linear = linear_circle_problem(
+            scene.rod.section, dim, scene.fem_options.get("order", 2), elements
+        )
+        if linear:
+            problems.append(f"{key}: {linear} (fem.order = 1)")
         cells = fem_cells(scene, dim, elements)
         if cells > limits.MAX_FEM_ELEMENTS[dim]:
             problems.append(
@@ -322,7 +365,7 @@ def scene_problems(scene, coil_keys=(), strength_key: str = "field") -> list[str
         return zero
     problems = _clearance(scene, list(coil_keys))
     if not problems:  # the field along the robot is known only once it is clear of the coils
-        problems += _in_plane(scene, strength_key)
+        problems += _in_plane(scene, strength_key) or _out_of_plane(scene, strength_key)
     problems += _magnetoelastic(scene, strength_key)
     problems += _fem(scene)
     problems += _planar_and_incompressible(scene)

@@ -18,7 +18,7 @@ from coils.coaxial import coaxial_parts
 
 from .parse import Scene
 
-__all__ = ["Plan", "Job", "plan_scene", "robot_reach_box"]
+__all__ = ["Plan", "Job", "plan_scene", "robot_reach_box", "leaves_its_plane"]
 
 #: A coil field expected to be queried more than this many times per grid node is cached.
 CACHE_QUERIES_PER_NODE = 20
@@ -73,13 +73,25 @@ class Plan:
         return "\n".join(lines)
 
 
+def leaves_its_plane(scene: Scene) -> bool:
+    """True if the robot can leave the plane z = 0 in some field of ``scene``: the planar rod
+    model's criterion (:func:`coilrod.rod.model.planar_reasons`: an elevated magnetization, a
+    clamp rotation out of the x-y plane, B_z or dB_z/dx, dB_z/dy over the reach)."""
+    from ..rod.model import clamp_frame, planar_reasons
+
+    R0 = clamp_frame(0.0, scene.rod_options.get("clamp_rotation"))
+    return any(planar_reasons(scene.rod, fld, np.zeros(3), R0) for fld in scene.fields.values())
+
+
 def robot_reach_box(scene: Scene, margin: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
-    """Axis-aligned box (m) containing every point the robot can reach (a ball of radius L about
-    the clamp at the origin, in the plane z = 0 thickened by the section), with a margin."""
+    """Axis-aligned box (m) containing every point the robot can reach, with a margin: the
+    ball of radius L about the clamp at the origin, thickened by the section, when the robot
+    can leave its plane (:func:`leaves_its_plane`), else its disc in the plane z = 0 thickened
+    by the section."""
     L = scene.rod.length
     h = scene.rod.section.height
     half = (1 + margin) * L + h
-    depth = max(h, getattr(scene.rod.section, "width", h))
+    depth = half if leaves_its_plane(scene) else max(h, getattr(scene.rod.section, "width", h))
     return np.array([-half, -half, -depth]), np.array([half, half, depth])
 
 
@@ -213,8 +225,9 @@ def plan_scene(scene: Scene, *, cache: bool | None = None) -> Plan:
             if _box_clear_of_windings(real, box):
                 plan.cache_box = box
                 plan.decisions.append(
-                    "coil field cached on a grid over the robot's reach "
-                    f"[{1e3 * box[0][0]:.0f}, {1e3 * box[1][0]:.0f}] x "
+                    "coil field cached on a grid over the robot's reach"
+                    + (" (a ball: it can leave its plane) " if leaves_its_plane(scene) else " ")
+                    + f"[{1e3 * box[0][0]:.0f}, {1e3 * box[1][0]:.0f}] x "
                     f"[{1e3 * box[0][1]:.0f}, {1e3 * box[1][1]:.0f}] x "
                     f"[{1e3 * box[0][2]:.1f}, {1e3 * box[1][2]:.1f}] mm "
                     f"(~{queries:.1e} queries expected)"

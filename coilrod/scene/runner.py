@@ -79,7 +79,7 @@ class SceneResult:
         return None
 
     def table(self) -> list[dict]:
-        """One row per (model, field, scale): tip in mm, angle in degrees, lambda."""
+        """One row per (model, field, scale): tip (x, y, z) in mm, angle in degrees, lambda."""
         value, kind, number = field_strength(self.scene)
         L = self.scene.rod.length
         rows = []
@@ -96,6 +96,7 @@ class SceneResult:
                         ("lambda" if kind == "B" else "gamma"): float(s * number),
                         "tip_x_mm": 1e3 * float(r.tip[k, 0]),
                         "tip_y_mm": 1e3 * float(r.tip[k, 1]),
+                        "tip_z_mm": 1e3 * float(r.tip[k, 2]),
                         "tip_deflection_over_L": float(r.tip[k, 1] / L),
                         "tip_angle_deg": float(np.degrees(r.tip_angle[k])),
                         "stable": bool(r.stable[k]),
@@ -126,8 +127,8 @@ class SceneResult:
                     "tip_shift_percent_L": 100 * float(d[-1] / L),
                     "max_tip_shift_mm": 1e3 * float(d.max()),
                     "tip_angle_shift_deg": float(da[-1]),
-                    "ideal_tip_mm": (1e3 * ideal.tip[n - 1, :2]).tolist(),
-                    "coil_tip_mm": (1e3 * real.tip[n - 1, :2]).tolist(),
+                    "ideal_tip_mm": (1e3 * ideal.tip[n - 1, :3]).tolist(),
+                    "coil_tip_mm": (1e3 * real.tip[n - 1, :3]).tolist(),
                 }
             )
         return out
@@ -152,7 +153,7 @@ class SceneResult:
                 tip = 1e3 * r.tip[-1]
                 lines.append(
                     f"  {r.model:6s} {r.field_label:6s} tip ({tip[0]:7.3f}, "
-                    f"{tip[1]:7.3f}) mm at scale {r.scales[-1]:.3g}  "
+                    f"{tip[1]:7.3f}, {tip[2]:7.3f}) mm at scale {r.scales[-1]:.3g}  "
                     f"[{r.seconds:.2f} s, {status}]"
                 )
             else:
@@ -211,6 +212,7 @@ class SceneResult:
                                 "seconds": r.seconds,
                                 "error": r.error,
                                 "scales_reached": len(r.scales),
+                                "tip_mm": (1e3 * r.tip[-1, :3]).tolist() if len(r.scales) else None,
                             }
                             for r in self.runs
                         ],
@@ -294,15 +296,26 @@ def run_scene(
         from coils.grid import GriddedField
 
         t0 = time.perf_counter()
-        cached = GriddedField(
-            scene.fields["coils"], plan.cache_box[0], plan.cache_box[1], tol=1e-7, tol_gradient=1e-5
-        )
-        if log:
-            log(
-                f"field cache: {cached.cells.tolist()} cells, estimated error B "
-                f"{cached.error_B:.1e}, gradient {cached.error_gradient:.1e} "
-                f"({time.perf_counter() - t0:.2f} s)"
+        try:
+            cached = GriddedField(
+                scene.fields["coils"],
+                plan.cache_box[0],
+                plan.cache_box[1],
+                tol=1e-7,
+                tol_gradient=1e-5,
             )
+        except ValueError as exc:  # the grid cannot reach the tolerance within its cell limit
+            note = f"no field cache after all, direct evaluation: {exc}"
+            result.plan.decisions.append(note)
+            if log:
+                log(note)
+        else:
+            if log:
+                log(
+                    f"field cache: {cached.cells.tolist()} cells, estimated error B "
+                    f"{cached.error_B:.1e}, gradient {cached.error_gradient:.1e} "
+                    f"({time.perf_counter() - t0:.2f} s)"
+                )
     for job in plan.jobs:
         field_obj = cached if (cached is not None and job.field_label == "coils") else job.field
         if log:
