@@ -169,3 +169,33 @@ def test_planar_and_spatial_agree_on_stability_of_in_plane_states(angles, direct
         return  # a path that ends (both models would have to fail alike: not the point here)
     np.testing.assert_allclose(out["planar"].tip, out["spatial"].tip, atol=1e-9 * rod.length)
     np.testing.assert_array_equal(out["planar"].stable, out["spatial"].stable)
+
+
+def test_planar_blocks_equal_the_spatial_rods_own():
+    # the numpy second variation at planar states (uniform fields: nothing compiled for a
+    # planar run) against the spatial rod's blocks at the same states, random states and
+    # one field per member (a fan of directions), a rectangle with GJ != EI_y != EI_z
+    from coilrod.rod.out_of_plane import uniform_blocks
+    from coilrod.rod.solve import build_problem, make_mesh
+
+    rng = np.random.default_rng(1)
+    rod = coilrod.Rod(
+        0.04,
+        1e6,
+        coilrod.Rectangle(3e-3, 1e-3),
+        coilrod.Magnetization.segments([0.02, 0.02], [128e3, 64e3], [0.3, -1.0]),
+        poisson_ratio=0.3,
+    )
+    problem = build_problem(rod, _uniform(8e-3, 70.0), make_mesh(rod, 16), np.zeros(3), 0.4)
+    twin = problem.out_of_plane.twin
+    theta = 0.4 + np.cumsum(rng.normal(0.0, 0.3, (3, problem.n)), axis=1)
+    theta[:, 0] = 0.4
+    scales = np.array([0.3, 1.0, 2.5])
+    for fields in (twin._b_uniform, rng.normal(0.0, 5e-3, (3, 1, 3)) * [1, 1, 0]):
+        twin._b_uniform = fields
+        _, _, _, (D, E) = twin._assemble(
+            problem.out_of_plane.spatial_states(theta), scales, True, band=False
+        )
+        D2, E2 = uniform_blocks(theta, scales, twin, fields)
+        np.testing.assert_allclose(D2, D, rtol=0, atol=1e-12 * np.abs(D).max())
+        np.testing.assert_allclose(E2, E, rtol=0, atol=1e-12 * np.abs(E).max())

@@ -116,6 +116,9 @@ class OutOfPlane:
 
         def blocks():
             with np.errstate(all="ignore"):
+                if self.twin.uniform:  # numpy, at planar states: nothing to compile
+                    b = self.twin._b_uniform
+                    return uniform_blocks(self.planar.theta(lin.u), S, self.twin, b)
                 return self.twin._assemble(U3, S, True, band=False, fields=known)[3]
 
         D, E = self._with_fields(fields, blocks)
@@ -140,3 +143,50 @@ class OutOfPlane:
             one = _take_tangent(lin3.tangent, [j])
             out[j] = self.twin._lowest(one, lin3.u[j], 1.0 if counts[j] == 0 else -1.0)
         return out
+
+
+def uniform_blocks(theta: np.ndarray, S: np.ndarray, twin, b) -> tuple[np.ndarray, np.ndarray]:
+    """The spatial rod's second variation in world rotations, diagonal (k, n - 1, 3, 3) and
+    upper (k, n - 2, 3, 3) blocks of the free nodes, at planar states with node angles theta
+    (k, n) in a uniform field ``b`` ((3,) or (k, 1, 3), T at scale 1) at scales S (k,).
+
+    The uniform-layout tangent of :func:`coilrod.rod.spatial.numpy_core` specialised to
+    rotations about z: the segment rotation is psi_i = (0, 0, theta_{i+1} - theta_i), so the
+    frames, logarithms and the terms of ``psi x g`` need no series (tested against the
+    spatial rod's own blocks to round-off)."""
+    from .so3 import about_z, hat, inv_right_jacobian_coefficients
+
+    K, h, w = twin.K, twin.mesh.h, twin.mesh.w
+    k, n = theta.shape
+    R = about_z(theta)  # (k, n, 3, 3)
+    m = np.einsum("knij,nj->kni", R, twin.mu)
+    B = np.broadcast_to(np.asarray(b, float), (k, n, 3))
+    delta = np.diff(theta, axis=1)  # (k, n - 1)
+    psi = np.zeros((k, n - 1, 3))
+    psi[..., 2] = delta
+    g = psi * (K / h[:, None])[None]
+    cc, _ = inv_right_jacobian_coefficients(np.abs(delta))
+    Psi = hat(psi)
+    Minv = np.eye(3) + 0.5 * Psi + cc[..., None, None] * (Psi @ Psi)
+    MtKM = np.swapaxes(Minv, -1, -2) @ ((K[None, :, None] / h[:, None, None]) * Minv)
+    Gm = hat(g)
+    N = -0.5 * Gm - cc[..., None, None] * (Gm @ Psi)  # psi || g: the other terms vanish
+    MtN = np.swapaxes(Minv, -1, -2) @ N
+    Rb = R[:, 1:]
+    P = Rb @ (MtKM + 0.5 * (MtN + np.swapaxes(MtN, -1, -2))) @ np.swapaxes(Rb, -1, -2)
+    p = np.einsum("knij,knj->kni", Rb, g)
+    Sc = np.asarray(S, float)[:, None, None]
+    mxb = np.cross(m, B)
+    M = -Sc * w[None, :, None] * mxb
+    M[:, 1:] += p
+    M[:, :-1] -= p
+    A_ab = -P + 0.5 * hat(p)
+    diag = np.zeros((k, n, 3, 3))
+    diag[:, 1:] += P
+    diag[:, :-1] += P
+    mb = np.einsum("kni,kni->kn", m, B)
+    sym = 0.5 * (m[..., :, None] * B[..., None, :] + B[..., :, None] * m[..., None, :])
+    sym -= mb[..., None, None] * np.eye(3)
+    diag -= Sc[..., None] * w[None, :, None, None] * sym
+    diag -= 0.5 * hat(M)
+    return diag[:, 1:], A_ab[:, 1:]
