@@ -199,3 +199,28 @@ def test_planar_blocks_equal_the_spatial_rods_own():
         D2, E2 = uniform_blocks(theta, scales, twin, fields)
         np.testing.assert_allclose(D2, D, rtol=0, atol=1e-12 * np.abs(D).max())
         np.testing.assert_allclose(E2, E, rtol=0, atol=1e-12 * np.abs(E).max())
+
+
+def test_scenes_and_sweep_rows_report_the_3d_figure():
+    # the M(2b) case as a scene: its rows say unstable where the rod would leave its plane
+    from _scenes import scene_with
+
+    from coilrod.scene import parse_scene
+    from coilrod.scene.runner import run_scene
+
+    a = np.deg2rad(255.0)
+    scene = parse_scene(
+        scene_with(
+            robot__magnetization={"preset": "M2b"},
+            field__B="20 mT",
+            field__direction=[float(np.cos(a)), float(np.sin(a)), 0.0],
+            load__steps=2,
+        )
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", StabilityWarning)
+        result = run_scene(scene, progress=False)
+    run = result.run("rod", "ideal")
+    assert run.result.model == "planar"
+    np.testing.assert_array_equal(run.stable, [False, False])
+    assert run.result.stable_in_plane.all()
