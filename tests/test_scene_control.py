@@ -524,7 +524,8 @@ def test_unreachable_target_gives_the_closest_tip_and_exit_1(tmp_path):
     assert lines["real"].startswith(
         "real: FAILED (* the closest found): solve_currents: the target"
     )
-    assert "is not reachable within the current limits; the closest tip found is" in lines["real"]
+    assert "is not reachable within the current limits (channels " in lines["real"]
+    assert " at their limit); the closest stable tip found is" in lines["real"]
     # the ideal controller is stopped by the limits in its own model too: also a failure
     assert lines["ideal"].startswith(
         "ideal: FAILED (* the closest found): the ideal controller cannot put the tip on the "
