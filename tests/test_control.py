@@ -167,9 +167,11 @@ class TestUnreachable:
 
 class TestLeastSquaresCompromise:
     """A target angle too: three conditions, two in-plane channels (the z pair idle by the
-    mirror symmetry of the plane).  The start [1, 0, 0] A (B along M) is far; the old step
-    control stopped at the uniform-field start (1.09 mm, 1.07 deg off) after one overshooting
-    step whose backtracks all failed."""
+    mirror symmetry of the plane).  The uniform-field start is a nearly antiparallel field
+    (x channel -2.09 A, y channel a few uA: the small current decides to which side the rod
+    buckles); the old step control returned that start (1.09 mm, 1.07 deg off) after one
+    overshooting step whose backtracks all failed.  scipy's least squares from there reaches
+    0.674 mm, 0.278 deg."""
 
     TARGET, ANGLE = np.array([0.025, 0.028]), np.radians(75.0)
 
@@ -181,12 +183,11 @@ class TestLeastSquaresCompromise:
             (res.tip[-1, :3] - np.r_[self.TARGET, 0.0]) / L, res.tip_angle[-1] - self.ANGLE
         ]
 
-    def test_the_compromise_is_scipys_local_least_squares_optimum(self, monkeypatch):
+    def test_the_compromise_is_scipys_local_least_squares_optimum(self):
         from scipy.optimize import least_squares
 
         import coilrod.control.currents as currents
 
-        monkeypatch.setattr(currents, "_start", lambda *args: (np.array([1.0, 0.0, 0.0]), 0))
         with warnings.catch_warnings():
             warnings.simplefilter("error", currents.ControlWarning)
             out = solve_currents(ROD, LARGE, self.TARGET, angle=self.ANGLE, nodes=16)
@@ -197,8 +198,9 @@ class TestLeastSquaresCompromise:
         # finds no better state nearby: within 1 % of the cost
         ref = least_squares(lambda I2: self._residual(np.r_[I2, 0.0]), out.currents[:2], max_nfev=8)
         assert ref.cost >= 0.99 * 0.5 * float(r @ r)
-        assert out.miss < 0.8e-3
-        assert out.angle_miss < np.radians(0.3)
+        # scipy from the start reaches 0.674 mm, 0.278 deg (the old answer: 1.09 mm, 1.07 deg)
+        assert out.miss < 0.69e-3
+        assert out.angle_miss < np.radians(0.29)
 
     def test_a_result_that_is_not_an_optimum_says_so(self, monkeypatch):
         import coilrod.control.currents as currents
