@@ -77,9 +77,10 @@ class ControlResult:
     status : str
         "converged" (the target met within ``tol``), "optimal" (not met, but a local
         least-squares optimum of the weighted misses within the current limits: no bounded
-        Gauss-Newton step predicts more than a 1e-4 relative decrease), or, for a result that
-        is neither, why the search stopped: "max_solves" (the solve budget spent), "stalled"
-        (no step decreased the misses any more).
+        Gauss-Newton step predicts a relative decrease of their squares above ``GAIN_TOL`` =
+        1e-6), or, for a result that is neither, why the search stopped: "max_solves" (the
+        solve budget spent), "stalled" (no step decreased the misses any more, or the steps
+        crept towards the edge of the rod's branch without reaching an optimum).
     optimal : bool
         ``status`` is "converged" or "optimal".  A result that is not is returned with a
         :class:`ControlWarning` (or, for an unreachable position target, said in the error).
@@ -552,7 +553,8 @@ def solve_currents(
 
 
 #: Largest relative decrease of the squared weighted misses a bounded Gauss-Newton step may
-#: predict at a state called a local least-squares optimum (|P r| <= 1 % of |r|).
+#: predict at a state called a local least-squares optimum (|P r| <= 0.1 % of |r|, P the
+#: projection on the range of the Jacobian).
 GAIN_TOL = 1e-6
 
 
@@ -689,7 +691,11 @@ def _finish(
         active=[] if limits is None else np.flatnonzero(np.abs(I) >= limits - 1e-9).tolist(),
     )
     own_miss = history[-1] if history else miss
-    stable = "" if real.stable[-1] else " (an unstable equilibrium: no stable one was found)"
+    closest = (
+        "the closest stable tip found"
+        if real.stable[-1]
+        else "the closest tip found (an unstable equilibrium: no stable one was found)"
+    )
     if model == "real" and min(history) > tol and not with_angle:
         if out.active:
             why = (
@@ -708,9 +714,9 @@ def _finish(
                 " before a local optimum of the miss; no current limit is active"
             )
         err = ConvergenceError(
-            f"solve_currents: the target {goal[:2].tolist()} m is {why}; the closest stable "
-            f"tip found is {tip[:2].tolist()} m{stable}, {miss:.4g} m ({miss / rod.length:.3g}"
-            f" L) away, with currents {np.round(I, 4).tolist()} A",
+            f"solve_currents: the target {goal[:2].tolist()} m is {why}; {closest} is "
+            f"{tip[:2].tolist()} m, {miss:.4g} m ({miss / rod.length:.3g} L) away, with "
+            f"currents {np.round(I, 4).tolist()} A",
             reached=0.0,
             target=1.0,
             residual=own_miss,
