@@ -403,7 +403,8 @@ class GriddedField(Field):
         ----------
         points : array-like, shape (n, 3), optional
             Points (m, inside the box) to compare at.  Default: three points per cell (see
-            :attr:`error_B`), over all cells or a random subset of :data:`CHECK_CELLS`.
+            :attr:`error_B`), over all cells or a random subset of :data:`CHECK_CELLS`, and
+            343 points in each of the :data:`NEAR_CELLS` cells nearest a winding.
         seed : int
             Seed of the random choices.
 
