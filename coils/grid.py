@@ -50,6 +50,13 @@ __all__ = ["GriddedField"]
 GRID_CHUNK = 4096
 #: Sample points used by the error estimate: every cell up to this many cells, else a subset.
 CHECK_CELLS = 20000
+#: Cells nearest the windings (filament circles) checked densely by the error estimate.
+NEAR_CELLS = 256
+#: Local coordinates (per axis) of the dense check of those cells: the peaks of the value
+#: (1/2) and derivative (1/2 +- sqrt(3)/6) errors of a 1D cubic Hermite interpolant, points
+#: between them and on the faces (the box faces nearest a winding hold the largest gradient
+#: errors); 7^3 = 343 points per cell.
+_DENSE = np.array([0.0, 0.2113248654, 0.36, 0.5, 0.64, 0.7886751346, 1.0])
 #: Local coordinate where the derivative error of a 1D cubic Hermite interpolant peaks.
 _GAUSS_OFFSET = math.sqrt(3.0) / 6.0
 #: Bytes of coefficients per cell (3 components x 64 monomials, float64).
@@ -170,7 +177,10 @@ class GriddedField(Field):
         against the wrapped field at three points per cell: the centre (where the error of a
         cubic peaks), a point where the error of its derivative peaks (``1/2 +- sqrt(3)/6`` on
         each axis, random signs) and a uniformly random point; over every cell, or a random
-        subset of :data:`CHECK_CELLS` cells for larger grids.
+        subset of :data:`CHECK_CELLS` cells for larger grids.  And where the field is least
+        smooth, every one of the :data:`NEAR_CELLS` cells nearest a filament (winding) of
+        the field, on a 7 x 7 x 7 lattice of points each (the errors grow like ``(h/d)^4``
+        and ``(h/d)^3`` at a distance ``d`` from a filament).
     ghost : bool
         True if the mixed derivatives used a ghost layer of nodes one spacing outside the box
         (central differences everywhere); False if the field could not be evaluated there.
@@ -398,7 +408,8 @@ class GriddedField(Field):
         ----------
         points : array-like, shape (n, 3), optional
             Points (m, inside the box) to compare at.  Default: three points per cell (see
-            :attr:`error_B`), over all cells or a random subset of :data:`CHECK_CELLS`.
+            :attr:`error_B`), over all cells or a random subset of :data:`CHECK_CELLS`, and
+            343 points in each of the :data:`NEAR_CELLS` cells nearest a winding.
         seed : int
             Seed of the random choices.
 
@@ -426,6 +437,13 @@ class GriddedField(Field):
                 ]
             )
             pts = self.lower + (np.concatenate([ijk, ijk, ijk]) + local) * self.spacing
+            near = self._cells_nearest_windings(NEAR_CELLS)
+            if near.size:  # where the field is least smooth: every one of them, densely
+                ijk = np.stack(np.unravel_index(near, self.cells), axis=1)
+                lattice = np.stack(np.meshgrid(_DENSE, _DENSE, _DENSE, indexing="ij"), -1)
+                local = lattice.reshape(-1, 3)
+                dense = (ijk[:, None, :] + local[None, :, :]).reshape(-1, 3)
+                pts = np.concatenate([pts, self.lower + dense * self.spacing])
         else:
             pts = as_points(points)
         B, G, _ = self._interpolate(self._check_inside(pts, force_raise=True), 1)
@@ -437,6 +455,34 @@ class GriddedField(Field):
         (during construction)."""
         self.error_B, self.error_gradient = self.error_estimate()
         return self.error_B, self.error_gradient
+
+    def _cells_nearest_windings(self, count: int) -> np.ndarray:
+        """Flat indices of the ``count`` cells whose centres lie nearest a filament circle of
+        the wrapped field (nearest first); empty if it has no coaxial windings.
+
+        The interpolation error of a field ``~ 1/d`` at distance ``d`` from a filament scales
+        like ``(h/d)^4`` (B) and ``(h/d)^3`` (gradient), so those cells hold the largest errors
+        of the box: a random subset of cells can miss them.
+        """
+        from .clearance import _groups
+
+        parts = list(_groups(self.field))
+        if not parts or count <= 0:
+            return np.empty(0, dtype=np.intp)
+        axes = [
+            lo + (np.arange(n) + 0.5) * h
+            for lo, n, h in zip(self.lower, self.cells, self.spacing, strict=True)
+        ]
+        centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        dist = np.full(len(centres), np.inf)
+        for part in parts:
+            local = part.to_local(centres)
+            rho = np.hypot(local[:, 0], local[:, 1])
+            for z0, a, _ in np.asarray(part.filaments, float).reshape(-1, 3):
+                np.minimum(dist, np.hypot(rho - a, local[:, 2] - z0), out=dist)
+        count = min(count, len(dist))
+        near = np.argpartition(dist, count - 1)[:count]
+        return near[np.argsort(dist[near])]
 
     # -- evaluation ----------------------------------------------------------------------------
     def _check_inside(self, pts: np.ndarray, force_raise: bool = False) -> np.ndarray:

@@ -12,3 +12,75 @@ import pytest  # noqa: E402
 def rng():
     """A seeded random generator, so failures reproduce."""
     return np.random.default_rng(20261122)
+
+
+@pytest.fixture
+def denied(monkeypatch):
+    """Simulated permissions, the same for root (which chmod does not restrict, and CI runs
+    as root): ``denied(path)`` makes the folder ``path`` read-only -- ``os.access`` says
+    no write, creating anything inside raises PermissionError -- and ``denied(path,
+    read=True)`` makes the file ``path`` unreadable (``Path.read_bytes``/``read_text`` and
+    ``open`` raise PermissionError)."""
+    import builtins
+    import errno
+    import os
+    from pathlib import Path
+
+    folders: list[Path] = []
+    files: set[Path] = set()
+
+    def error(path):
+        return PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path))
+
+    def inside(path) -> bool:
+        path = Path(os.path.abspath(path))
+        return any(path != f and path.is_relative_to(f) for f in folders)
+
+    real_access, real_mkdir, real_open = os.access, Path.mkdir, builtins.open
+    real_read_bytes, real_read_text = Path.read_bytes, Path.read_text
+    real_mkstemp = __import__("tempfile")._mkstemp_inner
+
+    def access(path, mode, *args, **kwargs):
+        if mode & os.W_OK and Path(os.path.abspath(path)) in folders:
+            return False
+        return real_access(path, mode, *args, **kwargs)
+
+    def mkdir(self, *args, **kwargs):
+        if inside(self):
+            raise error(self)
+        return real_mkdir(self, *args, **kwargs)
+
+    def open_(file, mode="r", *args, **kwargs):
+        if isinstance(file, str | os.PathLike):
+            if Path(os.path.abspath(file)) in files or (set(mode) & set("wax+") and inside(file)):
+                raise error(file)
+        return real_open(file, mode, *args, **kwargs)
+
+    def read_bytes(self):
+        if Path(os.path.abspath(self)) in files:
+            raise error(self)
+        return real_read_bytes(self)
+
+    def read_text(self, *args, **kwargs):
+        if Path(os.path.abspath(self)) in files:
+            raise error(self)
+        return real_read_text(self, *args, **kwargs)
+
+    def mkstemp_inner(dir, pre, suf, flags, output_type):
+        if inside(os.path.join(dir, "x")):
+            raise error(dir)
+        return real_mkstemp(dir, pre, suf, flags, output_type)
+
+    monkeypatch.setattr(os, "access", access)
+    monkeypatch.setattr(Path, "mkdir", mkdir)
+    monkeypatch.setattr(builtins, "open", open_)
+    monkeypatch.setattr(Path, "read_bytes", read_bytes)
+    monkeypatch.setattr(Path, "read_text", read_text)
+    monkeypatch.setattr("tempfile._mkstemp_inner", mkstemp_inner)
+
+    def deny(path, read: bool = False):
+        path = Path(os.path.abspath(path))
+        (files.add(path) if read else folders.append(path))
+        return path
+
+    return deny

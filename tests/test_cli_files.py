@@ -1,7 +1,6 @@
 """The CLI with bad files and output folders: one line per problem, exit code 2, no traceback,
 and nothing solved before the output folder is known to work."""
 
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -39,8 +38,6 @@ direction = "--y"
 [output]
 figures = "no"
 """
-
-ROOT = hasattr(os, "geteuid") and os.geteuid() == 0
 
 
 @pytest.fixture
@@ -97,14 +94,10 @@ def test_missing_scene(tmp_path, capsys):
     )
 
 
-@pytest.mark.skipif(ROOT, reason="chmod does not restrict root")
-def test_unreadable_scene(tmp_path, capsys, no_solving):
+def test_unreadable_scene(tmp_path, capsys, no_solving, denied):
     path = write(tmp_path, GOOD)
-    path.chmod(0)
-    try:
-        assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 2
-    finally:
-        path.chmod(0o644)
+    denied(path, read=True)  # as chmod 0 would, for root too
+    assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 2
     assert errors(capsys) == [f"{path}: cannot read the scene file (Permission denied)"]
     assert not (tmp_path / "out").exists()
 
@@ -152,24 +145,21 @@ def test_scene_and_out_problems_reported_together(tmp_path, capsys, no_solving):
     assert lines[-1].startswith("--out: ")
 
 
-@pytest.mark.skipif(ROOT, reason="chmod does not restrict root")
-def test_unwritable_out(tmp_path, capsys, no_solving):
+def test_unwritable_out(tmp_path, capsys, no_solving, denied):
     scene = write(tmp_path, GOOD)
     locked = tmp_path / "locked"
     locked.mkdir()
-    locked.chmod(0o555)
-    try:
-        assert main(["run", str(scene), "--out", str(locked)]) == 2
-        assert errors(capsys) == [f"--out: cannot write in {locked} (permission denied)"]
-        assert main(["run", str(scene), "--out", str(locked / "new")]) == 2
-        assert errors(capsys) == [f"--out: cannot create folders in {locked} (permission denied)"]
-        assert main(["check", str(scene), "--out", str(locked / "new")]) == 2
-        assert errors(capsys) == [f"--out: cannot create folders in {locked} (permission denied)"]
-        assert main(["demo", "--out", str(locked / "demo"), "--quiet"]) == 2
-        (line,) = errors(capsys)
-        assert line.startswith(f"--out: cannot create the folder {locked / 'demo'}")
-    finally:
-        locked.chmod(0o755)
+    denied(locked)  # as chmod 0o555 would, for root too
+    assert main(["run", str(scene), "--out", str(locked)]) == 2
+    assert errors(capsys) == [f"--out: cannot write in {locked} (permission denied)"]
+    assert main(["run", str(scene), "--out", str(locked / "new")]) == 2
+    assert errors(capsys) == [f"--out: cannot create folders in {locked} (permission denied)"]
+    assert main(["check", str(scene), "--out", str(locked / "new")]) == 2
+    assert errors(capsys) == [f"--out: cannot create folders in {locked} (permission denied)"]
+    assert main(["demo", "--out", str(locked / "demo"), "--quiet"]) == 2
+    (line,) = errors(capsys)
+    assert line.startswith(f"--out: cannot create the folder {locked / 'demo'}")
+    assert list(locked.iterdir()) == []
 
 
 def test_demo_out_is_an_existing_file(tmp_path, capsys, no_solving):

@@ -20,13 +20,12 @@ import copy
 import datetime
 import io
 import json
+import re
 import warnings
 
 import numpy as np
 import pytest
 from _scenes import BASE
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 import coils
 from coilrod import Circle, Magnetization, Rod, solve_currents, solve_rod
@@ -435,29 +434,73 @@ def _names(line: str, key: str) -> bool:
     return any(line.startswith(key + end) for end in (":", ".", "["))
 
 
-@settings(max_examples=1000, deadline=None, derandomize=True)
-@given(path=st.sampled_from(_PATHS), value=st.sampled_from(_JUNK))
-def test_any_corrupted_value_is_a_scene_error_naming_its_key(path, value):
-    data = copy.deepcopy(FULL)
-    node = data
-    for k in path[:-1]:
-        node = node[k]
-    removed = value is None and isinstance(node, dict)
-    if removed:
-        node.pop(path[-1])
-    else:
-        node[path[-1]] = value
-    key = _spell(path)
-    allowed = [key] + ([_spell(path[:-1])] if removed else [])
-    if path[:2] in (("field", "max_current"), ("field", "coil")):
-        allowed.append("control.max_current")  # checked against the changed channels
-    try:
-        parse_scene(data)
-        problems = []
-    except SceneError as exc:
-        problems = exc.problems or ["<a SceneError without problems>"]
-    for line in problems:
-        assert any(_names(line, k) for k in allowed), f"{key} = {value!r}: {line!r}"
+#: Keys that may be left out (a default applies).
+_OPTIONAL = {
+    "field.radii", "field.turns", "field.max_current", "field.wire_diameter", "field.center",
+    "field.coil[0].axis", "field.coil[0].wire_diameter", "field.coil[0].center",
+    "control.angle", "control.model",
+}  # fmt: skip
+
+
+def _still_valid(key: str, value) -> bool:
+    """Whether a "corruption" is a valid value of the key (of the right kind, unit and sign):
+    the only ones the parser may accept."""
+    if value is None:
+        return key in _OPTIONAL
+    positive_length = re.fullmatch(r"field\.(radii(\[\d\])?|wire_diameter)", key) or re.fullmatch(
+        r"field\.coil\[0\]\.(radius|wire_diameter)", key
+    )
+    position = re.fullmatch(r"(field\.(coil\[0\]\.)?center|control\.target)\[\d\]", key)
+    return bool(
+        (positive_length and value == "5 mm")
+        or (position and value in ("5 mm", "-5 mm"))
+        or (re.fullmatch(r"control\.max_current(\[\d\])?", key) and value == "5 A")
+        or any(
+            (key, value) == pair
+            for pair in (
+                ("field.preset", "three_axis_helmholtz"),
+                ("field.coil[0].axis", "-x"),
+                ("control.angle", 0),
+                ("control.model", "real"),
+            )
+        )
+    )
+
+
+def test_any_corrupted_value_is_a_scene_error_naming_its_key():
+    """Every key of FULL set to every junk value (or removed): a SceneError whose every line
+    names that key, unless the value is a valid one (then it parses)."""
+    wrong = []
+    for path in _PATHS:
+        for value in _JUNK:
+            data = copy.deepcopy(FULL)
+            node = data
+            for k in path[:-1]:
+                node = node[k]
+            removed = value is None and isinstance(node, dict)
+            if removed:
+                node.pop(path[-1])
+            else:
+                node[path[-1]] = value
+            key = _spell(path)
+            allowed = [key] + ([_spell(path[:-1])] if removed else [])
+            if path[:2] in (("field", "max_current"), ("field", "coil")):
+                allowed.append("control.max_current")  # checked against the changed channels
+            try:
+                parse_scene(data)
+            except SceneError as exc:
+                problems = exc.problems or ["<a SceneError without problems>"]
+                if _still_valid(key, value):
+                    wrong.append(f"{key} = {value!r} is valid but refused: {problems}")
+                wrong += [
+                    f"{key} = {value!r}: {line!r}"
+                    for line in problems
+                    if not any(_names(line, k) for k in allowed)
+                ]
+            else:
+                if not _still_valid(key, value):
+                    wrong.append(f"{key} = {value!r}: accepted silently")
+    assert not wrong, "\n".join(wrong)
 
 
 def test_full_control_scene_is_valid():
@@ -524,7 +567,8 @@ def test_unreachable_target_gives_the_closest_tip_and_exit_1(tmp_path):
     assert lines["real"].startswith(
         "real: FAILED (* the closest found): solve_currents: the target"
     )
-    assert "is not reachable within the current limits; the closest tip found is" in lines["real"]
+    assert "is not reachable within the current limits (channels " in lines["real"]
+    assert " at their limit); the closest stable tip found is" in lines["real"]
     # the ideal controller is stopped by the limits in its own model too: also a failure
     assert lines["ideal"].startswith(
         "ideal: FAILED (* the closest found): the ideal controller cannot put the tip on the "

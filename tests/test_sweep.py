@@ -320,13 +320,25 @@ E_GRID = {"robot.youngs_modulus": "1 MPa:2 MPa:6"}
 
 
 @pytest.fixture(scope="module")
-def full_file(tmp_path_factory) -> str:
+def full_dir(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("full")
     sweep(scene_with(load__steps=2), E_GRID, workers=1, out=out)
-    return (out / "sweep.csv").read_text()
+    return out
 
 
-def test_resume_solves_only_the_missing_points(full_file, tmp_path, count_solves):
+@pytest.fixture(scope="module")
+def full_file(full_dir) -> str:
+    return (full_dir / "sweep.csv").read_text()
+
+
+@pytest.fixture
+def fingerprinted(full_dir, tmp_path) -> Path:
+    """``tmp_path`` with the full sweep's scene fingerprint (sweep.json) and no table yet."""
+    (tmp_path / "sweep.json").write_text((full_dir / "sweep.json").read_text())
+    return tmp_path
+
+
+def test_resume_solves_only_the_missing_points(full_file, tmp_path, fingerprinted, count_solves):
     lines = full_file.splitlines(keepends=True)
     # header, points 0 and 3 written (completion order), point 4 cut by a kill mid-line
     partial = lines[0] + lines[1] + lines[4] + lines[5][:30]
@@ -401,6 +413,75 @@ def test_a_killed_cli_sweep_resumes_to_the_uninterrupted_file(full_file, tmp_pat
     assert (out / "sweep.csv").read_text() == full_file
 
 
+UNIFORM_TOML = """\
+# a uniform-field scene
+[robot]
+length = "40 mm"
+diameter = "2 mm"
+youngs_modulus = "1 MPa"
+magnetization = { preset = "M1" }
+[field]
+type = "uniform"
+B = "5 mT"
+direction = "y"
+[load]
+steps = 2
+"""
+
+
+def test_resume_refuses_the_rows_of_an_edited_scene_and_keeps_those_of_a_reformatted_one(
+    tmp_path, capsys, count_solves
+):
+    """The fingerprint is the parsed scene: B 5 -> 10 mT is refused (exit 2, the key named,
+    nothing solved), a changed comment and layout resume, and the resumed rows are a fresh
+    sweep's."""
+    scene, out = tmp_path / "scene.toml", tmp_path / "out"
+    args = ["sweep", str(scene), "--param", "robot.youngs_modulus=1MPa:2MPa:3"]
+    args += ["--out", str(out), "--workers", "1", "--no-progress", "--quiet"]
+    scene.write_text(UNIFORM_TOML, encoding="utf-8")
+    assert main(args) == 0
+    lines = (out / "sweep.csv").read_text().splitlines(keepends=True)
+    (out / "sweep.csv").write_text("".join(lines[:2]))  # stopped after point 0
+    capsys.readouterr()
+    del count_solves[:]
+
+    scene.write_text(UNIFORM_TOML.replace('B = "5 mT"', 'B = "10 mT"'), encoding="utf-8")
+    assert main([*args, "--resume"]) == 2
+    (line,) = errors(capsys)
+    assert "solved for another scene (scene content differs: field.B was " in line, line
+    assert '"5 mT", now "10 mT"' in line, line
+    assert count_solves == []
+    assert (out / "sweep.csv").read_text() == "".join(lines[:2])  # untouched
+
+    scene.write_text(
+        UNIFORM_TOML.replace("# a uniform-field scene", "# another comment\n\n").replace(
+            'B = "5 mT"', 'B   =   "5 mT"   # same field'
+        ),
+        encoding="utf-8",
+    )
+    assert main([*args, "--resume"]) == 0
+    assert len(count_solves) == 2
+    fresh = sweep(scene, {"robot.youngs_modulus": "1MPa:2MPa:3"}, workers=1, progress=False)
+    resumed = sweep(scene, {"robot.youngs_modulus": "1MPa:2MPa:3"}, out=out, resume=True)
+    assert resumed.reused == 3
+    assert resumed.rows == fresh.rows
+
+
+def test_resume_refuses_rows_of_another_coilrod_version_or_without_a_fingerprint(
+    full_file, tmp_path, fingerprinted, no_solving
+):
+    (tmp_path / "sweep.csv").write_text(full_file)
+    record = json.loads((tmp_path / "sweep.json").read_text())
+    record["coilrod_version"] = "0.0.1"
+    (tmp_path / "sweep.json").write_text(json.dumps(record))
+    with pytest.raises(SceneError, match=r"solved by coilrod 0\.0\.1, this is coilrod "):
+        sweep(scene_with(load__steps=2), E_GRID, out=tmp_path, resume=True)
+    (tmp_path / "sweep.json").unlink()
+    with pytest.raises(SceneError, match="sweep.json: missing, so the scene .* is unknown"):
+        sweep(scene_with(load__steps=2), E_GRID, out=tmp_path, resume=True)
+    assert (tmp_path / "sweep.csv").read_text() == full_file
+
+
 def test_an_existing_file_needs_resume_or_overwrite(full_file, tmp_path, count_solves):
     (tmp_path / "sweep.csv").write_text("precious\n")
     with pytest.raises(SceneError, match="exists .* --resume .* --overwrite"):
@@ -424,7 +505,9 @@ def test_an_existing_file_needs_resume_or_overwrite(full_file, tmp_path, count_s
         ({"robot.youngs_modulus": "1 MPa:2 MPa:2"}, "has point 2, this sweep has points 0 to 1"),
     ],
 )
-def test_resume_refuses_the_file_of_another_sweep(full_file, tmp_path, no_solving, params, message):
+def test_resume_refuses_the_file_of_another_sweep(
+    full_file, tmp_path, fingerprinted, no_solving, params, message
+):
     (tmp_path / "sweep.csv").write_text(full_file)
     with pytest.raises(SceneError, match=message) as info:
         sweep(scene_with(load__steps=2), params, out=tmp_path, resume=True)
@@ -443,7 +526,9 @@ def test_resume_refuses_the_file_of_another_sweep(full_file, tmp_path, no_solvin
         ),
     ],
 )
-def test_a_damaged_file_is_named_not_overwritten(full_file, tmp_path, no_solving, damage, message):
+def test_a_damaged_file_is_named_not_overwritten(
+    full_file, tmp_path, fingerprinted, no_solving, damage, message
+):
     text = "".join(damage(full_file.splitlines(keepends=True)))
     (tmp_path / "sweep.csv").write_text(text)
     with pytest.raises(SceneError, match=message):
@@ -686,11 +771,10 @@ def test_cli_unreachable_scheduler(
     assert not (tmp_path / "out").exists()
 
 
-def test_cli_unwritable_out_before_any_solve(coil_file, tmp_path, capsys, no_solving):
-    if hasattr(os, "geteuid") and os.geteuid() == 0:
-        pytest.skip("root may write anywhere")
+def test_cli_unwritable_out_before_any_solve(coil_file, tmp_path, capsys, no_solving, denied):
     locked = tmp_path / "locked"
-    locked.mkdir(mode=0o500)
+    locked.mkdir()
+    denied(locked)  # as chmod 0o500 would, for root too
     args = ["sweep", str(coil_file), "--param", "robot.youngs_modulus=1MPa:2MPa:2"]
     assert main([*args, "--out", str(locked / "out")]) == 2
     (line,) = errors(capsys)

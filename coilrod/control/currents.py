@@ -39,7 +39,7 @@ from ..robot.rod import Rod
 from ..rod.result import RodResult
 from ..rod.solve import solve_rod
 
-__all__ = ["solve_currents", "ControlResult"]
+__all__ = ["solve_currents", "ControlResult", "ControlWarning"]
 
 
 @dataclass
@@ -74,6 +74,18 @@ class ControlResult:
         Uniform-field solves of the start.
     history : list of float
         Miss after each iteration, m (in the model's own field).
+    status : str
+        "converged" (the target met within ``tol``), "optimal" (not met, but a local
+        least-squares optimum of the weighted misses within the current limits: no bounded
+        Gauss-Newton step predicts a relative decrease of their squares above ``GAIN_TOL`` =
+        1e-6), or, for a result that is neither, why the search stopped: "max_solves" (the
+        solve budget spent), "stalled" (no step decreased the misses any more, or the steps
+        crept towards the edge of the rod's branch without reaching an optimum).
+    optimal : bool
+        ``status`` is "converged" or "optimal".  A result that is not is returned with a
+        :class:`ControlWarning` (or, for an unreachable position target, said in the error).
+    active : list of int
+        Channels at their current limit (within 1e-9 of it) in ``currents``.
     """
 
     currents: np.ndarray
@@ -88,6 +100,14 @@ class ControlResult:
     solves: int
     start_solves: int
     history: list = field(default_factory=list)
+    status: str = "converged"
+    optimal: bool = True
+    active: list = field(default_factory=list)
+
+
+class ControlWarning(RuntimeWarning):
+    """:func:`solve_currents` returns a compromise that is not a (local) least-squares optimum
+    within the current limits (``ControlResult.optimal`` is False)."""
 
 
 def _channels_at_center(system):
@@ -150,10 +170,12 @@ def _uniform_start(rod, goal, with_angle, steps, opts, b_cap):
     )
     dist = np.linalg.norm(grid.tips[:, 1:, :2] - goal[:2], axis=2)
     dist = np.where(grid.stable[:, 1:], dist, np.inf)
-    # among the grid states near the closest one, the weakest field: the minimum-power answer
-    # is sought, and a strong field reaching the same tip (a rod curled further) is a
-    # different, costlier solution
-    near = dist <= max(2.0 * dist.min(), dist.min() + 0.03 * L)
+    # among the grid states near the closest one (within 3 % of L: the grid's resolution),
+    # the weakest field: the minimum-power answer is sought, and a strong field reaching the
+    # same tip (a rod curled further) is a different, costlier solution.  Not within a
+    # multiple of the closest distance: for a target out of reach that takes in the straight
+    # rod of a weak field, far from the closest tips
+    near = dist <= dist.min() + 0.03 * L
     field = np.broadcast_to(grid.magnitudes[1:], dist.shape)
     d, j = np.unravel_index(np.argmin(np.where(near, field + 1e-9 * dist, np.inf)), dist.shape)
     b0 = grid.magnitudes[j + 1]
@@ -245,7 +267,10 @@ def solve_currents(
         does, from the system's field and gradient at its centre (see the module docstring).
     angle : float, optional
         Target tip angle, rad (then three conditions; with fewer independent channels the
-        result is the least-squares compromise and the misses say so).
+        result is the least-squares compromise of the misses -- positions in L, the angle in
+        rad -- within the current limits, and the misses say so).  When the first steps
+        stop improving, the search goes on by Levenberg-Marquardt steps within the limits
+        until a local optimum; ``ControlResult.status`` says whether one was reached.
     steps : int
         Load steps of each forward solve (the currents ramped from zero: the path matters at
         snap-throughs).
@@ -272,8 +297,16 @@ def solve_currents(
         Bad input (naming the argument), a system that cannot make an in-plane field, or a
         magnetization with an out-of-plane elevation (the planar rod is steered).
     coilrod.ConvergenceError
-        The target is not reachable (within the current limits): the message gives the closest
-        reachable tip found and its distance; ``err.result`` is the ControlResult there.
+        The target position is not reachable: the message gives the closest stable tip found
+        and its distance, and why: the current limits (naming the channels at their limit),
+        or, with no limit active at a local optimum of the miss, a target outside the robot's
+        reachable set; ``err.result`` is the ControlResult there.
+
+    Warns
+    -----
+    ControlWarning
+        The currents returned are neither on the target nor a local least-squares optimum
+        (``status`` "max_solves" or "stalled"; ``optimal`` False).
 
     Examples
     --------
@@ -385,9 +418,16 @@ def solve_currents(
         r = (_outputs(res, with_angle, with_z) - goal_z) * wts_z
         miss = float(np.linalg.norm(r[:npos])) * L
         history.append(miss)
-        if best is None or np.linalg.norm(r) < best[0]:
-            best = (float(np.linalg.norm(r)), I.copy(), res)
+        # the closest state found, stable ones first (an unstable state is not where the tip
+        # stays)
+        key = (not bool(res.stable[-1]), float(np.linalg.norm(r)))
+        if best is None or key < best[0]:
+            best = (key, I.copy(), res, r)
         return res, r, miss
+
+    def met(r):  # the target met: position (and angle) within the tolerance
+        pos = float(np.linalg.norm(r[:npos])) * L
+        return pos <= tol and (not with_angle or abs(r[-1]) <= tol / L)
 
     res, r, miss = evaluate(I)
     far = 1e-3 * L  # beyond this miss, steps restore the target first (with a line search)
@@ -404,6 +444,7 @@ def solve_currents(
 
         return lsq_linear(J, J @ I - r, bounds=(-limits, limits)).x - I
 
+    bounds = (-limits, limits.copy())  # the currents' range (narrowed by _damped)
     restore_next = False
     trust = 1.0  # fraction of the minimum-power step tried first (grows back after successes)
     try:
@@ -452,10 +493,26 @@ def solve_currents(
                     break
             if not moved:
                 break
+        if not met(best[3]):  # not on the target: the least-squares optimum from the best
+            _, I, res, r = best
+            bounds = _damped(I, res, r, jacobian, evaluate, met, bounds)
     except _Spent:  # the solve budget is spent: the closest tip found is reported
-        pass
-    _, I, res = best
-    if initial is not None and model == "real" and min(history) > tol:
+        stopped = "max_solves"
+    else:
+        stopped = "stalled"
+    _, I, res, r = best
+    if met(r):
+        status = "converged"
+    elif _gain(jacobian(res), r, I, _within(bounds, I)) <= GAIN_TOL:
+        status = "optimal"
+    else:
+        status = stopped
+    if (
+        initial is not None
+        and model == "real"
+        and min(history) > tol
+        and (not with_angle or status != "optimal")
+    ):
         # the warm start led astray (e.g. across a snap-through): start afresh, count both
         out = solve_currents(
             rod,
@@ -490,7 +547,91 @@ def solve_currents(
         start_solves,
         history,
         goal_z[:npos],
+        status,
+        limits,
     )
+
+
+#: Largest relative decrease of the squared weighted misses a bounded Gauss-Newton step may
+#: predict at a state called a local least-squares optimum (|P r| <= 0.1 % of |r|, P the
+#: projection on the range of the Jacobian).
+GAIN_TOL = 1e-6
+
+
+def _within(bounds, I):
+    """The bounds (lo, hi) widened to hold ``I`` (a returned state found before they were
+    narrowed)."""
+    return np.minimum(bounds[0], I), np.maximum(bounds[1], I)
+
+
+def _gain(J, r, I, bounds) -> float:
+    """Relative decrease of |r|^2 that the best step within ``bounds`` (lo, hi) of the
+    currents predicts for the linearisation ``r + J s``: 0 at a (bounded) local least-squares
+    optimum."""
+    from scipy.optimize import lsq_linear
+
+    rr = float(r @ r)
+    if rr == 0.0:
+        return 0.0
+    lo, hi = bounds
+    s = lsq_linear(J, -r, bounds=(lo - I, hi - I + 1e-300 * (hi <= I))).x
+    after = r + J @ s
+    return max(0.0, (rr - float(after @ after)) / rr)
+
+
+def _damped(I, res, r, jacobian, evaluate, met, bounds):
+    """Levenberg-Marquardt within the current limits from the state (I, res, r): steps
+    ``argmin |r + J s|^2 + mu |D s|^2`` over ``|I + s| <= limits`` (D the column norms of J),
+    a step accepted when the misses decrease (and the state stays stable if it was), ``mu``
+    raised after a failed step and lowered after a good one.  Ends at a local optimum (see
+    :func:`_gain`), when ``mu`` grows beyond any useful step or three accepted steps in a row
+    gain almost nothing, or when ``evaluate`` spends the solve budget; the states met are
+    kept by ``evaluate``.
+
+    A channel whose change of sign sent the rod to another branch (a step that raised the
+    misses, e.g. the small current that decides to which side a rod in a nearly antiparallel
+    field buckles) is kept on its side of zero, at least as far from it as now: the bounds
+    (lo, hi) of the currents are narrowed so, and returned (the optimum is sought, and
+    checked, within them)."""
+    from scipy.optimize import lsq_linear
+
+    lo, hi = (np.array(b, float) for b in bounds)
+    J = jacobian(res)
+    d = np.linalg.norm(J, axis=0)
+    mu, crawl = 1e-3, 0
+    while not met(r) and _gain(J, r, I, (lo, hi)) > GAIN_TOL and mu < 1e10 and crawl < 3:
+        d = np.maximum(d, 1e-6 * max(d.max(), 1e-300))
+        A = np.vstack([J, np.sqrt(mu) * np.diag(d)])
+        b = np.r_[-r, np.zeros(I.size)]
+        step = lsq_linear(A, b, bounds=(lo - I, hi - I + 1e-300 * (hi <= I))).x
+        pred = float(r @ r) - float((r + J @ step) @ (r + J @ step))
+        if pred <= 0.0 or not np.any(step):
+            mu *= 4.0
+            continue
+        trial = np.clip(I + step, lo, hi)
+        try:
+            res_t, r_t, _ = evaluate(trial)
+        except ConvergenceError:
+            mu *= 4.0
+            continue
+        rho = (float(r @ r) - float(r_t @ r_t)) / pred
+        flipped = (np.sign(trial) != np.sign(I)) & (I != 0.0)
+        if rho < 0.0 and np.any(flipped):  # another branch: keep those channels on their side
+            lo = np.where(flipped & (I > 0), I, lo)
+            hi = np.where(flipped & (I < 0), I, hi)
+            continue
+        if rho > 1e-3 and (bool(res_t.stable[-1]) or not bool(res.stable[-1])):
+            # steps that each gain < 1e-6 of |r|^2 while the linearisation promises more:
+            # the misses creep towards an edge of the branch (e.g. a bifurcation the load
+            # path turns away from), not towards an optimum
+            crawl = crawl + 1 if float(r @ r) - float(r_t @ r_t) < 1e-6 * float(r @ r) else 0
+            I, res, r = trial, res_t, r_t
+            J = jacobian(res)
+            d = np.maximum(d, np.linalg.norm(J, axis=0))
+            mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+        else:
+            mu *= 4.0
+    return lo, hi
 
 
 def _room(I, step, limits) -> float:
@@ -521,6 +662,8 @@ def _finish(
     start_solves,
     history,
     goal_pos=None,
+    status="converged",
+    limits=None,
 ):
     real = res if model == "real" else _forward(rod, system.with_currents(I), steps, opts)
     tip = real.tip[-1]
@@ -543,18 +686,50 @@ def _finish(
         solves=solves,
         start_solves=start_solves,
         history=history,
+        status=status,
+        optimal=status in ("converged", "optimal"),
+        active=[] if limits is None else np.flatnonzero(np.abs(I) >= limits - 1e-9).tolist(),
     )
     own_miss = history[-1] if history else miss
+    closest = (
+        "the closest stable tip found"
+        if real.stable[-1]
+        else "the closest tip found (an unstable equilibrium: no stable one was found)"
+    )
     if model == "real" and min(history) > tol and not with_angle:
+        if out.active:
+            why = (
+                "not reachable within the current limits (channels "
+                f"{', '.join(map(str, out.active))} at their limit)"
+            )
+        elif out.optimal:
+            why = (
+                "outside the robot's reachable set (no current limit is active at the closest "
+                "tip, a local optimum of the miss)"
+            )
+        else:
+            why = (
+                "not reached: the search stopped "
+                f"({'the solve budget max_solves spent' if status == 'max_solves' else 'stalled'})"
+                " before a local optimum of the miss; no current limit is active"
+            )
         err = ConvergenceError(
-            f"solve_currents: the target {goal[:2].tolist()} m is not reachable within the "
-            f"current limits; the closest tip found is {tip[:2].tolist()} m, "
-            f"{miss:.4g} m ({miss / rod.length:.3g} L) away, with currents "
-            f"{np.round(I, 4).tolist()} A",
+            f"solve_currents: the target {goal[:2].tolist()} m is {why}; {closest} is "
+            f"{tip[:2].tolist()} m, {miss:.4g} m ({miss / rod.length:.3g} L) away, with "
+            f"currents {np.round(I, 4).tolist()} A",
             reached=0.0,
             target=1.0,
             residual=own_miss,
         )
         err.result = out
         raise err
+    if not out.optimal:
+        warnings.warn(
+            f"solve_currents: the currents {np.round(I, 4).tolist()} A are not a local "
+            f"least-squares optimum of the misses ({status}: miss {miss:.4g} m"
+            + (f", angle miss {out.angle_miss:.4g} rad" if with_angle else "")
+            + "); ControlResult.optimal is False",
+            ControlWarning,
+            stacklevel=3,
+        )
     return out

@@ -27,13 +27,15 @@ from pathlib import Path
 import numpy as np
 
 from ..scene.parse import Scene, SceneError, load_scene, parse_scene
-from .sweep_file import SweepFile
+from .sweep_file import SceneFingerprint, SweepFile
 from .sweep_params import Parameter, point_data, sweep_parameters
 
 __all__ = ["sweep", "SweepResult", "Parameter", "sweep_parameters", "solve_point"]
 
 #: The CSV file a sweep writes in its output folder.
 FILENAME = "sweep.csv"
+#: The scene fingerprint next to it (:class:`~coilrod.design.sweep_file.SceneFingerprint`).
+FINGERPRINT = "sweep.json"
 #: Errors of points whose worker died, not of the points: a resumed sweep solves them again.
 RETRIED = ("worker process:", "dask:")
 #: Why a control scene is not swept (its rows would be currents, not tips: not done yet).
@@ -277,11 +279,14 @@ def sweep(
         most one per point to solve).  1 solves the points one after another in this process.
     out : str or Path, optional
         A folder: the rows go to ``out/sweep.csv`` as the points finish (each row appended and
-        flushed), and the file is rewritten in grid order at the end.
+        flushed), and the file is rewritten in grid order at the end; ``out/sweep.json``
+        holds the scene's fingerprint (see ``resume``).
     resume : bool
         Keep the points already in ``out/sweep.csv`` (from a sweep that was stopped) and solve
         only the others.  The file must be this sweep's: same columns and the same parameter
-        values at each point number.  A cut last line (a sweep killed while writing it) is
+        values at each point number, and ``out/sweep.json`` (written with the first row) must
+        name the same scene (its parsed TOML data: comments and layout do not count) and the
+        same coilrod version.  A cut last line (a sweep killed while writing it) is
         dropped and that point solved again, and so are the points whose worker died (errors
         starting "worker process:" or "dask:"); the errors of the points themselves are kept.
     overwrite : bool
@@ -300,7 +305,8 @@ def sweep(
     SceneError
         Before anything is solved, one line per problem: an invalid scene, unknown parameter
         keys, malformed or empty ranges (N < 1), values of the wrong kind, a folder that cannot
-        be written, an existing file of another sweep, a scheduler that cannot be reached.
+        be written, an existing file of another sweep (other columns or values, another scene
+        or coilrod version), a scheduler that cannot be reached.
         Problems of single points are not raised: they are the ``error`` of their row.
 
     Notes
@@ -358,7 +364,10 @@ def sweep(
         kinds.update({"point": "int", "error": "text"})
         kinds.update({c: "bool" for c in columns if c.endswith(("_converged", "_stable"))})
         file = SweepFile(Path(out) / FILENAME, columns, kinds)
+        fingerprint = SceneFingerprint(Path(out) / FINGERPRINT, scene.data)
         rows = file.check(resume=resume, overwrite=overwrite)
+        if file.resumes:
+            fingerprint.check(file.path)
         _check_resumed(rows, grid, parameters, file.path)
     retry = [i for i, row in rows.items() if row["error"].startswith(RETRIED)]
     for i in retry:
@@ -376,6 +385,7 @@ def sweep(
             from ..scene.outputs import prepare_output_dir
 
             prepare_output_dir(out, create=True, key="out")
+            fingerprint.write()  # before any row: a row is never without its scene
             if retry:  # the file without the rows solved again
                 file.rewrite([rows[i] for i in sorted(rows)])
             file.open()

@@ -9,7 +9,9 @@ uninterrupted one's.
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
+import json
 import numbers
 import os
 import tempfile
@@ -19,7 +21,7 @@ import numpy as np
 
 from ..scene.parse import SceneError
 
-__all__ = ["SweepFile", "format_cell", "parse_cell"]
+__all__ = ["SweepFile", "SceneFingerprint", "format_cell", "parse_cell"]
 
 #: How the cells of each kind of column are read back.
 KINDS = ("int", "number", "bool", "text")
@@ -82,6 +84,8 @@ class SweepFile:
         self.columns = list(columns)
         self.kinds = kinds
         self._keep = 0  # bytes of the existing file to keep (header and whole rows)
+        #: Whether :meth:`check` kept an existing file's header (and rows) to append to.
+        self.resumes = False
         self._fh = None
 
     # -- reading back ------------------------------------------------------------------------
@@ -147,6 +151,7 @@ class SweepFile:
             rows[row["point"]] = row
             keep += len(line)
         self._keep = keep
+        self.resumes = True
         return rows
 
     def _record(self, line: bytes) -> list[str]:
@@ -229,3 +234,115 @@ def _difference(header: list[str], file: SweepFile) -> str:
     if missing:
         parts.append(f"this sweep writes {', '.join(missing)}")
     return "; ".join(parts) + " (other parameters or models?); use another folder or overwrite it"
+
+
+def _coilrod_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("coilrod")
+    except PackageNotFoundError:  # pragma: no cover - a source tree that is not installed
+        return "unknown"
+
+
+def _canonical(data) -> str:
+    """Canonical JSON of parsed TOML data: sorted keys, no spaces (dates as their text)."""
+    return json.dumps(data, sort_keys=True, separators=(",", ":"), ensure_ascii=False, default=str)
+
+
+def _differences(old, new, key: str = "") -> list[str]:
+    """The keys at which two JSON values differ, with both values."""
+    if isinstance(old, dict) and isinstance(new, dict):
+        out = []
+        for k in sorted(set(old) | set(new), key=str):
+            sub = f"{key}.{k}" if key else str(k)
+            if k not in old:
+                out.append(f"{sub} is new ({_canonical(new[k])})")
+            elif k not in new:
+                out.append(f"{sub} was removed (it was {_canonical(old[k])})")
+            else:
+                out += _differences(old[k], new[k], sub)
+        return out
+    if isinstance(old, list) and isinstance(new, list) and len(old) == len(new):
+        out = []
+        for i, (a, b) in enumerate(zip(old, new, strict=True)):
+            out += _differences(a, b, f"{key}.{i}" if key else str(i))
+        return out
+    if _canonical(old) == _canonical(new):
+        return []
+    return [f"{key or 'the scene'} was {_canonical(old)}, now {_canonical(new)}"]
+
+
+class SceneFingerprint:
+    """``DIR/sweep.json`` next to ``DIR/sweep.csv``: which scene and coilrod version wrote the
+    rows, so that a resumed sweep does not keep the rows of another scene.
+
+    The file holds ``coilrod_version``, ``scene_sha256`` (SHA-256 of the canonical JSON of the
+    scene's parsed TOML data: sorted keys, no whitespace, so comments and layout of the scene
+    file do not count) and ``scene`` (that data, to name what changed).
+
+    Parameters
+    ----------
+    path : Path
+        The JSON file.
+    data : dict
+        The scene's TOML data (``Scene.data``, before the swept values are put in).
+    """
+
+    def __init__(self, path: Path, data: dict):
+        self.path = Path(path)
+        text = _canonical(data)
+        self.record = {
+            "coilrod_version": _coilrod_version(),
+            "scene_sha256": hashlib.sha256(text.encode("utf-8")).hexdigest(),
+            "scene": json.loads(text),
+        }
+
+    def check(self, table: Path) -> None:
+        """Refuse to resume the rows of ``table`` unless this file says they are this scene's,
+        computed by this coilrod version.
+
+        Raises
+        ------
+        SceneError
+            The file is missing or unreadable, or names another coilrod version or another
+            scene (the keys that differ, with both values).
+        """
+        fix = "use another folder or overwrite it"
+        try:
+            old = json.loads(self.path.read_text(encoding="utf-8"))
+            if not isinstance(old, dict):
+                raise ValueError("not a JSON object")
+        except FileNotFoundError:
+            raise SceneError(
+                f"{self.path}: missing, so the scene the rows of {table} were solved for is "
+                f"unknown; {fix}"
+            ) from None
+        except (OSError, ValueError) as exc:
+            raise SceneError(
+                f"{self.path}: cannot read the scene fingerprint of {table} ({exc}); {fix}"
+            ) from None
+        ours = self.record
+        if old.get("coilrod_version") != ours["coilrod_version"]:
+            raise SceneError(
+                f"{table}: solved by coilrod {old.get('coilrod_version')}, this is coilrod "
+                f"{ours['coilrod_version']} (the rows may differ); {fix}"
+            )
+        if old.get("scene_sha256") != ours["scene_sha256"]:
+            changed = _differences(old.get("scene"), ours["scene"]) or ["the scene content"]
+            raise SceneError(
+                f"{table}: solved for another scene (scene content differs: "
+                f"{'; '.join(changed)}); {fix}"
+            )
+
+    def write(self) -> None:
+        """Write the file at once (a temporary file, renamed)."""
+        fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=".sweep-", suffix=".json")
+        try:
+            with os.fdopen(fd, "w", encoding="utf-8") as fh:
+                json.dump(self.record, fh, sort_keys=True, indent=1, ensure_ascii=False)
+                fh.write("\n")
+            os.replace(tmp, self.path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise

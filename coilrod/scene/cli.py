@@ -248,7 +248,10 @@ def main(argv: list[str] | None = None) -> int:
         help="run on the Dask cluster of this scheduler, e.g. tcp://10.0.0.5:8786",
     )
     p_sweep.add_argument(
-        "--resume", action="store_true", help="keep the points already in OUT/sweep.csv"
+        "--resume",
+        action="store_true",
+        help="keep the points already in OUT/sweep.csv (refused if OUT/sweep.json names "
+        "another scene or coilrod version)",
     )
     p_sweep.add_argument(
         "--overwrite", action="store_true", help="replace an existing OUT/sweep.csv"
