@@ -517,19 +517,23 @@ class Assembler:
         return out
 
     def _magnetic_kernel(self, Ff, Mf, G, Hs) -> np.ndarray:
-        """Gradient (and curvature) stiffness of the magnetic term per unit scale."""
+        """Gradient (and curvature) stiffness of the magnetic term per unit scale.
+
+        ``K[a,i,b,k] = Y[a,b,i,k] + Y[b,a,k,i]`` with ``Y[a,b,i,k] = sum_q w (m_a N_b C_ik
+        + N_a N_b H_ik / 2)``, ``m_a = dN_a . M``, ``C = -G`` and ``H`` the curvature
+        stiffness (symmetric): one batched matmul over the quadrature points (both terms
+        stacked along ``q``) and one symmetrising sum; shape (e, nb*d, nb*d).
+        """
         d, nel, nq, nb = self.dim, self.nel, self.nq, self.nb
         mvec = np.matmul(self.dN, Mf.reshape(nel, nq, d, 1))[..., 0]  # (e, q, a)
-        C = -G.reshape(nel, nq, d, d)  # C_ik = -G_ik
-        wm = (self.w[:, :, None] * mvec).transpose(0, 2, 1)  # (e, a, q)
-        # K[e, a, b, i, k] = sum_q (w m_a N_b)(q) C_ik(q): contract q with a matmul
-        S = (wm[:, :, None, :] * self._N_a_q[:, None, :, :]).reshape(nel, nb * nb, nq)
-        K = np.matmul(S, C.reshape(nel, nq, d * d)).reshape(nel, nb, nb, d, d)
-        K = K.transpose(0, 1, 3, 2, 4)  # (e, a, i, b, k)
-        K = K + K.transpose(0, 3, 4, 1, 2)
+        U = self.w[:, :, None] * mvec  # (e, q, a)
+        V = self.N[:, :, :, None] * (-G).reshape(nel, nq, 1, d * d)  # (e, q, b, ik)
         if Hs is not None:
-            Hk = mag.curvature_stiffness(Ff, Mf, Hs).reshape(nel, nq, d * d)
-            wN = (self.w[:, :, None] * self.N).transpose(0, 2, 1)
-            NN = (wN[:, :, None, :] * self._N_a_q[:, None, :, :]).reshape(nel, nb * nb, nq)
-            K = K + np.matmul(NN, Hk).reshape(nel, nb, nb, d, d).transpose(0, 1, 3, 2, 4)
-        return K.reshape(nel, nb * d, nb * d)
+            Hk = mag.curvature_stiffness(Ff, Mf, Hs).reshape(nel, nq, 1, d * d)
+            U = np.concatenate([U, 0.5 * self.w[:, :, None] * self.N], axis=1)  # (e, 2q, a)
+            V = np.concatenate([V, self.N[:, :, :, None] * Hk], axis=1)  # (e, 2q, b, ik)
+        Y = np.matmul(np.swapaxes(U, 1, 2), V.reshape(nel, -1, nb * d * d))
+        Y = Y.reshape(nel, nb, nb, d, d)
+        out = np.empty((nel, nb, d, nb, d))
+        np.add(Y.transpose(0, 1, 3, 2, 4), Y.transpose(0, 2, 4, 1, 3), out=out)
+        return out.reshape(nel, nb * d, nb * d)
