@@ -304,3 +304,24 @@ def test_fem_tangent_uses_the_block_cholesky_at_a_stable_state():
     # the tangent is ill conditioned (K/G ~ 1000, slender): the solves agree to cond * eps
     cond = np.linalg.cond(K.toarray())
     assert np.abs(x - ref).max() <= 1e-15 * cond * np.abs(ref).max()
+
+
+def test_envelope_cost_bounds_the_rcm_factor_of_superlu():
+    """The cost model's sparse figure, computed from the pattern alone, against the operation
+    count of SuperLU's factor in the same RCM ordering: equal where the factor fills its
+    envelope (the slender grid), never below it (a random pattern)."""
+    from coilrod.fem.linalg import (
+        SYMMETRIC_OPTIONS,
+        _cholesky_flops,
+        _envelope_flops,
+        _superlu,
+    )
+
+    for K, equal in ((_slender_laplacian(shift=0.1)[0], True), (_random_symmetric(150, 0), False)):
+        p = fill_reducing_ordering(K, "rcm")
+        lu = _superlu(sp.csc_matrix(K[p][:, p]), SYMMETRIC_OPTIONS)
+        exact = _cholesky_flops(lu)
+        if equal:
+            assert _envelope_flops(K) == pytest.approx(exact, rel=1e-12)
+        else:
+            assert _envelope_flops(K) >= exact

@@ -500,6 +500,27 @@ def fill_reducing_ordering(K, method: str = "rcm") -> np.ndarray:
     raise ValueError(msg)
 
 
+def _envelope_flops(K) -> float:
+    """Operation count (sum of squared off-diagonal column counts) of a Cholesky factor that
+    fills the envelope of ``K`` in the reverse Cuthill-McKee ordering: the cost model's figure
+    for the sparse factorisation, an upper bound of the RCM factor's (:func:`_cholesky_flops`)
+    obtained without factorising."""
+    import scipy.sparse as sp
+
+    n = K.shape[0]
+    p = fill_reducing_ordering(K, "rcm")
+    Kp = sp.csr_matrix(sp.csr_matrix(K)[p][:, p])
+    Kp.sort_indices()
+    rows = np.arange(n)
+    nonempty = np.diff(Kp.indptr) > 0
+    first = rows.copy()
+    first[nonempty] = np.minimum(Kp.indices[Kp.indptr[:-1][nonempty]], rows[nonempty])
+    # row i fills columns first[i] .. i-1 of the factor
+    counts = np.cumsum(np.bincount(first, minlength=n + 1) - np.bincount(rows, minlength=n + 1))
+    counts = counts[:n].astype(float)
+    return float(np.dot(counts, counts))
+
+
 def _cholesky_flops(lu) -> float:
     """Operation count of a Cholesky factor with the structure of ``lu.L``: sum of squared
     column counts (the cost model by which orderings are compared)."""
@@ -510,13 +531,15 @@ def _cholesky_flops(lu) -> float:
 class SymmetricFactorizer:
     """Factorises symmetric matrices that share one sparsity pattern (the FEM tangent).
 
-    The first call orders the pattern (each of ``methods``; the one with the cheaper
-    factor is kept) and builds the index map from ``K.data`` to the permuted matrix's CSC
-    data; later calls with the same pattern only gather and factorise.
+    The first call analyses the pattern; the first SuperLU factorisation orders it (each of
+    ``methods``; the one with the cheaper factor is kept) and builds the index map from
+    ``K.data`` to the permuted matrix's CSC data; later calls with the same pattern only
+    gather and factorise.
 
-    When a level structure from ``start`` makes the matrix block tridiagonal with a cheap
-    enough dense factorisation (:data:`BLOCK_FLOP_RATIO`, :data:`BLOCK_LEVEL_COST`,
-    :data:`SPARSE_DOF_COST`: a model of the time of each), matrices are factorised by
+    When a level structure from ``start`` makes the matrix block tridiagonal with a dense
+    factorisation cheaper than the sparse one in the RCM envelope (:data:`BLOCK_FLOP_RATIO`,
+    :data:`BLOCK_LEVEL_COST`, :data:`SPARSE_DOF_COST`: a model of the time of each;
+    :func:`_envelope_flops`), matrices are factorised by
     :class:`BlockCholesky` (Cholesky levels, Bunch-Kaufman where a level is indefinite); the
     others -- and an indefinite block factor whose first solve has a backward error above
     :data:`BACKWARD_ERROR_LIMIT` -- by SuperLU in symmetric mode.
@@ -543,12 +566,21 @@ class SymmetricFactorizer:
         self.methods = tuple(methods)
         self.start = None if start is None else np.asarray(start)
         self.allow_block = bool(block)
-        self.perm = None
+        self._perm = None
         self.method = None
         self.block = None
         self._pattern = None
+        self._pending = None  # the pattern's matrix while its SuperLU ordering is not computed
         self._map = None
         self._indptr = self._indices = None
+
+    @property
+    def perm(self):
+        """The SuperLU fill-reducing ordering of the pattern (computed on first use: the
+        block factorisation does not need it)."""
+        if self._perm is None and self._pending is not None:
+            self._order(self._pending)
+        return self._perm
 
     def _same_pattern(self, K) -> bool:
         if self._pattern is None:
@@ -559,10 +591,22 @@ class SymmetricFactorizer:
         return np.array_equal(K.indptr, indptr) and np.array_equal(K.indices, indices)
 
     def _analyse(self, K) -> None:
+        """A new pattern: the block analysis now, the SuperLU ordering when first needed."""
         import scipy.sparse as sp
 
         K = sp.csr_matrix(K)
         K.sort_indices()
+        self._pattern = (K.indptr, K.indices)
+        self._perm = self.method = self._map = None
+        self._pending = K
+        self.block = None
+        if self.allow_block:
+            self.block = self._block_analysis(K, _envelope_flops(K))
+
+    def _order(self, K) -> None:
+        """The cheapest of ``methods`` (by the factor's operation count) and the index map."""
+        import scipy.sparse as sp
+
         best = None
         for method in self.methods:
             try:
@@ -589,11 +633,8 @@ class SymmetricFactorizer:
         Kp.sort_indices()
         self._map = Kp.data.astype(np.int64) - 1
         self._indptr, self._indices = Kp.indptr, Kp.indices
-        self._pattern = (K.indptr, K.indices)
-        self.perm = p
-        self.block = None
-        if self.allow_block:
-            self.block = self._block_analysis(K, best[0])
+        self._perm = p
+        self._pending = None
 
     def _block_analysis(self, K, sparse_flops: float):
         start = self.start
@@ -617,6 +658,8 @@ class SymmetricFactorizer:
 
         if not self._same_pattern(K):
             self._analyse(K)
+        if self._map is None:
+            self._order(self._pending)
         K = sp.csr_matrix(K)
         return sp.csc_matrix((K.data[self._map], self._indices, self._indptr), shape=K.shape)
 
