@@ -436,14 +436,21 @@ class Assembler:
             ev.residual += self._vector(r_extra)
         ev.load_rate = rm
         if tangent:
+            magnetic = G is not None and scale != 0.0
             if self.plane_stress:
                 Ke = self._elastic_kernel(A.reshape(nel, nq, d, d, d, d))
+                if magnetic:
+                    Ke += scale * self._magnetic_kernel(Ff, Mf, G, Hs)
             else:
-                Ke = self._dyadic_kernel(A)
-            if self.mixed and not self.plane_stress:
-                Ke += np.matmul(np.swapaxes(Bm, 1, 2), KMB)
-            if G is not None and scale != 0.0:
-                Ke += scale * self._magnetic_kernel(Ff, Mf, G, Hs)
+                # the mixed and magnetic terms are added chunk by chunk, while the chunk's
+                # element matrices are in cache
+                terms = []
+                if self.mixed:
+                    BmT = np.swapaxes(Bm, 1, 2)
+                    terms.append(lambda sl, K: K.__iadd__(np.matmul(BmT[sl], KMB[sl])))
+                if magnetic:
+                    terms.append(self._magnetic_terms(Ff, Mf, scale * G, Hs, scale))
+                Ke = self._dyadic_kernel(A, add=terms)
             ev.tangent = self._sparse(Ke)
         return ev
 
@@ -465,7 +472,7 @@ class Assembler:
             out[sl] = K.transpose(0, 1, 2, 4, 3).reshape(ne, nb * d, nb * d)
         return out
 
-    def _dyadic_kernel(self, T, chunk: int = 16) -> np.ndarray:
+    def _dyadic_kernel(self, T, chunk: int = 16, add=()) -> np.ndarray:
         """The elastic kernel of a :class:`~coilrod.fem.material.DyadicTangent`, without
         forming the tangent array; shape (e, nb*d, nb*d).
 
@@ -474,7 +481,9 @@ class Assembler:
         + mixed (phi_ai psi_bk + psi_ai phi_bk) + inverse psi_ai psi_bk
         + cross psi_ak psi_bi ]``: one batched matmul over ``(q, 2)`` for the mixed and inverse
         terms, one over ``q`` for the cross term (added with ``i`` and ``k`` swapped) and one
-        over ``(q, J)`` for the identity term (added on the diagonal ``i = k``).
+        over ``(q, J)`` for the identity term (added on the diagonal ``i = k``).  Each callable
+        of ``add`` is called as ``f(sl, K)`` to add further terms to the element matrices
+        ``K`` (ne, nb*d, nb*d) of the chunk of elements ``sl``.
         """
         d, nq, nb, nel = self.dim, self.nq, self.nb, self.nel
         nd = nb * d
@@ -514,22 +523,57 @@ class Assembler:
                 K5[:, :, i, :, i] += g
                 for k in range(d):
                     K5[:, :, i, :, k] += C5[:, :, k, :, i]
+            for term in add:
+                term(sl, K)
         return out
 
-    def _magnetic_kernel(self, Ff, Mf, G, Hs) -> np.ndarray:
-        """Gradient (and curvature) stiffness of the magnetic term per unit scale."""
+    def _magnetic_terms(self, Ff, Mf, C, Hs, scale: float):
+        """The magnetic stiffness as a chunk callable for :meth:`_dyadic_kernel`: adds
+        ``Y[a,b,i,k] + Y[b,a,k,i]`` (see :meth:`_magnetic_kernel`; ``C = -scale G`` here
+        enters with the sign of ``G``, ``scale`` multiplies the curvature term)."""
         d, nel, nq, nb = self.dim, self.nel, self.nq, self.nb
         mvec = np.matmul(self.dN, Mf.reshape(nel, nq, d, 1))[..., 0]  # (e, q, a)
-        C = -G.reshape(nel, nq, d, d)  # C_ik = -G_ik
-        wm = (self.w[:, :, None] * mvec).transpose(0, 2, 1)  # (e, a, q)
-        # K[e, a, b, i, k] = sum_q (w m_a N_b)(q) C_ik(q): contract q with a matmul
-        S = (wm[:, :, None, :] * self._N_a_q[:, None, :, :]).reshape(nel, nb * nb, nq)
-        K = np.matmul(S, C.reshape(nel, nq, d * d)).reshape(nel, nb, nb, d, d)
-        K = K.transpose(0, 1, 3, 2, 4)  # (e, a, i, b, k)
-        K = K + K.transpose(0, 3, 4, 1, 2)
+        wm = self.w[:, :, None] * mvec
+        C = -C.reshape(nel, nq, 1, d * d)
+        Hk = None
         if Hs is not None:
-            Hk = mag.curvature_stiffness(Ff, Mf, Hs).reshape(nel, nq, d * d)
-            wN = (self.w[:, :, None] * self.N).transpose(0, 2, 1)
-            NN = (wN[:, :, None, :] * self._N_a_q[:, None, :, :]).reshape(nel, nb * nb, nq)
-            K = K + np.matmul(NN, Hk).reshape(nel, nb, nb, d, d).transpose(0, 1, 3, 2, 4)
-        return K.reshape(nel, nb * d, nb * d)
+            Hk = scale * mag.curvature_stiffness(Ff, Mf, Hs).reshape(nel, nq, 1, d * d)
+            wN = 0.5 * self.w[:, :, None] * self.N
+
+        def term(sl, K):
+            ne = K.shape[0]
+            N = self.N[sl][:, :, :, None]
+            if Hk is None:
+                U, V = wm[sl], N * C[sl]
+            else:
+                U = np.concatenate([wm[sl], wN[sl]], axis=1)
+                V = np.concatenate([N * C[sl], N * Hk[sl]], axis=1)
+            Y = np.matmul(np.swapaxes(U, 1, 2), V.reshape(ne, -1, nb * d * d))
+            Y = Y.reshape(ne, nb, nb, d, d)
+            K5 = K.reshape(ne, nb, d, nb, d)
+            K5 += Y.transpose(0, 1, 3, 2, 4)
+            K5 += Y.transpose(0, 2, 4, 1, 3)
+
+        return term
+
+    def _magnetic_kernel(self, Ff, Mf, G, Hs) -> np.ndarray:
+        """Gradient (and curvature) stiffness of the magnetic term per unit scale.
+
+        ``K[a,i,b,k] = Y[a,b,i,k] + Y[b,a,k,i]`` with ``Y[a,b,i,k] = sum_q w (m_a N_b C_ik
+        + N_a N_b H_ik / 2)``, ``m_a = dN_a . M``, ``C = -G`` and ``H`` the curvature
+        stiffness (symmetric): one batched matmul over the quadrature points (both terms
+        stacked along ``q``) and one symmetrising sum; shape (e, nb*d, nb*d).
+        """
+        d, nel, nq, nb = self.dim, self.nel, self.nq, self.nb
+        mvec = np.matmul(self.dN, Mf.reshape(nel, nq, d, 1))[..., 0]  # (e, q, a)
+        U = self.w[:, :, None] * mvec  # (e, q, a)
+        V = self.N[:, :, :, None] * (-G).reshape(nel, nq, 1, d * d)  # (e, q, b, ik)
+        if Hs is not None:
+            Hk = mag.curvature_stiffness(Ff, Mf, Hs).reshape(nel, nq, 1, d * d)
+            U = np.concatenate([U, 0.5 * self.w[:, :, None] * self.N], axis=1)  # (e, 2q, a)
+            V = np.concatenate([V, self.N[:, :, :, None] * Hk], axis=1)  # (e, 2q, b, ik)
+        Y = np.matmul(np.swapaxes(U, 1, 2), V.reshape(nel, -1, nb * d * d))
+        Y = Y.reshape(nel, nb, nb, d, d)
+        out = np.empty((nel, nb, d, nb, d))
+        np.add(Y.transpose(0, 1, 3, 2, 4), Y.transpose(0, 2, 4, 1, 3), out=out)
+        return out.reshape(nel, nb * d, nb * d)

@@ -16,10 +16,11 @@ backward error above :data:`BACKWARD_ERROR_LIMIT`) is replaced by threshold pivo
 Slender bodies (the rod meshes) have a level structure: ordered by breadth-first levels from
 the clamped end, ``K`` is block tridiagonal and each level couples forward only through its
 last rows.  :class:`BlockCholesky` factorises such a matrix level by level with dense LAPACK
-(``potrf``, ``trsm``, ``syrk``), several times faster than SuperLU's sparse LU there.  The
-factorizer tries it first when the pattern suits it: it succeeds exactly when the tangent is
-positive definite (a stable state: no negative eigenvalue) and the SuperLU LDL^T takes over
-otherwise, so every factor reveals the inertia unless SuperLU had to pivot off the diagonal.
+(``potrf``, ``trsm``, ``syrk``), several times faster than SuperLU's sparse LU there; a level
+whose Schur complement is indefinite (a Newton iterate off the path, an unstable state) is
+factorised by Bunch-Kaufman (``sytrf``) instead, 2-4 times faster than SuperLU's LDL^T of the
+whole matrix.  The levels' pivots reveal the inertia; the first solve with an indefinite factor
+checks its backward error and SuperLU takes over if it is too large (a nearly singular level).
 """
 
 from __future__ import annotations
@@ -79,6 +80,14 @@ SPARSE_DOF_COST = 2.7e3
 
 #: Largest level (dofs) of the block Cholesky: bounds the dense blocks' memory and time.
 BLOCK_MAX_LEVEL = 4000
+
+
+def backward_error(K, x: np.ndarray, b: np.ndarray) -> float:
+    """Normwise backward error ``|K x - b| / (|K| |x| + |b|)`` (infinity norms) of a solve."""
+    absK = type(K)((np.abs(K.data), K.indices, K.indptr), shape=K.shape)
+    norm_k = float((absK @ np.ones(K.shape[1])).max())
+    r = K @ x - b
+    return float(np.abs(r).max() / (norm_k * np.abs(x).max() + np.abs(b).max() + 1e-300))
 
 
 def _superlu(A, options):
@@ -146,12 +155,7 @@ class Factorization:
         x = self._solve_permuted(b)
         if not self._checked:
             self._checked = True
-            K = self._matrix
-            absK = type(K)((np.abs(K.data), K.indices, K.indptr), shape=K.shape)
-            norm_k = float((absK @ np.ones(K.shape[1])).max())
-            r = K @ x - b
-            eta = np.abs(r).max() / (norm_k * np.abs(x).max() + np.abs(b).max() + 1e-300)
-            if not eta <= BACKWARD_ERROR_LIMIT:
+            if not backward_error(self._matrix, x, b) <= BACKWARD_ERROR_LIMIT:
                 self.lu = self._refactor()
                 self._negative = self._sign = None
                 x = self._solve_permuted(b)
@@ -182,7 +186,9 @@ class BlockCholesky:
         S_0 = A_0,   S_k = L_k L_k^T,   W_k = (L_k)_qq^-1 (C_k)_q,   S_k+1 = A_k+1 - W_k^T W_k,
 
     with ``(L_k)_qq`` the trailing ``q_k x q_k`` block of ``L_k``: the Cholesky factor of the
-    Schur complement that the next level sees.
+    Schur complement that the next level sees.  An indefinite ``S_k`` is factorised by
+    Bunch-Kaufman instead, ``S_k = P L D L^T P^T``, and passes on
+    ``S_k+1 = A_k+1 - C_q^T (S_k^-1)_qq C_q`` (:meth:`factor`).
 
     Parameters
     ----------
@@ -245,90 +251,226 @@ class BlockCholesky:
         self._cdst = self._coff[k] + j[up] * q[k] + ci
 
     def factor(self, K) -> BlockCholeskyFactor | None:
-        """Factorise ``K`` (CSR with the analysed pattern); None if it is not positive
-        definite (some ``S_k`` has no Cholesky factor)."""
-        from scipy.linalg.blas import dsyrk, dtrsm
-        from scipy.linalg.lapack import dpotrf
+        """Factorise ``K`` (CSR with the analysed pattern) level by level.
 
+        Each Schur complement ``S_k`` is factorised by Cholesky (``potrf``) when it is
+        positive definite and otherwise by Bunch-Kaufman (``sytrf``, ``S_k = P L D L^T P^T``):
+        ``K`` is then congruent to ``diag(S_k)``, so its number of negative eigenvalues is the
+        sum over the levels (Sylvester).  Returns None if some ``S_k`` is exactly singular.
+        """
         D = np.zeros(self._doff[-1])
         D[self._ddst] = K.data[self._dsrc]
         C = np.zeros(self._coff[-1])
         C[self._cdst] = K.data[self._csrc]
         sizes, q = self.sizes, self.couplings
-        factors, couplings = [], []
+        levels = []
         update = None
         for k in range(sizes.size):
             m = sizes[k]
             S = D[self._doff[k] : self._doff[k + 1]].reshape(m, m).T  # column-major view
             if update is not None:
                 S -= update
-            L, info = dpotrf(S, lower=1, clean=0, overwrite_a=1)
+            Ck = None
+            if k + 1 < sizes.size and q[k] > 0:
+                Ck = C[self._coff[k] : self._coff[k + 1]].reshape(sizes[k + 1], q[k]).T
+            level = _CholeskyLevel.make(S, Ck)
+            if level is None:
+                level = _LDLLevel.make(S, Ck)
+                if level is None:
+                    return None
+            levels.append(level)
+            update = level.update
+            level.update = None
+        return BlockCholeskyFactor(self, levels)
+
+
+class _CholeskyLevel:
+    """A positive definite level: ``S = L L^T``; ``W = L_qq^-1 C_q`` couples it forward."""
+
+    negatives = 0
+
+    @classmethod
+    def make(cls, S, Ck):
+        from scipy.linalg.blas import dsyrk, dtrmm
+        from scipy.linalg.lapack import dpotrf, dtrtri
+
+        L, info = dpotrf(S, lower=1, clean=0, overwrite_a=0)
+        if info != 0:
+            return None
+        self = cls()
+        self.L, self.W, self.update = L, None, None
+        if Ck is not None:
+            m, qk = L.shape[0], Ck.shape[0]
+            # W = L_qq^-1 C_q through the triangular inverse (trtri + trmm: half the time of
+            # OpenBLAS's trsm here; a well-conditioned Cholesky factor)
+            Li, info = dtrtri(L[m - qk :, m - qk :], lower=1)
             if info != 0:
                 return None
-            factors.append(L)
-            update = None
-            if k + 1 < sizes.size and q[k] > 0:
-                m2, qk = sizes[k + 1], q[k]
-                Ck = C[self._coff[k] : self._coff[k + 1]].reshape(m2, qk).T
-                W = dtrsm(1.0, L[m - qk :, m - qk :], Ck, lower=1)
-                couplings.append(W)
-                update = dsyrk(1.0, W, trans=1, lower=1)  # lower triangle of W^T W
-            else:
-                couplings.append(None)
-        return BlockCholeskyFactor(self, factors, couplings)
+            self.W = dtrmm(1.0, Li, Ck, lower=1)
+            self.update = dsyrk(1.0, self.W, trans=1, lower=1)  # lower triangle of W^T W
+        return self
+
+    def forward(self, v):
+        """``y = L^-1 v`` and the next level's correction ``C^T S^-1 v = W^T y_q``."""
+        from scipy.linalg.blas import dtrsm
+
+        y = dtrsm(1.0, self.L, v, lower=1)
+        if self.W is None:
+            return y, None
+        return y, self.W.T @ y[y.shape[0] - self.W.shape[0] :]
+
+    def backward(self, y, x_next):
+        """``x = S^-1 v - S^-1 C x_next`` from the forward's ``y``."""
+        from scipy.linalg.blas import dtrsm
+
+        if x_next is not None and self.W is not None:
+            y = y.copy()
+            y[y.shape[0] - self.W.shape[0] :] -= self.W @ x_next
+        return dtrsm(1.0, self.L, y, lower=1, trans_a=1)
+
+
+class _LDLLevel:
+    """An indefinite level: ``S = P L D L^T P^T`` (Bunch-Kaufman); ``X = S^-1 E_q`` (the
+    columns of ``S^-1`` of the coupling rows) couples it forward."""
+
+    @classmethod
+    def make(cls, S, Ck):
+        from scipy.linalg.lapack import dsytrf, dsytrf_lwork, dsytrs
+
+        m = S.shape[0]
+        lwork, _ = dsytrf_lwork(m, lower=1)
+        lu, ipiv, info = dsytrf(S, lower=1, lwork=int(lwork), overwrite_a=0)
+        if info != 0:  # an exactly zero pivot
+            return None
+        self = cls()
+        self.lu, self.ipiv = lu, ipiv
+        self.negatives = _bunch_kaufman_negatives(lu, ipiv)
+        self.C, self.X, self.update = Ck, None, None
+        if Ck is not None:
+            qk = Ck.shape[0]
+            E = np.zeros((m, qk), order="F")
+            E[m - qk :] = np.eye(qk)
+            X, info = dsytrs(lu, ipiv, E, lower=1)
+            self.X = X
+            self.update = Ck.T @ (X[m - qk :] @ Ck)
+        return self
+
+    def _solve(self, v):
+        from scipy.linalg.lapack import dsytrs
+
+        x, _ = dsytrs(self.lu, self.ipiv, v, lower=1)
+        return x
+
+    def forward(self, v):
+        """``t = S^-1 v`` and the next level's correction ``C^T t_q``."""
+        t = self._solve(v)
+        if self.C is None:
+            return t, None
+        return t, self.C.T @ t[t.shape[0] - self.C.shape[0] :]
+
+    def backward(self, t, x_next):
+        """``x = t - S^-1 C x_next = t - X (C_q x_next)``."""
+        if x_next is None or self.C is None:
+            return t
+        return t - self.X @ (self.C @ x_next)
+
+
+def _bunch_kaufman_negatives(lu, ipiv) -> int:
+    """Negative eigenvalues of the block diagonal ``D`` of a lower ``sytrf`` factorisation:
+    1x1 pivots where ``ipiv > 0``, 2x2 pivots on rows ``i, i+1`` where ``ipiv[i] < 0``."""
+    d = np.diag(lu).copy()
+    ip = np.asarray(ipiv)
+    count = 0
+    i = 0
+    n = d.size
+    two = np.flatnonzero(ip < 0)
+    if two.size == 0:
+        return int(np.count_nonzero(d < 0))
+    single = np.ones(n, bool)
+    while i < n:
+        if ip[i] < 0:
+            a, b, c = d[i], lu[i + 1, i], d[i + 1]
+            det = a * c - b * b
+            count += 1 if det < 0 else (2 if a + c < 0 else 0)
+            single[i : i + 2] = False
+            i += 2
+        else:
+            i += 1
+    return count + int(np.count_nonzero(d[single] < 0))
 
 
 class BlockCholeskyFactor:
-    """A :class:`BlockCholesky` factorisation ``K = L L^T``: positive definite, so no
-    negative eigenvalue and a positive determinant."""
+    """A :class:`BlockCholesky` factorisation ``K = L diag(S_k) L^T`` (block unit lower
+    bidiagonal ``L``), each ``S_k`` by Cholesky or, where indefinite, Bunch-Kaufman."""
 
-    pivoted = False
-
-    def __init__(self, analysis: BlockCholesky, factors, couplings):
+    def __init__(self, analysis: BlockCholesky, levels):
         self.analysis = analysis
-        self.factors, self.couplings = factors, couplings
+        self.levels = levels
         self.shape = (analysis.n, analysis.n)
+        self._negative = int(sum(level.negatives for level in levels))
+        self._matrix = self._fallback = self._replacement = None
+
+    @property
+    def pivoted(self) -> bool:
+        """False: the levels' pivots reveal the inertia (unless SuperLU replaced them)."""
+        return self._replacement is not None and self._replacement.pivoted
+
+    @property
+    def definite(self) -> bool:
+        """True if every level is positive definite (then ``K`` is)."""
+        return self._negative == 0 and all(isinstance(v, _CholeskyLevel) for v in self.levels)
 
     def solve(self, b) -> np.ndarray:
         """Solve ``K x = b`` for ``b`` of shape (n,) or (n, k); returns the same shape."""
-        from scipy.linalg.blas import dtrsm
-
         b = np.asarray(b, dtype=float)
+        if self._replacement is not None:
+            return self._replacement.solve(b)
+        x = self._solve(b)
+        if self._matrix is not None:
+            K, self._matrix = self._matrix, None
+            if not backward_error(K, x, b) <= BACKWARD_ERROR_LIMIT:
+                self._replacement = self._fallback()
+                x = self._replacement.solve(b)
+            self._fallback = None
+        return x
+
+    def _solve(self, b: np.ndarray) -> np.ndarray:
         an = self.analysis
         B = b.reshape(an.n, -1)[an.perm]
-        Y = np.empty_like(B)
-        prev = None
-        for k, L in enumerate(self.factors):
-            s0, s1 = an.starts[k], an.starts[k + 1]
-            rhs = B[s0:s1]
-            if prev is not None:
-                rhs = rhs - self.couplings[k - 1].T @ prev
-            y = dtrsm(1.0, L, rhs, lower=1)
-            Y[s0:s1] = y
-            q = an.couplings[k]
-            prev = y[y.shape[0] - q :] if self.couplings[k] is not None else None
-        X = np.empty_like(Y)
-        nxt = None
-        for k in range(len(self.factors) - 1, -1, -1):
-            s0, s1 = an.starts[k], an.starts[k + 1]
-            rhs = Y[s0:s1]
-            if nxt is not None and self.couplings[k] is not None:
-                rhs = rhs.copy()
-                rhs[rhs.shape[0] - an.couplings[k] :] -= self.couplings[k] @ nxt
-            x = dtrsm(1.0, self.factors[k], rhs, lower=1, trans_a=1)
-            X[s0:s1] = x
-            nxt = x
+        Y = []
+        correction = None
+        for k, level in enumerate(self.levels):
+            rhs = B[an.starts[k] : an.starts[k + 1]]
+            if correction is not None:
+                rhs = rhs - correction
+            y, correction = level.forward(rhs)
+            Y.append(y)
+        X = np.empty_like(B)
+        x = None
+        for k in range(len(self.levels) - 1, -1, -1):
+            x = self.levels[k].backward(Y[k], x)
+            X[an.starts[k] : an.starts[k + 1]] = x
         out = np.empty_like(X)
         out[an.perm] = X
         return out.reshape(b.shape)
 
-    def negative_eigenvalues(self) -> int:
-        """0: the Cholesky factorisation exists only for a positive definite matrix."""
-        return 0
+    def check(self, K, fallback) -> None:
+        """Measure the backward error of the first solve against ``K``; above
+        :data:`BACKWARD_ERROR_LIMIT`, that solve and every later one (and the inertia) come
+        from ``fallback()`` (a :class:`Factorization`)."""
+        self._matrix, self._fallback = K, fallback
+
+    def negative_eigenvalues(self) -> int | None:
+        """Number of negative eigenvalues: the sum over the levels' pivots (Sylvester)."""
+        if self._replacement is not None:
+            return self._replacement.negative_eigenvalues()
+        return self._negative
 
     def determinant_sign(self) -> int:
-        """+1 (positive definite)."""
-        return 1
+        """Sign of ``det K``: ``(-1)^(negative eigenvalues)``."""
+        if self._replacement is not None:
+            return self._replacement.determinant_sign()
+        return -1 if self._negative % 2 else 1
 
 
 def fill_reducing_ordering(K, method: str = "rcm") -> np.ndarray:
@@ -363,6 +505,27 @@ def fill_reducing_ordering(K, method: str = "rcm") -> np.ndarray:
     raise ValueError(msg)
 
 
+def _envelope_flops(K) -> float:
+    """Operation count (sum of squared off-diagonal column counts) of a Cholesky factor that
+    fills the envelope of ``K`` in the reverse Cuthill-McKee ordering: the cost model's figure
+    for the sparse factorisation, an upper bound of the RCM factor's (:func:`_cholesky_flops`)
+    obtained without factorising."""
+    import scipy.sparse as sp
+
+    n = K.shape[0]
+    p = fill_reducing_ordering(K, "rcm")
+    Kp = sp.csr_matrix(sp.csr_matrix(K)[p][:, p])
+    Kp.sort_indices()
+    rows = np.arange(n)
+    nonempty = np.diff(Kp.indptr) > 0
+    first = rows.copy()
+    first[nonempty] = np.minimum(Kp.indices[Kp.indptr[:-1][nonempty]], rows[nonempty])
+    # row i fills columns first[i] .. i-1 of the factor
+    counts = np.cumsum(np.bincount(first, minlength=n + 1) - np.bincount(rows, minlength=n + 1))
+    counts = counts[:n].astype(float)
+    return float(np.dot(counts, counts))
+
+
 def _cholesky_flops(lu) -> float:
     """Operation count of a Cholesky factor with the structure of ``lu.L``: sum of squared
     column counts (the cost model by which orderings are compared)."""
@@ -373,17 +536,18 @@ def _cholesky_flops(lu) -> float:
 class SymmetricFactorizer:
     """Factorises symmetric matrices that share one sparsity pattern (the FEM tangent).
 
-    The first call orders the pattern (each of ``methods``; the one with the cheaper
-    factor is kept) and builds the index map from ``K.data`` to the permuted matrix's CSC
-    data; later calls with the same pattern only gather and factorise.
+    The first call analyses the pattern; the first SuperLU factorisation orders it (each of
+    ``methods``; the one with the cheaper factor is kept) and builds the index map from
+    ``K.data`` to the permuted matrix's CSC data; later calls with the same pattern only
+    gather and factorise.
 
-    When a level structure from ``start`` makes the matrix block tridiagonal with a cheap
-    enough dense factorisation (:data:`BLOCK_FLOP_RATIO`, :data:`BLOCK_LEVEL_COST`,
-    :data:`SPARSE_DOF_COST`: a model of the time of each), positive definite matrices are
-    factorised by :class:`BlockCholesky`; the others by SuperLU in symmetric mode.  An
-    isolated indefinite matrix (a Newton iterate off the path) costs one failed Cholesky;
-    after two failures in a row (an unstable branch) SuperLU is used directly for the next
-    :attr:`retry` calls.
+    When a level structure from ``start`` makes the matrix block tridiagonal with a dense
+    factorisation cheaper than the sparse one in the RCM envelope (:data:`BLOCK_FLOP_RATIO`,
+    :data:`BLOCK_LEVEL_COST`, :data:`SPARSE_DOF_COST`: a model of the time of each;
+    :func:`_envelope_flops`), matrices are factorised by
+    :class:`BlockCholesky` (Cholesky levels, Bunch-Kaufman where a level is indefinite); the
+    others -- and an indefinite block factor whose first solve has a backward error above
+    :data:`BACKWARD_ERROR_LIMIT` -- by SuperLU in symmetric mode.
 
     Parameters
     ----------
@@ -403,21 +567,25 @@ class SymmetricFactorizer:
     (True, 1)
     """
 
-    #: After two failed block Choleskys in a row (indefinite matrices), SuperLU is used
-    #: directly for this many calls before the Cholesky is tried again.
-    retry = 4
-
     def __init__(self, methods=("rcm", "mmd"), start=None, block: bool = True):
         self.methods = tuple(methods)
         self.start = None if start is None else np.asarray(start)
         self.allow_block = bool(block)
-        self.perm = None
+        self._perm = None
         self.method = None
         self.block = None
-        self._skip = self._failures = 0
         self._pattern = None
+        self._pending = None  # the pattern's matrix while its SuperLU ordering is not computed
         self._map = None
         self._indptr = self._indices = None
+
+    @property
+    def perm(self):
+        """The SuperLU fill-reducing ordering of the pattern (computed on first use: the
+        block factorisation does not need it)."""
+        if self._perm is None and self._pending is not None:
+            self._order(self._pending)
+        return self._perm
 
     def _same_pattern(self, K) -> bool:
         if self._pattern is None:
@@ -428,10 +596,22 @@ class SymmetricFactorizer:
         return np.array_equal(K.indptr, indptr) and np.array_equal(K.indices, indices)
 
     def _analyse(self, K) -> None:
+        """A new pattern: the block analysis now, the SuperLU ordering when first needed."""
         import scipy.sparse as sp
 
         K = sp.csr_matrix(K)
         K.sort_indices()
+        self._pattern = (K.indptr, K.indices)
+        self._perm = self.method = self._map = None
+        self._pending = K
+        self.block = None
+        if self.allow_block:
+            self.block = self._block_analysis(K, _envelope_flops(K))
+
+    def _order(self, K) -> None:
+        """The cheapest of ``methods`` (by the factor's operation count) and the index map."""
+        import scipy.sparse as sp
+
         best = None
         for method in self.methods:
             try:
@@ -458,11 +638,8 @@ class SymmetricFactorizer:
         Kp.sort_indices()
         self._map = Kp.data.astype(np.int64) - 1
         self._indptr, self._indices = Kp.indptr, Kp.indices
-        self._pattern = (K.indptr, K.indices)
-        self.perm = p
-        self.block, self._skip, self._failures = None, 0, 0
-        if self.allow_block:
-            self.block = self._block_analysis(K, best[0])
+        self._perm = p
+        self._pending = None
 
     def _block_analysis(self, K, sparse_flops: float):
         start = self.start
@@ -486,6 +663,8 @@ class SymmetricFactorizer:
 
         if not self._same_pattern(K):
             self._analyse(K)
+        if self._map is None:
+            self._order(self._pending)
         K = sp.csr_matrix(K)
         return sp.csc_matrix((K.data[self._map], self._indices, self._indptr), shape=K.shape)
 
@@ -498,16 +677,15 @@ class SymmetricFactorizer:
         if not self._same_pattern(K):
             self._analyse(K)
         if self.block is not None:
-            if self._skip > 0:
-                self._skip -= 1
-            else:
-                factor = self.block.factor(K)
-                if factor is not None:
-                    self._failures = 0
-                    return factor
-                self._failures += 1
-                if self._failures >= 2:
-                    self._skip, self._failures = self.retry, 0
+            factor = self.block.factor(K)
+            if factor is not None:
+                if not factor.definite:  # check the first solve (nearly singular levels)
+                    factor.check(K, lambda: self._superlu(K))
+                return factor
+        return self._superlu(K)
+
+    def _superlu(self, K):
+        """SuperLU LDL^T in the analysed ordering (threshold pivots if exactly singular)."""
         Kp = self.permuted(K)
         try:
             lu = _superlu(Kp, SYMMETRIC_OPTIONS)
