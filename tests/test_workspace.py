@@ -26,12 +26,12 @@ B_MAX = 0.02
 
 @pytest.fixture(scope="module")
 def m1():
-    return workspace(ROD, B_MAX, directions=24, magnitudes=8)
+    return workspace(ROD, B_MAX, directions=24, magnitudes=8, refine=0)
 
 
 @pytest.fixture(scope="module")
 def m42():
-    return workspace(presets.seed_rod(presets.M42()), 0.015, directions=24, magnitudes=6)
+    return workspace(presets.seed_rod(presets.M42()), 0.015, directions=24, magnitudes=6, refine=0)
 
 
 def _direction(rod, ws, d, **kw):
@@ -55,15 +55,17 @@ class TestTips:
 
     def test_mirror_symmetry_of_an_axial_magnetization(self, m1):
         """M(1) in the field at -phi is the mirror image (y -> -y) of M(1) at phi."""
-        mirrored = m1.tips[(-np.arange(24)) % 24] * [1, -1, 1]
+        mirrored = m1.tips[::-1] * [1, -1, 1]  # directions symmetric about the reference
         np.testing.assert_allclose(mirrored, m1.tips, atol=1e-9 * ROD.length)
 
 
 class TestStability:
-    def test_antiparallel_straight_rod_buckles_at_the_closed_form_field(self, m1):
-        """Field along -x: the straight rod is stable below lambda_c = pi^2 / 4 (continuous
-        rod), unstable beyond (the workspace leaves those cells out)."""
-        d = 12  # 180 deg
+    def test_antiparallel_straight_rod_buckles_at_the_closed_form_field(self):
+        """Field along -x (the first refinement bisects the cut, the antiparallel direction):
+        the straight rod is stable below lambda_c = pi^2 / 4 (continuous rod), unstable beyond
+        (the workspace leaves those cells out)."""
+        m1 = workspace(ROD, B_MAX, directions=24, magnitudes=8, refine=1)
+        (d,) = np.flatnonzero(np.abs(np.cos(m1.directions) + 1) < 1e-12)  # 180 deg
         b_c = ROD.field_for_lambda(math.pi**2 / 4)
         below = m1.magnitudes < 0.98 * b_c
         above = m1.magnitudes > 1.02 * b_c
@@ -110,7 +112,7 @@ class TestArea:
     def test_real_coils_of_large_radius_approach_the_ideal_workspace(self):
         """A three-axis Helmholtz system 2.5 L in radius: the real workspace within 3 % of the
         ideal one; coils of about L in radius shrink it (the field falls off along the rod)."""
-        kw = dict(directions=12, magnitudes=4)
+        kw = dict(directions=12, magnitudes=4, refine=0)
         ideal = workspace(ROD, 0.012, **kw)
         big = workspace(ROD, 0.012, system=coils.presets.three_axis_helmholtz(), **kw)
         small = workspace(
@@ -148,7 +150,10 @@ class TestDerivatives:
                 moved = dataclasses.replace(
                     rod, magnetization=Magnetization.segments(lengths, mags, angs)
                 )
-                tips.append(workspace(moved, 0.015, directions=24, magnitudes=6).tips[..., :2])
+                ws = workspace(
+                    moved, 0.015, directions=24, magnitudes=6, refine=0, reference=m42.reference
+                )
+                tips.append(ws.tips[..., :2])
             fd = (tips[0] - tips[1]) / (2 * h)
             assert np.max(np.abs(fd - dT[..., j])) <= 1e-5 * np.max(np.abs(fd)), labels[j]
 
@@ -165,10 +170,18 @@ class TestOptimisation:
         assert best.history.shape == (best.solves, 2)
         assert np.all(np.diff(best.history[:, 1]) >= 0)  # best so far never decreases
         assert np.all(best.magnitudes <= 128e3 + 1e-9)
-        again = workspace(dataclasses.replace(ROD, magnetization=best.magnetization), B_MAX, **kw)
+        again = workspace(
+            dataclasses.replace(ROD, magnetization=best.magnetization),
+            B_MAX,
+            refine=0,
+            reference=0.0,
+            **kw,
+        )
         assert again.area == pytest.approx(best.area, rel=1e-9)
         for preset in (presets.M1(), presets.M42()):
-            other = workspace(dataclasses.replace(ROD, magnetization=preset), B_MAX, **kw)
+            other = workspace(
+                dataclasses.replace(ROD, magnetization=preset), B_MAX, refine=0, reference=0.0, **kw
+            )
             assert best.area > other.area
 
     def test_evolution_respects_its_budget(self):
@@ -238,7 +251,7 @@ class TestUnreachedDirections:
         from coilrod import ConvergenceError
 
         system = coils.presets.three_axis_helmholtz()
-        kw = dict(directions=8, magnitudes=4, system=system)
+        kw = dict(directions=8, magnitudes=4, system=system, refine=0, reference=np.pi / 8)
         full = workspace(ROD, 0.01, **kw)
         real = W._solve_direction
 
@@ -253,7 +266,7 @@ class TestUnreachedDirections:
 
         monkeypatch.setattr(W, "_solve_direction", stops_half_way)
         ws = workspace(ROD, 0.01, **kw)
-        d = 2  # 90 deg
+        (d,) = np.flatnonzero(np.abs(np.sin(ws.directions) - 1) < 1e-12)  # 90 deg
         np.testing.assert_allclose(ws.tips[d, :3], full.tips[d, :3], atol=1e-12)
         assert np.isnan(ws.tips[d, 3:]).all()
         assert not ws.cells[d, 2:].any()

@@ -81,7 +81,9 @@ class _Objective:
         self.rod, self.segments = rod, segments
         self.lengths = np.full(segments, rod.length / segments)
         self.b_max, self.max_mag = b_max, max_magnitude
-        self.kw = dict(directions=directions, magnitudes=magnitudes)
+        # one initial grid, fixed in the clamp frame and unrefined, so that the area is a
+        # smooth function of the layout and area_gradient x tip_derivatives its exact gradient
+        self.kw = dict(directions=directions, magnitudes=magnitudes, refine=0, reference=0.0)
         self.budget = budget
         self.solves = 0
         self.best = (-np.inf, None, None)
