@@ -60,6 +60,12 @@ class MagnetizationDesign:
         The best layout's workspace.
     seconds : float
         CPU time spent, s.
+    uniform_area : float
+        The workspace area of the best uniform magnetization, m^2: |M| = ``max_magnitude``
+        along the rod (a uniform magnetization at any other angle has the same area: turning
+        it is turning the field, and the workspace's directions turn with it).
+    ratio : float
+        ``area / uniform_area``: what the segment layout gains over a uniform magnetization.
     """
 
     magnetization: Magnetization
@@ -71,19 +77,26 @@ class MagnetizationDesign:
     angles: np.ndarray
     workspace: Workspace
     seconds: float
+    uniform_area: float = float("nan")
+
+    @property
+    def ratio(self) -> float:
+        return self.area / self.uniform_area
 
 
 class _Objective:
     """Workspace area of a layout x = (magnitudes / max, angles), with a record of every
     evaluation."""
 
-    def __init__(self, rod, segments, b_max, max_magnitude, directions, magnitudes, budget):
+    def __init__(
+        self, rod, segments, b_max, max_magnitude, directions, magnitudes, refine, tolerance, budget
+    ):
         self.rod, self.segments = rod, segments
         self.lengths = np.full(segments, rod.length / segments)
         self.b_max, self.max_mag = b_max, max_magnitude
-        # one initial grid, fixed in the clamp frame and unrefined, so that the area is a
-        # smooth function of the layout and area_gradient x tip_derivatives its exact gradient
-        self.kw = dict(directions=directions, magnitudes=magnitudes, refine=0, reference=0.0)
+        self.kw = dict(
+            directions=directions, magnitudes=magnitudes, refine=refine, tolerance=tolerance
+        )
         self.budget = budget
         self.solves = 0
         self.best = (-np.inf, None, None)
@@ -102,6 +115,20 @@ class _Objective:
         m = Magnetization.segments(self.lengths, mags, angles, label="optimised")
         return dataclasses.replace(self.rod, magnetization=m)
 
+    def reference_rate(self, x) -> np.ndarray:
+        """d(reference direction)/d(magnitudes [A/m], angles [rad]) of layout x, (2 S,):
+        the net moment is sum_s l_s M_s (cos a_s, sin a_s)."""
+        mags, angles = self.layout(x)
+        e = np.stack([np.cos(angles), np.sin(angles)], 1)
+        N = (self.lengths * mags) @ e
+        n2 = N @ N
+        if n2 <= 1e-18 * (self.lengths @ mags) ** 2:
+            return np.zeros(2 * self.segments)
+        dN = np.concatenate(
+            [self.lengths[:, None] * e, (self.lengths * mags)[:, None] * e[:, ::-1] * [-1, 1]]
+        )
+        return (N[0] * dN[:, 1] - N[1] * dN[:, 0]) / n2
+
     def evaluate(self, x, gradient: bool):
         key = tuple(np.round(np.asarray(x, float), 15))
         if key in self._cache and (not gradient or self._cache[key][1] is not None):
@@ -117,6 +144,11 @@ class _Objective:
         if gradient:
             g_tip = area_gradient(ws)  # (D, M + 1, 2)
             _, dT = tip_derivatives(ws, ["magnitudes", "angles"])  # (D, M + 1, 2, p)
+            # the directions turn with the reference (the net moment's direction psi): the
+            # tips at psi + alpha move by dT/dphi dpsi/dp, and turning every segment by delta
+            # is the field turned by -delta, so dT/dphi = -sum of dT/d(angle)
+            dT_dphi = -dT[..., self.segments :].sum(axis=-1)
+            dT = dT + dT_dphi[..., None] * self.reference_rate(x)[None, None, None, :]
             grad = np.einsum("dmc,dmcp->p", g_tip, dT)
             grad[: self.segments] *= self.max_mag  # per unit of x
         if ws.area > self.best[0]:
@@ -145,6 +177,8 @@ def optimize_magnetization(
     *,
     directions: int = 36,
     magnitudes: int = 8,
+    refine: int = 6,
+    tolerance: float = 1e-3,
     starts: int = 4,
 ) -> MagnetizationDesign:
     """Segment magnitudes and directions that maximise the workspace area at ``b_max``.
@@ -165,8 +199,8 @@ def optimize_magnetization(
         Most workspace evaluations (default 400 for "gradient", 4000 for "evolution").
     seed : int
         Random seed (the starts of "gradient", the population of "evolution").
-    directions, magnitudes : int
-        Resolution of the workspaces evaluated (see :func:`coilrod.workspace`).
+    directions, magnitudes, refine, tolerance
+        Initial grid and refinement of the workspaces evaluated (see :func:`coilrod.workspace`).
     starts : int
         Starts of the gradient method: M(2a) in segments (the direction turning by pi/2
         from clamp to tip, magnitudes at the bound), then random layouts (magnitudes 0.5 to 1
@@ -200,7 +234,9 @@ def optimize_magnetization(
     default = 400 if method == "gradient" else 4000
     budget = as_count(default if budget is None else budget, "budget", 1, 10**6)
     starts = as_count(starts, "starts", 1, 1000)
-    obj = _Objective(rod, segments, b_max, max_magnitude, directions, magnitudes, budget)
+    obj = _Objective(
+        rod, segments, b_max, max_magnitude, directions, magnitudes, refine, tolerance, budget
+    )
     rng = np.random.default_rng(seed)
     t0 = time.process_time()
     n = 2 * segments
@@ -260,6 +296,11 @@ def optimize_magnetization(
     if x is None:
         raise ValueError("no workspace was evaluated (budget too small)")
     mags, angles = obj.layout(x)
+    uniform = workspace(
+        dataclasses.replace(rod, magnetization=Magnetization(max_magnitude, 0.0)),
+        b_max,
+        **obj.kw,
+    )
     return MagnetizationDesign(
         magnetization=ws._solution.rod.magnetization,
         area=float(area),
@@ -270,4 +311,5 @@ def optimize_magnetization(
         angles=angles,
         workspace=ws,
         seconds=time.process_time() - t0,
+        uniform_area=uniform.area,
     )

@@ -1,22 +1,40 @@
 """The workspace of a magnetic rod: every tip position a bounded field can hold it at.
 
-Definition (what :func:`workspace` computes):
+Definition (what :func:`workspace` approximates, with an error estimate):
 
-* For each of ``directions`` in-plane field directions ``phi_d = 2 pi d / directions`` (from +x,
-  counter-clockwise), the field magnitude is ramped quasi-statically from 0 to ``b_max`` in
-  ``magnitudes`` equal steps, starting from the straight unloaded rod.  This is the solver's own
-  path following (:func:`coilrod.solve_rod`): at a limit point the rod snaps through to the
-  stable branch, and states are never taken from an unstable branch.
-* The tip positions form a grid ``tips[d, j]`` (direction d, magnitude ``j b_max /
-  magnitudes``).  A grid cell (d, j) -- the quadrilateral of ``tips[d, j], tips[d, j + 1],
-  tips[d + 1, j + 1], tips[d + 1, j]``, directions wrapping around -- is the image of a patch of
-  fields the rod reaches continuously.  The workspace is the union of the cells' images
-  (computed by shapely, each cell split into two triangles).
-* A cell is left out when its image is not reached continuously: a corner state is unstable
-  (e.g. the straight rod beyond buckling in an exactly antiparallel field), the rod snaps
-  through between its magnitudes, or its two directions hold the rod on different branches
-  (the node angles differ by more than ``max(0.5 rad, 2 x the direction step)`` somewhere: the
-  rod would jump, not sweep, between them).  ``cells`` says which cells count.
+* The workspace is the set of tips of the **stable** states reached quasi-statically along
+  the radial field ramps ``B = s b_max (cos phi, sin phi)``, s from 0 to 1, over all in-plane
+  field directions phi: the image of the field disc ``|B| <= b_max`` under the map field ->
+  tip, each field's state being the one the solver's path following (:func:`coilrod.solve_rod`:
+  snap-through to the stable branch at a limit point, never a state of an unstable branch)
+  reaches from the straight rod along its ramp.  Stability is the solver's own figure.
+* Directions are measured from the robot, not from +x: ``phi = reference + alpha``, alpha in
+  (-pi, pi), ``reference`` the direction of the rod's net magnetic moment in the clamp frame
+  turned by the clamp angle (:func:`reference_direction`).  Turning the clamp, or a uniform
+  magnetization, turns the grid with it, so the area is exactly invariant under these
+  symmetries.
+* **The antiparallel cut.**  Near alpha = +-pi (the field against the net moment) the rod
+  buckles beyond a critical field: the two sides of the antiparallel ray land on the two
+  branches of the (imperfect) bifurcation, and the map field -> tip jumps across that ray (more
+  generally across any ray where neighbouring directions land on different branches).  The
+  workspace is the image of the disc **cut along** those rays: both sides are reached (as
+  one-sided limits), nothing in between is.  No grid direction lies on alpha = +-pi initially
+  (the initial grid is ``alpha_d = -pi + 2 pi (d + 1/2) / directions``).
+* Computed as a union of grid cells: the quadrilateral ``tips[d, j], tips[d, j + 1],
+  tips[d + 1, j + 1], tips[d + 1, j]`` (two triangles, shapely) of neighbouring directions d,
+  d + 1 (the last cell across the cut) and magnitudes j, j + 1.  A cell is left out when its
+  image is not swept continuously: a corner state unstable, a snap-through along either ramp,
+  or the two directions on different branches (node angles differing by more than
+  ``max(0.5 rad, 2 x the direction step)``).  Cells left out whose two sides differ (a branch
+  jump, one side unstable or snapping) are **bisected in direction** (``refine`` levels), so
+  the lost wedge shrinks to zero on either side of the cut wherever the grid falls; so is the
+  cell pair whose tips at ``b_max`` bend away from their chord by more than ``tolerance`` L.
+  Magnitude steps along which the tip curves bend away from their chords by more than
+  ``tolerance`` L (the sharp knee of a nearly antiparallel ramp just past buckling) are
+  bisected for every direction (the grid stays a tensor grid).
+* ``area_error``: the difference between the area and that of the same states one resolution
+  coarser: the last bisection undone everywhere (in directions and in magnitudes; on a
+  stretch the refinement left alone, every other point of the initial grid).
 
 With ``system`` (a coil system with current control) each direction's field is made by the
 currents that give ``b_max`` along that direction at the system centre, and the real
@@ -94,14 +112,14 @@ class Workspace:
         With ``system``: the currents of each direction at ``b_max``, A.
     area_error : float
         Error estimate of ``area``, m^2: its difference from the area of the same states one
-        resolution coarser (every other direction of the initial grid, the last refinement
-        level and every other magnitude left out).
+        resolution coarser (the last bisection of every stretch of directions and of
+        magnitudes undone; where none was made, every other point of the initial grid).
     reference : float
         The direction the field directions are measured from (:func:`reference_direction`),
         rad from +x.
     levels : ndarray of int, shape (D,)
         Refinement level of each direction: 0 and 1 the initial grid's even and odd
-        directions, 2, 3, ... the directions added by each refinement.
+        directions, ``k + 2`` a direction bisecting a step ``2 pi / directions / 2**k``.
     """
 
     directions: np.ndarray
@@ -483,7 +501,7 @@ def workspace(
         got, sol, events = fresh(), _Solution(rod), []
         args = (rod, b_max, scales, nodes, richardson, clamp, angle, system, n, straight)
         _solve_directions(psi + alpha, 0, *args, got, sol, events, bar)
-        for r in range(refine):
+        for _ in range(refine):
             a, cat = _sorted(alpha, got)
             _, recover = _cells(a, *(cat[k] for k in ("theta", "stable", "snaps")))
             gap = np.diff(np.r_[a, a[0] + 2 * np.pi])
@@ -495,23 +513,23 @@ def workspace(
             new = np.where(new > np.pi, new - 2 * np.pi, new)
             first = alpha.size
             alpha = np.r_[alpha, new]
-            level = np.r_[level, np.full(new.size, r + 2)]
+            depth = 2 + np.round(np.log2(2 * np.pi / D / gap[split])).astype(int)
+            level = np.r_[level, depth]  # the finer the step split, the higher
             _solve_directions(psi + new, first, *args, got, sol, events, bar)
         # 2. magnitudes: bisect the steps where the ramps of the directions bounding the
         #    workspace (next to the cut or to a cell left out) bend away from the chords
         a, cat = _sorted(alpha, got)
         _, recover = _cells(a, *(cat[k] for k in ("theta", "stable", "snaps")))
-        edge = recover.any(axis=1) | np.roll(recover.any(axis=1), 1)
-        edge[[0, -1]] = True
+        edge = np.any(_sagitta(cat["tips"][..., :2], axis=1) > h, axis=1)
         probe, tips = psi + a[edge], cat["tips"][edge]
-        for r in range(refine):
+        for _ in range(refine):
             width = np.diff(np.r_[0.0, scales])
             sag = _sagitta(tips[..., :2], axis=1)
             long = np.flatnonzero(np.any(sag > h, axis=0) & (width > min_width))
             if long.size == 0:
                 break
             scales = np.r_[scales, scales[long] - width[long] / 2]
-            mlevel = np.r_[mlevel, np.full(long.size, r + 2)]
+            mlevel = np.r_[mlevel, 2 + np.round(np.log2(1.0 / M / width[long])).astype(int)]
             o = np.argsort(scales)
             scales, mlevel = scales[o], mlevel[o]
             trial = fresh()
@@ -539,11 +557,10 @@ def workspace(
     cells, _ = _cells(alpha, cat["theta"], cat["stable"], cat["snaps"])
     tips = cat["tips"]
     polygon, area, boundary = _union(tips[..., :2], cells, rod.length)
-    # one level coarser: every other direction and magnitude of the initial grid, the last
-    # refinement level left out
-    keep = (level != 1) & ((level == 0) | (level < level.max()))
-    mlevel = np.r_[0, mlevel]
-    mj = np.flatnonzero((mlevel != 1) & ((mlevel == 0) | (mlevel < mlevel.max())))
+    # one level coarser: the last bisection undone everywhere (the leaves of the bisection
+    # trees left out; on an unrefined stretch, every other point of the initial grid)
+    keep = ~_leaves(level, cyclic=True)
+    mj = np.flatnonzero(~_leaves(np.r_[0, mlevel], cyclic=False))
     mj = np.unique(np.r_[mj, scales.size])
     coarse_cells, _ = _cells(
         alpha[keep],
@@ -571,6 +588,16 @@ def workspace(
         levels=level,
         _solution=sol,
     )
+
+
+def _leaves(level, cyclic: bool):
+    """The points of a bisection hierarchy (levels in grid order) made by the last bisection
+    of their stretch: finer than both neighbours (the ends of a non-cyclic grid are kept)."""
+    if cyclic:
+        return (level > np.roll(level, 1)) & (level > np.roll(level, -1))
+    out = np.zeros(level.size, dtype=bool)
+    out[1:-1] = (level[1:-1] > level[:-2]) & (level[1:-1] > level[2:])
+    return out
 
 
 def _sorted(alpha, got):
