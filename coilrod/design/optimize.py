@@ -2,16 +2,22 @@
 
 The rod is cut into ``segments`` equal segments, each with its own magnitude
 (0 ... ``max_magnitude``) and direction (free).  The objective is the workspace area
-(:func:`coilrod.workspace`) at a field bound ``b_max``.
+(:func:`coilrod.workspace`, refined up to the antiparallel cut, directions measured from the
+rod's net moment) at a field bound ``b_max``.  The result reports the ratio to the best
+uniform magnetization (``max_magnitude`` at any angle: all angles have the same workspace, a
+turned uniform magnetization being a turned field), the baseline a layout must beat.
 
 * ``method="gradient"``: L-BFGS-B from several starts, with the exact gradient: the area's
   derivative with respect to the tips (:func:`coilrod.design.workspace.area_gradient`) times
-  the tips' adjoint sensitivities (:func:`coilrod.sensitivities`, all states of all directions
-  at once).  The area is a smooth function of the tips as long as the set of included cells
-  does not change; where a snap-through appears or disappears inside the grid (a cell drops out
-  or comes in), the area jumps.  The gradient then describes the current cell set only, the
-  line search of L-BFGS-B backs off from the jump, and the several starts guard against being
-  stuck at one.
+  the tips' total derivative: their adjoint sensitivities (:func:`coilrod.sensitivities`, all
+  states of all directions at once) plus the turn of the workspace's directions with the
+  rod's net moment (:func:`coilrod.design.workspace.reference_direction`; turning every
+  segment by delta is turning the field by -delta, so d tip/d phi = -sum of d tip/d angle).
+  The area is a smooth function of the layout as long as the refined grid and the set of
+  included cells do not change; where they do (a bisection added or dropped, a snap-through
+  appearing), the area jumps by about its ``area_error``.  The gradient then describes the
+  current grid only, the line search of L-BFGS-B backs off from the jump, and the several
+  starts guard against being stuck at one.
 * ``method="evolution"``: :func:`scipy.optimize.differential_evolution` (derivative-free, the
   kind of method behind the seed's cited M(4.1) design).
 

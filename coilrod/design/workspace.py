@@ -683,12 +683,12 @@ def _solve_directions(
         try:
             res = _solve_direction(rod, fields[d], scales, nodes, richardson, clamp, angle)
         except ConvergenceError as err:  # keep the states before, leave the rest out
-            res = err.result
+            res = getattr(err, "result", None)
             events.append(
                 {
                     "direction": first + d,
                     "kind": "unreached",
-                    "scale": float(err.reached),
+                    "scale": float(getattr(err, "reached", 0.0)),
                     "message": str(err),
                 }
             )
