@@ -202,13 +202,26 @@ def _union(tips_xy: np.ndarray, cells: np.ndarray, scale: float):
     import shapely
 
     tri, _ = _triangles(tips_xy, cells)
+    # a strictly convex cell is one quadrilateral (the union of its two triangles, half the
+    # shapes to unite); the others stay two triangles
+    N = tri.shape[0] // 2
+    quad = np.concatenate([tri[:N, :3], tri[N:, 2:3]], axis=1)  # a, b, c, e
+    edges = np.roll(quad, -1, axis=1) - quad
+    turn = edges[..., 0] * np.roll(edges, -1, axis=1)[..., 1]
+    turn -= edges[..., 1] * np.roll(edges, -1, axis=1)[..., 0]
+    tiny = 1e-20 * scale**2
+    convex = np.all(turn > tiny, axis=1) | np.all(turn < -tiny, axis=1)
+    tri = tri[~np.r_[convex, convex]]
     # drop degenerate triangles (the cells at zero field have two equal corners)
     u, v = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
     area2 = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
     tri = tri[area2 > 1e-24 * scale**2]
-    if tri.shape[0] == 0:
+    if tri.shape[0] == 0 and not convex.any():
         return shapely.Polygon(), 0.0, np.zeros((0, 2))
-    polys = shapely.polygons(np.concatenate([tri, tri[:, :1]], axis=1))
+    polys = np.r_[
+        shapely.polygons(np.concatenate([tri, tri[:, :1]], axis=1)),
+        shapely.polygons(np.concatenate([quad[convex], quad[convex][:, :1]], axis=1)),
+    ]
     union = shapely.union_all(polys)
     union = shapely.orient_polygons(union) if hasattr(shapely, "orient_polygons") else union
     parts = getattr(union, "geoms", [union])
@@ -528,12 +541,14 @@ def workspace(
             long = np.flatnonzero(np.any(sag > h, axis=0) & (width > min_width))
             if long.size == 0:
                 break
+            probe = probe[np.any(sag[:, long] > h, axis=1)]  # the ramps still bent
             scales = np.r_[scales, scales[long] - width[long] / 2]
             mlevel = np.r_[mlevel, 2 + np.round(np.log2(1.0 / M / width[long])).astype(int)]
             o = np.argsort(scales)
             scales, mlevel = scales[o], mlevel[o]
             trial = fresh()
-            targs = (rod, b_max, scales, nodes, richardson, clamp, angle, system, n, straight)
+            # (the coarse mesh's tips: enough to see where the ramps bend)
+            targs = (rod, b_max, scales, nodes, False, clamp, angle, system, n, straight)
             _solve_directions(probe, 0, *targs, trial, _Solution(rod), [], None)
             tips = trial["tips"][0]
         # 3. every direction at the final magnitudes
