@@ -148,7 +148,7 @@ def _rel(a, ref):
 
 def workspace_table(out):
     rod = presets.seed_rod(presets.M1())
-    t_fan, ws = best_wall(lambda: workspace(rod, 0.02), 5)
+    t_grid, ws = best_wall(lambda: workspace(rod, 0.02, refine=0), 5)
 
     def one_by_one():
         tips = []
@@ -159,15 +159,29 @@ def workspace_table(out):
 
     t_single, tips = best_wall(one_by_one, 3)
     diff = np.max(np.abs(tips - ws.tips[:, 1:])) / rod.length
-    out.append("## 2. Workspace of M(1): 72 directions x 16 magnitudes, b_max 20 mT\n")
-    out.append("| method | time (s) | max tip difference (L) |")
-    out.append("|---|---|---|")
-    out.append(f"| coilrod.workspace (directions together) | {t_fan:.3f} | reference |")
-    out.append(f"| solve_rod per direction | {t_single:.3f} | {diff:.1e} |")
+    t_ref, ref = best_wall(lambda: workspace(rod, 0.02), 2)
+    fine = workspace(rod, 0.02, directions=144, magnitudes=32, refine=8, tolerance=2.5e-4)
+    out.append("## 2. Workspace of M(1), b_max 20 mT\n")
+    out.append("| method | time (s) | area (mm^2) | max tip difference (L) |")
+    out.append("|---|---|---|---|")
     out.append(
-        f"\nratio {t_fan / t_single:.2f} (1/{t_single / t_fan:.1f}); "
-        f"area {ws.area * 1e6:.1f} mm^2; "
-        f"{int(ws.cells.sum())} of {ws.cells.size} cells (the antiparallel direction buckles).\n"
+        f"| coilrod.workspace, default accuracy (72 x 16 refined: {ref.directions.size} x "
+        f"{ref.magnitudes.size - 1}) | {t_ref:.3f} | {ref.area * 1e6:.1f} +- "
+        f"{ref.area_error * 1e6:.1f} | |"
+    )
+    out.append(
+        f"| refined further (144 x 32, 8 levels, tolerance 2.5e-4: {fine.directions.size} x "
+        f"{fine.magnitudes.size - 1}) | | {fine.area * 1e6:.1f} +- {fine.area_error * 1e6:.1f} | |"
+    )
+    out.append(
+        f"| 72 x 16 grid, unrefined (refine=0; directions together) | {t_grid:.3f} | "
+        f"{ws.area * 1e6:.1f} | reference |"
+    )
+    out.append(f"| 72 x 16, solve_rod per direction | {t_single:.3f} | | {diff:.1e} |")
+    out.append(
+        f"\ndefault accuracy / unrefined grid: {t_ref / t_grid:.1f} x the time; default within "
+        f"{abs(ref.area / fine.area - 1) * 100:.2f} % of the further refined area; "
+        f"directions together / one by one: 1/{t_single / t_grid:.1f}.\n"
     )
 
 
@@ -176,6 +190,7 @@ def optimisation_table(out):
 
     rod = presets.seed_rod(presets.M1())
     kw = dict(segments=4, b_max=0.02, max_magnitude=128e3, directions=24, magnitudes=6)
+    grid = dict(directions=24, magnitudes=6)
     t0 = time.process_time()
     grad = optimize_magnetization(rod, method="gradient", budget=300, starts=4, **kw)
     t_grad = time.process_time() - t0
@@ -199,9 +214,7 @@ def optimisation_table(out):
     ):
         out.append(f"| {name} | {r.area * 1e6:.1f} | {r.solves} | {reach(r.history)} | {t:.0f} |")
     presets_area = {
-        name: workspace(
-            dataclasses.replace(rod, magnetization=m), 0.02, directions=24, magnitudes=6
-        ).area
+        name: workspace(dataclasses.replace(rod, magnetization=m), 0.02, **grid).area
         for name, m in (
             ("M(1)", presets.M1()),
             ("M(2a)", presets.M2(variant="a")),
@@ -214,7 +227,8 @@ def optimisation_table(out):
         "\nPresets at the same resolution (mm^2): "
         + ", ".join(f"{k} {v * 1e6:.1f}" for k, v in presets_area.items())
         + f".  Gradient layout: |M| {np.round(grad.magnitudes / 1e3, 1).tolist()} kA/m, "
-        f"angles {np.round(grad.angles, 3).tolist()} rad.\n"
+        f"angles {np.round(grad.angles, 3).tolist()} rad; {grad.ratio:.3f} x the uniform "
+        f"magnetization's area ({grad.uniform_area * 1e6:.1f} mm^2).\n"
     )
 
 

@@ -165,6 +165,7 @@ def _uniform_start(rod, goal, with_angle, steps, opts, b_cap):
         magnitudes=8,
         nodes=16,
         richardson=False,
+        refine=0,
         clamp_position=clamp,
         clamp_angle=ang,
     )

@@ -2,16 +2,22 @@
 
 The rod is cut into ``segments`` equal segments, each with its own magnitude
 (0 ... ``max_magnitude``) and direction (free).  The objective is the workspace area
-(:func:`coilrod.workspace`) at a field bound ``b_max``.
+(:func:`coilrod.workspace`, refined up to the antiparallel cut, directions measured from the
+rod's net moment) at a field bound ``b_max``.  The result reports the ratio to the best
+uniform magnetization (``max_magnitude`` at any angle: all angles have the same workspace, a
+turned uniform magnetization being a turned field), the baseline a layout must beat.
 
 * ``method="gradient"``: L-BFGS-B from several starts, with the exact gradient: the area's
   derivative with respect to the tips (:func:`coilrod.design.workspace.area_gradient`) times
-  the tips' adjoint sensitivities (:func:`coilrod.sensitivities`, all states of all directions
-  at once).  The area is a smooth function of the tips as long as the set of included cells
-  does not change; where a snap-through appears or disappears inside the grid (a cell drops out
-  or comes in), the area jumps.  The gradient then describes the current cell set only, the
-  line search of L-BFGS-B backs off from the jump, and the several starts guard against being
-  stuck at one.
+  the tips' total derivative: their adjoint sensitivities (:func:`coilrod.sensitivities`, all
+  states of all directions at once) plus the turn of the workspace's directions with the
+  rod's net moment (:func:`coilrod.design.workspace.reference_direction`; turning every
+  segment by delta is turning the field by -delta, so d tip/d phi = -sum of d tip/d angle).
+  The area is a smooth function of the layout as long as the refined grid and the set of
+  included cells do not change; where they do (a bisection added or dropped, a snap-through
+  appearing), the area jumps by about its ``area_error``.  The gradient then describes the
+  current grid only, the line search of L-BFGS-B backs off from the jump, and the several
+  starts guard against being stuck at one.
 * ``method="evolution"``: :func:`scipy.optimize.differential_evolution` (derivative-free, the
   kind of method behind the seed's cited M(4.1) design).
 
@@ -60,6 +66,12 @@ class MagnetizationDesign:
         The best layout's workspace.
     seconds : float
         CPU time spent, s.
+    uniform_area : float
+        The workspace area of the best uniform magnetization, m^2: |M| = ``max_magnitude``
+        along the rod (a uniform magnetization at any other angle has the same area: turning
+        it is turning the field, and the workspace's directions turn with it).
+    ratio : float
+        ``area / uniform_area``: what the segment layout gains over a uniform magnetization.
     """
 
     magnetization: Magnetization
@@ -71,17 +83,26 @@ class MagnetizationDesign:
     angles: np.ndarray
     workspace: Workspace
     seconds: float
+    uniform_area: float = float("nan")
+
+    @property
+    def ratio(self) -> float:
+        return self.area / self.uniform_area
 
 
 class _Objective:
     """Workspace area of a layout x = (magnitudes / max, angles), with a record of every
     evaluation."""
 
-    def __init__(self, rod, segments, b_max, max_magnitude, directions, magnitudes, budget):
+    def __init__(
+        self, rod, segments, b_max, max_magnitude, directions, magnitudes, refine, tolerance, budget
+    ):
         self.rod, self.segments = rod, segments
         self.lengths = np.full(segments, rod.length / segments)
         self.b_max, self.max_mag = b_max, max_magnitude
-        self.kw = dict(directions=directions, magnitudes=magnitudes)
+        self.kw = dict(
+            directions=directions, magnitudes=magnitudes, refine=refine, tolerance=tolerance
+        )
         self.budget = budget
         self.solves = 0
         self.best = (-np.inf, None, None)
@@ -100,6 +121,20 @@ class _Objective:
         m = Magnetization.segments(self.lengths, mags, angles, label="optimised")
         return dataclasses.replace(self.rod, magnetization=m)
 
+    def reference_rate(self, x) -> np.ndarray:
+        """d(reference direction)/d(magnitudes [A/m], angles [rad]) of layout x, (2 S,):
+        the net moment is sum_s l_s M_s (cos a_s, sin a_s)."""
+        mags, angles = self.layout(x)
+        e = np.stack([np.cos(angles), np.sin(angles)], 1)
+        N = (self.lengths * mags) @ e
+        n2 = N @ N
+        if n2 <= 1e-18 * (self.lengths @ mags) ** 2:
+            return np.zeros(2 * self.segments)
+        dN = np.concatenate(
+            [self.lengths[:, None] * e, (self.lengths * mags)[:, None] * e[:, ::-1] * [-1, 1]]
+        )
+        return (N[0] * dN[:, 1] - N[1] * dN[:, 0]) / n2
+
     def evaluate(self, x, gradient: bool):
         key = tuple(np.round(np.asarray(x, float), 15))
         if key in self._cache and (not gradient or self._cache[key][1] is not None):
@@ -115,6 +150,11 @@ class _Objective:
         if gradient:
             g_tip = area_gradient(ws)  # (D, M + 1, 2)
             _, dT = tip_derivatives(ws, ["magnitudes", "angles"])  # (D, M + 1, 2, p)
+            # the directions turn with the reference (the net moment's direction psi): the
+            # tips at psi + alpha move by dT/dphi dpsi/dp, and turning every segment by delta
+            # is the field turned by -delta, so dT/dphi = -sum of dT/d(angle)
+            dT_dphi = -dT[..., self.segments :].sum(axis=-1)
+            dT = dT + dT_dphi[..., None] * self.reference_rate(x)[None, None, None, :]
             grad = np.einsum("dmc,dmcp->p", g_tip, dT)
             grad[: self.segments] *= self.max_mag  # per unit of x
         if ws.area > self.best[0]:
@@ -143,6 +183,8 @@ def optimize_magnetization(
     *,
     directions: int = 36,
     magnitudes: int = 8,
+    refine: int = 6,
+    tolerance: float = 1e-3,
     starts: int = 4,
 ) -> MagnetizationDesign:
     """Segment magnitudes and directions that maximise the workspace area at ``b_max``.
@@ -163,8 +205,8 @@ def optimize_magnetization(
         Most workspace evaluations (default 400 for "gradient", 4000 for "evolution").
     seed : int
         Random seed (the starts of "gradient", the population of "evolution").
-    directions, magnitudes : int
-        Resolution of the workspaces evaluated (see :func:`coilrod.workspace`).
+    directions, magnitudes, refine, tolerance
+        Initial grid and refinement of the workspaces evaluated (see :func:`coilrod.workspace`).
     starts : int
         Starts of the gradient method: M(2a) in segments (the direction turning by pi/2
         from clamp to tip, magnitudes at the bound), then random layouts (magnitudes 0.5 to 1
@@ -179,7 +221,7 @@ def optimize_magnetization(
     >>> from coilrod import presets, optimize_magnetization
     >>> rod = presets.seed_rod(presets.M1())
     >>> best = optimize_magnetization(rod, segments=1, b_max=0.01, budget=6, starts=1,
-    ...                               directions=12, magnitudes=3)
+    ...                               directions=12, magnitudes=3, refine=2)
     >>> best.solves <= 6 and best.area > 0
     True
     """
@@ -198,7 +240,9 @@ def optimize_magnetization(
     default = 400 if method == "gradient" else 4000
     budget = as_count(default if budget is None else budget, "budget", 1, 10**6)
     starts = as_count(starts, "starts", 1, 1000)
-    obj = _Objective(rod, segments, b_max, max_magnitude, directions, magnitudes, budget)
+    obj = _Objective(
+        rod, segments, b_max, max_magnitude, directions, magnitudes, refine, tolerance, budget
+    )
     rng = np.random.default_rng(seed)
     t0 = time.process_time()
     n = 2 * segments
@@ -258,6 +302,11 @@ def optimize_magnetization(
     if x is None:
         raise ValueError("no workspace was evaluated (budget too small)")
     mags, angles = obj.layout(x)
+    uniform = workspace(
+        dataclasses.replace(rod, magnetization=Magnetization(max_magnitude, 0.0)),
+        b_max,
+        **obj.kw,
+    )
     return MagnetizationDesign(
         magnetization=ws._solution.rod.magnetization,
         area=float(area),
@@ -268,4 +317,5 @@ def optimize_magnetization(
         angles=angles,
         workspace=ws,
         seconds=time.process_time() - t0,
+        uniform_area=uniform.area,
     )

@@ -1,22 +1,40 @@
 """The workspace of a magnetic rod: every tip position a bounded field can hold it at.
 
-Definition (what :func:`workspace` computes):
+Definition (what :func:`workspace` approximates, with an error estimate):
 
-* For each of ``directions`` in-plane field directions ``phi_d = 2 pi d / directions`` (from +x,
-  counter-clockwise), the field magnitude is ramped quasi-statically from 0 to ``b_max`` in
-  ``magnitudes`` equal steps, starting from the straight unloaded rod.  This is the solver's own
-  path following (:func:`coilrod.solve_rod`): at a limit point the rod snaps through to the
-  stable branch, and states are never taken from an unstable branch.
-* The tip positions form a grid ``tips[d, j]`` (direction d, magnitude ``j b_max /
-  magnitudes``).  A grid cell (d, j) -- the quadrilateral of ``tips[d, j], tips[d, j + 1],
-  tips[d + 1, j + 1], tips[d + 1, j]``, directions wrapping around -- is the image of a patch of
-  fields the rod reaches continuously.  The workspace is the union of the cells' images
-  (computed by shapely, each cell split into two triangles).
-* A cell is left out when its image is not reached continuously: a corner state is unstable
-  (e.g. the straight rod beyond buckling in an exactly antiparallel field), the rod snaps
-  through between its magnitudes, or its two directions hold the rod on different branches
-  (the node angles differ by more than ``max(0.5 rad, 2 x the direction step)`` somewhere: the
-  rod would jump, not sweep, between them).  ``cells`` says which cells count.
+* The workspace is the set of tips of the **stable** states reached quasi-statically along
+  the radial field ramps ``B = s b_max (cos phi, sin phi)``, s from 0 to 1, over all in-plane
+  field directions phi: the image of the field disc ``|B| <= b_max`` under the map field ->
+  tip, each field's state being the one the solver's path following (:func:`coilrod.solve_rod`:
+  snap-through to the stable branch at a limit point, never a state of an unstable branch)
+  reaches from the straight rod along its ramp.  Stability is the solver's own figure.
+* Directions are measured from the robot, not from +x: ``phi = reference + alpha``, alpha in
+  (-pi, pi), ``reference`` the direction of the rod's net magnetic moment in the clamp frame
+  turned by the clamp angle (:func:`reference_direction`).  Turning the clamp, or a uniform
+  magnetization, turns the grid with it, so the area is exactly invariant under these
+  symmetries.
+* **The antiparallel cut.**  Near alpha = +-pi (the field against the net moment) the rod
+  buckles beyond a critical field: the two sides of the antiparallel ray land on the two
+  branches of the (imperfect) bifurcation, and the map field -> tip jumps across that ray (more
+  generally across any ray where neighbouring directions land on different branches).  The
+  workspace is the image of the disc **cut along** those rays: both sides are reached (as
+  one-sided limits), nothing in between is.  No grid direction lies on alpha = +-pi initially
+  (the initial grid is ``alpha_d = -pi + 2 pi (d + 1/2) / directions``).
+* Computed as a union of grid cells: the quadrilateral ``tips[d, j], tips[d, j + 1],
+  tips[d + 1, j + 1], tips[d + 1, j]`` (two triangles, shapely) of neighbouring directions d,
+  d + 1 (the last cell across the cut) and magnitudes j, j + 1.  A cell is left out when its
+  image is not swept continuously: a corner state unstable, a snap-through along either ramp,
+  or the two directions on different branches (node angles differing by more than
+  ``max(0.5 rad, 2 x the direction step)``).  Cells left out whose two sides differ (a branch
+  jump, one side unstable or snapping) are **bisected in direction** (``refine`` levels), so
+  the lost wedge shrinks to zero on either side of the cut wherever the grid falls; so is the
+  cell pair whose tips at ``b_max`` bend away from their chord by more than ``tolerance`` L.
+  Magnitude steps along which the tip curves bend away from their chords by more than
+  ``tolerance`` L (the sharp knee of a nearly antiparallel ramp just past buckling) are
+  bisected for every direction (the grid stays a tensor grid).
+* ``area_error``: the difference between the area and that of the same states one resolution
+  coarser: the last bisection undone everywhere (in directions and in magnitudes; on a
+  stretch the refinement left alone, every other point of the initial grid).
 
 With ``system`` (a coil system with current control) each direction's field is made by the
 currents that give ``b_max`` along that direction at the system centre, and the real
@@ -43,11 +61,13 @@ from ..robot.rod import Rod
 from ..rod.fan import UniformFan
 from ..rod.solve import DEFAULT_SEGMENTS, MAX_SEGMENTS, build_problem, make_mesh, solve_rod
 
-__all__ = ["workspace", "Workspace", "area_gradient"]
+__all__ = ["workspace", "Workspace", "area_gradient", "reference_direction"]
 
 #: Largest grids accepted (time and memory stay bounded: 3600 x 1000 states).
 MAX_DIRECTIONS = 3600
 MAX_MAGNITUDES = 1000
+#: Most refinement levels of the directions.
+MAX_REFINE = 20
 #: Largest magnetoelastic number A |M| b_max L^2 / (E I) accepted.
 MAX_LAMBDA = 1000.0
 
@@ -63,9 +83,12 @@ class Workspace:
     Attributes
     ----------
     directions : ndarray, shape (D,)
-        Field directions in the bending plane, rad from +x.
+        Field directions in the bending plane, rad from +x, increasing from
+        ``reference - pi`` to ``reference + pi`` (the initial grid and the directions added by
+        refinement).
     magnitudes : ndarray, shape (M + 1,)
-        Field magnitudes at the system centre, T (``magnitudes[0] = 0``).
+        Field magnitudes at the system centre, T, increasing from ``magnitudes[0] = 0`` to
+        ``b_max`` (the initial steps and their bisections).
     tips : ndarray, shape (D, M + 1, 3)
         Tip positions, m.
     stable : ndarray of bool, shape (D, M + 1)
@@ -88,6 +111,16 @@ class Workspace:
         The coil system, or None for ideal uniform fields.
     currents : ndarray, shape (D, m) or None
         With ``system``: the currents of each direction at ``b_max``, A.
+    area_error : float
+        Error estimate of ``area``, m^2: its difference from the area of the same states one
+        resolution coarser (the last bisection of every stretch of directions and of
+        magnitudes undone; where none was made, every other point of the initial grid).
+    reference : float
+        The direction the field directions are measured from (:func:`reference_direction`),
+        rad from +x.
+    levels : ndarray of int, shape (D,)
+        Refinement level of each direction: 0 and 1 the initial grid's even and odd
+        directions, ``k + 2`` a direction bisecting a step ``2 pi / directions / 2**k``.
     """
 
     directions: np.ndarray
@@ -102,6 +135,9 @@ class Workspace:
     events: list
     system: object = None
     currents: np.ndarray | None = None
+    area_error: float = 0.0
+    reference: float = 0.0
+    levels: np.ndarray | None = None
     _solution: object = dataclasses.field(default=None, repr=False)
 
     def plot(self, ax=None, *, color="C0", label=None, grid: bool = False, unit: float = 1e-3):
@@ -167,13 +203,26 @@ def _union(tips_xy: np.ndarray, cells: np.ndarray, scale: float):
     import shapely
 
     tri, _ = _triangles(tips_xy, cells)
+    # a strictly convex cell is one quadrilateral (the union of its two triangles, half the
+    # shapes to unite); the others stay two triangles
+    N = tri.shape[0] // 2
+    quad = np.concatenate([tri[:N, :3], tri[N:, 2:3]], axis=1)  # a, b, c, e
+    edges = np.roll(quad, -1, axis=1) - quad
+    turn = edges[..., 0] * np.roll(edges, -1, axis=1)[..., 1]
+    turn -= edges[..., 1] * np.roll(edges, -1, axis=1)[..., 0]
+    tiny = 1e-20 * scale**2
+    convex = np.all(turn > tiny, axis=1) | np.all(turn < -tiny, axis=1)
+    tri = tri[~np.r_[convex, convex]]
     # drop degenerate triangles (the cells at zero field have two equal corners)
     u, v = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
     area2 = np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
     tri = tri[area2 > 1e-24 * scale**2]
-    if tri.shape[0] == 0:
+    if tri.shape[0] == 0 and not convex.any():
         return shapely.Polygon(), 0.0, np.zeros((0, 2))
-    polys = shapely.polygons(np.concatenate([tri, tri[:, :1]], axis=1))
+    polys = np.r_[
+        shapely.polygons(np.concatenate([tri, tri[:, :1]], axis=1)),
+        shapely.polygons(np.concatenate([quad[convex], quad[convex][:, :1]], axis=1)),
+    ]
     union = shapely.union_all(polys)
     union = shapely.orient_polygons(union) if hasattr(shapely, "orient_polygons") else union
     parts = getattr(union, "geoms", [union])
@@ -247,18 +296,27 @@ def area_gradient(ws: Workspace) -> np.ndarray:
 
 # -- the solves -----------------------------------------------------------------------------------
 @dataclass
+class _Batch:
+    """Directions followed together as one fan: the fan problems and states per mesh and the
+    workspace indices of the fan's members (set once the directions are sorted)."""
+
+    fans: tuple
+    states: tuple
+    members: np.ndarray  # positions of the fan's members in the list of solved directions
+    index: np.ndarray | None = None
+
+
+@dataclass
 class _Solution:
-    """What the workspace's sensitivities need: the fan problems and states per mesh, and the
-    directions solved one by one (index -> RodResult)."""
+    """What the workspace's sensitivities need: the fan batches, and the directions solved one
+    by one (workspace index -> RodResult)."""
 
     rod: Rod
-    fans: tuple = ()
-    fan_states: tuple = ()
-    fan_index: np.ndarray | None = None
+    batches: list = dataclasses.field(default_factory=list)
     single: dict = dataclasses.field(default_factory=dict)
 
 
-def _check(rod, b_max, directions, magnitudes, nodes, clamp_position, clamp_angle):
+def _check(rod, b_max, directions, magnitudes, nodes, clamp_position, clamp_angle, refine):
     if not isinstance(rod, Rod):
         raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
     rod.magnetization.check_planar("workspace")
@@ -272,9 +330,41 @@ def _check(rod, b_max, directions, magnitudes, nodes, clamp_position, clamp_angl
     directions = as_count(directions, "directions", 3, MAX_DIRECTIONS)
     magnitudes = as_count(magnitudes, "magnitudes", 1, MAX_MAGNITUDES)
     nodes = as_count(DEFAULT_SEGMENTS if nodes is None else nodes, "nodes", 4, MAX_SEGMENTS)
+    refine = as_count(refine, "refine", 0, MAX_REFINE)
     clamp = as_vector(clamp_position, "clamp_position")
     angle = finite_scalar(clamp_angle, "clamp_angle")
-    return b_max, directions, magnitudes, nodes, clamp, angle
+    return b_max, directions, magnitudes, nodes, clamp, angle, refine
+
+
+def reference_direction(rod: Rod, nodes: int | None = None, clamp_angle: float = 0.0) -> float:
+    """The direction the workspace's field directions are measured from, rad from +x.
+
+    The direction of the rod's net magnetic moment in the plane, ``sum_i w_i m_i`` over the
+    mesh nodes (body-frame magnetization, quadrature weights w), turned by ``clamp_angle``: a
+    property of the robot, which turns with the clamp and with a uniform magnetization.  A rod
+    whose net moment vanishes (below 1e-9 of ``sum_i w_i |m_i|``) takes the clamp direction.
+
+    Parameters
+    ----------
+    rod : Rod
+    nodes : int, optional
+        Mesh nodes (as in :func:`coilrod.solve_rod`).
+    clamp_angle : float
+        Clamp angle, rad.
+
+    Returns
+    -------
+    float
+        rad.
+    """
+    from ..rod.mesh import node_magnetization
+
+    mesh = make_mesh(rod, DEFAULT_SEGMENTS if nodes is None else nodes)
+    m = node_magnetization(rod.magnetization, mesh, rod.length)
+    net = mesh.w @ m
+    if math.hypot(*net) <= 1e-9 * float(mesh.w @ np.hypot(m[:, 0], m[:, 1])):
+        return float(clamp_angle)
+    return float(clamp_angle) + math.atan2(net[1], net[0])
 
 
 def _direction_fields(system, b_max: float, phi: np.ndarray):
@@ -301,6 +391,23 @@ def _direction_fields(system, b_max: float, phi: np.ndarray):
     return [system.with_currents(i) for i in currents], currents
 
 
+def _cells(alpha, theta, stable, snaps):
+    """Included cells (D, M) and the cells left out that refinement can recover (D, M), of
+    directions ``alpha`` (D,) sorted over (-pi, pi), the cell d lying between alpha[d] and
+    alpha[d + 1] (the last one across the cut, alpha[0] + 2 pi)."""
+    gap = np.diff(np.r_[alpha, alpha[0] + 2 * np.pi])
+    ok = stable[:, :-1] & stable[:, 1:] & ~snaps  # (D, M): along each direction's ramp
+    cells = ok & np.roll(ok, -1, axis=0)
+    with np.errstate(invalid="ignore"):
+        jump = np.max(np.abs(theta - np.roll(theta, -1, axis=0)), axis=2)  # (D, M + 1)
+    same = jump <= np.maximum(BRANCH_JUMP, 2 * gap)[:, None]
+    cells &= same[:, :-1] & same[:, 1:]
+    # nothing to recover where both directions' ramps leave the cell out (e.g. the straight
+    # rod beyond buckling on both sides): elsewhere the two sides differ
+    dead = ~ok & ~np.roll(ok, -1, axis=0)
+    return cells, ~cells & ~dead
+
+
 def workspace(
     rod: Rod,
     b_max: float,
@@ -312,6 +419,9 @@ def workspace(
     richardson: bool = True,
     clamp_position=(0.0, 0.0, 0.0),
     clamp_angle: float = 0.0,
+    refine: int = 6,
+    tolerance: float = 1e-3,
+    reference: float | None = None,
     progress: bool = False,
 ) -> Workspace:
     """The workspace of ``rod``: the tip positions reached by fields up to ``b_max``.
@@ -322,7 +432,8 @@ def workspace(
     b_max : float
         Largest field magnitude (at the system centre), T, > 0.
     directions : int
-        In-plane field directions (>= 3), evenly spaced over the full circle.
+        In-plane field directions of the initial grid (>= 3), evenly spaced over the circle
+        and measured from the rod's :func:`reference_direction` (see the module docstring).
     magnitudes : int
         Magnitude steps from 0 to ``b_max`` (>= 1).
     system : coil system, optional
@@ -332,6 +443,19 @@ def workspace(
         direction.  None: ideal uniform fields.
     nodes, richardson, clamp_position, clamp_angle
         As in :func:`coilrod.solve_rod` (the clamp in m and rad).
+    refine : int
+        Bisection levels of the directions where neighbouring directions land on different
+        branches, a snap or an unstable state (0 ... 20): the smallest direction step is
+        ``2 pi / directions / 2**refine``, the smallest magnitude step
+        ``b_max / magnitudes / 2**refine``.
+    tolerance : float
+        Largest estimated distance of the tip curves (along a direction's ramp, or across
+        directions at one magnitude) from a cell's straight edge, in rod lengths (> 0): the
+        directions and magnitude steps beyond it are bisected (up to ``refine`` levels).
+    reference : float, optional
+        The direction the field directions are measured from, rad from +x; default the rod's
+        :func:`reference_direction` (give it to hold the directions fixed while the
+        magnetization changes, e.g. for differences of tips).
     progress : bool
         Show a progress bar (directions solved one by one).
 
@@ -348,90 +472,128 @@ def workspace(
 
     Notes
     -----
-    Ideal fields: all directions are followed together as one block-diagonal problem
-    (:class:`~coilrod.rod.fan.UniformFan`), so 72 x 16 states of M(1) take a fraction of a
-    second; a direction whose path meets a fold or a bifurcation is re-solved on its own with
-    :func:`coilrod.solve_rod` (which locates and reports the event).  Real coil fields: one
-    :func:`coilrod.solve_rod` per direction.
+    Ideal fields: all directions of a refinement level are followed together as one
+    block-diagonal problem (:class:`~coilrod.rod.fan.UniformFan`); a direction whose path
+    meets a fold or a bifurcation is re-solved on its own with :func:`coilrod.solve_rod` (which
+    locates and reports the event).  Real coil fields: one :func:`coilrod.solve_rod` per
+    direction.  Stability is the solver's (``member_stability`` of the fan, ``stable`` of
+    :func:`coilrod.solve_rod`).
 
     Examples
     --------
     >>> from coilrod import presets, workspace
-    >>> ws = workspace(presets.seed_rod(presets.M1()), 0.01, directions=12, magnitudes=4)
-    >>> ws.tips.shape
-    (12, 5, 3)
+    >>> ws = workspace(presets.seed_rod(presets.M1()), 0.01, directions=12, magnitudes=4, refine=2)
+    >>> ws.tips.shape == (ws.directions.size, ws.magnitudes.size, 3)
+    True
+    >>> bool(0 < ws.area_error < ws.area)  # two levels only: a rough area
+    True
     """
-    b_max, D, M, nodes, clamp, angle = _check(
-        rod, b_max, directions, magnitudes, nodes, clamp_position, clamp_angle
+    b_max, D, M, nodes, clamp, angle, refine = _check(
+        rod, b_max, directions, magnitudes, nodes, clamp_position, clamp_angle, refine
     )
-    phi = 2 * np.pi * np.arange(D) / D
-    fields, currents = _direction_fields(system, b_max, phi)
+    tolerance = positive(tolerance, "tolerance")
+    if reference is None:
+        psi = reference_direction(rod, nodes, angle)
+    else:
+        psi = finite_scalar(reference, "reference")
+    n = make_mesh(rod, nodes).n
+    straight = clamp + rod.length * np.array([math.cos(angle), math.sin(angle), 0.0])
+    h = tolerance * rod.length  # largest sagitta of the tip curves over a cell edge, m
+    alpha = -np.pi + 2 * np.pi * (np.arange(D) + 0.5) / D  # from the reference direction
+    level = np.arange(D) % 2  # the initial grid is level 1 of a grid half as fine
     scales = np.arange(1, M + 1) / M
-    sol = _Solution(rod)
-    tips = np.full((D, M + 1, 3), np.nan)
-    theta = np.full((D, M + 1, make_mesh(rod, nodes).n), np.nan)  # node angles, rad
-    stable = np.ones((D, M + 1), dtype=bool)
-    snaps = np.zeros((D, M), dtype=bool)
-    events: list = []
-    todo = list(range(D))
-    if system is None:
-        todo = _solve_fan(rod, b_max, phi, scales, nodes, richardson, clamp, angle, sol)
-        if sol.fans:
-            theta[sol.fan_index, 1:] = sol.fan_thetas
-            tips[sol.fan_index, 1:] = sol.fan_tips
-            stable[sol.fan_index, 1:] = sol.fan_stable
+    mlevel = np.arange(1, M + 1) % 2
+    min_gap = 2 * np.pi / D / 2**refine * (1 - 1e-9)
+    min_width = 1.0 / M / 2**refine * (1 - 1e-9)
     bar = None
-    if progress and todo:
+    if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(todo), desc="workspace", unit="direction")
+        bar = tqdm(desc="workspace", unit="direction")
+    fresh = lambda: {"tips": [], "theta": [], "stable": [], "snaps": [], "currents": []}  # noqa: E731
     try:
-        for d in todo:
-            try:
-                res = _solve_direction(rod, fields[d], scales, nodes, richardson, clamp, angle)
-            except ConvergenceError as err:  # keep the states before, leave the rest out
-                res = err.result
-                events.append(
-                    {
-                        "direction": d,
-                        "kind": "unreached",
-                        "scale": float(err.reached),
-                        "message": str(err),
-                    }
-                )
-                stable[d, 1:] = False
-                if res is None:
-                    continue
-            sol.single[d] = res
-            got = len(res.scales)
-            tips[d, 1 : got + 1] = res.tip
-            theta[d, 1 : got + 1] = np.array([res.theta(k) for k in range(got)])
-            stable[d, 1 : got + 1] = res.stable
-            for e in res.instabilities:
-                events.append({"direction": d, **e})
-                if e["kind"] == "snap":
-                    snaps[d, e["index"]] = True
-            if bar is not None:
-                bar.update(1)
+        # 1. directions: bisect where neighbours land on different branches (or one on an
+        #    unstable state or a snap) and where the tips at b_max bend away from the chords
+        got, sol, events = fresh(), _Solution(rod), []
+        args = (rod, b_max, scales, nodes, richardson, clamp, angle, system, n, straight)
+        _solve_directions(psi + alpha, 0, *args, got, sol, events, bar)
+        for _ in range(refine):
+            a, cat = _sorted(alpha, got)
+            _, recover = _cells(a, *(cat[k] for k in ("theta", "stable", "snaps")))
+            gap = np.diff(np.r_[a, a[0] + 2 * np.pi])
+            sag = _sagitta(cat["tips"][:, -1:, :2], axis=0, wrap=True)[:, 0]
+            split = np.flatnonzero((recover.any(axis=1) | (sag > h)) & (gap > min_gap))
+            if split.size == 0:
+                break
+            new = a[split] + gap[split] / 2
+            new = np.where(new > np.pi, new - 2 * np.pi, new)
+            first = alpha.size
+            alpha = np.r_[alpha, new]
+            depth = 2 + np.round(np.log2(2 * np.pi / D / gap[split])).astype(int)
+            level = np.r_[level, depth]  # the finer the step split, the higher
+            _solve_directions(psi + new, first, *args, got, sol, events, bar)
+        # 2. magnitudes: bisect the steps where the ramps of the directions bounding the
+        #    workspace (next to the cut or to a cell left out) bend away from the chords
+        a, cat = _sorted(alpha, got)
+        _, recover = _cells(a, *(cat[k] for k in ("theta", "stable", "snaps")))
+        edge = np.any(_sagitta(cat["tips"][..., :2], axis=1) > h, axis=1)
+        probe, tips = psi + a[edge], cat["tips"][edge]
+        for _ in range(refine):
+            width = np.diff(np.r_[0.0, scales])
+            sag = _sagitta(tips[..., :2], axis=1)
+            long = np.flatnonzero(np.any(sag > h, axis=0) & (width > min_width))
+            if long.size == 0:
+                break
+            probe = probe[np.any(sag[:, long] > h, axis=1)]  # the ramps still bent
+            scales = np.r_[scales, scales[long] - width[long] / 2]
+            mlevel = np.r_[mlevel, 2 + np.round(np.log2(1.0 / M / width[long])).astype(int)]
+            o = np.argsort(scales)
+            scales, mlevel = scales[o], mlevel[o]
+            trial = fresh()
+            # (the coarse mesh's tips: enough to see where the ramps bend)
+            targs = (rod, b_max, scales, nodes, False, clamp, angle, system, n, straight)
+            _solve_directions(probe, 0, *targs, trial, _Solution(rod), [], None)
+            tips = trial["tips"][0]
+        # 3. every direction at the final magnitudes
+        if scales.size > magnitudes:
+            got, sol, events = fresh(), _Solution(rod), []
+            args = (rod, b_max, scales, nodes, richardson, clamp, angle, system, n, straight)
+            _solve_directions(psi + alpha, 0, *args, got, sol, events, bar)
     finally:
         if bar is not None:
             bar.close()
-    straight = clamp + rod.length * np.array([math.cos(angle), math.sin(angle), 0.0])
-    tips[:, 0] = straight
-    theta[:, 0] = angle
-    cells = stable[:, :-1] & stable[:, 1:] & ~snaps
-    cells &= np.roll(cells, -1, axis=0)  # both directions' edges of the cell
-    step = 2 * np.pi / D
-    jump = np.max(np.abs(theta - np.roll(theta, -1, axis=0)), axis=2)  # (D, M + 1)
-    same_branch = jump <= max(BRANCH_JUMP, 2 * step)
-    cells &= same_branch[:, :-1] & same_branch[:, 1:]
+    order = np.argsort(alpha, kind="stable")
+    where = np.empty_like(order)
+    where[order] = np.arange(order.size)
+    cat = {k: np.concatenate(v)[order] for k, v in got.items() if k != "currents"}
+    for b in sol.batches:
+        b.index = where[b.members]
+    sol.single = {int(where[k]): v for k, v in sol.single.items()}
+    for e in events:
+        e["direction"] = int(where[e["direction"]])
+    alpha, level = alpha[order], level[order]
+    cells, _ = _cells(alpha, cat["theta"], cat["stable"], cat["snaps"])
+    tips = cat["tips"]
     polygon, area, boundary = _union(tips[..., :2], cells, rod.length)
+    # one level coarser: the last bisection undone everywhere (the leaves of the bisection
+    # trees left out; on an unrefined stretch, every other point of the initial grid)
+    keep = ~_leaves(level, cyclic=True)
+    mj = np.flatnonzero(~_leaves(np.r_[0, mlevel], cyclic=False))
+    mj = np.unique(np.r_[mj, scales.size])
+    coarse_cells, _ = _cells(
+        alpha[keep],
+        cat["theta"][keep][:, mj],
+        cat["stable"][keep][:, mj],
+        _coarse_snaps(cat["snaps"][keep], mj),
+    )
+    coarse_area = _union(tips[keep][:, mj, :2], coarse_cells, rod.length)[1]
+    currents = None if system is None else np.concatenate(got["currents"])[order]
     return Workspace(
-        directions=phi,
-        magnitudes=b_max * np.arange(M + 1) / M,
+        directions=psi + alpha,
+        magnitudes=b_max * np.r_[0.0, scales],
         tips=tips,
-        stable=stable,
-        snaps=snaps,
+        stable=cat["stable"],
+        snaps=cat["snaps"],
         cells=cells,
         polygon=polygon,
         area=area,
@@ -439,8 +601,132 @@ def workspace(
         events=events,
         system=system,
         currents=currents,
+        area_error=abs(area - coarse_area),
+        reference=psi,
+        levels=level,
         _solution=sol,
     )
+
+
+def _leaves(level, cyclic: bool):
+    """The points of a bisection hierarchy (levels in grid order) made by the last bisection
+    of their stretch: finer than both neighbours (the ends of a non-cyclic grid are kept)."""
+    if cyclic:
+        return (level > np.roll(level, 1)) & (level > np.roll(level, -1))
+    out = np.zeros(level.size, dtype=bool)
+    out[1:-1] = (level[1:-1] > level[:-2]) & (level[1:-1] > level[2:])
+    return out
+
+
+def _sorted(alpha, got):
+    """The directions sorted, and the states solved (``got``) in their order."""
+    order = np.argsort(alpha, kind="stable")
+    return alpha[order], {k: np.concatenate(v)[order] for k, v in got.items() if k != "currents"}
+
+
+def _sagitta(xy, axis: int, wrap: bool = False):
+    """Estimated distance of the tip curves from their chords, per chord: ``|chord| turn / 8``
+    (the sagitta of a circular arc), ``turn`` the larger turning angle of the polyline at the
+    chord's two ends, along ``axis`` of the tip grid ``xy`` (D, M + 1, 2); (D, M) along the
+    magnitudes (axis 1), (D, M + 1) along the directions (axis 0, ``wrap``: closed)."""
+    xy = np.moveaxis(xy, axis, 0)
+    nxt = np.roll(xy, -1, axis=0) if wrap else xy[1:]
+    v = nxt - (xy if wrap else xy[:-1])  # chords
+    with np.errstate(invalid="ignore"):
+        c = np.hypot(v[..., 0], v[..., 1])
+        prev = np.roll(v, 1, axis=0)
+        turn = np.abs(
+            np.arctan2(
+                prev[..., 0] * v[..., 1] - prev[..., 1] * v[..., 0],
+                np.einsum("...k,...k->...", prev, v),
+            )
+        )  # at each chord's start
+        if not wrap:
+            turn[0] = 0.0
+        end = np.roll(turn, -1, axis=0)
+        if not wrap:
+            end[-1] = 0.0
+        sag = c * np.fmax(turn, end) / 8
+    sag = np.where(np.isfinite(sag), sag, 0.0)
+    return np.moveaxis(sag, 0, axis)
+
+
+def _coarse_snaps(snaps, mj):
+    """Snaps of the coarse magnitude steps mj[i] -> mj[i + 1]: any fine snap between."""
+    c = np.concatenate([np.zeros((snaps.shape[0], 1), int), np.cumsum(snaps, axis=1)], axis=1)
+    return (c[:, mj[1:]] - c[:, mj[:-1]]) > 0
+
+
+def _solve_directions(
+    phi,
+    first,
+    rod,
+    b_max,
+    scales,
+    nodes,
+    richardson,
+    clamp,
+    angle,
+    system,
+    n,
+    straight,
+    got,
+    sol,
+    events,
+    bar,
+):
+    """Solve the directions ``phi`` (numbered from ``first``) and append their states to
+    ``got``, batches and single solves to ``sol`` and events to ``events``."""
+    D, M = phi.size, scales.size
+    tips = np.full((D, M + 1, 3), np.nan)
+    theta = np.full((D, M + 1, n), np.nan)  # node angles, rad
+    stable = np.ones((D, M + 1), dtype=bool)
+    snaps = np.zeros((D, M), dtype=bool)
+    tips[:, 0], theta[:, 0] = straight, angle
+    todo = list(range(D))
+    if system is None:
+        todo, batch = _solve_fan(rod, b_max, phi, scales, nodes, richardson, clamp, angle)
+        if batch is not None:
+            idx = batch.pop("members")
+            theta[idx, 1:], tips[idx, 1:], stable[idx, 1:] = (
+                batch.pop("thetas"),
+                batch.pop("tips"),
+                batch.pop("stable"),
+            )
+            sol.batches.append(_Batch(members=first + idx, **batch))
+    fields, currents = _direction_fields(system, b_max, phi) if todo else (None, None)
+    if system is not None:
+        got["currents"].append(currents)
+    for d in todo:
+        try:
+            res = _solve_direction(rod, fields[d], scales, nodes, richardson, clamp, angle)
+        except ConvergenceError as err:  # keep the states before, leave the rest out
+            res = getattr(err, "result", None)
+            events.append(
+                {
+                    "direction": first + d,
+                    "kind": "unreached",
+                    "scale": float(getattr(err, "reached", 0.0)),
+                    "message": str(err),
+                }
+            )
+            stable[d, 1:] = False
+            if res is None:
+                continue
+        sol.single[first + d] = res
+        k = len(res.scales)
+        tips[d, 1 : k + 1] = res.tip
+        theta[d, 1 : k + 1] = np.array([res.theta(i) for i in range(k)])
+        stable[d, 1 : k + 1] = res.stable
+        for e in res.instabilities:
+            events.append({"direction": first + d, **e})
+            if e["kind"] == "snap":
+                snaps[d, e["index"]] = True
+        if bar is not None:
+            bar.update(1)
+    stable &= np.isfinite(tips).all(axis=2)
+    for key, v in (("tips", tips), ("theta", theta), ("stable", stable), ("snaps", snaps)):
+        got[key].append(v)
 
 
 def _solve_direction(rod, field, scales, nodes, richardson, clamp, angle):
@@ -457,8 +743,9 @@ def _solve_direction(rod, field, scales, nodes, richardson, clamp, angle):
         )
 
 
-def _solve_fan(rod, b_max, phi, scales, nodes, richardson, clamp, angle, sol) -> list[int]:
-    """Follow the directions together; returns the directions to re-solve one by one.
+def _solve_fan(rod, b_max, phi, scales, nodes, richardson, clamp, angle):
+    """Follow the directions together; returns the directions to re-solve one by one and the
+    fan's batch (a dict; None if the fan gave up).
 
     The fan gives up early on a hard stretch (no snap-through handling, a coarse smallest
     sub-step): then the directions with the smallest second-variation eigenvalue at its last
@@ -477,7 +764,7 @@ def _solve_fan(rod, b_max, phi, scales, nodes, richardson, clamp, angle, sol) ->
     redo: set = set()
     for _ in range(4):
         if active.size == 0:
-            return sorted(redo)
+            return sorted(redo), None
         fields = b_max * np.stack([np.cos(phi[active]), np.sin(phi[active])], 1)
         fans = [UniformFan(base, fields) for base in bases]
         try:
@@ -495,7 +782,7 @@ def _solve_fan(rod, b_max, phi, scales, nodes, richardson, clamp, angle, sol) ->
             redo |= set(active[hard].tolist())
             active = np.delete(active, hard)
     else:
-        return sorted(redo | set(active.tolist()))
+        return sorted(redo | set(active.tolist())), None
     Dn = active.size
     coarse = np.array([p.u for p in run.points])
     states = [coarse]
@@ -508,7 +795,7 @@ def _solve_fan(rod, b_max, phi, scales, nodes, richardson, clamp, angle, sol) ->
             tangent_at_end=False,
         )
         if not np.all(res.ok):
-            return sorted(redo | set(active.tolist()))
+            return sorted(redo | set(active.tolist())), None
         states.append(res.u)
     k = len(scales)
     thetas = [
@@ -527,15 +814,17 @@ def _solve_fan(rod, b_max, phi, scales, nodes, richardson, clamp, angle, sol) ->
         mu = fans[0].member_stability(lin, precise=True).reshape(k, Dn).T
         near = np.any(mu < 0.25 * bases[0].mu0, axis=1)
         redo |= set(active[np.flatnonzero(near | np.any(signs <= 0, axis=1))].tolist())
-    sol.fans = tuple(fans)
-    sol.fan_states = tuple(states)
-    sol.fan_index = active
-    sol.fan_thetas = th
-    sol.fan_tips = np.concatenate(
-        [clamp[:2] + rod.length * tip, np.full(tip.shape[:2] + (1,), clamp[2])], axis=2
-    )
-    sol.fan_stable = signs > 0
-    return sorted(redo)
+    batch = {
+        "fans": tuple(fans),
+        "states": tuple(states),
+        "members": active,
+        "thetas": th,
+        "tips": np.concatenate(
+            [clamp[:2] + rod.length * tip, np.full(tip.shape[:2] + (1,), clamp[2])], axis=2
+        ),
+        "stable": signs > 0,
+    }
+    return sorted(redo), batch
 
 
 # -- derivatives ----------------------------------------------------------------------------------
@@ -575,9 +864,9 @@ def tip_derivatives(ws: Workspace, wrt) -> tuple[list[str], np.ndarray]:
     out = np.zeros((D, M1, 2, len(labels)))
     scales = ws.magnitudes[1:] / ws.magnitudes[-1]
     k = scales.size
-    if sol.fans:
+    for batch in sol.batches:
         per_mesh = []
-        for fan, U in zip(sol.fans, sol.fan_states, strict=True):
+        for fan, U in zip(batch.fans, batch.states, strict=True):
             lin = fan.member_linearization(fan.linearize(U, scales))
             S = np.repeat(scales, fan.D)
             with np.errstate(all="ignore"):
@@ -587,7 +876,7 @@ def tip_derivatives(ws: Workspace, wrt) -> tuple[list[str], np.ndarray]:
                     d = np.full((k * fan.D, 3, len(labels)), np.nan)
             per_mesh.append(d.reshape(k, fan.D, 3, -1).transpose(1, 0, 2, 3))
         d = per_mesh[0] if len(per_mesh) == 1 else (4 * per_mesh[1] - per_mesh[0]) / 3
-        out[sol.fan_index, 1:] = rod.length * d[:, :, 0:2]
+        out[batch.index, 1:] = rod.length * d[:, :, 0:2]
     for direction, res in sol.single.items():
         got = len(res.scales)
         try:
