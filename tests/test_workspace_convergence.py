@@ -48,13 +48,17 @@ class TestSymmetries:
             ws.tips[..., :2], _rotate(base.tips[..., :2], angle), atol=1e-9 * ROD.length
         )
 
-    def test_a_uniform_magnetization_at_any_angle_has_the_same_workspace(self, base):
-        """Issue 18: Magnetization(128e3, 1.0) against M(1): 747 against 660 mm^2 at 16 x 4."""
+    def test_a_uniform_magnetization_at_any_angle_has_the_same_equilibria(self, base):
+        """Issue 18: Magnetization(128e3, 1.0) against M(1): 747 against 660 mm^2 at 16 x 4.
+        The planar equilibria are the same (the grid turns with the moment: identical tips);
+        their 3D stability is not -- a twist turns the normal component of a tilted
+        magnetization out of the plane, which an axial one does not have -- so the areas of
+        the 3D-stable sets may differ (tests/test_rod_stability3d.py checks that stability
+        against an independent Hessian)."""
         m = ROD.magnetization.max_magnitude(ROD.length)
         turned = dataclasses.replace(ROD, magnetization=Magnetization(m, 1.0))
         assert reference_direction(turned) == pytest.approx(1.0, abs=1e-12)
         ws = workspace(turned, B, **CHEAP)
-        assert ws.area == pytest.approx(base.area, rel=1e-9)
         np.testing.assert_allclose(ws.tips, base.tips, atol=1e-8 * ROD.length)
 
 

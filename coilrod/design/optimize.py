@@ -4,8 +4,8 @@ The rod is cut into ``segments`` equal segments, each with its own magnitude
 (0 ... ``max_magnitude``) and direction (free).  The objective is the workspace area
 (:func:`coilrod.workspace`, refined up to the antiparallel cut, directions measured from the
 rod's net moment) at a field bound ``b_max``.  The result reports the ratio to the best
-uniform magnetization (``max_magnitude`` at any angle: all angles have the same workspace, a
-turned uniform magnetization being a turned field), the baseline a layout must beat.
+axial uniform magnetization (``max_magnitude``), the baseline a layout must beat (a tilted
+uniform one has the same equilibria, turned, but its own 3D stability).
 
 * ``method="gradient"``: L-BFGS-B from several starts, with the exact gradient: the area's
   derivative with respect to the tips (:func:`coilrod.design.workspace.area_gradient`) times
@@ -67,9 +67,10 @@ class MagnetizationDesign:
     seconds : float
         CPU time spent, s.
     uniform_area : float
-        The workspace area of the best uniform magnetization, m^2: |M| = ``max_magnitude``
-        along the rod (a uniform magnetization at any other angle has the same area: turning
-        it is turning the field, and the workspace's directions turn with it).
+        The workspace area of the axial uniform magnetization, m^2: |M| = ``max_magnitude``
+        along the rod.  A uniform magnetization at another angle has the same planar
+        equilibria (turning it is turning the field), but not the same 3D stability (a twist
+        turns its normal component out of the plane), so its area may differ.
     ratio : float
         ``area / uniform_area``: what the segment layout gains over a uniform magnetization.
     """

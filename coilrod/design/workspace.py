@@ -10,9 +10,9 @@ Definition (what :func:`workspace` approximates, with an error estimate):
   reaches from the straight rod along its ramp.  Stability is the solver's own figure.
 * Directions are measured from the robot, not from +x: ``phi = reference + alpha``, alpha in
   (-pi, pi), ``reference`` the direction of the rod's net magnetic moment in the clamp frame
-  turned by the clamp angle (:func:`reference_direction`).  Turning the clamp, or a uniform
-  magnetization, turns the grid with it, so the area is exactly invariant under these
-  symmetries.
+  turned by the clamp angle (:func:`reference_direction`).  Turning the clamp turns the grid
+  with it, so the area is exactly invariant; turning a uniform magnetization turns its
+  equilibria exactly, but the 3D stability of a tilted one differs (twist).
 * **The antiparallel cut.**  Near alpha = +-pi (the field against the net moment) the rod
   buckles beyond a critical field: the two sides of the antiparallel ray land on the two
   branches of the (imperfect) bifurcation, and the map field -> tip jumps across that ray (more
@@ -773,8 +773,12 @@ def _solve_fan(rod, b_max, phi, scales, nodes, richardson, clamp, angle):
         except ConvergenceError as err:
             last = err.points[-1] if err.points else None
             u = fans[0].straight() if last is None else last.u
-            mu = fans[0].member_stability(
-                fans[0].linearize(u, 0.0 if last is None else last.scale), precise=True
+            # in-plane figure: the branch's folds and knees (the 3D one adds out-of-plane modes)
+            mu = fans[0].base.branch_stability(
+                fans[0].member_linearization(
+                    fans[0].linearize(u, 0.0 if last is None else last.scale)
+                ),
+                precise=True,
             )
             order = np.argsort(mu)
             hard = order[: max(1, active.size // 10)]
@@ -811,7 +815,8 @@ def _solve_fan(rod, b_max, phi, scales, nodes, richardson, clamp, angle):
     lin = fans[0].linearize(coarse, scales)
     signs = fans[0].member_stability(lin).reshape(k, Dn).T  # (Dn, k)
     if run.events:  # directions near the event: small eigenvalue or unstable somewhere
-        mu = fans[0].member_stability(lin, precise=True).reshape(k, Dn).T
+        mu = fans[0].base.branch_stability(fans[0].member_linearization(lin), precise=True)
+        mu = np.asarray(mu, float).reshape(k, Dn).T
         near = np.any(mu < 0.25 * bases[0].mu0, axis=1)
         redo |= set(active[np.flatnonzero(near | np.any(signs <= 0, axis=1))].tolist())
     batch = {
