@@ -813,12 +813,14 @@ def _solve_fan(rod, b_max, phi, scales, nodes, richardson, clamp, angle):
     else:
         th, tip = thetas[0], pos[0][:, :, -1]
     lin = fans[0].linearize(coarse, scales)
-    signs = fans[0].member_stability(lin).reshape(k, Dn).T  # (Dn, k)
+    signs = fans[0].member_stability(lin).reshape(k, Dn).T  # (Dn, k), 3D
     if run.events:  # directions near the event: small eigenvalue or unstable somewhere
         mu = fans[0].base.branch_stability(fans[0].member_linearization(lin), precise=True)
         mu = np.asarray(mu, float).reshape(k, Dn).T
         near = np.any(mu < 0.25 * bases[0].mu0, axis=1)
-        redo |= set(active[np.flatnonzero(near | np.any(signs <= 0, axis=1))].tolist())
+        plane = fans[0].base.branch_stability(fans[0].member_linearization(lin))
+        plane = np.asarray(plane, float).reshape(k, Dn).T  # in-plane: the fan's own events
+        redo |= set(active[np.flatnonzero(near | np.any(plane <= 0, axis=1))].tolist())
     batch = {
         "fans": tuple(fans),
         "states": tuple(states),

@@ -142,9 +142,12 @@ class UniformFan(PathProblem):
         return np.full(self.size, 1.0 / self.size)
 
     def stability(self, lin: Linearization, precise: bool = False) -> np.ndarray:
-        """The worst member's stability (det sign, or smallest eigenvalue with ``precise``)."""
-        k = lin.u.shape[0]
-        return self.member_stability(lin, precise).reshape(k, self.D).min(axis=1)
+        """The worst member's in-plane stability (det sign, or smallest eigenvalue with
+        ``precise``): what the engine steps by.  The fan's path is the planar branches'; the
+        3D stability of each state (out-of-plane modes) is :meth:`member_stability`, read
+        once at the requested states -- locating every member's out-of-plane bifurcation
+        would only cut the fan's steps."""
+        return self.branch_stability(lin, precise)
 
     def member_stability(self, lin: Linearization, precise: bool = False) -> np.ndarray:
         """Stability of every member, shape (k D,) (see :meth:`PlanarRod.stability`)."""
