@@ -58,8 +58,10 @@ class TestSymmetries:
         m = ROD.magnetization.max_magnitude(ROD.length)
         turned = dataclasses.replace(ROD, magnetization=Magnetization(m, 1.0))
         assert reference_direction(turned) == pytest.approx(1.0, abs=1e-12)
-        ws = workspace(turned, B, **CHEAP)
-        np.testing.assert_allclose(ws.tips, base.tips, atol=1e-8 * ROD.length)
+        grid = {**CHEAP, "refine": 0}  # refinement follows the (different) 3D stability
+        ws = workspace(turned, B, **grid)
+        axial = workspace(ROD, B, **grid)
+        np.testing.assert_allclose(ws.tips, axial.tips, atol=1e-8 * ROD.length)
 
 
 class TestMonotonicity:
