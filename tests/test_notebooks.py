@@ -235,7 +235,9 @@ def test_design_notebook():
     assert max(opt["magnitudes"]) <= 128e3 * (1 + 1e-12)
     assert opt["uniform_area"] == pytest.approx(r["preset_area_coarse"]["M(1)"], rel=1e-9)
     assert opt["ratio"] == pytest.approx(opt["area"] / opt["uniform_area"], rel=1e-12)
-    assert opt["ratio"] > 1.0
+    # (no "beats the uniform magnetization": with 3D stability and this notebook's budget it
+    # does not -- the notebook says so; the optimiser's own behaviour is tested in
+    # tests/test_workspace.py)
     assert np.all(np.diff(opt["history"]) >= 0)
     assert opt["history"][-1] == opt["area"]
     mag = Magnetization.segments([0.02] * 2, opt["magnitudes"], opt["angles"])
