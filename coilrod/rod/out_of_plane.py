@@ -104,9 +104,8 @@ class OutOfPlane:
         planar states of ``lin``, shape (k,) int (-1 where not finite)."""
         from ._inertia import block_tridiagonal_inertia
 
-        U3 = self.spatial_states(lin.u)
-        S = np.broadcast_to(np.asarray(lin.scale, float), (U3.shape[0],)).copy()
-
+        S = np.broadcast_to(np.asarray(lin.scale, float), (np.atleast_2d(lin.u).shape[0],))
+        S = S.copy()
         fv = getattr(lin, "field_values", None)
         known = None
         if fv is not None and not self.twin.uniform:
@@ -119,6 +118,7 @@ class OutOfPlane:
                 if self.twin.uniform:  # numpy, at planar states: nothing to compile
                     b = self.twin._b_uniform
                     return uniform_blocks(self.planar.theta(lin.u), S, self.twin, b)
+                U3 = self.spatial_states(lin.u)
                 return self.twin._assemble(U3, S, True, band=False, fields=known)[3]
 
         D, E = self._with_fields(fields, blocks)
@@ -154,7 +154,8 @@ def uniform_blocks(theta: np.ndarray, S: np.ndarray, twin, b) -> tuple[np.ndarra
     rotations about z: the segment rotation is psi_i = (0, 0, theta_{i+1} - theta_i), so the
     frames, logarithms and the terms of ``psi x g`` need no series (tested against the
     spatial rod's own blocks to round-off)."""
-    from .so3 import about_z, hat, inv_right_jacobian_coefficients
+    from .so3 import about_z, cross, hat, inv_right_jacobian_coefficients
+    from .spatial import _sym_term
 
     K, h, w = twin.K, twin.mesh.h, twin.mesh.w
     k, n = theta.shape
@@ -176,17 +177,13 @@ def uniform_blocks(theta: np.ndarray, S: np.ndarray, twin, b) -> tuple[np.ndarra
     P = Rb @ (MtKM + 0.5 * (MtN + np.swapaxes(MtN, -1, -2))) @ np.swapaxes(Rb, -1, -2)
     p = np.einsum("knij,knj->kni", Rb, g)
     Sc = np.asarray(S, float)[:, None, None]
-    mxb = np.cross(m, B)
-    M = -Sc * w[None, :, None] * mxb
+    M = -Sc * w[None, :, None] * cross(m, B)
     M[:, 1:] += p
     M[:, :-1] -= p
     A_ab = -P + 0.5 * hat(p)
     diag = np.zeros((k, n, 3, 3))
     diag[:, 1:] += P
     diag[:, :-1] += P
-    mb = np.einsum("kni,kni->kn", m, B)
-    sym = 0.5 * (m[..., :, None] * B[..., None, :] + B[..., :, None] * m[..., None, :])
-    sym -= mb[..., None, None] * np.eye(3)
-    diag -= Sc[..., None] * w[None, :, None, None] * sym
+    diag -= Sc[..., None] * w[None, :, None, None] * _sym_term(m, B)
     diag -= 0.5 * hat(M)
     return diag[:, 1:], A_ab[:, 1:]

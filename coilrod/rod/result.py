@@ -88,29 +88,32 @@ class RodResult:
     _frames: np.ndarray | None = field(default=None, repr=False)
     _contact: dict | None = field(default=None, repr=False)
     error: np.ndarray = field(default=None, repr=False)
-    #: planar model: a callable giving (stable in the plane, in-plane eigenvalue), or their pair
-    _in_plane: object = field(default=None, repr=False)
+    #: planar model: the in-plane figures, arrays or callables computing them once (None:
+    #: the 3D figures are the in-plane ones)
+    _stable_in_plane: object = field(default=None, repr=False)
+    _min_eigenvalue_in_plane: object = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return len(self.scales)
 
-    def _in_plane_pair(self):
-        if callable(self._in_plane):
-            self._in_plane = self._in_plane()
-        return self._in_plane
-
     @property
     def stable_in_plane(self) -> np.ndarray:
         """See the class docstring; shape (k,)."""
-        pair = self._in_plane_pair()
-        return self.stable.copy() if pair is None else np.asarray(pair[0], bool)
+        if self._stable_in_plane is None:
+            return self.stable.copy()
+        if callable(self._stable_in_plane):
+            self._stable_in_plane = np.asarray(self._stable_in_plane(), bool)
+        return self._stable_in_plane
 
     @property
     def min_eigenvalue_in_plane(self) -> np.ndarray:
         """Smallest eigenvalue of the in-plane second variation (planar model; the 3D
         ``min_eigenvalue`` for the spatial one), EI / L^3 units, shape (k,)."""
-        pair = self._in_plane_pair()
-        return self.min_eigenvalue if pair is None else np.asarray(pair[1], float)
+        if self._min_eigenvalue_in_plane is None:
+            return self.min_eigenvalue
+        if callable(self._min_eigenvalue_in_plane):
+            self._min_eigenvalue_in_plane = np.asarray(self._min_eigenvalue_in_plane(), float)
+        return self._min_eigenvalue_in_plane
 
     @property
     def min_eigenvalue(self) -> np.ndarray:

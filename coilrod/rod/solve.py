@@ -86,12 +86,19 @@ def build_problem(
     """The discrete problem of ``rod`` in ``field`` on ``mesh`` (non-dimensional); with
     ``stability3d`` (default) its stability counts the out-of-plane modes too
     (:mod:`coilrod.rod.out_of_plane`)."""
-    L = rod.length
-    mu = node_magnetization(rod.magnetization, mesh, L) * (rod.area * L**2 / rod.bending_stiffness)
-    problem = PlanarRod(mesh, mu, field, L, clamp_position, clamp_angle, tol)
+    mu = _node_moments(rod, mesh, dim=2)
+    problem = PlanarRod(mesh, mu, field, rod.length, clamp_position, clamp_angle, tol)
     if stability3d:
         problem.with_out_of_plane(rod_stiffnesses(rod))
     return problem
+
+
+def _node_moments(rod: Rod, mesh: RodMesh, dim: int) -> np.ndarray:
+    """Body-frame node magnetization times A L^2 / EI_z (1/T), shape (n, dim): the rods'
+    non-dimensional magnetic moment per unit field."""
+    L = rod.length
+    scale = rod.area * L**2 / rod.bending_stiffness
+    return node_magnetization(rod.magnetization, mesh, L, dim=dim) * scale
 
 
 def rod_stiffnesses(rod: Rod) -> np.ndarray:
@@ -112,16 +119,12 @@ def build_spatial_problem(
     """The spatial discrete problem of ``rod`` in ``field`` on ``mesh`` (non-dimensional)."""
     from .spatial import SpatialRod
 
-    L = rod.length
-    mu = node_magnetization(rod.magnetization, mesh, L, dim=3) * (
-        rod.area * L**2 / rod.bending_stiffness
-    )
     return SpatialRod(
         mesh,
-        mu,
+        _node_moments(rod, mesh, dim=3),
         rod_stiffnesses(rod),
         field,
-        L,
+        rod.length,
         clamp_position,
         clamp_rotation,
         tol,
@@ -459,9 +462,10 @@ def _assemble_result(
         stable = np.array([p.stability > 0 for p in points], dtype=bool)
         fine = (problems[1], fine_states) if len(problems) == 2 else None
         mu = _eigenvalues_later(coarse, states, scales, fine)
-    in_plane = None
+    in_plane = mu_plane = None
     if getattr(coarse, "out_of_plane", None) is not None and opts.stability:
-        in_plane = _in_plane_later(coarse, states, scales, fine)
+        in_plane = _in_plane_later(coarse, states, scales)
+        mu_plane = _eigenvalues_later(coarse, states, scales, fine, in_plane=True)
         events = [_label_mode(e, coarse, states, scales) for e in events]
     points_xyz = fields.pop("points_xyz")
     return RodResult(
@@ -472,7 +476,8 @@ def _assemble_result(
         stable=stable,
         residual=residual,
         error=measured,
-        _in_plane=in_plane,
+        _stable_in_plane=in_plane,
+        _min_eigenvalue_in_plane=mu_plane,
         _min_eigenvalue=mu,
         iterations=iterations,
         segments=coarse.mesh.counts.sum(),
@@ -592,14 +597,13 @@ def _eigenvalues_later(problem, states, scales, fine=None, in_plane=False):
     return compute
 
 
-def _in_plane_later(problem, states, scales, fine):
-    """A callable giving (stable in the plane (k,), smallest in-plane eigenvalue (k,)) of
-    ``states``, for :attr:`RodResult.stable_in_plane` (computed on first access)."""
+def _in_plane_later(problem, states, scales):
+    """A callable giving the in-plane stability (k,) of ``states`` (the planar determinant's
+    sign), for :attr:`RodResult.stable_in_plane` (computed on first access)."""
 
     def compute():
-        lin = problem.linearize(states, scales)
-        signs = np.asarray(problem.stability_in_plane(lin), float)
-        return signs > 0, _eigenvalues_later(problem, states, scales, fine, in_plane=True)()
+        signs = problem.stability_in_plane(problem.linearize(states, scales))
+        return np.asarray(signs, float) > 0
 
     return compute
 

@@ -266,7 +266,11 @@ def _finish(problem, rod, pts_u, pts_c) -> RodPath:
         points = problem.points(problem.positions(thetas))
         tip_angle = thetas[:, -1].copy()
     mu = np.asarray(problem.stability(lin, precise=True), float)
-    mu_plane = np.asarray(problem.branch_stability(lin, precise=True), float)
+    mu_plane = (
+        np.asarray(problem.branch_stability(lin, precise=True), float)
+        if getattr(problem, "out_of_plane", None) is not None
+        else mu
+    )
     residuals = problem.residual_norm(lin)
     path = RodPath(
         scale=scale,
