@@ -90,8 +90,9 @@ class FEMProblem(PathProblem):
                 ev = asm.evaluate(z, float(scale), tangent=tangent)
         except ValueError as exc:  # the field refuses a point (a coil winding)
             self.last_failure = (
-                f"the field could not be evaluated on the deformed body ({exc}); the rod "
-                "enters a coil winding"
+                f"the field could not be evaluated on the deformed body ({exc}): the body "
+                "reaches a point where the field source refuses to answer (a coil winding, or "
+                "outside a gridded field's bounds)"
             )
             return Linearization(z, scale, np.full(self.size, np.nan), False)
         if not ev.ok:
