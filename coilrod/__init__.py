@@ -5,19 +5,57 @@ models) driven by ``path`` (the one path-following engine) -> results; ``design`
 (TOML scenes, planner, runner, figures, CLI) sit on top.
 """
 
-from . import _moved  # noqa: F401  (old 0.1 module paths stay importable)
-from .contact import Insertion, Vessel, VesselNetwork, Wall, insert
-from .control import ControlResult, solve_currents
-from .design.calibrate import Calibration, IdentifiabilityError, calibrate
-from .design.optimize import MagnetizationDesign, optimize_magnetization
-from .design.sensitivity import Sensitivities, SingularStateError, sensitivities
-from .design.sweep import SweepResult, sweep  # dask is imported only for a cluster
-from .design.workspace import Workspace, workspace
-from .errors import ConvergenceError, UnitsWarning
-from .fem import solve_fem  # scikit-fem itself is imported lazily, inside the call
-from .path.events import StabilityWarning
-from .robot import Circle, Magnetization, Rectangle, Rod, presets
-from .rod import RodPath, RodResult, elastica, solve_rod, trace_rod  # noqa: F401 (elastica: a module)
+from __future__ import annotations
+
+import importlib
+
+#: public name -> the submodule that defines it; each is imported on first use (PEP 562), so
+#: ``coilrod --help`` or ``import coilrod.robot`` loads neither scipy's optimisers nor numba.
+_LAZY = {
+    "Insertion": ".contact",
+    "Vessel": ".contact",
+    "VesselNetwork": ".contact",
+    "Wall": ".contact",
+    "insert": ".contact",
+    "ControlResult": ".control",
+    "solve_currents": ".control",
+    "Calibration": ".design.calibrate",
+    "IdentifiabilityError": ".design.calibrate",
+    "calibrate": ".design.calibrate",
+    "MagnetizationDesign": ".design.optimize",
+    "optimize_magnetization": ".design.optimize",
+    "Sensitivities": ".design.sensitivity",
+    "SingularStateError": ".design.sensitivity",
+    "sensitivities": ".design.sensitivity",
+    "SweepResult": ".design.sweep",
+    "sweep": ".design.sweep",
+    "Workspace": ".design.workspace",
+    "workspace": ".design.workspace",
+    "ConvergenceError": ".errors",
+    "UnitsWarning": ".errors",
+    "solve_fem": ".fem",
+    "StabilityWarning": ".path.events",
+    "Circle": ".robot",
+    "Magnetization": ".robot",
+    "Rectangle": ".robot",
+    "Rod": ".robot",
+    "presets": ".robot",
+    "RodPath": ".rod",
+    "RodResult": ".rod",
+    "elastica": ".rod",
+    "solve_rod": ".rod",
+    "trace_rod": ".rod",
+}
+
+
+def __getattr__(name: str):
+    """Import a public name's submodule on first use and cache the name in this module."""
+    if name not in _LAZY:
+        raise AttributeError(f"module 'coilrod' has no attribute {name!r}")
+    value = getattr(importlib.import_module(_LAZY[name], __name__), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = [
     "Rod",

@@ -223,46 +223,53 @@ def _source_digest() -> int:
 
 
 def _make_kernel(digest: int):
+    """The compiled pass ``coaxial_field``, its cache entry tied to ``digest``
+    (:func:`_source_digest`).
+
+    ``coaxial_field(pts, center, axis, fil, wind, beta, n0, params, flags, factor, Bout, Gout,
+    Hout, err)`` adds the field of one coaxial group at many points to the outputs.
+
+    Parameters
+    ----------
+    pts : ndarray, shape (n, 3)
+        Global points, m.
+    center, axis : ndarray, shape (3,)
+        Group centre (m) and unit axis.
+    fil : ndarray, shape (f, 5)
+        Per filament, in units of L: ``z_offset, radius, mu0 I radius^2, mu0 I / (2 pi),
+        1 / radius^2``.
+    wind : ndarray, shape (w, 4)
+        Winding cross-sections in units of L: ``z0, radius, width / 2, height / 2``.
+    beta : ndarray, shape (N,)
+        Normalised axial moments (T m^3, :func:`coils.multipole.group_moments`).
+    n0 : int
+        First non-zero moment.
+    params : ndarray, shape (8,)
+        ``1/L, 1/L (B scale), 1/L^2, 1/L^3, (SWITCH d)^2 [m^2], d [m], kappa,
+        ON_WIRE_TOL^2``.
+    flags : int
+        ``WANT_B | WANT_G | WANT_H`` bits.
+    factor : float
+        Multiplies the field (current scaling of a :class:`coils.field.ScaledField`).
+    Bout, Gout, Hout : ndarray, shapes (n, 3), (n, 9), (n, 27)
+        Outputs (T, T/m, T/m^2), added to; unused ones may have 0 rows.
+    err : ndarray of int64, shape (3 + w,)
+        Filled with the first offending point index (or -1): on a filament, non-finite
+        result, coordinate overflow, then one slot per winding cross-section.
+
+    Returns
+    -------
+    numba dispatcher
+        ``coaxial_field``; a call returns 0 if every point was evaluated, 1 if ``err`` names
+        an offending point (the pass stops at the first point on a filament).
+    """
+
     @njit(cache=True, error_model="numpy", fastmath={"contract"})
     def coaxial_field(
         pts, center, axis, fil, wind, beta, n0, params, flags, factor, Bout, Gout, Hout, err
     ):
-        """Add the field of one coaxial group at many points to the outputs.
-
-        Parameters
-        ----------
-        pts : ndarray, shape (n, 3)
-            Global points, m.
-        center, axis : ndarray, shape (3,)
-            Group centre (m) and unit axis.
-        fil : ndarray, shape (f, 5)
-            Per filament, in units of L: ``z_offset, radius, mu0 I radius^2, mu0 I / (2 pi),
-            1 / radius^2``.
-        wind : ndarray, shape (w, 4)
-            Winding cross-sections in units of L: ``z0, radius, width / 2, height / 2``.
-        beta : ndarray, shape (N,)
-            Normalised axial moments (T m^3, :func:`coils.multipole.group_moments`).
-        n0 : int
-            First non-zero moment.
-        params : ndarray, shape (8,)
-            ``1/L, 1/L (B scale), 1/L^2, 1/L^3, (SWITCH d)^2 [m^2], d [m], kappa,
-            ON_WIRE_TOL^2``.
-        flags : int
-            ``WANT_B | WANT_G | WANT_H`` bits.
-        factor : float
-            Multiplies the field (current scaling of a :class:`coils.field.ScaledField`).
-        Bout, Gout, Hout : ndarray, shapes (n, 3), (n, 9), (n, 27)
-            Outputs (T, T/m, T/m^2), added to; unused ones may have 0 rows.
-        err : ndarray of int64, shape (3 + w,)
-            Filled with the first offending point index (or -1): on a filament, non-finite
-            result, coordinate overflow, then one slot per winding cross-section.
-
-        Returns
-        -------
-        int
-            0 if every point was evaluated, 1 if ``err`` names an offending point (the pass
-            stops at the first point on a filament).
-        """
+        """Add the field of one coaxial group at many points to the outputs (see
+        :func:`_make_kernel`)."""
         want_B = (flags & WANT_B) != 0
         want_G = (flags & WANT_G) != 0
         want_H = (flags & WANT_H) != 0

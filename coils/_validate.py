@@ -28,7 +28,8 @@ arrays of reals        :func:`as_array` (any shape), :func:`as_vector` (shape (k
                        :func:`as_limits` (a scalar or one positive bound per entry, inf allowed)
 directions             :func:`as_axis` ("x", "-y", or a non-zero 3-vector, normalised)
 flags and options      :func:`as_bool`, :func:`as_choice`
-objects                :func:`as_field` (a :class:`coils.Field`)
+objects                :func:`coils.field.as_field` (a :class:`coils.Field`; it lives with
+                       the class, so that this module imports nothing of coils)
 =====================  ========================================================================
 """
 
@@ -55,7 +56,6 @@ __all__ = [
     "as_axis",
     "as_bool",
     "as_choice",
-    "as_field",
 ]
 
 _TEXT = (str, bytes, bytearray)
@@ -445,13 +445,3 @@ def as_choice(value, name: str, choices: Sequence[str]) -> str:
     else:
         alternatives = "one of " + ", ".join(quoted)
     raise ValueError(f"{name} must be {alternatives}; got {_show(value)}")
-
-
-def as_field(value, name: str = "field"):
-    """Return ``value`` if it is a :class:`coils.Field` ("field must be a coils Field; got
-    function")."""
-    from .field import Field  # here: coils.field itself validates with this module
-
-    if not isinstance(value, Field):
-        raise ValueError(f"{name} must be a coils Field; got {type(value).__name__}")
-    return value

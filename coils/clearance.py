@@ -46,9 +46,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validate import as_field, as_vector, nonnegative
+from ._validate import as_vector, nonnegative
 from .coaxial import ON_WIRE_TOL, coaxial_parts
-from .field import Field, FieldSum
+from .field import Field, FieldSum, as_field
 
 __all__ = [
     "Box",

@@ -25,7 +25,7 @@ from collections.abc import Iterable
 import numpy as np
 
 from ._immutable import Immutable
-from ._validate import as_field, as_points, finite_scalar
+from ._validate import as_points, finite_scalar
 
 __all__ = ["Field", "FieldSum", "ScaledField"]
 
@@ -196,6 +196,14 @@ class Field(Immutable, ABC):
             out[:, :, :, axis] = (gp - gm) / (2 * h)
         # symmetrise in the two derivative indices (exact for a smooth field)
         return 0.5 * (out + out.transpose(0, 1, 3, 2))
+
+
+def as_field(value, name: str = "field") -> Field:
+    """Return ``value`` if it is a :class:`Field` ("field must be a coils Field; got
+    function")."""
+    if not isinstance(value, Field):
+        raise ValueError(f"{name} must be a coils Field; got {type(value).__name__}")
+    return value
 
 
 class FieldSum(Field):

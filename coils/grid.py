@@ -35,14 +35,13 @@ from ._immutable import sealed
 from ._validate import (
     as_choice,
     as_count,
-    as_field,
     as_points,
     as_triple,
     as_vector,
     positive,
 )
 from .clearance import Box, check_clear
-from .field import Field
+from .field import Field, as_field
 
 __all__ = ["GriddedField"]
 

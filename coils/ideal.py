@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from ._immutable import sealed
-from ._validate import as_array, as_count, as_field, as_vector, finite_scalar, nonnegative
-from .field import Field
+from ._validate import as_array, as_count, as_vector, finite_scalar, nonnegative
+from .field import Field, as_field
 
 __all__ = ["UniformField", "LinearField", "maxwell_gradient", "linearize"]
 

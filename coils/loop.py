@@ -192,6 +192,25 @@ SERIES, SERIES_CENTRES, SERIES_LENGTHS = _series_tables()
 _INV_PI = 1.0 / math.pi
 
 
+@njit(cache=True, inline="always")
+def _series_table(w):
+    """Row ``idx`` of ``SERIES`` for ``0 <= w < W_SERIES`` and its term count ``n``: chosen by
+    the binary exponent E and the leading mantissa bits of w (w in [2^(E-1023), 2^(E-1022));
+    E = 0 for w = 0)."""
+    bits = _float_bits(w)
+    E = bits >> 52
+    if E == 1022:
+        idx = (bits >> 47) & 31
+        return idx, SERIES_LENGTHS[idx]
+    if E == 1021:
+        idx = 16 + ((bits >> 49) & 7)
+        return idx, SERIES_LENGTHS[idx]
+    if w >= W_TAYLOR:
+        idx = 24 + 4 * (1020 - E) + ((bits >> 50) & 3)
+        return idx, SERIES_LENGTHS[idx]
+    return 48, SERIES_TERMS[min(1022 - E, 64)]
+
+
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
 def loop_point(a, A, C2, u, rho, z, want_B, want_G, want_H):
     """Invariants of one filament at one point (scalar; compiled, no checks).
@@ -226,20 +245,7 @@ def loop_point(a, A, C2, u, rho, z, want_B, want_G, want_H):
     if w < W_SERIES:
         # F, F', F'', F''' from a table chosen by the binary exponent E and the leading
         # mantissa bits of w (w in [2^(E-1023), 2^(E-1022)); E = 0 for w = 0)
-        bits = _float_bits(w)
-        E = bits >> 52
-        if E == 1022:
-            idx = (bits >> 47) & 31
-            n = SERIES_LENGTHS[idx]
-        elif E == 1021:
-            idx = 16 + ((bits >> 49) & 7)
-            n = SERIES_LENGTHS[idx]
-        elif w >= W_TAYLOR:
-            idx = 24 + 4 * (1020 - E) + ((bits >> 50) & 3)
-            n = SERIES_LENGTHS[idx]
-        else:
-            idx = 48
-            n = SERIES_TERMS[min(1022 - E, 64)]
+        idx, n = _series_table(w)
         delta = w - SERIES_CENTRES[idx]
         F0 = 0.0
         F1 = 0.0

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._validate import as_bool, as_choice, as_count, as_field, as_vector, positive
+from ._validate import as_bool, as_choice, as_count, as_vector, positive
 from .coaxial import coaxial_parts, winding_mask
-from .field import Field
+from .field import Field, as_field
 from .region import deviation
 
 __all__ = ["plot_field_map", "plane_grid"]

@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import brentq
 
-from ._validate import as_axis, as_choice, as_count, as_field, as_points, as_vector, positive
+from ._validate import as_axis, as_choice, as_count, as_points, as_vector, positive
 from .coaxial import coaxial_parts
-from .field import Field
+from .field import Field, as_field
 from .ideal import LinearField, linearize
 
 __all__ = ["deviation", "uniformity", "UniformityReport"]

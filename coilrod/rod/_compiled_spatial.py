@@ -19,7 +19,7 @@ import numpy as np
 from .so3 import _C_SERIES, _C_SMALL, _SMALL  # the same series and switch angles
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _hat(v, out):
     out[0, 0] = 0.0
     out[0, 1] = -v[2]
@@ -32,7 +32,7 @@ def _hat(v, out):
     out[2, 2] = 0.0
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _cross(a, b, out):
     out[0] = a[1] * b[2] - a[2] * b[1]
     out[1] = a[2] * b[0] - a[0] * b[2]

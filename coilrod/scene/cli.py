@@ -160,16 +160,8 @@ def _run(scene, out: Path | None, quiet: bool, no_cache: bool, progress: bool | 
     return 0 if result.ok else 1
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``coilrod`` console script."""
-    parser = argparse.ArgumentParser(
-        prog="coilrod",
-        description=DESCRIPTION,
-        epilog=EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-
+def _add_run_commands(sub) -> None:
+    """The ``demo``, ``run`` and ``check`` subcommands."""
     p_demo = sub.add_parser(
         "demo",
         help="the seed's robot in a real Helmholtz pair vs ideal",
@@ -215,6 +207,9 @@ def main(argv: list[str] | None = None) -> int:
         help="also check that results could be written to this folder (nothing is created)",
     )
 
+
+def _add_sweep_command(sub) -> None:
+    """The ``sweep`` subcommand."""
     p_sweep = sub.add_parser(
         "sweep",
         help="run a scene over a grid of parameter values",
@@ -259,6 +254,9 @@ def main(argv: list[str] | None = None) -> int:
     p_sweep.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     p_sweep.add_argument("--quiet", action="store_true", help="print only the summary")
 
+
+def _add_scenes_command(sub) -> None:
+    """The ``scenes`` subcommand."""
     p_list = sub.add_parser(
         "scenes",
         help="list the shipped scenes",
@@ -266,6 +264,26 @@ def main(argv: list[str] | None = None) -> int:
     )
     p_list.add_argument("--show", metavar="NAME", help="print the scene file NAME")
 
+
+def _parser() -> argparse.ArgumentParser:
+    """The ``coilrod`` argument parser."""
+    parser = argparse.ArgumentParser(
+        prog="coilrod",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    _add_run_commands(sub)
+    _add_sweep_command(sub)
+    _add_scenes_command(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``coilrod`` console script."""
+    parser = _parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # argparse exits 2 on usage errors, 0 on --help
