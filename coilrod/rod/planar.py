@@ -133,6 +133,11 @@ class RodTangent:
             self._per_member = True
         return lu, ipiv
 
+    def take(self, rows) -> RodTangent:
+        """Members ``rows`` of this stacked tangent (factors sliced: the blocks are
+        independent)."""
+        return _take_tangent(self, rows)
+
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Solve with every member's Jacobian: rhs (k, size) -> (k, size) (NaN rows for
         singular members)."""
