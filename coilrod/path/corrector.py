@@ -166,9 +166,10 @@ def take(problem: PathProblem, lin: Linearization, rows: np.ndarray) -> Lineariz
 
 
 def _errors(problem, lin, du) -> np.ndarray:
+    """The model's error of each member, inf where inadmissible (called inside
+    :func:`newton`'s ``np.errstate(all="ignore")``)."""
     ok = np.asarray(lin.ok, bool)
-    with np.errstate(all="ignore"):
-        err = np.asarray(problem.error(lin, du), float)
+    err = np.asarray(problem.error(lin, du), float)
     return np.where(ok & np.isfinite(err), err, np.inf)
 
 

@@ -82,9 +82,7 @@ class DiscreteRod(PathProblem):
             u=lin.u[rows], scale=lin.scale[rows], residual=lin.residual[rows], ok=lin.ok[rows]
         )
         out.load_rate = lin.load_rate[rows]
-        from .planar import _take_tangent  # (planar imports this module)
-
-        out.tangent = None if lin.tangent is None else _take_tangent(lin.tangent, rows)
+        out.tangent = None if lin.tangent is None else lin.tangent.take(rows)
         return out
 
     def residual(self, u: np.ndarray, scale) -> np.ndarray:

@@ -133,6 +133,11 @@ class RodTangent:
             self._per_member = True
         return lu, ipiv
 
+    def take(self, rows) -> RodTangent:
+        """Members ``rows`` of this stacked tangent (factors sliced: the blocks are
+        independent)."""
+        return _take_tangent(self, rows)
+
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Solve with every member's Jacobian: rhs (k, size) -> (k, size) (NaN rows for
         singular members)."""
@@ -498,13 +503,17 @@ class PlanarRod(DiscreteRod):
 
     def step_limit(self, u, du):
         """No node angle turns by more than :attr:`max_rotation` in one Newton step."""
-        rot = np.max(np.abs(self.theta(np.atleast_2d(du))), axis=1)
+        du = np.asarray(du)
+        du = du if du.ndim == 2 else du[None]
+        rot = np.abs(self.theta(du)).max(axis=1)
         with np.errstate(divide="ignore"):
             return np.where(rot > 0, np.minimum(1.0, self.max_rotation / rot), 1.0)
 
     def distance(self, du):
         """Largest change of a node angle, rad, shape (k,)."""
-        return np.max(np.abs(self.theta(np.atleast_2d(du))), axis=1)
+        du = np.asarray(du)
+        du = du if du.ndim == 2 else du[None]
+        return np.abs(self.theta(du)).max(axis=1)
 
     def arclength_weights(self) -> np.ndarray:
         w = np.zeros(self.size)
