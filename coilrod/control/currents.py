@@ -258,7 +258,7 @@ class _Problem:
     rod: Rod
     system: object
     model: str
-    target: np.ndarray  # (2,) tip x, y, m
+    target: np.ndarray  # (2,) tip x, y in the bending plane, or (3,) x, y, z, m
     angle: float | None  # target tip angle, rad
     limits: np.ndarray  # (m,) current limits, A
     resistance: np.ndarray  # (m,) weights of the power sum R I^2 (ones without resistances)
@@ -285,6 +285,11 @@ class _Problem:
         return 3 if self.with_z else 2
 
     @property
+    def spatial(self) -> bool:
+        """A 3D target (x, y, z)."""
+        return self.target.size == 3
+
+    @property
     def planar_goal(self) -> np.ndarray:
         """(x, y) or (x, y, angle): the uniform-field start's target."""
         return np.r_[self.target, self.angle] if self.with_angle else self.target
@@ -292,7 +297,7 @@ class _Problem:
     @property
     def goal(self) -> np.ndarray:
         """Targets of the controlled outputs."""
-        z = [self.opts["clamp_position"][2]] if self.with_z else []
+        z = [self.opts["clamp_position"][2]] if self.with_z and not self.spatial else []
         return np.r_[self.target, z, [self.angle] if self.with_angle else []]
 
     @property
@@ -513,8 +518,19 @@ def _problem(
         )
     if model not in ("real", "ideal"):
         raise ValueError(f"model must be 'real' or 'ideal'; got {model!r}")
-    goal = as_array(target, "target", (2,))
+    goal = as_array(target, "target")
+    if goal.shape not in ((2,), (3,)):
+        raise ValueError(
+            "target must have shape (2,) (x, y in the bending plane) or (3,) (x, y, z); got "
+            f"{goal.shape}"
+        )
+    spatial = goal.size == 3
     angle = None if angle is None else finite_scalar(angle, "angle")
+    if spatial and angle is not None:
+        raise ValueError(
+            "angle: a target tip angle is only for a target (x, y) in the bending plane; got a "
+            "3D target"
+        )
     m = system.currents.size
     if max_current is None:
         limits = np.asarray(system.max_current, float)
@@ -529,14 +545,21 @@ def _problem(
         clamp_position=clamp, clamp_angle=finite_scalar(clamp_angle, "clamp_angle"), nodes=nodes
     )
     Bu, Gu = _channels_at_center(system)
-    if np.linalg.matrix_rank(Bu[:2], tol=1e-12 * max(np.abs(Bu).max(), 1e-300)) < 2:
+    rank_tol = 1e-12 * max(np.abs(Bu).max(), 1e-300)
+    if np.linalg.matrix_rank(Bu[:2], tol=rank_tol) < 2:
         raise ValueError(
             "the system's channels cannot make every in-plane field (B_x, B_y) at its centre: "
             f"the centre field per ampere has rank {np.linalg.matrix_rank(Bu[:2])} in the plane"
         )
-    if np.linalg.norm(goal - clamp[:2]) > L * (1 + 1e-12):
+    if spatial and np.linalg.matrix_rank(Bu, tol=rank_tol) < 3:
+        raise ValueError(
+            "target: a 3D target needs a system whose channels make every field (B_x, B_y, "
+            f"B_z) at its centre; its centre field per ampere has rank "
+            f"{np.linalg.matrix_rank(Bu, tol=rank_tol)}"
+        )
+    if np.linalg.norm(goal - clamp[: goal.size]) > L * (1 + 1e-12):
         raise ConvergenceError(
-            f"the target {goal.tolist()} m is {np.linalg.norm(goal - clamp[:2]):.4g} m "
+            f"the target {goal.tolist()} m is {np.linalg.norm(goal - clamp[: goal.size]):.4g} m "
             f"from the clamp, beyond the rod's length {L:g} m: unreachable",
             reached=0.0,
             target=1.0,
@@ -558,7 +581,7 @@ def _problem(
         opts=opts,
         tol=tol,
         # a system that can push the rod out of its plane: the tip is held on the plane too
-        with_z=_leaves_plane(system, clamp, L),
+        with_z=spatial or _leaves_plane(system, clamp, L),
         Bu=Bu,
         Gu=Gu,
         B_fixed=B_fixed,
@@ -693,6 +716,8 @@ def solve_currents(
     for start in starts:
         if start == "warm":
             I, start_solves = warm, 0
+        elif p.spatial:
+            I, start_solves = _start_3d(p)
         else:
             I, start_solves = _start(
                 p.rod, p.planar_goal, p.with_angle, p.steps, p.opts, p.Bu, p.resistance, p.limits
@@ -788,6 +813,38 @@ def _damped(I, res, r, jacobian, evaluate, met, bounds):
     return lo, hi
 
 
+def _start_3d(p: _Problem):
+    """Start currents for a 3D target: the bending plane turned about the clamp tangent t by
+    the angle phi that brings it through the target, the in-plane uniform-field answer
+    (:func:`_uniform_start`) for the target turned into the plane, and that field turned back
+    (exact for a rod symmetric about its axis, e.g. an axial magnetization on a round section;
+    a start otherwise), made at the centre with minimum power.  Returns (currents, solves)."""
+    from coils.currents import largest_fraction
+
+    clamp, a = p.opts["clamp_position"], p.opts["clamp_angle"]
+    t = np.array([math.cos(a), math.sin(a), 0.0])
+    n = np.array([-math.sin(a), math.cos(a), 0.0])
+    v = p.target - clamp
+    phi = math.atan2(v[2], v @ n)
+    n_phi = math.cos(phi) * n + math.sin(phi) * np.array([0.0, 0.0, 1.0])
+    planar = clamp[:2] + (v @ t) * t[:2] + math.hypot(v @ n, v[2]) * n[:2]
+    b_big = p.rod.field_for_lambda(30.0)  # beyond any useful field: lambda = 30
+    caps = [
+        largest_fraction(p.Bu, b_big * (math.cos(al) * t + math.sin(al) * n_phi), p.limits)[0]
+        for al in np.linspace(0.0, 2 * np.pi, 36, endpoint=False)
+    ]
+    b_cap = b_big * float(min(caps))  # the largest centre field (T) in every direction of it
+    b, solves = _uniform_start(p.rod, planar, False, p.steps, p.opts, b_cap)
+    B = (b @ t[:2]) * t + (b @ n[:2]) * n_phi
+    start = minimum_power(p.Bu, B, p.resistance, p.limits)
+    I = (
+        start.currents
+        if start.currents is not None
+        else np.clip(start.unlimited, -p.limits, p.limits)
+    )
+    return I, solves
+
+
 def _room(I, step, limits) -> float:
     """Largest t <= 1 with |I + t step| <= limits."""
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -865,7 +922,7 @@ def _report(p: _Problem, out: ControlResult, history) -> None:
         )
         err = ConvergenceError(
             f"solve_currents: the target {p.target.tolist()} m is {why}; {closest} is "
-            f"{tip[:2].tolist()} m, {miss:.4g} m ({miss / p.length:.3g} L) away, with "
+            f"{tip[: p.target.size].tolist()} m, {miss:.4g} m ({miss / p.length:.3g} L) away, with "
             f"currents {np.round(I, 4).tolist()} A",
             reached=0.0,
             target=1.0,
