@@ -18,6 +18,9 @@ replaced by the system's field and gradient at its centre (``system.with_current
 for every current vector, exact in the currents); the currents are then applied to the real
 field and ``miss`` says how far the tip really lands from the target.
 
+A 3D target (x, y, z) is the same iteration with the tip's z among the controlled outputs
+(the forward solves then run on the spatial rod).
+
 The search, one function per stage: :func:`_problem` validates the input and sets up the
 problem (:class:`_Problem`: the weighted misses r(I) of the controlled outputs and their exact
 Jacobian); :func:`_start` gives the start currents; :func:`_approach` takes the Gauss-Newton /
@@ -74,8 +77,8 @@ class ControlResult:
         The forward solve in the real field (load path from the straight rod to the currents).
     model : str
         "real" or "ideal".
-    target : ndarray, shape (2,)
-        Target (x, y), m.
+    target : ndarray, shape (2,) or (3,)
+        Target (x, y) in the bending plane, or (x, y, z), m.
     solves : int
         Forward solves used (real or ideal field; the start's uniform-field solves counted
         separately in ``start_solves``).
@@ -614,19 +617,23 @@ def solve_currents(
     system : coils.CoilSystem
         A coil system under current control (``unit_fields``, ``with_currents``,
         ``currents_for``), e.g. ``coils.presets.three_axis_helmholtz()``.
-    target : array-like, shape (2,)
-        Tip position (x, y) in the bending plane, m.
+    target : array-like, shape (2,) or (3,)
+        Tip position, m: (x, y) in the bending plane, or (x, y, z) for the spatial rod (the
+        system's channels must make every field direction at its centre; the start is the
+        planar answer turned about the clamp tangent into the target's plane, see
+        :func:`_start_3d`).
     max_current : float or array-like, shape (m,), optional
         Current limits, A (> 0); default the system's own (``system.max_current``).
     model : {"real", "ideal"}
         "real": the currents are found in the real field; "ideal": as the usual controller
         does, from the system's field and gradient at its centre (see the module docstring).
     angle : float, optional
-        Target tip angle, rad (then three conditions; with fewer independent channels the
-        result is the least-squares compromise of the misses -- positions in L, the angle in
-        rad -- within the current limits, and the misses say so).  When the first steps
-        stop improving, the search goes on by Levenberg-Marquardt steps within the limits
-        until a local optimum; ``ControlResult.status`` says whether one was reached.
+        Target tip angle, rad, for a target (x, y) only (then three conditions; with fewer
+        independent channels the result is the least-squares compromise of the misses --
+        positions in L, the angle in rad -- within the current limits, and the misses say
+        so).  When the first steps stop improving, the search goes on by Levenberg-Marquardt
+        steps within the limits until a local optimum; ``ControlResult.status`` says whether
+        one was reached.
     steps : int
         Load steps of each forward solve (the currents ramped from zero: the path matters at
         snap-throughs).
@@ -650,8 +657,9 @@ def solve_currents(
     Raises
     ------
     ValueError
-        Bad input (naming the argument), a system that cannot make an in-plane field, or a
-        magnetization with an out-of-plane elevation (the planar rod is steered).
+        Bad input (naming the argument), a system that cannot make an in-plane field (or,
+        for a 3D target, every field direction), or a magnetization with an out-of-plane
+        elevation (the start is found on the planar rod).
     coilrod.ConvergenceError
         The target position is not reachable: the message gives the closest stable tip found
         and its distance, and why: the current limits (naming the channels at their limit),
@@ -669,7 +677,8 @@ def solve_currents(
     The search, for the model's field (see the module docstring):
 
     1. start: ``initial``, or the in-plane uniform field that puts the tip on the target
-       made at the centre with minimum power (:func:`_start`);
+       made at the centre with minimum power (:func:`_start`; for a 3D target turned about
+       the clamp tangent, :func:`_start_3d`);
     2. Gauss-Newton steps on the weighted misses r(I) with the exact Jacobian, minimum-power
        steps near the target (:func:`_approach`);
     3. off the target: Levenberg-Marquardt within the limits to a local least-squares
