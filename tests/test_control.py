@@ -140,6 +140,24 @@ class TestUnreachable:
         assert f"channels {', '.join(map(str, at_limit))} at their limit" in message
         assert "outside the robot's reachable set" not in message
 
+    def test_a_restarted_search_counts_both_searches(self, monkeypatch):
+        """A warm start that cannot reach the target is followed by a fresh one: the error's
+        result counts the forward solves of both (the old code reported the second's only).
+        Reference: the forward solves counted where they are made (the start's uniform-field
+        solves are start_solves - 1: its workspace grid counts one)."""
+        import coilrod.control.currents as currents
+
+        calls = []
+        forward = currents._forward
+        monkeypatch.setattr(currents, "_forward", lambda *a: calls.append(1) or forward(*a))
+        target, _ = _target(COMPACT, (0.004, 0.012, 0.0))
+        with pytest.raises(ConvergenceError, match="current limits") as info:
+            solve_currents(ROD, COMPACT, target, max_current=0.5, initial=(0.5, 0.0, 0.0), nodes=16)
+        out = info.value.result
+        assert out.start_solves > 0  # the fresh start was taken
+        assert out.solves + out.start_solves - 1 == len(calls)
+        assert len(out.history) == out.solves
+
     def test_outside_the_reachable_set_without_a_limit_active(self):
         """(20, 0) mm: no stable tip of the M(1) rod comes closer than the straight rod's
         (checked on an independent workspace grid of uniform fields up to 50 mT, every
