@@ -259,6 +259,22 @@ class TestSpatialTarget:
         assert out.solves + out.start_solves <= 15
         assert out.target.shape == (3,)
 
+    def test_ideal_controller_in_3d(self):
+        """The ideal controller's currents make, at the centre, the uniform field that puts the
+        tip on the 3D target (an independent solve in that uniform field), and its reported miss
+        is the real-field tip's distance (independent solve)."""
+        target = _tip_3d(COMPACT, COMPACT.currents_for(B=(0.003, 0.005, -0.004)), nodes=16)
+        ideal = solve_currents(ROD, COMPACT, target, model="ideal", nodes=16)
+        Bc = COMPACT.with_currents(ideal.currents).B(np.zeros((1, 3)))[0]
+        assert abs(Bc[2]) > 0.3 * np.linalg.norm(Bc)  # a field well out of the plane
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = solve_rod(ROD, coils.UniformField(B=Bc), SCALES, tol=1e-11, nodes=16)
+        assert np.linalg.norm(res.tip[-1] - target) <= 1e-5 * L
+        real_tip = _tip_3d(COMPACT, ideal.currents, nodes=16)
+        assert ideal.miss == pytest.approx(np.linalg.norm(real_tip - target), rel=1e-6)
+        assert ideal.miss > 0.01 * L  # compact coils: the ideal controller is off
+
     def test_minimum_power_with_eight_coils(self):
         """Eight channels, three conditions: first-order optimality of min sum R I^2 on
         tip(I) = target -- R I orthogonal to the null space of the tip's Jacobian, by central
