@@ -140,6 +140,24 @@ class TestUnreachable:
         assert f"channels {', '.join(map(str, at_limit))} at their limit" in message
         assert "outside the robot's reachable set" not in message
 
+    def test_a_restarted_search_counts_both_searches(self, monkeypatch):
+        """A warm start that cannot reach the target is followed by a fresh one: the error's
+        result counts the forward solves of both (the old code reported the second's only).
+        Reference: the forward solves counted where they are made (the start's uniform-field
+        solves are start_solves - 1: its workspace grid counts one)."""
+        import coilrod.control.currents as currents
+
+        calls = []
+        forward = currents._forward
+        monkeypatch.setattr(currents, "_forward", lambda *a: calls.append(1) or forward(*a))
+        target, _ = _target(COMPACT, (0.004, 0.012, 0.0))
+        with pytest.raises(ConvergenceError, match="current limits") as info:
+            solve_currents(ROD, COMPACT, target, max_current=0.5, initial=(0.5, 0.0, 0.0), nodes=16)
+        out = info.value.result
+        assert out.start_solves > 0  # the fresh start was taken
+        assert out.solves + out.start_solves - 1 == len(calls)
+        assert len(out.history) == out.solves
+
     def test_outside_the_reachable_set_without_a_limit_active(self):
         """(20, 0) mm: no stable tip of the M(1) rod comes closer than the straight rod's
         (checked on an independent workspace grid of uniform fields up to 50 mT, every
@@ -211,12 +229,107 @@ class TestLeastSquaresCompromise:
         assert (out.status, out.optimal) == ("max_solves", False)
 
 
+def _tip_3d(system, currents, nodes=None):
+    """Tip (x, y, z) of an independent forward solve (tolerance 1e-11; the spatial rod)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = solve_rod(ROD, system.with_currents(currents), SCALES, tol=1e-11, nodes=nodes)
+    assert res.model == "spatial"
+    return res.tip[-1]
+
+
+EIGHT = coils.presets.eight_coil_hemisphere()
+
+
+class TestSpatialTarget:
+    """3D targets (x, y, z) on the spatial rod, made reachable by construction: the tip of an
+    independent forward solve with currents that make a field with a B_z component."""
+
+    @pytest.mark.parametrize("B", [(0.003, 0.005, -0.004), (-0.002, -0.006, 0.004)])
+    def test_lands_on_reachable_3d_targets(self, B):
+        made = LARGE.currents_for(B=B)
+        target = _tip_3d(LARGE, made)
+        assert abs(target[2]) > 0.2 * L  # well out of the plane
+        out = solve_currents(ROD, LARGE, target)
+        assert np.linalg.norm(_tip_3d(LARGE, out.currents) - target) <= 1e-6 * L
+        assert out.miss <= 1e-6 * L
+        assert out.result.model == "spatial"
+        # three channels, three conditions: the currents that made the target, found again
+        np.testing.assert_allclose(out.currents, made, atol=1e-6 * np.abs(made).max())
+        assert out.solves + out.start_solves <= 15
+        assert out.target.shape == (3,)
+
+    def test_ideal_controller_in_3d(self):
+        """The ideal controller's currents make, at the centre, the uniform field that puts the
+        tip on the 3D target (an independent solve in that uniform field), and its reported miss
+        is the real-field tip's distance (independent solve)."""
+        target = _tip_3d(COMPACT, COMPACT.currents_for(B=(0.003, 0.005, -0.004)), nodes=16)
+        ideal = solve_currents(ROD, COMPACT, target, model="ideal", nodes=16)
+        Bc = COMPACT.with_currents(ideal.currents).B(np.zeros((1, 3)))[0]
+        assert abs(Bc[2]) > 0.3 * np.linalg.norm(Bc)  # a field well out of the plane
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = solve_rod(ROD, coils.UniformField(B=Bc), SCALES, tol=1e-11, nodes=16)
+        assert np.linalg.norm(res.tip[-1] - target) <= 1e-5 * L
+        real_tip = _tip_3d(COMPACT, ideal.currents, nodes=16)
+        assert ideal.miss == pytest.approx(np.linalg.norm(real_tip - target), rel=1e-6)
+        assert ideal.miss > 0.01 * L  # compact coils: the ideal controller is off
+
+    def test_minimum_power_with_eight_coils(self):
+        """Eight channels, three conditions: first-order optimality of min sum R I^2 on
+        tip(I) = target -- R I orthogonal to the null space of the tip's Jacobian, by central
+        differences of forward solves (independent of the adjoint) -- and no more power than
+        the currents that made the target."""
+        made = EIGHT.currents_for(B=(0.002, 0.004, 0.003))
+        target = _tip_3d(EIGHT, made, nodes=16)
+        out = solve_currents(ROD, EIGHT, target, nodes=16)
+        assert np.linalg.norm(_tip_3d(EIGHT, out.currents, nodes=16) - target) <= 1e-6 * L
+        h = 1e-3
+        J = np.column_stack(
+            [
+                _tip_3d(EIGHT, out.currents + h * e, 16) - _tip_3d(EIGHT, out.currents - h * e, 16)
+                for e in np.eye(8)
+            ]
+        ) / (2 * h)
+        null = np.linalg.svd(J)[2][3:]
+        RI = EIGHT.resistance * out.currents
+        assert np.linalg.norm(null @ RI) <= 1e-4 * np.linalg.norm(RI)
+        assert out.power < EIGHT.power(made)
+
+    def test_beyond_the_current_limits_in_3d(self):
+        target = _tip_3d(LARGE, LARGE.currents_for(B=(0.003, 0.005, -0.004)), nodes=16)
+        with pytest.raises(
+            ConvergenceError, match="not reachable within the current limits"
+        ) as info:
+            solve_currents(ROD, LARGE, target, max_current=1.0, nodes=16)
+        out = info.value.result
+        assert out.active
+        assert np.all(np.abs(out.currents) <= 1.0 + 1e-9)
+        assert "outside the robot's reachable set" not in str(info.value)
+        np.testing.assert_allclose(out.tip, _tip_3d(LARGE, out.currents, 16), atol=1e-8 * L)
+
+    def test_a_3d_target_needs_three_field_directions(self):
+        planar = coils.CoilSystem(
+            [
+                coils.HelmholtzPair(0.1, 200, 0.0, axis="x"),
+                coils.HelmholtzPair(0.1, 200, 0.0, axis="y"),
+            ]
+        )
+        with pytest.raises(ValueError, match="3D target needs"):
+            solve_currents(ROD, planar, (0.03, 0.02, 0.01))
+
+    def test_beyond_the_rod_length_in_3d(self):
+        with pytest.raises(ConvergenceError, match="beyond the rod's length"):
+            solve_currents(ROD, LARGE, (0.03, 0.02, 0.02))
+
+
 class TestBadInput:
     @pytest.mark.parametrize(
         ("kwargs", "match"),
         [
             ({"target": (0.03, np.nan)}, "target"),
-            ({"target": (0.03, 0.02, 0.0)}, "target"),
+            ({"target": (0.03, 0.02, 0.0, 0.0)}, "target"),
+            ({"target": (0.03, 0.02, 0.01), "angle": 0.5}, "angle"),
             ({"max_current": 0.0}, "max_current"),
             ({"max_current": -1.0}, "max_current"),
             ({"max_current": np.nan}, "max_current"),

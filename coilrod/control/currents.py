@@ -17,6 +17,18 @@ centre.
 replaced by the system's field and gradient at its centre (``system.with_currents(I).ideal()``
 for every current vector, exact in the currents); the currents are then applied to the real
 field and ``miss`` says how far the tip really lands from the target.
+
+A 3D target (x, y, z) is the same iteration with the tip's z among the controlled outputs
+(the forward solves then run on the spatial rod).
+
+The search, one function per stage: :func:`_problem` validates the input and sets up the
+problem (:class:`_Problem`: the weighted misses r(I) of the controlled outputs and their exact
+Jacobian); :func:`_start` gives the start currents; :func:`_approach` takes the Gauss-Newton /
+minimum-power steps with their step control; :func:`_damped` goes on, off the target, by
+Levenberg-Marquardt within the limits to a local least-squares optimum; :func:`_search` runs
+the two and says how the search ended; :func:`solve_currents` restarts a warm start that led
+astray (a plain loop over the starts); :func:`_finish` and :func:`_report` make the result and
+tell an unreachable target's reason (the limits, or the robot's reachable set).
 """
 
 from __future__ import annotations
@@ -65,8 +77,8 @@ class ControlResult:
         The forward solve in the real field (load path from the straight rod to the currents).
     model : str
         "real" or "ideal".
-    target : ndarray, shape (2,)
-        Target (x, y), m.
+    target : ndarray, shape (2,) or (3,)
+        Target (x, y) in the bending plane, or (x, y, z), m.
     solves : int
         Forward solves used (real or ideal field; the start's uniform-field solves counted
         separately in ``start_solves``).
@@ -234,6 +246,352 @@ def _start(rod, goal, with_angle, steps, opts, Bu, weights, limits):
     return I, solves
 
 
+@dataclass
+class _Problem:
+    """One control problem, validated: the rod, the channels and their limits, the target and
+    how its misses are weighed.
+
+    The controlled outputs of a state are the tip x, y (and z, held on the rod's plane when a
+    channel can push the rod out of it), and the tip angle with a target angle; ``goal`` holds
+    their targets and ``scales`` their weights in the least-squares sense (positions in L, the
+    angle in rad).  ``residual`` is the weighted miss vector r of a forward solve, ``jacobian``
+    its exact derivative dr/dI (adjoint, :func:`coilrod.design.sensitivity.tip_derivatives`).
+    """
+
+    rod: Rod
+    system: object
+    model: str
+    target: np.ndarray  # (2,) tip x, y in the bending plane, or (3,) x, y, z, m
+    angle: float | None  # target tip angle, rad
+    limits: np.ndarray  # (m,) current limits, A
+    resistance: np.ndarray  # (m,) weights of the power sum R I^2 (ones without resistances)
+    steps: int  # load steps of a forward solve
+    opts: dict  # clamp_position, clamp_angle, nodes of solve_rod
+    tol: float  # position tolerance, m
+    with_z: bool  # z held on the plane too
+    Bu: np.ndarray  # (3, m) centre field per ampere, T/A
+    Gu: np.ndarray  # (3, 3, m) centre gradient per ampere, T/(A m)
+    B_fixed: np.ndarray  # (3,) current-free centre field, T
+    G_fixed: np.ndarray  # (3, 3) current-free centre gradient, T/m
+
+    @property
+    def with_angle(self) -> bool:
+        return self.angle is not None
+
+    @property
+    def length(self) -> float:
+        return self.rod.length
+
+    @property
+    def npos(self) -> int:
+        """Number of position outputs (2 or 3)."""
+        return 3 if self.with_z else 2
+
+    @property
+    def spatial(self) -> bool:
+        """A 3D target (x, y, z)."""
+        return self.target.size == 3
+
+    @property
+    def planar_goal(self) -> np.ndarray:
+        """(x, y) or (x, y, angle): the uniform-field start's target."""
+        return np.r_[self.target, self.angle] if self.with_angle else self.target
+
+    @property
+    def goal(self) -> np.ndarray:
+        """Targets of the controlled outputs."""
+        z = [self.opts["clamp_position"][2]] if self.with_z and not self.spatial else []
+        return np.r_[self.target, z, [self.angle] if self.with_angle else []]
+
+    @property
+    def scales(self) -> np.ndarray:
+        return _weights_for(self.with_angle, self.length, self.with_z)
+
+    def field_of(self, I):
+        """The field the model steers with at currents ``I`` (A): the real one, or the linear
+        field of the centre field and gradient (the limits checked as for the real field)."""
+        real = self.system.with_currents(I)
+        if self.model == "real":
+            return real
+        return coils.LinearField(
+            self.Bu @ I + self.B_fixed, self.Gu @ I + self.G_fixed, self.system.center
+        )
+
+    def residual(self, res: RodResult) -> np.ndarray:
+        """Weighted misses r of the last state of ``res``."""
+        return (_outputs(res, self.with_angle, self.with_z) - self.goal) * self.scales
+
+    def jacobian(self, res: RodResult) -> np.ndarray:
+        """dr/dI of the last state of ``res``, shape (outputs, m)."""
+        k = len(res) - 1
+        if self.model == "real":
+            _, _, _, D = tip_derivatives(res, [k], ["currents"], check=False)
+            J = D[0]
+        else:  # chain rule through the centre field and gradient, linear in I
+            _, _, _, D = tip_derivatives(res, [k], ["B0", "gradient"], check=False)
+            J = D[0, :, :3] @ self.Bu + D[0, :, 3:] @ self.Gu.reshape(9, -1)
+        rows = ([0, 1, 2] if self.with_z else [0, 1]) + ([3] if self.with_angle else [])
+        return J[rows] * self.scales[:, None]
+
+    def position_miss(self, r) -> float:
+        """Distance of the tip from the target position, m, from the weighted misses."""
+        return float(np.linalg.norm(r[: self.npos])) * self.length
+
+    def met(self, r) -> bool:
+        """The target met: position (and angle) within the tolerance."""
+        on_angle = not self.with_angle or abs(r[-1]) <= self.tol / self.length
+        return self.position_miss(r) <= self.tol and on_angle
+
+
+class _BudgetSpent(Exception):
+    """The search has spent its forward solves (``max_solves``)."""
+
+
+@dataclass
+class _Search:
+    """The forward solves of one search: the budget, the misses met and the closest state.
+
+    ``best`` is (key, currents, result, r) of the closest state found, stable states first (an
+    unstable state is not where the tip stays), then by |r|."""
+
+    problem: _Problem
+    max_solves: int
+    solves: int = 0
+    history: list = field(default_factory=list)
+    best: tuple | None = None
+
+    def evaluate(self, I):
+        """Forward solve at currents ``I``: (result, weighted misses r, position miss m).
+
+        Raises _BudgetSpent once ``max_solves`` solves are spent, and ConvergenceError (naming
+        the currents) if the forward solve fails."""
+        p = self.problem
+        if self.solves >= self.max_solves:
+            raise _BudgetSpent
+        try:
+            res = _forward(p.rod, p.field_of(I), p.steps, p.opts)
+        except ConvergenceError as err:
+            raise ConvergenceError(
+                f"solve_currents: the forward solve failed at currents {np.round(I, 6).tolist()} A"
+                f" ({err})",
+                reached=err.reached,
+                target=err.target,
+            ) from err
+        self.solves += 1
+        r = p.residual(res)
+        miss = p.position_miss(r)
+        self.history.append(miss)
+        key = (not bool(res.stable[-1]), float(np.linalg.norm(r)))
+        if self.best is None or key < self.best[0]:
+            self.best = (key, I.copy(), res, r)
+        return res, r, miss
+
+
+#: Beyond this miss (in L) the iteration takes restoring steps, towards the target first.
+FAR = 1e-3
+
+
+def _restoring_step(J, r, I, p: _Problem):
+    """The least correction towards the linearised target, in the power metric:
+    ``argmin sum R s^2`` over the least-squares solutions of ``J s = -r``."""
+    root = np.sqrt(p.resistance)
+    return (np.linalg.pinv(J / root) @ -r) / root
+
+
+def _least_power_step(J, r, I, p: _Problem):
+    """The step to the minimum-power currents of the linearised target:
+    ``argmin sum R I_new^2`` subject to ``J (I_new - I) = -r`` and the limits (or, out of
+    reach within the limits, the least-squares currents within them)."""
+    sol = minimum_power(J, J @ I - r, p.resistance, p.limits)
+    if sol.currents is not None:
+        return sol.currents - I
+    from scipy.optimize import lsq_linear
+
+    return lsq_linear(J, J @ I - r, bounds=(-p.limits, p.limits)).x - I
+
+
+def _within_limits(step, J, r, I, limits):
+    """``step`` and the largest fraction t <= 1 of it within the limits; when a channel at
+    its limit blocks it (t < 0.1), the least-squares step of the linearisation within the
+    limits instead."""
+    t = _room(I, step, limits)
+    if t < 0.1:
+        from scipy.optimize import lsq_linear
+
+        lo, hi = -limits - I, limits - I
+        step = lsq_linear(J, -r, bounds=(np.minimum(lo, 0.0), np.maximum(hi, 0.0))).x
+        t = _room(I, step, limits)
+    return step, t
+
+
+def _approach(p: _Problem, search: _Search, I, max_iter: int) -> None:
+    """Gauss-Newton steps towards the target from the currents ``I`` (the states met are kept
+    by ``search``).
+
+    Each iteration, at the currents I with misses r and exact Jacobian J:
+
+    1. the step: near the target (position miss <= FAR L), the minimum-power step
+       (:func:`_least_power_step`: its fixed point is the minimum-power solution), and if that
+       fails the restoring step (:func:`_restoring_step`); far from the target, the restoring
+       step only.  Once a minimum-power step has left the tip further off (with spare
+       channels it moves far along the target's null space, where the linearisation is poor,
+       and alternating would cycle), only restoring steps follow: the currents are then those
+       of the last minimum-power step, corrected onto the target;
+    2. step control: the step is cut to the current limits (:func:`_within_limits`), a
+       minimum-power step to the trust fraction ``trust`` (doubled after a success, set to the
+       last fraction tried after a failure), and halved up to three times until the miss
+       decreases (or, near the target, stays within FAR L);
+    3. the iteration ends on the target, after ``max_iter`` iterations, or when no step is
+       accepted.
+    """
+    res, r, miss = search.evaluate(I)
+    far = FAR * p.length
+    restore_next, trust = False, 1.0
+    for _ in range(max_iter):
+        if p.met(r):
+            return
+        J = p.jacobian(res)
+        near = miss <= far and not restore_next
+        kinds = [_least_power_step, _restoring_step] if near else [_restoring_step]
+        moved = False
+        for kind in kinds:
+            least_power = kind is _least_power_step
+            step, t = _within_limits(kind(J, r, I, p), J, r, I, p.limits)
+            if not np.any(step) or t <= 0.0:
+                continue
+            if least_power:
+                t = min(t, trust)
+            for _trial in range(4):  # backtracking
+                trial = np.clip(I + t * step, -p.limits, p.limits)
+                res_t, r_t, miss_t = search.evaluate(trial)
+                if miss_t < miss or (near and miss_t <= far):
+                    restore_next = restore_next or (least_power and miss_t > miss)
+                    if least_power:
+                        trust = min(1.0, 2.0 * t)
+                    I, res, r, miss, moved = trial, res_t, r_t, miss_t, True
+                    break
+                t /= 2
+            else:
+                if least_power:
+                    trust = t
+            if moved:
+                break
+        if not moved:
+            return
+
+
+def _search(p: _Problem, I, max_iter: int, max_solves: int):
+    """One search from the start currents ``I``: Gauss-Newton steps towards the target
+    (:func:`_approach`), then, if the target is not met, Levenberg-Marquardt within the limits
+    from the closest state to a local least-squares optimum (:func:`_damped`).
+
+    Returns the search (solves, history), the closest currents and their forward solve, and the
+    status (see :class:`ControlResult`)."""
+    search = _Search(p, max_solves)
+    bounds = (-p.limits, p.limits.copy())  # the currents' range (narrowed by _damped)
+    try:
+        _approach(p, search, I, max_iter)
+        if not p.met(search.best[3]):
+            _, I, res, r = search.best
+            bounds = _damped(I, res, r, p.jacobian, search.evaluate, p.met, bounds)
+    except _BudgetSpent:  # the closest tip found is reported
+        stopped = "max_solves"
+    else:
+        stopped = "stalled"
+    _, I, res, r = search.best
+    if p.met(r):
+        status = "converged"
+    elif _gain(p.jacobian(res), r, I, _within(bounds, I)) <= GAIN_TOL:
+        status = "optimal"
+    else:
+        status = stopped
+    return search, I, res, status
+
+
+def _problem(
+    rod, system, target, max_current, model, angle, steps, clamp_position, clamp_angle, nodes, tol
+) -> _Problem:
+    """Validate the arguments of :func:`solve_currents` and set up the problem."""
+    if not isinstance(rod, Rod):
+        raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
+    if not all(hasattr(system, a) for a in ("unit_fields", "with_currents", "currents_for")):
+        raise ValueError(
+            "system must be a coil system under current control (a coils.CoilSystem); got "
+            f"{type(system).__name__}"
+        )
+    if model not in ("real", "ideal"):
+        raise ValueError(f"model must be 'real' or 'ideal'; got {model!r}")
+    goal = as_array(target, "target")
+    if goal.shape not in ((2,), (3,)):
+        raise ValueError(
+            "target must have shape (2,) (x, y in the bending plane) or (3,) (x, y, z); got "
+            f"{goal.shape}"
+        )
+    spatial = goal.size == 3
+    angle = None if angle is None else finite_scalar(angle, "angle")
+    if spatial and angle is not None:
+        raise ValueError(
+            "angle: a target tip angle is only for a target (x, y) in the bending plane; got a "
+            "3D target"
+        )
+    m = system.currents.size
+    if max_current is None:
+        limits = np.asarray(system.max_current, float)
+    else:
+        limits = as_limits(max_current, "max_current", m)
+        system = system.with_limits(limits)
+    L = rod.length
+    tol = 1e-7 * L if tol is None else positive(tol, "tol")
+    steps = as_count(steps, "steps", 1, 10_000)
+    clamp = as_vector(clamp_position, "clamp_position")
+    opts = dict(
+        clamp_position=clamp, clamp_angle=finite_scalar(clamp_angle, "clamp_angle"), nodes=nodes
+    )
+    Bu, Gu = _channels_at_center(system)
+    rank_tol = 1e-12 * max(np.abs(Bu).max(), 1e-300)
+    if np.linalg.matrix_rank(Bu[:2], tol=rank_tol) < 2:
+        raise ValueError(
+            "the system's channels cannot make every in-plane field (B_x, B_y) at its centre: "
+            f"the centre field per ampere has rank {np.linalg.matrix_rank(Bu[:2])} in the plane"
+        )
+    if spatial and np.linalg.matrix_rank(Bu, tol=rank_tol) < 3:
+        raise ValueError(
+            "target: a 3D target needs a system whose channels make every field (B_x, B_y, "
+            f"B_z) at its centre; its centre field per ampere has rank "
+            f"{np.linalg.matrix_rank(Bu, tol=rank_tol)}"
+        )
+    if np.linalg.norm(goal - clamp[: goal.size]) > L * (1 + 1e-12):
+        raise ConvergenceError(
+            f"the target {goal.tolist()} m is {np.linalg.norm(goal - clamp[: goal.size]):.4g} m "
+            f"from the clamp, beyond the rod's length {L:g} m: unreachable",
+            reached=0.0,
+            target=1.0,
+        )
+    try:
+        resistance = np.asarray(system.resistance, float)
+    except ValueError:
+        resistance = np.ones(m)
+    B_fixed, G_fixed = _fixed(system)
+    return _Problem(
+        rod=rod,
+        system=system,
+        model=model,
+        target=goal,
+        angle=angle,
+        limits=limits,
+        resistance=resistance,
+        steps=steps,
+        opts=opts,
+        tol=tol,
+        # a system that can push the rod out of its plane: the tip is held on the plane too
+        with_z=spatial or _leaves_plane(system, clamp, L),
+        Bu=Bu,
+        Gu=Gu,
+        B_fixed=B_fixed,
+        G_fixed=G_fixed,
+    )
+
+
 def solve_currents(
     rod: Rod,
     system,
@@ -259,19 +617,23 @@ def solve_currents(
     system : coils.CoilSystem
         A coil system under current control (``unit_fields``, ``with_currents``,
         ``currents_for``), e.g. ``coils.presets.three_axis_helmholtz()``.
-    target : array-like, shape (2,)
-        Tip position (x, y) in the bending plane, m.
+    target : array-like, shape (2,) or (3,)
+        Tip position, m: (x, y) in the bending plane, or (x, y, z) for the spatial rod (the
+        system's channels must make every field direction at its centre; the start is the
+        planar answer turned about the clamp tangent into the target's plane, see
+        :func:`_start_3d`).
     max_current : float or array-like, shape (m,), optional
         Current limits, A (> 0); default the system's own (``system.max_current``).
     model : {"real", "ideal"}
         "real": the currents are found in the real field; "ideal": as the usual controller
         does, from the system's field and gradient at its centre (see the module docstring).
     angle : float, optional
-        Target tip angle, rad (then three conditions; with fewer independent channels the
-        result is the least-squares compromise of the misses -- positions in L, the angle in
-        rad -- within the current limits, and the misses say so).  When the first steps
-        stop improving, the search goes on by Levenberg-Marquardt steps within the limits
-        until a local optimum; ``ControlResult.status`` says whether one was reached.
+        Target tip angle, rad, for a target (x, y) only (then three conditions; with fewer
+        independent channels the result is the least-squares compromise of the misses --
+        positions in L, the angle in rad -- within the current limits, and the misses say
+        so).  When the first steps stop improving, the search goes on by Levenberg-Marquardt
+        steps within the limits until a local optimum; ``ControlResult.status`` says whether
+        one was reached.
     steps : int
         Load steps of each forward solve (the currents ramped from zero: the path matters at
         snap-throughs).
@@ -295,8 +657,9 @@ def solve_currents(
     Raises
     ------
     ValueError
-        Bad input (naming the argument), a system that cannot make an in-plane field, or a
-        magnetization with an out-of-plane elevation (the planar rod is steered).
+        Bad input (naming the argument), a system that cannot make an in-plane field (or,
+        for a 3D target, every field direction), or a magnetization with an out-of-plane
+        elevation (the start is found on the planar rod).
     coilrod.ConvergenceError
         The target position is not reachable: the message gives the closest stable tip found
         and its distance, and why: the current limits (naming the channels at their limit),
@@ -309,6 +672,22 @@ def solve_currents(
         The currents returned are neither on the target nor a local least-squares optimum
         (``status`` "max_solves" or "stalled"; ``optimal`` False).
 
+    Notes
+    -----
+    The search, for the model's field (see the module docstring):
+
+    1. start: ``initial``, or the in-plane uniform field that puts the tip on the target
+       made at the centre with minimum power (:func:`_start`; for a 3D target turned about
+       the clamp tangent, :func:`_start_3d`);
+    2. Gauss-Newton steps on the weighted misses r(I) with the exact Jacobian, minimum-power
+       steps near the target (:func:`_approach`);
+    3. off the target: Levenberg-Marquardt within the limits to a local least-squares
+       optimum (:func:`_damped`);
+    4. a warm start (``initial``) that does not reach the target in the real field is followed
+       by a fresh one from the uniform-field start (both searches' solves counted);
+    5. the report (:func:`_finish`): the real-field tip of the currents, and an error or a
+       warning when the target is not met.
+
     Examples
     --------
     >>> import coils
@@ -319,238 +698,46 @@ def solve_currents(
     >>> bool(out.miss < 1e-6 * rod.length)
     True
     """
-    if not isinstance(rod, Rod):
-        raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
-    if not all(hasattr(system, a) for a in ("unit_fields", "with_currents", "currents_for")):
-        raise ValueError(
-            "system must be a coil system under current control (a coils.CoilSystem); got "
-            f"{type(system).__name__}"
-        )
-    if model not in ("real", "ideal"):
-        raise ValueError(f"model must be 'real' or 'ideal'; got {model!r}")
-    goal = as_array(target, "target", (2,))
-    with_angle = angle is not None
-    if with_angle:
-        goal = np.r_[goal, finite_scalar(angle, "angle")]
-    m = system.currents.size
-    if max_current is None:
-        limits = np.asarray(system.max_current, float)
-    else:
-        limits = as_limits(max_current, "max_current", m)
-        system = system.with_limits(limits)
-    L = rod.length
-    tol = 1e-7 * L if tol is None else positive(tol, "tol")
-    max_solves = as_count(max_solves, "max_solves", 1, 10_000)
-    steps = as_count(steps, "steps", 1, 10_000)
-    max_iter = as_count(max_iter, "max_iter", 1, 10_000)
-    clamp = as_vector(clamp_position, "clamp_position")
-    opts = dict(
-        clamp_position=clamp, clamp_angle=finite_scalar(clamp_angle, "clamp_angle"), nodes=nodes
-    )
-    Bu, Gu = _channels_at_center(system)
-    if np.linalg.matrix_rank(Bu[:2], tol=1e-12 * max(np.abs(Bu).max(), 1e-300)) < 2:
-        raise ValueError(
-            "the system's channels cannot make every in-plane field (B_x, B_y) at its centre: "
-            f"the centre field per ampere has rank {np.linalg.matrix_rank(Bu[:2])} in the plane"
-        )
-    if np.linalg.norm(goal[:2] - clamp[:2]) > L * (1 + 1e-12):
-        raise ConvergenceError(
-            f"the target {goal[:2].tolist()} m is {np.linalg.norm(goal[:2] - clamp[:2]):.4g} m "
-            f"from the clamp, beyond the rod's length {L:g} m: unreachable",
-            reached=0.0,
-            target=1.0,
-        )
-    try:
-        weights = np.asarray(system.resistance, float)
-    except ValueError:
-        weights = np.ones(m)
-    # a system that can push the rod out of its plane: the tip is held on the plane too
-    with_z = _leaves_plane(system, clamp, L)
-    npos = 3 if with_z else 2
-    goal_z = np.r_[goal[:2], clamp[2], goal[2:]] if with_z else goal
-    wts_z = _weights_for(with_angle, L, with_z)
-    # start: the uniform field that meets the target, made at the centre
-    if initial is not None:
-        I = as_array(initial, "initial", (m,)).copy()
-        if np.any(np.abs(I) > limits):
-            raise ValueError(f"initial currents {I.tolist()} A exceed the limits {limits.tolist()}")
-        start_solves = 0
-    else:
-        I, start_solves = _start(rod, goal, with_angle, steps, opts, Bu, weights, limits)
-
-    B_fixed, G_fixed = _fixed(system)
-
-    def field_of(I):
-        if model == "real":
-            return system.with_currents(I)
-        system.with_currents(I)  # the limits are checked as for the real field
-        return coils.LinearField(Bu @ I + B_fixed, Gu @ I + G_fixed, system.center)
-
-    def jacobian(res):
-        k = len(res) - 1
-        if model == "real":
-            _, _, _, D = tip_derivatives(res, [k], ["currents"], check=False)
-            J = D[0]
-        else:
-            _, _, _, D = tip_derivatives(res, [k], ["B0", "gradient"], check=False)
-            J = D[0, :, :3] @ Bu + D[0, :, 3:] @ Gu.reshape(9, m)
-        rows = ([0, 1, 2] if with_z else [0, 1]) + ([3] if with_angle else [])
-        return J[rows] * wts_z[:, None]
-
-    solves, history, best = 0, [], None
-
-    class _Spent(Exception):
-        pass
-
-    def evaluate(I):
-        nonlocal solves, best
-        if solves >= max_solves:
-            raise _Spent
-        try:
-            res = _forward(rod, field_of(I), steps, opts)
-        except ConvergenceError as err:
-            raise ConvergenceError(
-                f"solve_currents: the forward solve failed at currents {np.round(I, 6).tolist()} A"
-                f" ({err})",
-                reached=err.reached,
-                target=err.target,
-            ) from err
-        solves += 1
-        r = (_outputs(res, with_angle, with_z) - goal_z) * wts_z
-        miss = float(np.linalg.norm(r[:npos])) * L
-        history.append(miss)
-        # the closest state found, stable ones first (an unstable state is not where the tip
-        # stays)
-        key = (not bool(res.stable[-1]), float(np.linalg.norm(r)))
-        if best is None or key < best[0]:
-            best = (key, I.copy(), res, r)
-        return res, r, miss
-
-    def met(r):  # the target met: position (and angle) within the tolerance
-        pos = float(np.linalg.norm(r[:npos])) * L
-        return pos <= tol and (not with_angle or abs(r[-1]) <= tol / L)
-
-    res, r, miss = evaluate(I)
-    far = 1e-3 * L  # beyond this miss, steps restore the target first (with a line search)
-    root = np.sqrt(weights)
-
-    def restoring(J, r):  # the least weighted correction towards the target
-        return (np.linalg.pinv(J / root) @ -r) / root
-
-    def least_power(J, r):  # the minimum-power currents of the linearised target
-        sol = minimum_power(J, J @ I - r, weights, limits)
-        if sol.currents is not None:
-            return sol.currents - I
-        from scipy.optimize import lsq_linear  # out of reach: least squares within limits
-
-        return lsq_linear(J, J @ I - r, bounds=(-limits, limits)).x - I
-
-    bounds = (-limits, limits.copy())  # the currents' range (narrowed by _damped)
-    restore_next = False
-    trust = 1.0  # fraction of the minimum-power step tried first (grows back after successes)
-    try:
-        for _ in range(max_iter):
-            if miss <= tol and (not with_angle or abs(r[-1]) <= tol / L):
-                break
-            J = jacobian(res)
-            # near the target the minimum-power step (whose fixed point is the minimum-power
-            # solution); far from it, or if that step fails, the restoring step; a
-            # minimum-power step that left the tip further off is followed by restoring steps
-            # only (with many channels it moves far along the target's null space, where the
-            # linearisation is poor, and alternating would cycle): the currents are then
-            # those of the last minimum-power step, corrected onto the target
-            near = miss <= far and not restore_next
-            kinds = [least_power, restoring] if near else [restoring]
-            moved = False
-            for kind in kinds:
-                step = kind(J, r)
-                t = _room(I, step, limits)
-                if t < 0.1:  # a channel at its limit blocks the step: a step within the limits
-                    from scipy.optimize import lsq_linear
-
-                    lo, hi = -limits - I, limits - I
-                    step = lsq_linear(J, -r, bounds=(np.minimum(lo, 0.0), np.maximum(hi, 0.0))).x
-                    t = _room(I, step, limits)
-                if not np.any(step) or t <= 0.0:
-                    continue
-                if kind is least_power:
-                    t = min(t, trust)
-                for _trial in range(4):  # backtrack while the miss grows, or leaves the near zone
-                    trial = np.clip(I + t * step, -limits, limits)
-                    res_t, r_t, miss_t = evaluate(trial)
-                    if miss_t < miss or (near and miss_t <= far):
-                        # once a minimum-power step has left the tip further off (the
-                        # linearisation is poor along the target's null space), restore
-                        restore_next = restore_next or (kind is least_power and miss_t > miss)
-                        if kind is least_power:
-                            trust = min(1.0, 2.0 * t)
-                        I, res, r, miss, moved = trial, res_t, r_t, miss_t, True
-                        break
-                    t /= 2
-                else:
-                    if kind is least_power:
-                        trust = t
-                if moved:
-                    break
-            if not moved:
-                break
-        if not met(best[3]):  # not on the target: the least-squares optimum from the best
-            _, I, res, r = best
-            bounds = _damped(I, res, r, jacobian, evaluate, met, bounds)
-    except _Spent:  # the solve budget is spent: the closest tip found is reported
-        stopped = "max_solves"
-    else:
-        stopped = "stalled"
-    _, I, res, r = best
-    if met(r):
-        status = "converged"
-    elif _gain(jacobian(res), r, I, _within(bounds, I)) <= GAIN_TOL:
-        status = "optimal"
-    else:
-        status = stopped
-    if (
-        initial is not None
-        and model == "real"
-        and min(history) > tol
-        and (not with_angle or status != "optimal")
-    ):
-        # the warm start led astray (e.g. across a snap-through): start afresh, count both
-        out = solve_currents(
-            rod,
-            system,
-            goal[:2],
-            limits,
-            model,
-            angle=angle,
-            steps=steps,
-            clamp_position=clamp,
-            clamp_angle=opts["clamp_angle"],
-            nodes=nodes,
-            tol=tol,
-            max_iter=max_iter,
-            max_solves=max_solves,
-        )
-        out.solves += solves
-        out.history = history + out.history
-        return out
-    return _finish(
+    p = _problem(
         rod,
         system,
-        I,
-        res,
-        goal,
-        with_angle,
+        target,
+        max_current,
         model,
+        angle,
         steps,
-        opts,
+        clamp_position,
+        clamp_angle,
+        nodes,
         tol,
-        solves,
-        start_solves,
-        history,
-        goal_z[:npos],
-        status,
-        limits,
     )
+    max_solves = as_count(max_solves, "max_solves", 1, 10_000)
+    max_iter = as_count(max_iter, "max_iter", 1, 10_000)
+    starts = ["fresh"]
+    if initial is not None:
+        warm = as_array(initial, "initial", (p.limits.size,)).copy()
+        if np.any(np.abs(warm) > p.limits):
+            raise ValueError(
+                f"initial currents {warm.tolist()} A exceed the limits {p.limits.tolist()}"
+            )
+        starts = ["warm", "fresh"]
+    solves, history = 0, []
+    for start in starts:
+        if start == "warm":
+            I, start_solves = warm, 0
+        elif p.spatial:
+            I, start_solves = _start_3d(p)
+        else:
+            I, start_solves = _start(
+                p.rod, p.planar_goal, p.with_angle, p.steps, p.opts, p.Bu, p.resistance, p.limits
+            )
+        search, I, res, status = _search(p, I, max_iter, max_solves)
+        solves, history = solves + search.solves, history + search.history
+        # a warm start led astray (e.g. across a snap-through): start afresh
+        astray = min(search.history) > p.tol and (not p.with_angle or status != "optimal")
+        if not (start == "warm" and p.model == "real" and astray):
+            break
+    return _finish(p, I, res, solves, start_solves, history, status)
 
 
 #: Largest relative decrease of the squared weighted misses a bounded Gauss-Newton step may
@@ -635,6 +822,38 @@ def _damped(I, res, r, jacobian, evaluate, met, bounds):
     return lo, hi
 
 
+def _start_3d(p: _Problem):
+    """Start currents for a 3D target: the bending plane turned about the clamp tangent t by
+    the angle phi that brings it through the target, the in-plane uniform-field answer
+    (:func:`_uniform_start`) for the target turned into the plane, and that field turned back
+    (exact for a rod symmetric about its axis, e.g. an axial magnetization on a round section;
+    a start otherwise), made at the centre with minimum power.  Returns (currents, solves)."""
+    from coils.currents import largest_fraction
+
+    clamp, a = p.opts["clamp_position"], p.opts["clamp_angle"]
+    t = np.array([math.cos(a), math.sin(a), 0.0])
+    n = np.array([-math.sin(a), math.cos(a), 0.0])
+    v = p.target - clamp
+    phi = math.atan2(v[2], v @ n)
+    n_phi = math.cos(phi) * n + math.sin(phi) * np.array([0.0, 0.0, 1.0])
+    planar = clamp[:2] + (v @ t) * t[:2] + math.hypot(v @ n, v[2]) * n[:2]
+    b_big = p.rod.field_for_lambda(30.0)  # beyond any useful field: lambda = 30
+    caps = [
+        largest_fraction(p.Bu, b_big * (math.cos(al) * t + math.sin(al) * n_phi), p.limits)[0]
+        for al in np.linspace(0.0, 2 * np.pi, 36, endpoint=False)
+    ]
+    b_cap = b_big * float(min(caps))  # the largest centre field (T) in every direction of it
+    b, solves = _uniform_start(p.rod, planar, False, p.steps, p.opts, b_cap)
+    B = (b @ t[:2]) * t + (b @ n[:2]) * n_phi
+    start = minimum_power(p.Bu, B, p.resistance, p.limits)
+    I = (
+        start.currents
+        if start.currents is not None
+        else np.clip(start.unlimited, -p.limits, p.limits)
+    )
+    return I, solves
+
+
 def _room(I, step, limits) -> float:
     """Largest t <= 1 with |I + t step| <= limits."""
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -648,30 +867,16 @@ def _fixed(system):
     return B[0], G[0]
 
 
-def _finish(
-    rod,
-    system,
-    I,
-    res,
-    goal,
-    with_angle,
-    model,
-    steps,
-    opts,
-    tol,
-    solves,
-    start_solves,
-    history,
-    goal_pos=None,
-    status="converged",
-    limits=None,
-):
-    real = res if model == "real" else _forward(rod, system.with_currents(I), steps, opts)
+def _finish(p: _Problem, I, res, solves, start_solves, history, status) -> ControlResult:
+    """The result at currents ``I`` (``res`` the model's forward solve there), with the tip in
+    the real field; raises for an unreachable position target and warns for a result that is
+    not a local optimum (:func:`_report`)."""
+    real = res if p.model == "real" else _forward(p.rod, p.system.with_currents(I), p.steps, p.opts)
     tip = real.tip[-1]
-    goal_pos = goal[:2] if goal_pos is None else goal_pos  # (x, y) or (x, y, z) held, m
+    goal_pos = p.goal[: p.npos]  # (x, y) or (x, y, z) held, m
     miss = float(np.linalg.norm(tip[: goal_pos.size] - goal_pos))
     try:
-        power = float(system.power(I))
+        power = float(p.system.power(I))
     except ValueError:
         power = float("nan")
     out = ControlResult(
@@ -679,25 +884,29 @@ def _finish(
         tip=tip.copy(),
         tip_angle=float(real.tip_angle[-1]),
         miss=miss,
-        angle_miss=abs(float(real.tip_angle[-1]) - goal[2]) if with_angle else None,
+        angle_miss=abs(float(real.tip_angle[-1]) - p.angle) if p.with_angle else None,
         power=power,
         result=real,
-        model=model,
-        target=goal[:2].copy(),
+        model=p.model,
+        target=p.target.copy(),
         solves=solves,
         start_solves=start_solves,
         history=history,
         status=status,
         optimal=status in ("converged", "optimal"),
-        active=[] if limits is None else np.flatnonzero(np.abs(I) >= limits - 1e-9).tolist(),
+        active=np.flatnonzero(np.abs(I) >= p.limits - 1e-9).tolist(),
     )
-    own_miss = history[-1] if history else miss
-    closest = (
-        "the closest stable tip found"
-        if real.stable[-1]
-        else "the closest tip found (an unstable equilibrium: no stable one was found)"
-    )
-    if model == "real" and min(history) > tol and not with_angle:
+    _report(p, out, history)
+    return out
+
+
+def _report(p: _Problem, out: ControlResult, history) -> None:
+    """Raise ConvergenceError for a position target the real controller did not reach --
+    telling the current limits (naming the channels at theirs) from a target outside the
+    robot's reachable set -- or warn (ControlWarning) for a result that is not a local
+    least-squares optimum."""
+    I, tip, miss = out.currents, out.tip, out.miss
+    if p.model == "real" and min(history) > p.tol and not p.with_angle:
         if out.active:
             why = (
                 "not reachable within the current limits (channels "
@@ -709,28 +918,33 @@ def _finish(
                 "tip, a local optimum of the miss)"
             )
         else:
+            spent = out.status == "max_solves"
             why = (
                 "not reached: the search stopped "
-                f"({'the solve budget max_solves spent' if status == 'max_solves' else 'stalled'})"
+                f"({'the solve budget max_solves spent' if spent else 'stalled'})"
                 " before a local optimum of the miss; no current limit is active"
             )
+        closest = (
+            "the closest stable tip found"
+            if out.result.stable[-1]
+            else "the closest tip found (an unstable equilibrium: no stable one was found)"
+        )
         err = ConvergenceError(
-            f"solve_currents: the target {goal[:2].tolist()} m is {why}; {closest} is "
-            f"{tip[:2].tolist()} m, {miss:.4g} m ({miss / rod.length:.3g} L) away, with "
+            f"solve_currents: the target {p.target.tolist()} m is {why}; {closest} is "
+            f"{tip[: p.target.size].tolist()} m, {miss:.4g} m ({miss / p.length:.3g} L) away, with "
             f"currents {np.round(I, 4).tolist()} A",
             reached=0.0,
             target=1.0,
-            residual=own_miss,
+            residual=history[-1] if history else miss,
         )
         err.result = out
         raise err
     if not out.optimal:
         warnings.warn(
             f"solve_currents: the currents {np.round(I, 4).tolist()} A are not a local "
-            f"least-squares optimum of the misses ({status}: miss {miss:.4g} m"
-            + (f", angle miss {out.angle_miss:.4g} rad" if with_angle else "")
+            f"least-squares optimum of the misses ({out.status}: miss {miss:.4g} m"
+            + (f", angle miss {out.angle_miss:.4g} rad" if p.with_angle else "")
             + "); ControlResult.optimal is False",
             ControlWarning,
-            stacklevel=3,
+            stacklevel=4,
         )
-    return out

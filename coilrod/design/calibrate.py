@@ -509,6 +509,132 @@ def _check_bounds(bounds, fit, initial) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
+def _checked_data(rod, fields, measured, fit, output, field_angle, sigma):
+    """Validate the data of :func:`calibrate`: (fields (k, 3), measured (k,), output, fit,
+    field_angle, weights (k,) = 1 / sigma)."""
+    if not isinstance(rod, Rod):
+        raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
+    rod.magnetization.check_planar("calibration (planar rod)")
+    fields = as_array(fields, "fields", ("k", 3))
+    k = fields.shape[0]
+    measured = as_array(measured, "measured", ("k",))
+    if measured.size != k:
+        raise ValueError(
+            f"measured must have one value per field, shape ({k},); got {measured.shape}"
+        )
+    norms = np.linalg.norm(fields, axis=1)
+    if np.any(np.abs(fields[:, 2]) > 1e-12 * norms):
+        raise ValueError(
+            "fields must lie in the bending plane (B_z = 0): the planar rod ignores B_z; got "
+            f"B_z = {fields[np.argmax(np.abs(fields[:, 2])), 2]:g} T"
+        )
+    output = as_choice(output, "output", tuple(OUTPUTS))
+    fit = _check_fit(fit, rod)
+    p = len(fit)
+    if k < p + 1:
+        raise ValueError(
+            f"fitting {p} parameter(s) needs at least {p + 1} data points (the residual "
+            f"variance is estimated from k - p degrees of freedom); got {k}"
+        )
+    field_angle = finite_scalar(field_angle, "field_angle")
+    if sigma is None:
+        weights = np.ones(k)
+    else:
+        s = as_array(sigma, "sigma")
+        if s.ndim > 1 or s.size not in (1, k):
+            raise ValueError(f"sigma must be a number or have shape ({k},); got {s.shape}")
+        if not np.all(s > 0):
+            raise ValueError(f"sigma must be positive; got {s.ravel().tolist()}")
+        weights = 1.0 / np.broadcast_to(s.ravel(), (k,))
+    return fields, measured, output, fit, field_angle, weights
+
+
+def _least_squares(model, measured, weights, x0, bounds, rank_tol, tol, max_nfev):
+    """scipy's trust-region least squares of the weighted residuals with the model's exact
+    Jacobian from ``x0``: (its solution, the trial points rejected and why).  The rank of the
+    Jacobian is checked at the start."""
+    k = measured.size
+    fit = model.fit
+    lo, hi = bounds
+    # the solver sees residuals of order one (its gtol is absolute): divided by the data's size
+    ref = float(np.max(np.abs(measured * weights))) or 1.0
+
+    rejected = []
+
+    def residuals(x):
+        try:
+            q = model.evaluate(x)[0]
+        except (ConvergenceError, SingularStateError, UnstableStateError) as err:
+            if np.array_equal(x, x0):
+                raise
+            rejected.append(f"{model.values(x)}: {err}")
+            return np.full(k, np.nan)  # a trial step off the model's domain: trf backs off
+        return (q - measured) * weights / ref
+
+    def jacobian(x):
+        return model.evaluate(x)[1] * weights[:, None] / ref
+
+    _check_rank(jacobian(x0), fit, rank_tol, "at the starting values")
+    from scipy.optimize import least_squares
+
+    sol = least_squares(
+        residuals,
+        x0,
+        jac=jacobian,
+        bounds=(lo, hi),
+        method="trf",
+        x_scale=1.0,
+        ftol=tol,
+        xtol=tol,
+        gtol=tol,
+        max_nfev=max_nfev,
+    )
+    return sol, rejected
+
+
+def _calibration(model, sol, rejected, initial, data, rank_tol):
+    """The Calibration at the least-squares solution ``sol``: values, covariance
+    ``s^2 (J^T W J)^-1`` in the parameters themselves (rank checked at the fit); ``data`` is
+    (fields, output, measured, weights, sigma)."""
+    fields, output, measured, weights, sigma = data
+    fit, options = model.fit, model.options
+    k, p = measured.size, len(fit)
+    values = model.values(sol.x)
+    q, jac_x = model.evaluate(sol.x)
+    _check_rank(jac_x * weights[:, None], fit, rank_tol, "at the fitted values")
+    scale = np.array([values[n] if PARAMETERS[n][1] else 1.0 for n in fit])
+    jac = jac_x / scale  # per unit of the parameters themselves
+    r = (q - measured) * weights
+    cost = 0.5 * float(r @ r)
+    _, s, vt = np.linalg.svd(jac * weights[:, None], full_matrices=False)
+    covariance = (vt.T / s**2) @ vt * (2 * cost / (k - p))
+    fitted_rod, angle = model.rod_and_angle(values)
+    return Calibration(
+        parameters=fit,
+        values=values,
+        initial=initial,
+        standard_errors={n: float(np.sqrt(covariance[j, j])) for j, n in enumerate(fit)},
+        covariance=covariance,
+        rod=fitted_rod,
+        field_angle=float(angle),
+        fields=fields.copy(),
+        output=output,
+        measured=measured.copy(),
+        model=q.copy(),
+        residuals=q - measured,
+        sigma=None if sigma is None else 1.0 / weights,
+        jacobian=jac,
+        cost=cost,
+        nfev=int(sol.nfev),
+        njev=int(sol.njev),
+        solves=model.solves,
+        rejected=tuple(rejected),
+        status=int(sol.status),
+        message=str(sol.message),
+        solve_options=options,
+    )
+
+
 def calibrate(
     rod: Rod,
     fields,
@@ -629,40 +755,9 @@ def calibrate(
     >>> round(cal.values["youngs_modulus"] / 9e5, 9)
     1.0
     """
-    if not isinstance(rod, Rod):
-        raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
-    rod.magnetization.check_planar("calibration (planar rod)")
-    fields = as_array(fields, "fields", ("k", 3))
-    k = fields.shape[0]
-    measured = as_array(measured, "measured", ("k",))
-    if measured.size != k:
-        raise ValueError(
-            f"measured must have one value per field, shape ({k},); got {measured.shape}"
-        )
-    norms = np.linalg.norm(fields, axis=1)
-    if np.any(np.abs(fields[:, 2]) > 1e-12 * norms):
-        raise ValueError(
-            "fields must lie in the bending plane (B_z = 0): the planar rod ignores B_z; got "
-            f"B_z = {fields[np.argmax(np.abs(fields[:, 2])), 2]:g} T"
-        )
-    output = as_choice(output, "output", tuple(OUTPUTS))
-    fit = _check_fit(fit, rod)
-    p = len(fit)
-    if k < p + 1:
-        raise ValueError(
-            f"fitting {p} parameter(s) needs at least {p + 1} data points (the residual "
-            f"variance is estimated from k - p degrees of freedom); got {k}"
-        )
-    field_angle = finite_scalar(field_angle, "field_angle")
-    if sigma is None:
-        weights = np.ones(k)
-    else:
-        s = as_array(sigma, "sigma")
-        if s.ndim > 1 or s.size not in (1, k):
-            raise ValueError(f"sigma must be a number or have shape ({k},); got {s.shape}")
-        if not np.all(s > 0):
-            raise ValueError(f"sigma must be positive; got {s.ravel().tolist()}")
-        weights = 1.0 / np.broadcast_to(s.ravel(), (k,))
+    fields, measured, output, fit, field_angle, weights = _checked_data(
+        rod, fields, measured, fit, output, field_angle, sigma
+    )
     rank_tol = positive(rank_tol, "rank_tol")
     tol = positive(tol, "tol")
     max_nfev = as_count(max_nfev, "max_nfev", 1)
@@ -674,40 +769,8 @@ def calibrate(
     model = _Model(rod, fields, output, fit, field_angle, options)
     initial = model.initial()
     lo, hi = _check_bounds(bounds, fit, initial)
-    x0 = model.to_x(initial)
-
-    # the solver sees residuals of order one (its gtol is absolute): divided by the data's size
-    ref = float(np.max(np.abs(measured * weights))) or 1.0
-
-    rejected = []
-
-    def residuals(x):
-        try:
-            q = model.evaluate(x)[0]
-        except (ConvergenceError, SingularStateError, UnstableStateError) as err:
-            if np.array_equal(x, x0):
-                raise
-            rejected.append(f"{model.values(x)}: {err}")
-            return np.full(k, np.nan)  # a trial step off the model's domain: trf backs off
-        return (q - measured) * weights / ref
-
-    def jacobian(x):
-        return model.evaluate(x)[1] * weights[:, None] / ref
-
-    _check_rank(jacobian(x0), fit, rank_tol, "at the starting values")
-    from scipy.optimize import least_squares
-
-    sol = least_squares(
-        residuals,
-        x0,
-        jac=jacobian,
-        bounds=(lo, hi),
-        method="trf",
-        x_scale=1.0,
-        ftol=tol,
-        xtol=tol,
-        gtol=tol,
-        max_nfev=max_nfev,
+    sol, rejected = _least_squares(
+        model, measured, weights, model.to_x(initial), (lo, hi), rank_tol, tol, max_nfev
     )
     if sol.status == 0:
         warnings.warn(
@@ -716,37 +779,5 @@ def calibrate(
             RuntimeWarning,
             stacklevel=2,
         )
-    values = model.values(sol.x)
-    q, jac_x = model.evaluate(sol.x)
-    _check_rank(jac_x * weights[:, None], fit, rank_tol, "at the fitted values")
-    scale = np.array([values[n] if PARAMETERS[n][1] else 1.0 for n in fit])
-    jac = jac_x / scale  # per unit of the parameters themselves
-    r = (q - measured) * weights
-    cost = 0.5 * float(r @ r)
-    _, s, vt = np.linalg.svd(jac * weights[:, None], full_matrices=False)
-    covariance = (vt.T / s**2) @ vt * (2 * cost / (k - p))
-    fitted_rod, angle = model.rod_and_angle(values)
-    return Calibration(
-        parameters=fit,
-        values=values,
-        initial=initial,
-        standard_errors={n: float(np.sqrt(covariance[j, j])) for j, n in enumerate(fit)},
-        covariance=covariance,
-        rod=fitted_rod,
-        field_angle=float(angle),
-        fields=fields.copy(),
-        output=output,
-        measured=measured.copy(),
-        model=q.copy(),
-        residuals=q - measured,
-        sigma=None if sigma is None else 1.0 / weights,
-        jacobian=jac,
-        cost=cost,
-        nfev=int(sol.nfev),
-        njev=int(sol.njev),
-        solves=model.solves,
-        rejected=tuple(rejected),
-        status=int(sol.status),
-        message=str(sol.message),
-        solve_options=options,
-    )
+    data = (fields, output, measured, weights, sigma)
+    return _calibration(model, sol, rejected, initial, data, rank_tol)

@@ -173,6 +173,70 @@ class _StartSpent(Exception):
     pass
 
 
+def _gradient_search(obj: _Objective, starts: int, rng) -> None:
+    """L-BFGS-B on the area with its exact gradient from ``starts`` starts, each with its share
+    of the budget (the layouts met are kept by ``obj``)."""
+    from scipy.optimize import minimize
+
+    rod, segments, budget = obj.rod, obj.segments, obj.budget
+    # first start: M(2a) in segments (direction turning by pi/2 along the rod, full
+    # magnitude), a good design of the seed; then random ones.  No layout with exactly
+    # aligned segments (e.g. all axial): it puts an exact pitchfork in the antiparallel
+    # direction, where the area is not smooth
+    turning = np.pi / 2 * (np.arange(segments) + 0.5) / segments
+    x0s = [np.r_[np.ones(segments), turning]]
+    x0s += [
+        np.r_[rng.uniform(0.5, 1.0, segments), rng.uniform(-np.pi, np.pi, segments)]
+        for _ in range(starts - 1)
+    ]
+    bounds = [(0.0, 1.0)] * segments + [(-2 * np.pi, 2 * np.pi)] * segments
+
+    def fun(x):
+        area, grad = obj.evaluate(x, True)
+        return -area / rod.length**2, -grad / rod.length**2
+
+    for i, x0 in enumerate(x0s):
+        if obj.solves >= budget:
+            break
+        # each start gets its share of the budget (a start stuck at a local optimum
+        # whose line searches keep failing on the area's jumps hands over in time)
+        share = (budget - obj.solves) // (len(x0s) - i)
+        obj.start_limit = obj.solves + max(share, 1)
+        try:
+            minimize(
+                fun,
+                x0,
+                jac=True,
+                method="L-BFGS-B",
+                bounds=bounds,
+                options={"maxfun": max(share, 1), "ftol": 1e-6, "gtol": 1e-8},
+            )
+        except _StartSpent:
+            pass
+    obj.start_limit = np.inf
+
+
+def _evolution_search(obj: _Objective, seed) -> None:
+    """Differential evolution on the area within the budget (the layouts met are kept by
+    ``obj``)."""
+    from scipy.optimize import differential_evolution
+
+    rod, segments, budget = obj.rod, obj.segments, obj.budget
+    n = 2 * segments
+    bounds = [(0.0, 1.0)] * segments + [(-np.pi, np.pi)] * segments
+    popsize = 10
+    maxiter = max(1, budget // (popsize * n) - 1)
+    differential_evolution(
+        lambda x: -obj.evaluate(x, False)[0] / rod.length**2,
+        bounds,
+        seed=seed,
+        popsize=popsize,
+        maxiter=maxiter,
+        polish=False,
+        tol=1e-8,
+    )
+
+
 def optimize_magnetization(
     rod: Rod,
     segments: int = 4,
@@ -226,8 +290,6 @@ def optimize_magnetization(
     >>> best.solves <= 6 and best.area > 0
     True
     """
-    from scipy.optimize import differential_evolution, minimize
-
     if not isinstance(rod, Rod):
         raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
     rod.magnetization.check_planar("optimize_magnetization (planar workspaces)")
@@ -246,57 +308,11 @@ def optimize_magnetization(
     )
     rng = np.random.default_rng(seed)
     t0 = time.process_time()
-    n = 2 * segments
     try:
         if method == "gradient":
-            # first start: M(2a) in segments (direction turning by pi/2 along the rod, full
-            # magnitude), a good design of the seed; then random ones.  No layout with exactly
-            # aligned segments (e.g. all axial): it puts an exact pitchfork in the antiparallel
-            # direction, where the area is not smooth
-            turning = np.pi / 2 * (np.arange(segments) + 0.5) / segments
-            x0s = [np.r_[np.ones(segments), turning]]
-            x0s += [
-                np.r_[rng.uniform(0.5, 1.0, segments), rng.uniform(-np.pi, np.pi, segments)]
-                for _ in range(starts - 1)
-            ]
-            bounds = [(0.0, 1.0)] * segments + [(-2 * np.pi, 2 * np.pi)] * segments
-
-            def fun(x):
-                area, grad = obj.evaluate(x, True)
-                return -area / rod.length**2, -grad / rod.length**2
-
-            for i, x0 in enumerate(x0s):
-                if obj.solves >= budget:
-                    break
-                # each start gets its share of the budget (a start stuck at a local optimum
-                # whose line searches keep failing on the area's jumps hands over in time)
-                share = (budget - obj.solves) // (len(x0s) - i)
-                obj.start_limit = obj.solves + max(share, 1)
-                try:
-                    minimize(
-                        fun,
-                        x0,
-                        jac=True,
-                        method="L-BFGS-B",
-                        bounds=bounds,
-                        options={"maxfun": max(share, 1), "ftol": 1e-6, "gtol": 1e-8},
-                    )
-                except _StartSpent:
-                    pass
-            obj.start_limit = np.inf
+            _gradient_search(obj, starts, rng)
         else:
-            bounds = [(0.0, 1.0)] * segments + [(-np.pi, np.pi)] * segments
-            popsize = 10
-            maxiter = max(1, budget // (popsize * n) - 1)
-            differential_evolution(
-                lambda x: -obj.evaluate(x, False)[0] / rod.length**2,
-                bounds,
-                seed=seed,
-                popsize=popsize,
-                maxiter=maxiter,
-                polish=False,
-                tol=1e-8,
-            )
+            _evolution_search(obj, seed)
     except _BudgetSpent:
         pass
     area, x, ws = obj.best

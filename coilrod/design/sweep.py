@@ -246,6 +246,35 @@ def _check_workers(workers, client) -> int | None:
     return int(workers)
 
 
+def _checked(scene, params, workers, client, resume, out):
+    """The sweep's parameters and worker count, every problem of the arguments reported at once
+    (SceneError)."""
+    problems: list[str] = [CONTROL_NOT_SWEPT] if scene.control is not None else []
+    parameters: list[Parameter] = []
+    try:
+        parameters = sweep_parameters(params, scene)
+    except SceneError as exc:
+        problems += exc.problems
+    try:
+        workers = _check_workers(workers, client)
+    except SceneError as exc:
+        problems += exc.problems
+    if client is not None and not isinstance(client, str) and not hasattr(client, "submit"):
+        problems.append(f"client: expected a dask Client or a scheduler address; got {client!r}")
+    if resume and out is None:
+        problems.append("resume: needs the folder of the sweep to resume (out)")
+    if out is not None:
+        from ..scene.outputs import prepare_output_dir
+
+        try:
+            prepare_output_dir(out, create=False, key="out")
+        except SceneError as exc:
+            problems += exc.problems
+    if problems:
+        raise SceneError(problems)
+    return parameters, workers
+
+
 def sweep(
     scene: Scene | dict | str | os.PathLike,
     params: Mapping[str, str | Sequence],
@@ -331,31 +360,8 @@ def sweep(
     [27.0, 23.17, 20.01]
     """
     scene = _as_scene(scene)
-    problems: list[str] = [CONTROL_NOT_SWEPT] if scene.control is not None else []
-    parameters: list[Parameter] = []
-    try:
-        parameters = sweep_parameters(params, scene)
-    except SceneError as exc:
-        problems += exc.problems
-    try:
-        workers = _check_workers(workers, client)
-    except SceneError as exc:
-        problems += exc.problems
-    if client is not None and not isinstance(client, str) and not hasattr(client, "submit"):
-        problems.append(f"client: expected a dask Client or a scheduler address; got {client!r}")
-    if resume and out is None:
-        problems.append("resume: needs the folder of the sweep to resume (out)")
+    parameters, workers = _checked(scene, params, workers, client, resume, out)
     file = None
-    if out is not None:
-        from ..scene.outputs import prepare_output_dir
-
-        try:
-            prepare_output_dir(out, create=False, key="out")
-        except SceneError as exc:
-            problems += exc.problems
-    if problems:
-        raise SceneError(problems)
-
     columns = ["point", *(p.column for p in parameters), *result_columns(scene), "error"]
     grid = list(itertools.product(*(p.values for p in parameters)))
     rows: dict[int, dict] = {}

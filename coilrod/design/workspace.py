@@ -510,58 +510,89 @@ def workspace(
         from tqdm import tqdm
 
         bar = tqdm(desc="workspace", unit="direction")
-    fresh = lambda: {"tips": [], "theta": [], "stable": [], "snaps": [], "currents": []}  # noqa: E731
+    args = (rod, b_max, scales, nodes, richardson, clamp, angle, system, n, straight)
     try:
-        # 1. directions: bisect where neighbours land on different branches (or one on an
-        #    unstable state or a snap) and where the tips at b_max bend away from the chords
-        got, sol, events = fresh(), _Solution(rod), []
-        args = (rod, b_max, scales, nodes, richardson, clamp, angle, system, n, straight)
-        _solve_directions(psi + alpha, 0, *args, got, sol, events, bar)
-        for _ in range(refine):
-            a, cat = _sorted(alpha, got)
-            _, recover = _cells(a, *(cat[k] for k in ("theta", "stable", "snaps")))
-            gap = np.diff(np.r_[a, a[0] + 2 * np.pi])
-            sag = _sagitta(cat["tips"][:, -1:, :2], axis=0, wrap=True)[:, 0]
-            split = np.flatnonzero((recover.any(axis=1) | (sag > h)) & (gap > min_gap))
-            if split.size == 0:
-                break
-            new = a[split] + gap[split] / 2
-            new = np.where(new > np.pi, new - 2 * np.pi, new)
-            first = alpha.size
-            alpha = np.r_[alpha, new]
-            depth = 2 + np.round(np.log2(2 * np.pi / D / gap[split])).astype(int)
-            level = np.r_[level, depth]  # the finer the step split, the higher
-            _solve_directions(psi + new, first, *args, got, sol, events, bar)
-        # 2. magnitudes: bisect the steps where the ramps of the directions bounding the
-        #    workspace (next to the cut or to a cell left out) bend away from the chords
-        a, cat = _sorted(alpha, got)
-        _, recover = _cells(a, *(cat[k] for k in ("theta", "stable", "snaps")))
-        edge = np.any(_sagitta(cat["tips"][..., :2], axis=1) > h, axis=1)
-        probe, tips = psi + a[edge], cat["tips"][edge]
-        for _ in range(refine):
-            width = np.diff(np.r_[0.0, scales])
-            sag = _sagitta(tips[..., :2], axis=1)
-            long = np.flatnonzero(np.any(sag > h, axis=0) & (width > min_width))
-            if long.size == 0:
-                break
-            probe = probe[np.any(sag[:, long] > h, axis=1)]  # the ramps still bent
-            scales = np.r_[scales, scales[long] - width[long] / 2]
-            mlevel = np.r_[mlevel, 2 + np.round(np.log2(1.0 / M / width[long])).astype(int)]
-            o = np.argsort(scales)
-            scales, mlevel = scales[o], mlevel[o]
-            trial = fresh()
-            # (the coarse mesh's tips: enough to see where the ramps bend)
-            targs = (rod, b_max, scales, nodes, False, clamp, angle, system, n, straight)
-            _solve_directions(probe, 0, *targs, trial, _Solution(rod), [], None)
-            tips = trial["tips"][0]
+        alpha, level, got, sol, events = _refine_directions(
+            psi, alpha, level, args, refine, h, min_gap, bar
+        )
+        scales, mlevel = _refine_magnitudes(psi, alpha, got, mlevel, args, refine, h, min_width)
         # 3. every direction at the final magnitudes
         if scales.size > magnitudes:
-            got, sol, events = fresh(), _Solution(rod), []
+            got, sol, events = _fresh(), _Solution(rod), []
             args = (rod, b_max, scales, nodes, richardson, clamp, angle, system, n, straight)
             _solve_directions(psi + alpha, 0, *args, got, sol, events, bar)
     finally:
         if bar is not None:
             bar.close()
+    return _collect(rod, b_max, system, psi, alpha, level, scales, mlevel, got, sol, events)
+
+
+def _fresh() -> dict:
+    """Empty lists of what :func:`_solve_directions` gathers per direction."""
+    return {"tips": [], "theta": [], "stable": [], "snaps": [], "currents": []}
+
+
+def _refine_directions(psi, alpha, level, args, refine, h, min_gap, bar):
+    """1. Directions: solve ``alpha`` (from the reference ``psi``), then bisect where
+    neighbours land on different branches (or one on an unstable state or a snap) and where
+    the tips at b_max bend away from the chords (sagitta > ``h``), ``refine`` times at most.
+
+    Returns the directions (in the order solved), their bisection levels, and what
+    :func:`_solve_directions` gathered (got, solution, events)."""
+    D = alpha.size
+    got, sol, events = _fresh(), _Solution(args[0]), []
+    _solve_directions(psi + alpha, 0, *args, got, sol, events, bar)
+    for _ in range(refine):
+        a, cat = _sorted(alpha, got)
+        _, recover = _cells(a, *(cat[k] for k in ("theta", "stable", "snaps")))
+        gap = np.diff(np.r_[a, a[0] + 2 * np.pi])
+        sag = _sagitta(cat["tips"][:, -1:, :2], axis=0, wrap=True)[:, 0]
+        split = np.flatnonzero((recover.any(axis=1) | (sag > h)) & (gap > min_gap))
+        if split.size == 0:
+            break
+        new = a[split] + gap[split] / 2
+        new = np.where(new > np.pi, new - 2 * np.pi, new)
+        first = alpha.size
+        alpha = np.r_[alpha, new]
+        depth = 2 + np.round(np.log2(2 * np.pi / D / gap[split])).astype(int)
+        level = np.r_[level, depth]  # the finer the step split, the higher
+        _solve_directions(psi + new, first, *args, got, sol, events, bar)
+    return alpha, level, got, sol, events
+
+
+def _refine_magnitudes(psi, alpha, got, mlevel, args, refine, h, min_width):
+    """2. Magnitudes: bisect the steps where the ramps of the directions bounding the
+    workspace (next to the cut or to a cell left out) bend away from the chords (sagitta >
+    ``h``), ``refine`` times at most, the ramps probed on the coarse mesh (enough to see where
+    they bend).  Returns the magnitudes (fractions of b_max) and their bisection levels."""
+    scales = args[2]
+    M = scales.size
+    a, cat = _sorted(alpha, got)
+    _, recover = _cells(a, *(cat[k] for k in ("theta", "stable", "snaps")))
+    edge = np.any(_sagitta(cat["tips"][..., :2], axis=1) > h, axis=1)
+    probe, tips = psi + a[edge], cat["tips"][edge]
+    for _ in range(refine):
+        width = np.diff(np.r_[0.0, scales])
+        sag = _sagitta(tips[..., :2], axis=1)
+        long = np.flatnonzero(np.any(sag > h, axis=0) & (width > min_width))
+        if long.size == 0:
+            break
+        probe = probe[np.any(sag[:, long] > h, axis=1)]  # the ramps still bent
+        scales = np.r_[scales, scales[long] - width[long] / 2]
+        mlevel = np.r_[mlevel, 2 + np.round(np.log2(1.0 / M / width[long])).astype(int)]
+        o = np.argsort(scales)
+        scales, mlevel = scales[o], mlevel[o]
+        trial = _fresh()
+        # (the coarse mesh's tips: enough to see where the ramps bend)
+        targs = (*args[:2], scales, args[3], False, *args[5:])
+        _solve_directions(probe, 0, *targs, trial, _Solution(args[0]), [], None)
+        tips = trial["tips"][0]
+    return scales, mlevel
+
+
+def _collect(rod, b_max, system, psi, alpha, level, scales, mlevel, got, sol, events):
+    """The Workspace: the directions sorted, the cells and their union, and the area error
+    (the area one bisection level coarser)."""
     order = np.argsort(alpha, kind="stable")
     where = np.empty_like(order)
     where[order] = np.arange(order.size)

@@ -109,7 +109,7 @@ class Assembler:
         plane: str = "stress",
         mixed: bool = True,
     ):
-        from skfem import Basis, FacetBasis
+        from skfem import Basis
 
         self.mesh = mesh
         self.dim = dim = mesh.p.shape[0]
@@ -124,8 +124,23 @@ class Assembler:
         elem = _element(dim, order)
         basis = Basis(mesh, elem, intorder=INTORDER[order])
         self.basis = basis
+        self._quadrature(basis)
+        self._magnetization(rod)
+        self._clamp_and_tip(mesh, basis, elem, order)
+        self._pressure_basis(order)
+        self._lam3 = None
+        # factorisations: levels of the block Cholesky grow from the clamped end
+        x_free = self.nodes[0][self.free // dim]
+        self._factorizer = SymmetricFactorizer(
+            start=np.flatnonzero(x_free <= x_free.min() + 1e-9 * self.length)
+        )
+
+    def _quadrature(self, basis) -> None:
+        """Shape functions, their gradients and weights at the quadrature points, and the
+        layouts of the batched kernels."""
+        dim = self.dim
         nb = len(basis.basis)
-        self.nel, self.nq, self.nb = mesh.t.shape[1], basis.X.shape[1], nb
+        self.nel, self.nq, self.nb = self.mesh.t.shape[1], basis.X.shape[1], nb
         self.n_nodes = basis.N
         self.ndof = basis.N * dim
         # shape functions at quadrature points: N (e, q, a), dN (e, q, a, J)
@@ -147,6 +162,11 @@ class Assembler:
         self._N_a_q = np.ascontiguousarray(self.N.transpose(0, 2, 1))
         self.X = np.ascontiguousarray(np.asarray(basis.global_coordinates()).transpose(1, 2, 0))
         self.nodes = np.asarray(basis.doflocs)
+
+    def _magnetization(self, rod) -> None:
+        """The magnetization ``M`` (e, q, dim), A/m, in the reference configuration at the
+        quadrature points."""
+        dim = self.dim
         # magnetization in the reference configuration at the quadrature points (e, q, dim):
         # |M| (cos th cos psi, sin th cos psi, sin psi) in 3D, the planar (cos th, sin th) in 2D
         if dim == 2:
@@ -161,9 +181,16 @@ class Assembler:
             mg = mg * np.cos(el)
         M[..., 0], M[..., 1] = mg * np.cos(an), mg * np.sin(an)
         self.M = M
+
+    def _clamp_and_tip(self, mesh, basis, elem, order) -> None:
+        """Element dofs, the clamped dofs at x = 0 (and the sparsity pattern of the free ones),
+        and the tip: the centroid of the free end face x = L."""
+        from skfem import FacetBasis
+
+        dim = self.dim
         # vector dofs of each element, (e, a*dim + i)
         nodes_e = basis.element_dofs.T
-        self.edofs = (nodes_e[:, :, None] * dim + np.arange(dim)).reshape(self.nel, nb * dim)
+        self.edofs = (nodes_e[:, :, None] * dim + np.arange(dim)).reshape(self.nel, self.nb * dim)
         # clamp at x = 0
         tol = 1e-9 * self.length
         clamp_facets = mesh.facets_satisfying(lambda x: np.abs(x[0]) < tol)
@@ -186,6 +213,11 @@ class Assembler:
         self.tip_weights = c / area
         Xf = np.asarray(fb.global_coordinates())
         self.tip_reference = np.einsum("dfq,fq->d", Xf, fb.dx) / area
+
+    def _pressure_basis(self, order) -> None:
+        """Mixed formulation: the discontinuous pressure basis ``phi`` (e, q, m) and its mass
+        matrices ``Mp``, ``Minv`` (e, m, m)."""
+        dim = self.dim
         # mixed formulation: discontinuous pressure basis phi (e, q, m), Minv (e, m, m);
         # linear in the physical (unmapped) coordinates for order 2 -- the stable, optimal
         # Q2-P1 pair also on curved and distorted elements -- and constant for order 1
@@ -202,12 +234,6 @@ class Assembler:
             self.Mp = np.einsum("eq,eqi,eqj->eij", self.w, self.phi, self.phi)
             self.Minv = np.linalg.inv(self.Mp)
             self.volumes = self.w.sum(axis=1)
-        self._lam3 = None
-        # factorisations: levels of the block Cholesky grow from the clamped end
-        x_free = self.nodes[0][self.free // dim]
-        self._factorizer = SymmetricFactorizer(
-            start=np.flatnonzero(x_free <= x_free.min() + 1e-9 * self.length)
-        )
 
     # -- sparsity ---------------------------------------------------------------------------
     def _build_pattern(self, fixed: np.ndarray) -> None:
@@ -354,7 +380,7 @@ class Assembler:
         if d == 3:
             Fi3, J = inverse_and_determinant(Ff)
         else:
-            J = Ff[:, 0, 0] * Ff[:, 1, 1] - Ff[:, 0, 1] * Ff[:, 1, 0]
+            Fi3, J = None, Ff[:, 0, 0] * Ff[:, 1, 1] - Ff[:, 0, 1] * Ff[:, 1, 0]
         minJ = float(J.min()) if np.all(np.isfinite(J)) else -np.inf
         if not minJ > 0:
             return Evaluation(ok=False, min_jacobian=minJ)
@@ -370,53 +396,7 @@ class Assembler:
         w = self.w.reshape(-1)
         Mf = self.M.reshape(-1, d)
         ev = Evaluation(ok=True, min_jacobian=minJ)
-        # elastic part: A is a dense (n, d, d, d, d) tangent (plane stress) or a DyadicTangent
-        A = None
-        r_extra = None
-        if self.plane_stress:
-            lam0 = self._lam3 if self._lam3 is not None and self._lam3.size == J.size else None
-            W, P, A, self._lam3 = plane_stress(Ff, self.shear, self.bulk, lam0, tangent)
-            energy = float(w @ W)
-        else:
-            if d == 3:
-                F3, inv = Ff, (Fi3, J)
-            else:  # plane strain: F33 = 1
-                F3 = np.pad(Ff, ((0, 0), (0, 1), (0, 1)))
-                F3[:, 2, 2] = 1.0
-                Fi3 = np.zeros_like(F3)
-                Fi3[:, 0, 0], Fi3[:, 1, 1] = Ff[:, 1, 1] / J, Ff[:, 0, 0] / J
-                Fi3[:, 0, 1], Fi3[:, 1, 0] = -Ff[:, 0, 1] / J, -Ff[:, 1, 0] / J
-                Fi3[:, 2, 2] = 1.0
-                inv = (Fi3, J)
-            if self.mixed:
-                W, P, A = isochoric(F3, self.shear, tangent, dyadic=True, inv=inv)
-                J3, dJ, d2J = jacobian_derivatives(F3, tangent, dyadic=True, inv=inv)
-                a = z[self.nfree :].reshape(nel, -1)
-                p = np.einsum("ei,eqi->eq", a, self.phi).reshape(-1)
-                g = np.einsum("eq,eqi->ei", self.w * (J3 - 1.0).reshape(nel, nq), self.phi)
-                Ma = np.einsum("eij,ej->ei", self.Mp, a)
-                ra = g - Ma / self.bulk
-                energy = (
-                    float(w @ W)
-                    + float(np.einsum("ei,ei->", a, g))
-                    - 0.5 * float(np.einsum("ei,ei->", a, Ma)) / self.bulk
-                )
-                P = P + p[:, None, None] * dJ
-                dJe = dJ[:, :d, :d].reshape(nel, nq, d, d)
-                h = np.matmul(self.dN, np.swapaxes(dJe, 2, 3))  # (e, q, b, k)
-                wphi = (self.w[:, :, None] * self.phi).transpose(0, 2, 1)  # (e, i, q)
-                Bm = np.matmul(wphi, h.reshape(nel, nq, nb * d))  # (e, i, b*d)
-                KMB = self.bulk * np.einsum("eij,ejb->eib", self.Minv, Bm)
-                r_extra = np.matmul(ra[:, None, :], KMB)[:, 0]
-                ev.constraint_matrix = Bm
-                ev.constraint_residual = ra
-                ev.constraint_norm = float(np.max(np.abs(ra) / self.volumes[:, None]))
-                if tangent:
-                    A = A + d2J.scaled(p)
-            else:
-                W, P, A = neo_hookean(F3, self.shear, self.bulk, tangent, dyadic=True, inv=inv)
-                energy = float(w @ W)
-            P = P[:, :d, :d]
+        energy, P, A, condensed = self._elastic(Ff, Fi3, J, z, tangent, ev)
         # elastic and magnetic (per unit scale) stresses tested with grad(du) in one matmul
         Pm = mag.magnetic_stress(Mf, B)
         PP = np.concatenate([P, Pm], axis=1) * w[:, None, None]  # (n, 2d, d): [i or d+i, J]
@@ -432,27 +412,92 @@ class Assembler:
         ev.energy = energy
         ev.internal_norm = float(np.linalg.norm(rel))
         ev.residual = rel + scale * rm
-        if r_extra is not None:
-            ev.residual += self._vector(r_extra)
+        if condensed is not None:
+            ev.residual += self._vector(condensed[0])
         ev.load_rate = rm
         if tangent:
-            magnetic = G is not None and scale != 0.0
-            if self.plane_stress:
-                Ke = self._elastic_kernel(A.reshape(nel, nq, d, d, d, d))
-                if magnetic:
-                    Ke += scale * self._magnetic_kernel(Ff, Mf, G, Hs)
-            else:
-                # the mixed and magnetic terms are added chunk by chunk, while the chunk's
-                # element matrices are in cache
-                terms = []
-                if self.mixed:
-                    BmT = np.swapaxes(Bm, 1, 2)
-                    terms.append(lambda sl, K: K.__iadd__(np.matmul(BmT[sl], KMB[sl])))
-                if magnetic:
-                    terms.append(self._magnetic_terms(Ff, Mf, scale * G, Hs, scale))
-                Ke = self._dyadic_kernel(A, add=terms)
-            ev.tangent = self._sparse(Ke)
+            ev.tangent = self._tangent(A, Ff, Mf, G, Hs, scale, condensed)
         return ev
+
+    def _elastic(self, Ff, Fi3, J, z, tangent: bool, ev: Evaluation):
+        """Elastic energy (J), first Piola-Kirchhoff stress P (n, d, d) and its tangent A (a
+        dense (n, d, d, d, d) array for plane stress, else a DyadicTangent; None without
+        ``tangent``) of the deformation gradients ``Ff`` (n, d, d) with determinants ``J``
+        (``Fi3`` their inverses in 3D); for the mixed formulation also the condensation
+        (residual term, B, K Minv B), else None, and ``ev``'s constraint fields."""
+        d = self.dim
+        w = self.w.reshape(-1)
+        if self.plane_stress:
+            lam0 = self._lam3 if self._lam3 is not None and self._lam3.size == J.size else None
+            W, P, A, self._lam3 = plane_stress(Ff, self.shear, self.bulk, lam0, tangent)
+            return float(w @ W), P, A, None
+        if d == 3:
+            F3, inv = Ff, (Fi3, J)
+        else:  # plane strain: F33 = 1
+            F3 = np.pad(Ff, ((0, 0), (0, 1), (0, 1)))
+            F3[:, 2, 2] = 1.0
+            Fi3 = np.zeros_like(F3)
+            Fi3[:, 0, 0], Fi3[:, 1, 1] = Ff[:, 1, 1] / J, Ff[:, 0, 0] / J
+            Fi3[:, 0, 1], Fi3[:, 1, 0] = -Ff[:, 0, 1] / J, -Ff[:, 1, 0] / J
+            Fi3[:, 2, 2] = 1.0
+            inv = (Fi3, J)
+        if not self.mixed:
+            W, P, A = neo_hookean(F3, self.shear, self.bulk, tangent, dyadic=True, inv=inv)
+            return float(w @ W), P[:, :d, :d], A, None
+        return self._mixed_elastic(F3, inv, z, tangent, ev)
+
+    def _mixed_elastic(self, F3, inv, z, tangent: bool, ev: Evaluation):
+        """The mixed formulation's part of :meth:`_elastic`: isochoric energy plus the element
+        pressures ``a`` (the last dofs of ``z``) times the volume constraint, condensed."""
+        d, nel, nq, nb = self.dim, self.nel, self.nq, self.nb
+        w = self.w.reshape(-1)
+        W, P, A = isochoric(F3, self.shear, tangent, dyadic=True, inv=inv)
+        J3, dJ, d2J = jacobian_derivatives(F3, tangent, dyadic=True, inv=inv)
+        a = z[self.nfree :].reshape(nel, -1)
+        p = np.einsum("ei,eqi->eq", a, self.phi).reshape(-1)
+        g = np.einsum("eq,eqi->ei", self.w * (J3 - 1.0).reshape(nel, nq), self.phi)
+        Ma = np.einsum("eij,ej->ei", self.Mp, a)
+        ra = g - Ma / self.bulk
+        energy = (
+            float(w @ W)
+            + float(np.einsum("ei,ei->", a, g))
+            - 0.5 * float(np.einsum("ei,ei->", a, Ma)) / self.bulk
+        )
+        P = P + p[:, None, None] * dJ
+        dJe = dJ[:, :d, :d].reshape(nel, nq, d, d)
+        h = np.matmul(self.dN, np.swapaxes(dJe, 2, 3))  # (e, q, b, k)
+        wphi = (self.w[:, :, None] * self.phi).transpose(0, 2, 1)  # (e, i, q)
+        Bm = np.matmul(wphi, h.reshape(nel, nq, nb * d))  # (e, i, b*d)
+        KMB = self.bulk * np.einsum("eij,ejb->eib", self.Minv, Bm)
+        r_extra = np.matmul(ra[:, None, :], KMB)[:, 0]
+        ev.constraint_matrix = Bm
+        ev.constraint_residual = ra
+        ev.constraint_norm = float(np.max(np.abs(ra) / self.volumes[:, None]))
+        if tangent:
+            A = A + d2J.scaled(p)
+        return energy, P[:, :d, :d], A, (r_extra, Bm, KMB)
+
+    def _tangent(self, A, Ff, Mf, G, Hs, scale: float, condensed) -> sp.csr_matrix:
+        """The tangent of the free dofs: elastic (``A``), condensed pressure (``condensed``)
+        and magnetic (at ``scale``) element matrices, assembled."""
+        d, nel, nq = self.dim, self.nel, self.nq
+        magnetic = G is not None and scale != 0.0
+        if self.plane_stress:
+            Ke = self._elastic_kernel(A.reshape(nel, nq, d, d, d, d))
+            if magnetic:
+                Ke += scale * self._magnetic_kernel(Ff, Mf, G, Hs)
+        else:
+            # the mixed and magnetic terms are added chunk by chunk, while the chunk's
+            # element matrices are in cache
+            terms = []
+            if self.mixed:
+                _, Bm, KMB = condensed
+                BmT = np.swapaxes(Bm, 1, 2)
+                terms.append(lambda sl, K: K.__iadd__(np.matmul(BmT[sl], KMB[sl])))
+            if magnetic:
+                terms.append(self._magnetic_terms(Ff, Mf, scale * G, Hs, scale))
+            Ke = self._dyadic_kernel(A, add=terms)
+        return self._sparse(Ke)
 
     def _elastic_kernel(self, A: np.ndarray, chunk: int = 256) -> np.ndarray:
         """``K[e, a*d+i, b*d+k] = sum_q w dN_aJ A_iJkL dN_bL``, shape (e, nb*d, nb*d).

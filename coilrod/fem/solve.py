@@ -35,6 +35,82 @@ def _scales(scales) -> np.ndarray:
     return arr
 
 
+def _checked_options(
+    rod, field, dim, order, plane, formulation, poisson_ratio, rtol, utol, max_iterations, max_cuts
+) -> float:
+    """Validate the options of :func:`solve_fem` (a 2D problem: that the field and the rod stay
+    in the plane); returns the Poisson ratio."""
+    if isinstance(dim, bool) or dim not in (2, 3):
+        raise ValueError(f"dim must be 2 or 3; got {dim!r}")
+    if dim == 2:
+        rod.magnetization.check_planar("2D FEM (dim=2)")
+        reasons = planar_reasons(rod, field, np.zeros(3), clamp_frame(0.0, None))
+        if reasons:
+            raise ValueError(
+                "dim=2 would drop out-of-plane loads (the 2D FEM sees only B_x, B_y and their "
+                "x-y derivatives): " + "; ".join(reasons) + " -- use dim=3"
+            )
+    if isinstance(order, bool) or order not in (1, 2):
+        raise ValueError(f"order must be 1 or 2; got {order!r}")
+    if plane not in ("stress", "strain"):
+        raise ValueError(f"plane must be 'stress' or 'strain'; got {plane!r}")
+    if formulation not in ("mixed", "displacement"):
+        raise ValueError(f"formulation must be 'mixed' or 'displacement'; got {formulation!r}")
+    nu = finite_scalar(poisson_ratio, "poisson_ratio")
+    if not -1.0 < nu < 0.5:
+        raise ValueError(f"poisson_ratio must lie in (-1, 0.5); got {nu}")
+    for name, val in (("rtol", rtol), ("utol", utol)):
+        if not finite_scalar(val, name) > 0:
+            raise ValueError(f"{name} must be positive; got {val}")
+    for name, val, high in (("max_iterations", max_iterations, 1000), ("max_cuts", max_cuts, 60)):
+        if isinstance(val, bool) or not isinstance(val, int | np.integer) or not 1 <= val <= high:
+            raise ValueError(f"{name} must be an integer from 1 to {high}; got {val!r}")
+    return nu
+
+
+def _assembler(rod, field, mesh, elements, dim, order, nu, plane, formulation) -> Assembler:
+    """The Assembler of the rod's body on ``mesh`` (the default or given element counts'
+    mesh when None), checked to have a finite field on the undeformed body."""
+    if mesh is None:
+        if elements is None:
+            elements = default_elements(rod, dim)
+        mesh = rod_mesh(rod, dim, check_elements(elements, dim), order)
+    elif getattr(getattr(mesh, "p", None), "shape", (dim,))[0] != dim:
+        raise ValueError(f"mesh must be {dim}-dimensional for dim={dim}; got {mesh.p.shape[0]}")
+    else:
+        check_mesh(mesh, rod, dim, order)
+    G, K = moduli(rod.youngs_modulus, nu)
+    asm = Assembler(mesh, order, rod, field, G, K, plane=plane, mixed=formulation == "mixed")
+    # the field must be finite on the undeformed body
+    try:
+        B, Gr, _ = asm.field_at(asm.X.reshape(-1, dim), False)
+    except ValueError as exc:
+        raise ValueError(f"field cannot be evaluated on the undeformed rod body: {exc}") from None
+    if not (np.all(np.isfinite(B)) and (Gr is None or np.all(np.isfinite(Gr)))):
+        raise ValueError("field must be finite on the rod body; it returned non-finite values")
+    return asm
+
+
+def _progress(progress, total: int, dim: int):
+    """(callback (k, scale) or None, the tqdm bar to close or None) for ``progress``: True (a
+    bar), False/None, or a callable."""
+    bar = None
+    if progress is True:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=total, desc=f"solve_fem {dim}D", unit="scale")
+
+        def progress(k, scale):
+            bar.update(1)
+            bar.set_postfix(scale=f"{scale:.3g}")
+
+    elif not progress:
+        progress = None
+    elif not callable(progress):
+        raise ValueError(f"progress must be a bool or a callable; got {progress!r}")
+    return progress, bar
+
+
 def solve_fem(
     rod: Rod,
     field: Field,
@@ -159,48 +235,20 @@ def solve_fem(
     if not isinstance(field, Field):
         raise ValueError(f"field must be a coils Field; got {type(field).__name__}")
     scales = _scales(scales)
-    if isinstance(dim, bool) or dim not in (2, 3):
-        raise ValueError(f"dim must be 2 or 3; got {dim!r}")
-    if dim == 2:
-        rod.magnetization.check_planar("2D FEM (dim=2)")
-        reasons = planar_reasons(rod, field, np.zeros(3), clamp_frame(0.0, None))
-        if reasons:
-            raise ValueError(
-                "dim=2 would drop out-of-plane loads (the 2D FEM sees only B_x, B_y and their "
-                "x-y derivatives): " + "; ".join(reasons) + " -- use dim=3"
-            )
-    if isinstance(order, bool) or order not in (1, 2):
-        raise ValueError(f"order must be 1 or 2; got {order!r}")
-    if plane not in ("stress", "strain"):
-        raise ValueError(f"plane must be 'stress' or 'strain'; got {plane!r}")
-    if formulation not in ("mixed", "displacement"):
-        raise ValueError(f"formulation must be 'mixed' or 'displacement'; got {formulation!r}")
-    nu = finite_scalar(poisson_ratio, "poisson_ratio")
-    if not -1.0 < nu < 0.5:
-        raise ValueError(f"poisson_ratio must lie in (-1, 0.5); got {nu}")
-    for name, val in (("rtol", rtol), ("utol", utol)):
-        if not finite_scalar(val, name) > 0:
-            raise ValueError(f"{name} must be positive; got {val}")
-    for name, val, high in (("max_iterations", max_iterations, 1000), ("max_cuts", max_cuts, 60)):
-        if isinstance(val, bool) or not isinstance(val, int | np.integer) or not 1 <= val <= high:
-            raise ValueError(f"{name} must be an integer from 1 to {high}; got {val!r}")
-    if mesh is None:
-        if elements is None:
-            elements = default_elements(rod, dim)
-        mesh = rod_mesh(rod, dim, check_elements(elements, dim), order)
-    elif getattr(getattr(mesh, "p", None), "shape", (dim,))[0] != dim:
-        raise ValueError(f"mesh must be {dim}-dimensional for dim={dim}; got {mesh.p.shape[0]}")
-    else:
-        check_mesh(mesh, rod, dim, order)
-    G, K = moduli(rod.youngs_modulus, nu)
-    asm = Assembler(mesh, order, rod, field, G, K, plane=plane, mixed=formulation == "mixed")
-    # the field must be finite on the undeformed body
-    try:
-        B, Gr, _ = asm.field_at(asm.X.reshape(-1, dim), False)
-    except ValueError as exc:
-        raise ValueError(f"field cannot be evaluated on the undeformed rod body: {exc}") from None
-    if not (np.all(np.isfinite(B)) and (Gr is None or np.all(np.isfinite(Gr)))):
-        raise ValueError("field must be finite on the rod body; it returned non-finite values")
+    nu = _checked_options(
+        rod,
+        field,
+        dim,
+        order,
+        plane,
+        formulation,
+        poisson_ratio,
+        rtol,
+        utol,
+        max_iterations,
+        max_cuts,
+    )
+    asm = _assembler(rod, field, mesh, elements, dim, order, nu, plane, formulation)
     problem = FEMProblem(asm, rtol, utol)
     min_step = 2.0 ** -int(max_cuts)
     opts = PathOptions(
@@ -208,20 +256,7 @@ def solve_fem(
         min_step=min_step,
         bifurcation_tol=min(0.75, max(1e-4, 2.0 * min_step)),
     )
-    bar = None
-    if progress is True:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=len(scales), desc=f"solve_fem {dim}D", unit="scale")
-
-        def progress(k, scale):
-            bar.update(1)
-            bar.set_postfix(scale=f"{scale:.3g}")
-
-    elif not progress:
-        progress = None
-    elif not callable(progress):
-        raise ValueError(f"progress must be a bool or a callable; got {progress!r}")
+    progress, bar = _progress(progress, len(scales), dim)
     try:
         run = follow_load(
             problem, np.zeros(asm.size), scales, opts, name="solve_fem", progress=progress

@@ -677,10 +677,9 @@ def _coil_list_problem(parts, key: str) -> str | None:
     return None
 
 
-def _parse_coil(data, key: str, p: _Problems, *, control: bool = False):
-    """A coil table: at the current its ``current``, ``B`` or ``gradient`` gives; in a coil
-    system under control (``control``) at 0 A, with an optional ``wire_diameter``."""
-    data = _table(data, key)
+def _coil_kind(data, key: str, p: _Problems, control: bool):
+    """Check the keys of a coil table (strengths refused under control) and return its
+    ``type`` (or _BAD)."""
     strengths = ("current", "B", "gradient")
     geometry = {"type", "radius", "turns", "axis", "center", "spacing", "winding", "filaments"}
     allowed = geometry | ({"wire_diameter"} if control else set(strengths))
@@ -700,6 +699,55 @@ def _parse_coil(data, key: str, p: _Problems, *, control: bool = False):
     elif not isinstance(kind, str) or kind not in _COIL_TYPES:
         p.add(f"{key}.type: unknown coil type {_show(kind)} (one of {', '.join(_COIL_TYPES)})")
         kind = _BAD
+    return kind
+
+
+def _coil_winding(data, key: str, p: _Problems, kind, radius, kwargs: dict) -> None:
+    """Parse a coil's ``winding`` (and ``filaments``) into ``kwargs``, checked against its
+    radius and the pair's spacing (``kwargs["spacing"]`` set _BAD when it is too small)."""
+    w = data["winding"]
+    if not isinstance(w, list) or len(w) != 2:
+        p.add(
+            f"{key}.winding: expected ['width', 'height'], e.g. ['10 mm', '10 mm']; got {_show(w)}"
+        )
+        kwargs["winding"] = _BAD
+    else:
+        width, height = (
+            p.take(_value, v, "length", f"{key}.winding[{i}]", kind="coil size", positive=True)
+            for i, v in enumerate(w)
+        )
+        if _ok(height, radius) and height >= 2 * radius:
+            p.add(
+                f"{key}.winding[1]: the winding height {w[1]} must be below twice the "
+                f"radius ({_mm(2 * radius)})"
+            )
+            height = _BAD
+        if _ok(width, kind) and kind != "coil":
+            spacing = kwargs.get("spacing")
+            if spacing is None and _ok(radius):
+                default = radius * _COIL_TYPES[kind].default_spacing_factor
+                if width >= default:
+                    p.add(
+                        f"{key}.winding[0]: the winding width {w[0]} must be below the "
+                        f"spacing of the pair (default {_mm(default)}); give a spacing"
+                    )
+                    width = _BAD
+            elif _ok(spacing) and spacing is not None and width >= spacing:
+                p.add(
+                    f"{key}.spacing: must exceed the winding width {w[0]} (the two "
+                    f"windings would overlap); got {data['spacing']}"
+                )
+                kwargs["spacing"] = _BAD
+        kwargs["winding"] = (width, height) if _ok(width, height) else _BAD
+    if "filaments" in data:
+        kwargs["filaments"] = p.take(
+            _counts, data["filaments"], f"{key}.filaments", 2, limits.MAX_FILAMENTS, "[3, 3]"
+        )
+
+
+def _coil_geometry(data, key: str, p: _Problems, kind):
+    """A coil's radius, turns and the keyword arguments of its class (axis, center, spacing,
+    winding, filaments), each _BAD where the table is wrong."""
     radius = p.take(_quantity, data, "radius", "length", key, kind="coil size", positive=True)
     turns = p.take(
         _number,
@@ -727,109 +775,100 @@ def _parse_coil(data, key: str, p: _Problems, *, control: bool = False):
                 _quantity, data, "spacing", "length", key, kind="coil size", positive=True
             )
     if "winding" in data:
-        w = data["winding"]
-        if not isinstance(w, list) or len(w) != 2:
-            p.add(
-                f"{key}.winding: expected ['width', 'height'], e.g. ['10 mm', '10 mm']; "
-                f"got {_show(w)}"
-            )
-            kwargs["winding"] = _BAD
-        else:
-            width, height = (
-                p.take(_value, v, "length", f"{key}.winding[{i}]", kind="coil size", positive=True)
-                for i, v in enumerate(w)
-            )
-            if _ok(height, radius) and height >= 2 * radius:
-                p.add(
-                    f"{key}.winding[1]: the winding height {w[1]} must be below twice the "
-                    f"radius ({_mm(2 * radius)})"
-                )
-                height = _BAD
-            if _ok(width, kind) and kind != "coil":
-                spacing = kwargs.get("spacing")
-                if spacing is None and _ok(radius):
-                    default = radius * _COIL_TYPES[kind].default_spacing_factor
-                    if width >= default:
-                        p.add(
-                            f"{key}.winding[0]: the winding width {w[0]} must be below the "
-                            f"spacing of the pair (default {_mm(default)}); give a spacing"
-                        )
-                        width = _BAD
-                elif _ok(spacing) and spacing is not None and width >= spacing:
-                    p.add(
-                        f"{key}.spacing: must exceed the winding width {w[0]} (the two "
-                        f"windings would overlap); got {data['spacing']}"
-                    )
-                    kwargs["spacing"] = _BAD
-            kwargs["winding"] = (width, height) if _ok(width, height) else _BAD
-        if "filaments" in data:
-            kwargs["filaments"] = p.take(
-                _counts, data["filaments"], f"{key}.filaments", 2, limits.MAX_FILAMENTS, "[3, 3]"
-            )
+        _coil_winding(data, key, p, kind, radius, kwargs)
     elif "filaments" in data:
         p.add(f"{key}.filaments: filaments model a finite winding; give winding too")
-    if control:
-        if "wire_diameter" in data:
-            kwargs["wire_diameter"] = p.take(
-                _quantity, data, "wire_diameter", "length", key, kind="coil size", positive=True
-            )
-        if not _ok(kind, radius, turns, *kwargs.values()):
-            return _BAD
-        try:
-            coil = _COIL_TYPES[kind](radius, turns, 0.0, **kwargs)
-        except ValueError as exc:  # the coil classes' own checks
-            p.add(f"{key}: {exc}")
-            return _BAD
-        return _Coil(key, coil, key)
-    given = [k for k in strengths if k in data]
-    strength = _BAD
+    return radius, turns, kwargs
+
+
+def _controlled_coil(data, key: str, p: _Problems, kind, radius, turns, kwargs):
+    """A coil of a system under control: at 0 A, with an optional ``wire_diameter``."""
+    if "wire_diameter" in data:
+        kwargs["wire_diameter"] = p.take(
+            _quantity, data, "wire_diameter", "length", key, kind="coil size", positive=True
+        )
+    if not _ok(kind, radius, turns, *kwargs.values()):
+        return _BAD
+    try:
+        coil = _COIL_TYPES[kind](radius, turns, 0.0, **kwargs)
+    except ValueError as exc:  # the coil classes' own checks
+        p.add(f"{key}: {exc}")
+        return _BAD
+    return _Coil(key, coil, key)
+
+
+def _coil_strength(data, key: str, p: _Problems, kind):
+    """The one strength key given (``current``, ``B`` or ``gradient``; None if not exactly
+    one) and its value (or _BAD), checked against what the coil type can make."""
+    given = [k for k in ("current", "B", "gradient") if k in data]
     if len(given) != 1:
         p.add(
             f"{key}: give exactly one of current, B (target centre field) or "
             f"gradient (target centre gradient); got {', '.join(given) or 'none'}"
         )
-    elif given == ["current"]:
-        strength = p.take(_quantity, data, "current", "current", key, kind="current")
-    elif given == ["B"]:
+        return None, _BAD
+    if given == ["current"]:
+        return "current", p.take(_quantity, data, "current", "current", key, kind="current")
+    if given == ["B"]:
         strength = p.take(_quantity, data, "B", "flux density", key, kind="flux density")
         if _ok(kind) and kind == "maxwell":
             p.add(f"{key}.B: a Maxwell pair has no field at its centre; give its gradient")
             strength = _BAD
-    else:
-        strength = p.take(_quantity, data, "gradient", "gradient", key, kind="gradient")
-        if _ok(kind) and kind != "maxwell":
-            p.add(
-                f"{key}.gradient: a {_COIL_NAMES[kind]} has no gradient at its centre (by "
-                "symmetry); give its field B, or use a maxwell pair"
-            )
-            strength = _BAD
+        return "B", strength
+    strength = p.take(_quantity, data, "gradient", "gradient", key, kind="gradient")
+    if _ok(kind) and kind != "maxwell":
+        p.add(
+            f"{key}.gradient: a {_COIL_NAMES[kind]} has no gradient at its centre (by "
+            "symmetry); give its field B, or use a maxwell pair"
+        )
+        strength = _BAD
+    return "gradient", strength
+
+
+def _coil_current(data, p: _Problems, unit, given: str, strength, strength_key: str):
+    """The current (A) of a coil whose strength is ``given`` ("current", "B" or "gradient"),
+    ``unit`` the coil at 1 A; _BAD (the problem added) beyond the allowed current."""
+    if given == "current":
+        return strength
+    from coils.design import current_for_field, current_for_gradient
+
+    to_current = current_for_field if given == "B" else current_for_gradient
+    try:
+        current = to_current(unit, strength)
+    except ValueError as exc:
+        p.add(f"{strength_key}: {exc}")
+        return _BAD
+    high = limits.RANGES["current"].high
+    if not abs(current) <= high:
+        p.add(
+            f"{strength_key}: needs {abs(current):.3g} A per turn in this coil, more than "
+            f"the {high:g} A allowed; use more turns or another size; got {data[given]}"
+        )
+        return _BAD
+    return current
+
+
+def _parse_coil(data, key: str, p: _Problems, *, control: bool = False):
+    """A coil table: at the current its ``current``, ``B`` or ``gradient`` gives; in a coil
+    system under control (``control``) at 0 A, with an optional ``wire_diameter``."""
+    data = _table(data, key)
+    kind = _coil_kind(data, key, p, control)
+    radius, turns, kwargs = _coil_geometry(data, key, p, kind)
+    if control:
+        return _controlled_coil(data, key, p, kind, radius, turns, kwargs)
+    given, strength = _coil_strength(data, key, p, kind)
     if not _ok(kind, radius, turns, strength, *kwargs.values()):
         return _BAD
-    strength_key = f"{key}.{given[0]}"
+    strength_key = f"{key}.{given}"
     cls = _COIL_TYPES[kind]
     try:
         unit = cls(radius, turns, 1.0, **kwargs)
     except ValueError as exc:  # the coil classes' own checks
         p.add(f"{key}: {exc}")
         return _BAD
-    if given == ["current"]:
-        current = strength
-    else:
-        from coils.design import current_for_field, current_for_gradient
-
-        to_current = current_for_field if given == ["B"] else current_for_gradient
-        try:
-            current = to_current(unit, strength)
-        except ValueError as exc:
-            p.add(f"{strength_key}: {exc}")
-            return _BAD
-        high = limits.RANGES["current"].high
-        if not abs(current) <= high:
-            p.add(
-                f"{strength_key}: needs {abs(current):.3g} A per turn in this coil, more than "
-                f"the {high:g} A allowed; use more turns or another size; got {data[given[0]]}"
-            )
-            return _BAD
+    current = _coil_current(data, p, unit, given, strength, strength_key)
+    if not _ok(current):
+        return _BAD
     return _Coil(key, cls(radius, turns, current, **kwargs), strength_key)
 
 

@@ -272,6 +272,82 @@ def scene_with_scales(scene: Scene, scales) -> Scene:
     return dataclasses.replace(scene, scales=np.asarray(scales, dtype=float))
 
 
+def _field_cache(scene, plan, result, log):
+    """The gridded field cache of the coils over the plan's box (None without a box, or, noted
+    in the plan's decisions, when the grid cannot reach its tolerance)."""
+    if plan.cache_box is None:
+        return None
+    from coils.grid import GriddedField
+
+    t0 = time.perf_counter()
+    try:
+        cached = GriddedField(
+            scene.fields["coils"],
+            plan.cache_box[0],
+            plan.cache_box[1],
+            tol=1e-7,
+            tol_gradient=1e-5,
+        )
+    except ValueError as exc:  # the grid cannot reach the tolerance within its cell limit
+        note = f"no field cache after all, direct evaluation: {exc}"
+        result.plan.decisions.append(note)
+        if log:
+            log(note)
+        return None
+    if log:
+        log(
+            f"field cache: {cached.cells.tolist()} cells, estimated error B "
+            f"{cached.error_B:.1e}, gradient {cached.error_gradient:.1e} "
+            f"({time.perf_counter() - t0:.2f} s)"
+        )
+    return cached
+
+
+def _run_job(job, scene, field_obj, progress) -> ModelRun:
+    """One model in one field along the scene's scales; on a ConvergenceError the run holds the
+    error and the part of the path that was reached."""
+    t0 = time.perf_counter()
+    try:
+        scales, tip, angle, res = _solve(job, scene, field_obj, progress)
+        return ModelRun(
+            job.model,
+            job.field_label,
+            np.asarray(scales),
+            tip,
+            np.asarray(angle),
+            time.perf_counter() - t0,
+            result=res,
+        )
+    except ConvergenceError as exc:
+        run = ModelRun(
+            job.model,
+            job.field_label,
+            np.zeros(0),
+            np.zeros((0, 3)),
+            np.zeros(0),
+            time.perf_counter() - t0,
+            error=str(exc),
+        )
+        partial = getattr(exc, "result", None)
+        if partial is not None and len(getattr(partial, "scales", ())):
+            # the solver handed over the states it reached
+            run.scales = np.asarray(partial.scales)
+            run.tip = np.asarray(partial.tip)
+            run.tip_angle = np.asarray(partial.tip_angle)
+            run.result = partial
+            return run
+        # keep the part of the path that was reached (cheap for the rod: solve it again)
+        reachable = scene.scales[scene.scales <= exc.reached]
+        if job.model == "rod" and reachable.size and np.all(np.diff(scene.scales) > 0):
+            partial = scene_with_scales(scene, reachable)
+            try:
+                scales, tip, angle, res = _solve(job, partial, field_obj, progress)
+                run.scales, run.tip, run.tip_angle, run.result = scales, tip, angle, res
+            except ConvergenceError:  # pragma: no cover - the reached scales converged
+                pass
+        return run
+
+
 def run_scene(
     scene: Scene, *, plan: Plan | None = None, progress: bool | None = None, log=None
 ) -> SceneResult:
@@ -291,76 +367,10 @@ def run_scene(
     plan = plan_scene(scene) if plan is None else plan
     progress = sys.stderr.isatty() if progress is None else progress
     result = SceneResult(scene, plan)
-    cached = None
-    if plan.cache_box is not None:
-        from coils.grid import GriddedField
-
-        t0 = time.perf_counter()
-        try:
-            cached = GriddedField(
-                scene.fields["coils"],
-                plan.cache_box[0],
-                plan.cache_box[1],
-                tol=1e-7,
-                tol_gradient=1e-5,
-            )
-        except ValueError as exc:  # the grid cannot reach the tolerance within its cell limit
-            note = f"no field cache after all, direct evaluation: {exc}"
-            result.plan.decisions.append(note)
-            if log:
-                log(note)
-        else:
-            if log:
-                log(
-                    f"field cache: {cached.cells.tolist()} cells, estimated error B "
-                    f"{cached.error_B:.1e}, gradient {cached.error_gradient:.1e} "
-                    f"({time.perf_counter() - t0:.2f} s)"
-                )
+    cached = _field_cache(scene, plan, result, log)
     for job in plan.jobs:
         field_obj = cached if (cached is not None and job.field_label == "coils") else job.field
         if log:
             log(f"solving {job.model} in the {job.field_label} field ...")
-        t0 = time.perf_counter()
-        try:
-            scales, tip, angle, res = _solve(job, scene, field_obj, progress)
-            result.runs.append(
-                ModelRun(
-                    job.model,
-                    job.field_label,
-                    np.asarray(scales),
-                    tip,
-                    np.asarray(angle),
-                    time.perf_counter() - t0,
-                    result=res,
-                )
-            )
-        except ConvergenceError as exc:
-            run = ModelRun(
-                job.model,
-                job.field_label,
-                np.zeros(0),
-                np.zeros((0, 3)),
-                np.zeros(0),
-                time.perf_counter() - t0,
-                error=str(exc),
-            )
-            partial = getattr(exc, "result", None)
-            if partial is not None and len(getattr(partial, "scales", ())):
-                # the solver handed over the states it reached
-                run.scales = np.asarray(partial.scales)
-                run.tip = np.asarray(partial.tip)
-                run.tip_angle = np.asarray(partial.tip_angle)
-                run.result = partial
-                result.runs.append(run)
-                continue
-            # keep the part of the path that was reached (cheap for the rod: solve it again)
-            reachable = scene.scales[scene.scales <= exc.reached]
-            if job.model == "rod" and reachable.size and np.all(np.diff(scene.scales) > 0):
-                partial = scene_with_scales(scene, reachable)
-                try:
-                    scales, tip, angle, res = _solve(job, partial, field_obj, progress)
-                    run.scales, run.tip, run.tip_angle, run.result = scales, tip, angle, res
-                except ConvergenceError:  # pragma: no cover - the reached scales converged
-                    pass
-            result.runs.append(run)
+        result.runs.append(_run_job(job, scene, field_obj, progress))
     return result
