@@ -20,6 +20,7 @@ from .coaxial import CoaxialCoils
 from .field import Field, FieldSum, ScaledField
 from .grid import GriddedField
 from .ideal import LinearField, UniformField, linearize, maxwell_gradient
+from .magnets import CylinderMagnet, Dipole
 from .mpem import MPEM
 from .pairs import Coil, CoilPair, HelmholtzPair, MaxwellPair
 from .region import UniformityReport, deviation, uniformity
@@ -44,6 +45,8 @@ __all__ = [
     "UniformityReport",
     "GriddedField",
     "MPEM",
+    "Dipole",
+    "CylinderMagnet",
     "presets",
 ]
 

@@ -1,0 +1,368 @@
+"""Permanent magnets: a point dipole and axially magnetised cylinders and rings.
+
+Tiers as for coils (STYLE.md): :func:`solenoid_field` is the kernel (the field of a cylindrical
+current sheet in its own frame, no checks); the classes place it (position and orientation),
+handle the axis and the edges, and validate once.
+
+A cylinder uniformly magnetised along its axis with polarization ``J`` (T; ``J = mu0 M``, the
+remanence of the material) has the field of its bound surface current ``K = J / mu0`` (A/m)
+on the side: a finite solenoid, whose B inside and outside is the closed form of Derby & Olbert,
+"Cylindrical magnets and ideal solenoids", Am. J. Phys. 78 (2010) 229, with Bulirsch's
+generalised complete elliptic integral ``cel``.  Its derivative along the axis is exact
+without a new closed form: moving the sheet along its axis only moves its end rings, so
+``dB/dz`` is the field of two circular loops of current ``+K`` at the bottom and ``-K`` at the
+top (:class:`coils.CoaxialCoils`), and curl B = div B = 0 give the radial derivatives from it
+and from B.  A ring (hollow cylinder) is two sheets of opposite currents.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.constants import mu_0
+
+from ._immutable import sealed
+from ._validate import _show, as_array, as_vector, finite_scalar, positive
+from .coaxial import CoaxialCoils
+from .dipoles import dipole_sum
+from .field import Field
+
+__all__ = ["Dipole", "CylinderMagnet", "solenoid_field", "as_rotation"]
+
+#: A point within this fraction of the radius of an edge circle is "on the edge".
+ON_EDGE = 1e-9
+#: Below this fraction of the radius from the axis, B_rho / rho takes its axis limit.
+NEAR_AXIS = 1e-5
+
+
+def as_rotation(orientation, name: str = "orientation") -> np.ndarray:
+    """A rotation matrix (3, 3) (local -> global, columns the local axes) from None (identity),
+    a ``scipy.spatial.transform.Rotation`` or an array-like (3, 3) proper rotation."""
+    if orientation is None:
+        return np.eye(3)
+    if hasattr(orientation, "as_matrix"):
+        mat = np.asarray(orientation.as_matrix(), dtype=float)
+        if mat.shape != (3, 3):
+            raise ValueError(f"{name} must be a single rotation; got {mat.shape[:-2]} of them")
+        return mat
+    mat = as_array(orientation, name, (3, 3))
+    if np.abs(mat.T @ mat - np.eye(3)).max() > 1e-9 or np.linalg.det(mat) < 0:
+        raise ValueError(
+            f"{name} must be a rotation matrix (orthonormal, det +1) or a scipy Rotation; "
+            f"got {_show(mat.tolist())}"
+        )
+    return mat
+
+
+# -- tier 1: kernels -------------------------------------------------------------------------------
+def _cel(kc, p, c, s):
+    """Bulirsch's generalised complete elliptic integral, vectorised (kc != 0, p >= 0):
+    integral_0^{pi/2} (c cos^2 + s sin^2) / ((cos^2 + p sin^2) sqrt(cos^2 + kc^2 sin^2))."""
+    kc, p, c, s = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (kc, p, c, s)))
+    k = np.abs(kc)
+    em = np.ones_like(k)
+    pos = p > 0
+    pp = np.where(pos, np.sqrt(np.where(pos, p, 1.0)), 0.0)
+    ss = np.where(pos, s / np.where(pos, pp, 1.0), s)
+    cc = c.copy()
+    if not np.all(pos):  # p <= 0 (here p = 0: on the cylinder's side surface)
+        f = kc * kc
+        q = (1.0 - f) * (s - c * p)
+        g = 1.0 - p
+        f2 = f - p
+        pn = np.sqrt(f2 / g)
+        cn = (c - s) / g
+        sn = -q / (g * g * pn) + cn * pn
+        pp = np.where(pos, pp, pn)
+        cc = np.where(pos, cc, cn)
+        ss = np.where(pos, ss, sn)
+    f = cc
+    cc = cc + ss / pp
+    g = k / pp
+    ss = 2.0 * (ss + f * g)
+    pp = g + pp
+    g = em
+    em = k + em
+    kk = k
+    for _ in range(60):
+        if np.all(np.abs(g - k) <= g * 1e-9):
+            break
+        k = 2.0 * np.sqrt(kk)
+        kk = k * em
+        f = cc
+        cc = cc + ss / pp
+        g = kk / pp
+        ss = 2.0 * (ss + f * g)
+        pp = g + pp
+        g = em
+        em = k + em
+    return 0.5 * math.pi * (ss + cc * em) / (em * (em + pp))
+
+
+def solenoid_field(rho, z, radius: float, half_height: float, K: float):
+    """B of a cylindrical current sheet in its frame (Derby & Olbert 2010), tier 1.
+
+    Parameters
+    ----------
+    rho, z : ndarray, shape (n,)
+        Cylindrical coordinates about the sheet's axis from its centre, m (not on an edge).
+    radius, half_height : float
+        The sheet's radius and half its height, m.
+    K : float
+        Sheet current per unit height, A/m (counter-clockwise about +z; ``J / mu0`` for a
+        magnet of polarization J).
+
+    Returns
+    -------
+    B_rho, B_z : ndarray, shape (n,)
+        T.
+    """
+    a, b = radius, half_height
+    B0 = mu_0 * K / math.pi
+    ap = a + rho
+    gamma = (a - rho) / ap
+    out_r = np.zeros_like(rho)
+    out_z = np.zeros_like(rho)
+    for sign in (1.0, -1.0):
+        zz = z + sign * b
+        root = np.sqrt(zz * zz + ap * ap)
+        alpha = a / root
+        beta = zz / root
+        kc = np.sqrt((zz * zz + (a - rho) ** 2) / (zz * zz + ap * ap))
+        out_r += sign * alpha * _cel(kc, 1.0, 1.0, -1.0)
+        out_z += sign * beta * _cel(kc, gamma * gamma, 1.0, gamma)
+    return B0 * out_r, B0 * a / ap * out_z
+
+
+# -- public sources -------------------------------------------------------------------------------
+class Dipole(Field):
+    """A point magnetic dipole.
+
+    Parameters
+    ----------
+    moment : array-like, shape (3,)
+        Magnetic moment, A m^2 (a magnet's ``J V / mu0``: polarization J in T, volume V in m^3).
+    center : array-like, shape (3,)
+        Position, m.
+
+    Notes
+    -----
+    ``B = mu0 / (4 pi) (3 r (m . r) - m r^2) / r^5`` with ``r = x - center``; B, the gradient
+    and the hessian are exact (:mod:`coils.dipoles`).  A point at the centre is refused.
+
+    Examples
+    --------
+    >>> from coils import Dipole
+    >>> d = Dipole((0.0, 0.0, 1.0), (0.0, 0.0, 0.0))
+    >>> round(float(d.B([0.0, 0.0, 0.1])[0, 2]) * 1e3, 9)   # 2 mu0 m / (4 pi z^3), mT
+    0.2
+    """
+
+    _immutable = True
+
+    def __init__(self, moment, center=(0.0, 0.0, 0.0)):
+        self.moment = sealed(as_vector(moment, "moment"))
+        self.center = sealed(as_vector(center, "center"))
+        self._pos = sealed(self.center[None, :])
+        self._mom = sealed(mu_0 / (4 * math.pi) * self.moment[None, :])  # T m^3
+
+    @property
+    def length_scale(self) -> float:
+        return 1.0
+
+    def _add_to(self, pts, B, G, H, factor):
+        hit = dipole_sum(np.ascontiguousarray(pts), self._pos, factor * self._mom, 0.0, B, G, H)
+        if hit >= 0:
+            raise ValueError(
+                f"points[{hit}] = {pts[hit].tolist()} m is at the dipole's centre: its field is "
+                f"infinite there"
+            )
+
+    def _eval(self, pts, want_B, want_G, want_H):
+        n = pts.shape[0]
+        B = np.zeros((n, 3)) if want_B else None
+        G = np.zeros((n, 3, 3)) if want_G else None
+        H = np.zeros((n, 3, 3, 3)) if want_H else None
+        self._add_to(pts, B, G, H, 1.0)
+        return B, G, H
+
+    def _B(self, pts):
+        return self._eval(pts, True, False, False)[0]
+
+    def _gradient(self, pts):
+        return self._eval(pts, False, True, False)[1]
+
+    def _B_and_gradient(self, pts):
+        return self._eval(pts, True, True, False)[:2]
+
+    def _hessian(self, pts):
+        return self._eval(pts, False, False, True)[2]
+
+    def _B_gradient_hessian(self, pts):
+        return self._eval(pts, True, True, True)
+
+    def __repr__(self):
+        return f"Dipole(moment={self.moment.tolist()}, center={self.center.tolist()})"
+
+
+class CylinderMagnet(Field):
+    """An axially magnetised cylinder or ring (hollow cylinder) permanent magnet.
+
+    Parameters
+    ----------
+    radius : float
+        Outer radius, m.
+    height : float
+        Height along the magnetisation axis, m.
+    polarization : float
+        Magnetic polarization ``J = mu0 M`` along the local z axis, T (the remanence ``B_r``
+        of a rigid magnet; negative: magnetised along -z).
+    inner_radius : float
+        Bore radius of a ring, m (0: a full cylinder; below ``radius``).
+    center : array-like, shape (3,)
+        Position of the magnet's centre, m.
+    orientation : None, scipy Rotation or array-like (3, 3)
+        Rotation from the magnet's frame (magnetisation along its z) to the global one;
+        default none (magnetised along +z).
+
+    Notes
+    -----
+    B is the Derby & Olbert closed form of the side sheets (:func:`solenoid_field`); the
+    gradient is exact from it and the end loops (:mod:`coils.magnets`); the hessian is the
+    default central difference of the exact gradient (about 1e-8 relative).  Inside the
+    material B includes the polarization (``B = mu0 (H + M)``), as magpylib's.  Points on an
+    edge circle are refused; on the side surface B is discontinuous and the value returned
+    is one of its sides.  Far away the field is that of :meth:`dipole`.
+
+    Examples
+    --------
+    >>> from coils import CylinderMagnet
+    >>> m = CylinderMagnet(radius=5e-3, height=10e-3, polarization=1.2)
+    >>> round(float(m.B([0.0, 0.0, 0.0])[0, 2]), 6)   # J h / (2 sqrt(R^2 + h^2/4)) at the centre
+    0.848528
+    """
+
+    _immutable = True
+    _caches = ("_loops",)
+
+    def __init__(
+        self,
+        radius,
+        height,
+        polarization,
+        *,
+        inner_radius=0.0,
+        center=(0.0, 0.0, 0.0),
+        orientation=None,
+    ):
+        self.radius = positive(radius, "radius")
+        self.height = positive(height, "height")
+        self.polarization = finite_scalar(polarization, "polarization")
+        self.inner_radius = finite_scalar(inner_radius, "inner_radius")
+        if not 0.0 <= self.inner_radius < self.radius:
+            raise ValueError(
+                f"inner_radius must be in [0, radius = {self.radius}) m; got {self.inner_radius}"
+            )
+        self.center = sealed(as_vector(center, "center"))
+        self.rotation = sealed(as_rotation(orientation))
+        self._loops = None
+
+    @property
+    def axis(self) -> np.ndarray:
+        """Magnetisation direction (unit, global), shape (3,)."""
+        return self.rotation[:, 2].copy()
+
+    @property
+    def volume(self) -> float:
+        """m^3."""
+        return math.pi * (self.radius**2 - self.inner_radius**2) * self.height
+
+    @property
+    def length_scale(self) -> float:
+        return min(self.height, self.radius - self.inner_radius)
+
+    def dipole(self) -> Dipole:
+        """The point dipole of the same moment ``J V / mu0 * axis`` at the centre (the far
+        field, to O((size / distance)^2) relative)."""
+        return Dipole(self.polarization * self.volume / mu_0 * self.axis, self.center)
+
+    def _sheets(self):
+        K = self.polarization / mu_0
+        sheets = [(self.radius, K)]
+        if self.inner_radius > 0:
+            sheets.append((self.inner_radius, -K))
+        return sheets
+
+    def _end_loops(self) -> CoaxialCoils:
+        if self._loops is None:
+            b = 0.5 * self.height
+            fil = []
+            for a, K in self._sheets():
+                fil += [(-b, a, K), (b, a, -K)]
+            self._set_cache("_loops", CoaxialCoils(fil, axis=self.axis, center=self.center))
+        return self._loops
+
+    def _local(self, pts):
+        local = (pts - self.center) @ self.rotation
+        rho = np.hypot(local[:, 0], local[:, 1])
+        b = 0.5 * self.height
+        for a, _ in self._sheets():
+            edge = np.hypot(rho - a, np.abs(local[:, 2]) - b) <= ON_EDGE * a
+            if edge.any():
+                k = int(np.nonzero(edge)[0][0])
+                raise ValueError(
+                    f"points[{k}] = {pts[k].tolist()} m is on an edge circle of the magnet "
+                    f"(radius {a} m): its field gradient is infinite there"
+                )
+        return local, rho
+
+    def _B_local(self, local, rho):
+        Br = np.zeros_like(rho)
+        Bz = np.zeros_like(rho)
+        for a, K in self._sheets():
+            r, z = solenoid_field(rho, local[:, 2], a, 0.5 * self.height, K)
+            Br += r
+            Bz += z
+        return Br, Bz
+
+    def _B(self, pts):
+        local, rho = self._local(pts)
+        Br, Bz = self._B_local(local, rho)
+        safe = np.where(rho > 0, rho, 1.0)
+        Bl = np.column_stack([Br * local[:, 0] / safe, Br * local[:, 1] / safe, Bz])
+        return Bl @ self.rotation.T
+
+    def _B_and_gradient(self, pts):
+        local, rho = self._local(pts)
+        Br, Bz = self._B_local(local, rho)
+        # d/dz of the local field: the end loops (exact), in the magnet's frame
+        dz = self._end_loops().B(pts) @ self.rotation
+        w = dz[:, 2]  # dBz/dz
+        near = rho < NEAR_AXIS * self.radius
+        safe = np.where(near, 1.0, rho)
+        u = np.where(near, -0.5 * w, Br / safe)  # B_rho / rho (its axis limit -w/2)
+        c = np.where(near, 1.0, local[:, 0] / safe)
+        s = np.where(near, 0.0, local[:, 1] / safe)
+        n = pts.shape[0]
+        G = np.empty((n, 3, 3))
+        drr = -w - u  # dB_rho/drho (div B = 0)
+        G[:, 0, 0] = drr * c * c + u * s * s
+        G[:, 1, 1] = drr * s * s + u * c * c
+        G[:, 0, 1] = G[:, 1, 0] = (drr - u) * s * c
+        G[:, :, 2] = dz
+        G[:, 2, :2] = dz[:, :2]  # curl B = 0
+        Bl = np.column_stack([Br * c, Br * s, Bz])
+        R = self.rotation
+        return Bl @ R.T, np.einsum("ia,kab,jb->kij", R, G, R)
+
+    def _gradient(self, pts):
+        return self._B_and_gradient(pts)[1]
+
+    def __repr__(self):
+        ring = f", inner_radius={self.inner_radius!r}" if self.inner_radius else ""
+        return (
+            f"CylinderMagnet(radius={self.radius!r}, height={self.height!r}, "
+            f"polarization={self.polarization!r}{ring}, center={self.center.tolist()}, "
+            f"axis={np.round(self.axis, 12).tolist()})"
+        )
