@@ -156,3 +156,18 @@ def test_bad_input_is_named():
         Dipole((0, 0, 1), (0.1, 0.0, 0.0)).B([0.1, 0.0, 0.0])
     with pytest.raises(AttributeError, match="immutable"):
         CylinderMagnet(R, H, J).polarization = 1.0
+
+
+def test_readme_magnet_example_runs(capsys):
+    """The README's magnet and eMNS block runs and prints the numbers its text quotes."""
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    block = next(b for b in re.findall(r"```python\n(.*?)```", text, re.S) if "dipole()" in b)
+    exec(compile(block, "README.md", "exec"), {})  # noqa: S102
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("[6.79 4.91] [-0.684")
+    assert out[1].startswith("[6.71 4.87] [-0.671")
+    assert out[2].endswith("[ 0.  0. 20.]")
+    assert "1.2 % low in B and 1.9 % in the gradient" in " ".join(text.split())
