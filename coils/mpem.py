@@ -1,7 +1,7 @@
 """Calibrated electromagnet models: the Multipole Electromagnet Model (MPEM).
 
 Petruska, Edelmann & Nelson, "Model-based calibration for magnetic manipulation", IEEE Trans.
-Magn. 53(7) (2017) 4900206, model an electromagnetic navigation system (eMNS) with iron cores
+Magn. 53(7) (2017), model an electromagnetic navigation system (eMNS) with iron cores
 by a few point dipoles per coil, fitted to field measurements.  The field is linear in the coil
 currents, as for air coils:
 

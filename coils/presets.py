@@ -46,7 +46,7 @@ Calibrated eMNS models (:func:`cardiomag`, :func:`navion`, :func:`octomag`)
     with iron cores, shipped as package data (``coils/data``) from ETH Zurich's
     github.com/ethz-msrl/Workspace_eMNS (``models/``, Apache-2.0; ``coils/data/README.md``
     and ``LICENSE``), the models of Boehler et al., "On the workspace of electromagnetic
-    navigation systems", IEEE Trans. Robot. 39(1) (2023) 791, doi:10.1109/TRO.2022.3197107.
+    navigation systems", IEEE Trans. Robot. (2022), doi:10.1109/TRO.2022.3197107.
     Frames and centres are the calibrations' (origin at the workspace centre).
 """
 
@@ -320,7 +320,7 @@ def cardiomag(max_current: float = 20.0) -> MPEM:
     ----------
     max_current : float
         Limit of every coil, A.  Default 20 A: the limit the calibration's authors use for
-        CardioMag in the workspace analysis of Boehler et al., IEEE Trans. Robot. 2023
+        CardioMag in the workspace analysis of Boehler et al., IEEE Trans. Robot. 2022
         (``Imax = 20`` in the repository's ``04_cardiomag_application.ipynb``); check it
         against your installation's amplifiers.
 
@@ -372,7 +372,7 @@ def octomag(*, max_current) -> MPEM:
     """An idealised OctoMag-like eight-coil eMNS (one dipole per coil), as an MPEM.
 
     The model ``mns_8coils_octomag.yaml`` of github.com/ethz-msrl/Workspace_eMNS (Boehler et
-    al., IEEE Trans. Robot. 2023): eight dipoles of 1e-4 T m^3/A, four in the plane z = 0 at
+    al., IEEE Trans. Robot. 2022): eight dipoles of 1e-4 T m^3/A, four in the plane z = 0 at
     150 mm pointing at the centre and four below it, in the arrangement of OctoMag (Kummer et
     al., IEEE Trans. Robot. 26 (2010) 1006).  It is not a calibration of a built system, so
     it has no published current limit: give one.
