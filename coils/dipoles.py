@@ -156,6 +156,84 @@ for _q, (_a, _b, _c) in enumerate(
     _SLOT[_a * 9 + _b * 3 + _c] = _q
 
 
+def _build_fast():
+    """B and gradient only: points in blocks, sources outer, points inner (SoA, vectorised)."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
+    def inner(x0, x1, x2, c, p, b0, b1, b2, g00, g11, g22, g01, g02, g12, dmin):  # pragma: no cover
+        c0, c1, c2 = c[0], c[1], c[2]
+        p0, p1, p2 = p[0], p[1], p[2]
+        for i in range(x0.shape[0]):
+            r0 = x0[i] - c0
+            r1 = x1[i] - c1
+            r2 = x2[i] - c2
+            rr = r0 * r0 + r1 * r1 + r2 * r2
+            dmin[i] = min(dmin[i], rr)
+            inv1 = 1.0 / np.sqrt(rr)
+            inv2 = inv1 * inv1
+            inv3 = inv2 * inv1
+            inv5 = inv3 * inv2
+            s = p0 * r0 + p1 * r1 + p2 * r2
+            t = 3.0 * s * inv5
+            b0[i] += t * r0 - p0 * inv3
+            b1[i] += t * r1 - p1 * inv3
+            b2[i] += t * r2 - p2 * inv3
+            a = 3.0 * inv5
+            e = 5.0 * t * inv2
+            g00[i] += a * (s + 2.0 * r0 * p0) - e * r0 * r0
+            g11[i] += a * (s + 2.0 * r1 * p1) - e * r1 * r1
+            g22[i] += a * (s + 2.0 * r2 * p2) - e * r2 * r2
+            g01[i] += a * (r0 * p1 + p0 * r1) - e * r0 * r1
+            g02[i] += a * (r0 * p2 + p0 * r2) - e * r0 * r2
+            g12[i] += a * (r1 * p2 + p1 * r2) - e * r1 * r2
+
+    @numba.njit(cache=True, nogil=True)
+    def kernel(pts, pos, mom, want_B, want_G, B, G):  # pragma: no cover
+        n = pts.shape[0]
+        x = np.empty((3, _BLOCK))
+        o = np.empty((10, _BLOCK))
+        closest = np.inf
+        for st in range(0, n, _BLOCK):
+            m = min(n - st, _BLOCK)
+            for i in range(m):
+                x[0, i] = pts[st + i, 0]
+                x[1, i] = pts[st + i, 1]
+                x[2, i] = pts[st + i, 2]
+            o[:9, :m] = 0.0
+            o[9, :m] = np.inf
+            for q in range(pos.shape[0]):
+                inner(
+                    x[0, :m], x[1, :m], x[2, :m], pos[q], mom[q], o[0, :m], o[1, :m],
+                    o[2, :m], o[3, :m], o[4, :m], o[5, :m], o[6, :m], o[7, :m], o[8, :m], o[9, :m],
+                )  # fmt: skip
+            for i in range(m):
+                k = st + i
+                closest = min(closest, o[9, i])
+                if want_B:
+                    B[k, 0] += o[0, i]
+                    B[k, 1] += o[1, i]
+                    B[k, 2] += o[2, i]
+                if want_G:
+                    G[k, 0] += o[3, i]
+                    G[k, 4] += o[4, i]
+                    G[k, 8] += o[5, i]
+                    G[k, 1] += o[6, i]
+                    G[k, 3] += o[6, i]
+                    G[k, 2] += o[7, i]
+                    G[k, 6] += o[7, i]
+                    G[k, 5] += o[8, i]
+                    G[k, 7] += o[8, i]
+        return closest
+
+    return kernel
+
+
+#: Points per block of the B + gradient kernel (its accumulators stay in the L1 cache).
+_BLOCK = 256
+_FAST = None
+
+
 def dipole_sum(pts, pos, mom, tol, B=None, G=None, H=None) -> int:
     """Add the field of point dipoles to the arrays given (tier 1: no checks).
 
@@ -176,10 +254,30 @@ def dipole_sum(pts, pos, mom, tol, B=None, G=None, H=None) -> int:
         -1, or ``k * S + q`` for the first point ``k`` found on source ``q`` (then the arrays
         hold a partial sum).
     """
-    global _KERNEL
+    global _KERNEL, _FAST
+    n = pts.shape[0]
+    if H is None and n >= 64:
+        # B and/or G: the vectorised kernel; the exact kernel only to name a point on a source
+        if _FAST is None:
+            _FAST = _build_fast()
+        dummy = np.empty((0, 3))
+        tol2 = float(tol) ** 2
+        if B is None and G is None:
+            return -1
+        closest = _FAST(
+            pts,
+            pos,
+            mom,
+            B is not None,
+            G is not None,
+            B if B is not None else dummy,
+            G.reshape(n, 9) if G is not None else dummy,
+        )
+        if closest > tol2:
+            return -1
+        B = G = None  # only find the point (the caller raises)
     if _KERNEL is None:
         _KERNEL = _build()
-    n = pts.shape[0]
     dummy = np.empty((0, 3))
     return int(
         _KERNEL(

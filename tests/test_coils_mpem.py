@@ -81,6 +81,23 @@ def test_shipped_models_match_an_independent_dipole_sum(name):
     )
 
 
+def test_blocked_kernel_equals_the_pointwise_one():
+    """From 64 points on, B and gradient take the vectorised kernel (sources outer, points in
+    blocks): the same sums as the per-point kernel (used below 64 points and for hessians), and
+    a point on a source among many is named as well."""
+    model = presets.cardiomag().with_currents(np.linspace(-20, 20, 8))
+    X = RNG.uniform(-0.08, 0.08, size=(300, 3))
+    B, G = model.B_and_gradient(X)  # blocked
+    parts = [model.B_and_gradient(X[k : k + 50]) for k in range(0, 300, 50)]  # pointwise
+    Bp, Gp = np.vstack([p[0] for p in parts]), np.vstack([p[1] for p in parts])
+    assert np.abs(B - Bp).max() <= 1e-14 * np.abs(B).max()
+    assert np.abs(G - Gp).max() <= 1e-14 * np.abs(G).max()
+    np.testing.assert_array_equal(model.B(X), B)
+    X[200] = model.positions[10]
+    with pytest.raises(ValueError, match=r"points\[200\].*on source 2 of Coil_1"):
+        model.gradient(X)
+
+
 def test_cardiomag_has_an_offset_field():
     """The CardioMag file's Offset sources: a current-independent field at the centre."""
     model = presets.cardiomag()
