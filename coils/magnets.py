@@ -23,8 +23,8 @@ import numpy as np
 from scipy.constants import mu_0
 
 from ._immutable import sealed
-from ._validate import _show, as_array, as_vector, finite_scalar, positive
-from .coaxial import CoaxialCoils
+from ._validate import _show, as_array, as_axis, as_vector, finite_scalar, positive
+from .coaxial import CoaxialCoils, frame_from_axis
 from .dipoles import dipole_sum
 from .field import Field
 
@@ -142,7 +142,7 @@ class Dipole(Field):
     Parameters
     ----------
     moment : array-like, shape (3,)
-        Magnetic moment, A m^2 (a magnet's ``J V / mu0``: polarization J in T, volume V in m^3).
+        Magnetic moment, A m^2 (a magnet's ``M V``: magnetization M in A/m, volume V in m^3).
     center : array-like, shape (3,)
         Position, m.
 
@@ -211,20 +211,22 @@ class CylinderMagnet(Field):
 
     Parameters
     ----------
-    radius : float
-        Outer radius, m.
-    height : float
-        Height along the magnetisation axis, m.
-    polarization : float
-        Magnetic polarization ``J = mu0 M`` along the local z axis, T (the remanence ``B_r``
-        of a rigid magnet; negative: magnetised along -z).
-    inner_radius : float
-        Bore radius of a ring, m (0: a full cylinder; below ``radius``).
+    diameter : float
+        Outer diameter, m.
+    length : float
+        Length along the magnetisation axis, m.
+    magnetization : float
+        Magnetization M along ``axis``, A/m (``B_r / mu0`` for a rigid magnet of remanence
+        ``B_r``: 1.15e6 A/m for N52's 1.45 T; negative: magnetised along ``-axis``).
     center : array-like, shape (3,)
         Position of the magnet's centre, m.
-    orientation : None, scipy Rotation or array-like (3, 3)
-        Rotation from the magnet's frame (magnetisation along its z) to the global one;
-        default none (magnetised along +z).
+    axis : {"x", "y", "z"}, optionally signed ("-y"), or array-like, shape (3,)
+        Magnetisation direction (normalised); default "z".  Give it or ``orientation``.
+    inner_diameter : float
+        Bore diameter of a ring, m (0: a full cylinder; below ``diameter``).
+    orientation : scipy Rotation or array-like (3, 3), optional
+        The pose's rotation from the magnet's frame (magnetisation along its z) to the global
+        one, instead of ``axis``.
 
     Notes
     -----
@@ -238,9 +240,9 @@ class CylinderMagnet(Field):
     Examples
     --------
     >>> from coils import CylinderMagnet
-    >>> m = CylinderMagnet(radius=5e-3, height=10e-3, polarization=1.2)
-    >>> round(float(m.B([0.0, 0.0, 0.0])[0, 2]), 6)   # J h / (2 sqrt(R^2 + h^2/4)) at the centre
-    0.848528
+    >>> m = CylinderMagnet(diameter=10e-3, length=10e-3, magnetization=1e6)
+    >>> round(float(m.B([0.0, 0.0, 0.0])[0, 2]), 6)   # mu0 M L / (2 sqrt(R^2 + L^2/4)), T
+    0.888577
     """
 
     _immutable = True
@@ -248,25 +250,53 @@ class CylinderMagnet(Field):
 
     def __init__(
         self,
-        radius,
-        height,
-        polarization,
-        *,
-        inner_radius=0.0,
+        diameter,
+        length,
+        magnetization,
         center=(0.0, 0.0, 0.0),
+        axis=None,
+        *,
+        inner_diameter=0.0,
         orientation=None,
     ):
-        self.radius = positive(radius, "radius")
-        self.height = positive(height, "height")
-        self.polarization = finite_scalar(polarization, "polarization")
-        self.inner_radius = finite_scalar(inner_radius, "inner_radius")
-        if not 0.0 <= self.inner_radius < self.radius:
+        self.diameter = positive(diameter, "diameter")
+        self.length = positive(length, "length")
+        self.magnetization = finite_scalar(magnetization, "magnetization")
+        self.inner_diameter = finite_scalar(inner_diameter, "inner_diameter")
+        if not 0.0 <= self.inner_diameter < self.diameter:
             raise ValueError(
-                f"inner_radius must be in [0, radius = {self.radius}) m; got {self.inner_radius}"
+                f"inner_diameter must be in [0, diameter = {self.diameter}) m; got "
+                f"{self.inner_diameter}"
             )
         self.center = sealed(as_vector(center, "center"))
-        self.rotation = sealed(as_rotation(orientation))
+        if axis is not None and orientation is not None:
+            raise ValueError("give axis or orientation, not both (orientation includes the axis)")
+        if orientation is None:
+            rotation = frame_from_axis(as_axis("z" if axis is None else axis))
+        else:
+            rotation = as_rotation(orientation)
+        self.rotation = sealed(rotation)
         self._loops = None
+
+    @property
+    def radius(self) -> float:
+        """Outer radius, m."""
+        return 0.5 * self.diameter
+
+    @property
+    def inner_radius(self) -> float:
+        """Bore radius, m (0 for a full cylinder)."""
+        return 0.5 * self.inner_diameter
+
+    @property
+    def height(self) -> float:
+        """The length along the axis, m."""
+        return self.length
+
+    @property
+    def polarization(self) -> float:
+        """``mu0 M``, T."""
+        return mu_0 * self.magnetization
 
     @property
     def axis(self) -> np.ndarray:
@@ -283,12 +313,12 @@ class CylinderMagnet(Field):
         return min(self.height, self.radius - self.inner_radius)
 
     def dipole(self) -> Dipole:
-        """The point dipole of the same moment ``J V / mu0 * axis`` at the centre (the far
-        field, to O((size / distance)^2) relative)."""
-        return Dipole(self.polarization * self.volume / mu_0 * self.axis, self.center)
+        """The point dipole of the same moment ``M V axis`` (A m^2) at the centre: the far
+        field, to O((size / distance)^2) relative."""
+        return Dipole(self.magnetization * self.volume * self.axis, self.center)
 
     def _sheets(self):
-        K = self.polarization / mu_0
+        K = self.magnetization
         sheets = [(self.radius, K)]
         if self.inner_radius > 0:
             sheets.append((self.inner_radius, -K))
@@ -360,9 +390,9 @@ class CylinderMagnet(Field):
         return self._B_and_gradient(pts)[1]
 
     def __repr__(self):
-        ring = f", inner_radius={self.inner_radius!r}" if self.inner_radius else ""
+        ring = f", inner_diameter={self.inner_diameter!r}" if self.inner_diameter else ""
         return (
-            f"CylinderMagnet(radius={self.radius!r}, height={self.height!r}, "
-            f"polarization={self.polarization!r}{ring}, center={self.center.tolist()}, "
-            f"axis={np.round(self.axis, 12).tolist()})"
+            f"CylinderMagnet(diameter={self.diameter!r}, length={self.length!r}, "
+            f"magnetization={self.magnetization!r}, center={self.center.tolist()}, "
+            f"axis={np.round(self.axis, 12).tolist()}{ring})"
         )

@@ -23,7 +23,8 @@ from coils import CylinderMagnet, Dipole
 RNG = np.random.default_rng(7)
 ROT = Rotation.from_rotvec([0.3, -0.5, 0.2])
 CENTER = np.array([1e-3, 2e-3, -1e-3])
-R, H, J, BORE = 5e-3, 8e-3, 1.3, 2e-3
+R, H, J, BORE = 5e-3, 8e-3, 1.3, 2e-3  # m, m, T (polarization), m
+M = J / mu_0  # A/m
 
 
 def _fd(f, x, h):
@@ -37,7 +38,7 @@ def _fd(f, x, h):
 
 
 def _pair(inner):
-    ours = CylinderMagnet(R, H, J, inner_radius=inner, center=CENTER, orientation=ROT)
+    ours = CylinderMagnet(2 * R, H, M, CENTER, inner_diameter=2 * inner, orientation=ROT)
     if inner == 0:
         ref = magpy.magnet.Cylinder(
             polarization=(0, 0, J), dimension=(2 * R, H), position=CENTER, orientation=ROT
@@ -92,9 +93,9 @@ def test_cylinder_and_ring_gradient_match_differences_of_magpylib(inner):
 
 def test_ring_is_a_cylinder_less_its_bore():
     X = _points(_pair(BORE)[0], 10, 1e-4)
-    ring = CylinderMagnet(R, H, J, inner_radius=BORE, center=CENTER, orientation=ROT)
-    outer = CylinderMagnet(R, H, J, center=CENTER, orientation=ROT)
-    bore = CylinderMagnet(BORE, H, J, center=CENTER, orientation=ROT)
+    ring = CylinderMagnet(2 * R, H, M, CENTER, inner_diameter=2 * BORE, orientation=ROT)
+    outer = CylinderMagnet(2 * R, H, M, CENTER, orientation=ROT)
+    bore = CylinderMagnet(2 * BORE, H, M, CENTER, orientation=ROT)
     scale = np.abs(outer.B(X)).max()
     assert np.abs(ring.B(X) - (outer.B(X) - bore.B(X))).max() <= 1e-14 * scale
     gs = np.abs(outer.gradient(X)).max()
@@ -118,10 +119,10 @@ def test_dipole_matches_magpylib_closed_form_and_differences():
 
 
 def test_far_field_tends_to_the_dipole():
-    magnet = CylinderMagnet(R, H, J, inner_radius=BORE, center=CENTER, orientation=ROT)
+    magnet = CylinderMagnet(2 * R, H, M, CENTER, inner_diameter=2 * BORE, orientation=ROT)
     dipole = magnet.dipole()
     np.testing.assert_allclose(
-        dipole.moment, J * np.pi * (R**2 - BORE**2) * H / mu_0 * magnet.axis, rtol=1e-15
+        dipole.moment, M * np.pi * (R**2 - BORE**2) * H * magnet.axis, rtol=1e-15
     )
     direction = np.array([0.3, -0.4, 0.866])
     errors = []
@@ -136,26 +137,30 @@ def test_far_field_tends_to_the_dipole():
 
 
 def test_orientation_turns_the_magnetisation():
-    flip = CylinderMagnet(R, H, J, orientation=Rotation.from_rotvec([np.pi, 0, 0]))
-    minus = CylinderMagnet(R, H, -J)
+    flip = CylinderMagnet(2 * R, H, M, orientation=Rotation.from_rotvec([np.pi, 0, 0]))
+    minus = CylinderMagnet(2 * R, H, -M)
+    down = CylinderMagnet(2 * R, H, M, axis="-z")
     X = RNG.normal(size=(5, 3)) * 0.02
     np.testing.assert_allclose(flip.B(X), minus.B(X), rtol=0, atol=1e-12 * np.abs(minus.B(X)).max())
     np.testing.assert_allclose(flip.axis, [0, 0, -1], atol=1e-15)
+    np.testing.assert_allclose(down.B(X), minus.B(X), rtol=0, atol=1e-12 * np.abs(minus.B(X)).max())
 
 
 def test_bad_input_is_named():
-    with pytest.raises(ValueError, match="inner_radius must be in"):
-        CylinderMagnet(R, H, J, inner_radius=R)
+    with pytest.raises(ValueError, match="inner_diameter must be in"):
+        CylinderMagnet(2 * R, H, M, inner_diameter=2 * R)
     with pytest.raises(ValueError, match="orientation must be a rotation matrix"):
-        CylinderMagnet(R, H, J, orientation=np.diag([1.0, 1.0, -1.0]))
-    with pytest.raises(ValueError, match="radius must be positive"):
-        CylinderMagnet(-R, H, J)
+        CylinderMagnet(2 * R, H, M, orientation=np.diag([1.0, 1.0, -1.0]))
+    with pytest.raises(ValueError, match="axis or orientation, not both"):
+        CylinderMagnet(2 * R, H, M, axis="x", orientation=np.eye(3))
+    with pytest.raises(ValueError, match="diameter must be positive"):
+        CylinderMagnet(-R, H, M)
     with pytest.raises(ValueError, match=r"points\[1\].*on an edge circle"):
-        CylinderMagnet(R, H, J).gradient([[0.0, 0.0, 0.0], [R, 0.0, H / 2]])
+        CylinderMagnet(2 * R, H, M).gradient([[0.0, 0.0, 0.0], [R, 0.0, H / 2]])
     with pytest.raises(ValueError, match=r"points\[0\].*at the dipole's centre"):
         Dipole((0, 0, 1), (0.1, 0.0, 0.0)).B([0.1, 0.0, 0.0])
     with pytest.raises(AttributeError, match="immutable"):
-        CylinderMagnet(R, H, J).polarization = 1.0
+        CylinderMagnet(2 * R, H, M).magnetization = 1.0
 
 
 def test_readme_magnet_example_runs(capsys):
