@@ -20,7 +20,7 @@ from .coaxial import CoaxialCoils
 from .field import Field, FieldSum, ScaledField
 from .grid import GriddedField
 from .ideal import LinearField, UniformField, linearize, maxwell_gradient
-from .magnets import CylinderMagnet, Dipole
+from .magnets import CuboidMagnet, CylinderMagnet, Dipole
 from .mpem import MPEM
 from .pairs import Coil, CoilPair, HelmholtzPair, MaxwellPair
 from .region import UniformityReport, deviation, uniformity
@@ -47,6 +47,7 @@ __all__ = [
     "MPEM",
     "Dipole",
     "CylinderMagnet",
+    "CuboidMagnet",
     "presets",
 ]
 
