@@ -20,6 +20,8 @@ from .coaxial import CoaxialCoils
 from .field import Field, FieldSum, ScaledField
 from .grid import GriddedField
 from .ideal import LinearField, UniformField, linearize, maxwell_gradient
+from .magnets import CuboidMagnet, CylinderMagnet, Dipole
+from .mpem import MPEM
 from .pairs import Coil, CoilPair, HelmholtzPair, MaxwellPair
 from .region import UniformityReport, deviation, uniformity
 from .system import CoilSystem
@@ -42,6 +44,10 @@ __all__ = [
     "deviation",
     "UniformityReport",
     "GriddedField",
+    "MPEM",
+    "Dipole",
+    "CylinderMagnet",
+    "CuboidMagnet",
     "presets",
 ]
 

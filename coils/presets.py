@@ -40,6 +40,14 @@ Eight coils on a hemisphere (:func:`eight_coil_hemisphere`)
     al., Adv. Mater. 2024) follow the same principle with fewer coils.  It is not the geometry
     of any of them, and those use iron cores, which make several times the field of these air
     coils.
+
+Calibrated eMNS models (:func:`cardiomag`, :func:`navion`, :func:`octomag`)
+    Not air coils: :class:`~coils.MPEM` point-dipole models fitted to measurements of systems
+    with iron cores, shipped as package data (``coils/data``) from ETH Zurich's
+    github.com/ethz-msrl/Workspace_eMNS (``models/``, Apache-2.0; ``coils/data/README.md``
+    and ``LICENSE``), the models of Boehler et al., "On the workspace of electromagnetic
+    navigation systems", IEEE Trans. Robot. (2022), doi:10.1109/TRO.2022.3197107.
+    Frames and centres are the calibrations' (origin at the workspace centre).
 """
 
 from __future__ import annotations
@@ -49,10 +57,18 @@ import math
 import numpy as np
 
 from ._validate import as_array, as_axis, as_vector, positive
+from .mpem import MPEM
 from .pairs import Coil, HelmholtzPair, MaxwellPair
 from .system import CoilSystem
 
-__all__ = ["three_axis_helmholtz", "helmholtz_maxwell", "eight_coil_hemisphere"]
+__all__ = [
+    "three_axis_helmholtz",
+    "helmholtz_maxwell",
+    "eight_coil_hemisphere",
+    "cardiomag",
+    "navion",
+    "octomag",
+]
 
 _AXES = ("x", "y", "z")
 
@@ -278,3 +294,97 @@ def eight_coil_hemisphere(
         )  # fmt: skip
         names.append(f"coil polar {t_deg:g} deg azimuth {p_deg:g} deg")
     return CoilSystem(coils, center=c, max_current=max_current, names=names)
+
+
+# -- calibrated eMNS models (MPEM) ----------------------------------------------------------------
+#: The shipped calibration files (coils/data, from github.com/ethz-msrl/Workspace_eMNS).
+CARDIOMAG_FILE = "C_Mag_Calibration_06-25-2015_no_offset.yaml"
+NAVION_FILE = "Navion_2_Calibration_24-02-2020.yaml"
+OCTOMAG_FILE = "mns_8coils_octomag.yaml"
+
+
+def _data_file(name: str):
+    from importlib.resources import files
+
+    return files("coils").joinpath("data", name)
+
+
+def cardiomag(max_current: float = 20.0) -> MPEM:
+    """CardioMag (Aeon Scientific): the eight-electromagnet clinical eMNS, calibrated MPEM.
+
+    The calibration of June 2015 (8 coils, 6 to 8 dipole sources each, and 8 offset sources of
+    the current-independent field), file ``C_Mag_Calibration_06-25-2015_no_offset.yaml`` of
+    github.com/ethz-msrl/Workspace_eMNS (Apache-2.0).
+
+    Parameters
+    ----------
+    max_current : float
+        Limit of every coil, A.  Default 20 A: the limit the calibration's authors use for
+        CardioMag in the workspace analysis of Boehler et al., IEEE Trans. Robot. 2022
+        (``Imax = 20`` in the repository's ``04_cardiomag_application.ipynb``); check it
+        against your installation's amplifiers.
+
+    Returns
+    -------
+    MPEM
+        Eight channels ``Coil_0`` ... ``Coil_7`` at 0 A.
+
+    Examples
+    --------
+    >>> from coils import presets
+    >>> cmag = presets.cardiomag()
+    >>> len(cmag.channels), float(cmag.max_current[0])
+    (8, 20.0)
+    """
+    return MPEM.from_yaml(_data_file(CARDIOMAG_FILE), max_current=max_current)
+
+
+def navion(max_current: float = 35.0) -> MPEM:
+    """Navion: the three-coil clinical eMNS of Gervasoni et al. (Adv. Mater. 36 (2024)
+    2310701, doi:10.1002/adma.202310701), calibrated MPEM (3 dipoles per coil).
+
+    Parameters
+    ----------
+    max_current : float
+        Limit of every coil, A.  Default 35 A: the limit of the authors' field maps of Navion
+        (``05_navion_application.ipynb`` of github.com/ethz-msrl/Workspace_eMNS, "maximum
+        field magnitude for 35 A", and ``MAX_CURRENT = 35`` in mag_manip's tests of this
+        calibration).
+
+    Returns
+    -------
+    MPEM
+        Three channels ``Coil_0`` ... ``Coil_2`` at 0 A.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from coils import presets
+    >>> nav = presets.navion()
+    >>> Bu, Gu = nav.unit_fields([0.0, 0.0, 0.0])
+    >>> np.round(1e3 * Bu[0, :, 0], 4)      # mT per ampere of Coil_0 at the centre
+    array([ 0.0005, -0.2905, -0.4138])
+    """
+    return MPEM.from_yaml(_data_file(NAVION_FILE), max_current=max_current)
+
+
+def octomag(*, max_current) -> MPEM:
+    """An idealised OctoMag-like eight-coil eMNS (one dipole per coil), as an MPEM.
+
+    The model ``mns_8coils_octomag.yaml`` of github.com/ethz-msrl/Workspace_eMNS (Boehler et
+    al., IEEE Trans. Robot. 2022): eight dipoles of 1e-4 T m^3/A, four in the plane z = 0 at
+    150 mm pointing at the centre and four below it, in the arrangement of OctoMag (Kummer et
+    al., IEEE Trans. Robot. 26 (2010) 1006).  It is not a calibration of a built system, so
+    it has no published current limit: give one.
+
+    Parameters
+    ----------
+    max_current : float or array-like, shape (8,)
+        Limit of every coil, A (required).
+
+    Returns
+    -------
+    MPEM
+        Eight channels at 0 A.
+    """
+    return MPEM.from_yaml(_data_file(OCTOMAG_FILE), max_current=max_current)

@@ -1,0 +1,560 @@
+"""Calibrated electromagnet models: the Multipole Electromagnet Model (MPEM).
+
+Petruska, Edelmann & Nelson, "Model-based calibration for magnetic manipulation", IEEE Trans.
+Magn. 53(7) (2017), model an electromagnetic navigation system (eMNS) with iron cores
+by a few point dipoles per coil, fitted to field measurements.  The field is linear in the coil
+currents, as for air coils:
+
+    B(x; I) = B_offset(x) + sum_j I_j b_j(x),
+    b_j(x) = sum_q c_q (3 r (d_q . r) - d_q |r|^2) / |r|^5,
+
+with ``r = x - x_q`` from the source position ``x_q`` (m), ``d_q`` its unit direction and
+``c_q`` its coefficient (T m^3 / A, the dipole moment already scaled by mu0/4pi); the
+``Offset`` sources (T m^3) make the current-independent field.  :meth:`MPEM.from_yaml` reads
+the YAML calibration files of ETH Zurich's Tesla / mag_manip tools (``Coil_List``, per coil a
+``Source_List`` of sources with ``Source_Position``, ``Source_Direction``, ``B_Coeff`` and
+``A_Coeff: ~``); :mod:`coils.presets` ships three of them (:func:`coils.presets.cardiomag`,
+:func:`~coils.presets.navion`, :func:`~coils.presets.octomag`).
+
+B, the gradient and the hessian are exact (:mod:`coils.dipoles`, one compiled pass).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ._immutable import sealed
+from ._validate import _show, as_array, as_bool, as_limits, as_points, as_vector
+from .dipoles import dipole_sum
+from .field import Field
+
+__all__ = ["MPEM"]
+
+#: A point closer than this fraction of :attr:`MPEM.length_scale` to a source is "on" it.
+ON_SOURCE = 1e-9
+#: Largest accepted deviation of ``|Source_Direction|`` from 1 in a calibration file (the
+#: public files round directions to 3 or more digits); the direction is used as written.
+UNIT_TOL = 1e-3
+
+
+def _fmt_mm(point) -> str:
+    return "(" + ", ".join(f"{1e3 * v:.4g}" for v in point) + ") mm"
+
+
+def _show_vec(v) -> str:
+    return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
+
+
+class MPEM(Field):
+    """A calibrated multipole electromagnet model: point dipoles driven by coil currents.
+
+    Parameters
+    ----------
+    coils : sequence of (positions, moments)
+        One entry per coil (current channel, m of them): ``positions`` array-like (s, 3), the
+        source positions in m, and ``moments`` array-like (s, 3), the dipole moments per ampere
+        scaled by mu0/4pi (``B_Coeff * Source_Direction``), T m^3/A.
+    offset : (positions, moments), optional
+        Current-independent sources: positions (s, 3) in m, moments (s, 3) in T m^3.
+    currents : array-like, shape (m,), optional
+        Coil currents, A (default zero).
+    max_current : float or array-like, shape (m,), optional
+        Limit of ``|I_j|``, A (> 0; ``inf``: none; default none).
+    names : sequence of str, shape (m,), optional
+        Coil names (default ``Coil_0`` ...).
+    center : array-like, shape (3,)
+        Working point for :meth:`currents_for` and :meth:`ideal`, m (default the origin, the
+        calibration frame's workspace centre).
+    origin : str, optional
+        Where the model comes from (a file name), quoted in error messages.
+
+    Notes
+    -----
+    Immutable like every source: :meth:`with_currents`, :meth:`with_limits` and
+    ``replace(...)`` return copies.  The model is a fit valid in the calibrated workspace; it
+    is a point-dipole sum, so it grows without bound near a source and a point on a source is
+    refused (``ValueError`` naming the coil and source).
+
+    Examples
+    --------
+    >>> from coils import MPEM
+    >>> one = MPEM([([[0.0, 0.0, -0.1]], [[0.0, 0.0, 1e-7]])], max_current=10.0)
+    >>> one.with_currents([2.0]).B([0.0, 0.0, 0.0])[0] * 1e3      # 2 c / r^3 * I, mT
+    array([0. , 0. , 0.4])
+    """
+
+    _immutable = True
+
+    def __init__(
+        self,
+        coils,
+        offset=None,
+        *,
+        currents=None,
+        max_current=None,
+        names=None,
+        center=(0.0, 0.0, 0.0),
+        origin=None,
+    ):
+        if isinstance(coils, str | np.ndarray) or not isinstance(coils, Sequence) or not coils:
+            raise ValueError(
+                f"coils must be a non-empty sequence of (positions (s, 3), moments (s, 3)); "
+                f"got {_show(coils)}"
+            )
+        m = len(coils)
+        self.origin = None if origin is None else str(origin)
+        self.names = (
+            tuple(f"Coil_{j}" for j in range(m)) if names is None else self._as_names(names, m)
+        )
+        pos, mom, chan = [], [], []
+        for j, entry in enumerate(coils):
+            p, q = self._pair(entry, f"coils[{j}]")
+            pos.append(p)
+            mom.append(q)
+            chan.append(np.full(len(p), j))
+        if offset is not None:
+            p, q = self._pair(offset, "offset")
+            pos.append(p)
+            mom.append(q)
+            chan.append(np.full(len(p), -1))
+        self.positions = sealed(np.vstack(pos))
+        self.moments = sealed(np.vstack(mom))
+        self.channel = sealed(np.concatenate(chan), dtype=np.int64)
+        self.center = sealed(as_vector(center, "center"))
+        self._currents = sealed(
+            np.zeros(m) if currents is None else as_vector(currents, "currents", m)
+        )
+        self._max_current = sealed(
+            np.full(m, np.inf) if max_current is None else as_limits(max_current, "max_current", m)
+        )
+        self._check_limits(self._currents)
+
+    # -- construction helpers ------------------------------------------------------------------
+    @staticmethod
+    def _pair(entry, name: str):
+        if not isinstance(entry, Sequence) or isinstance(entry, str) or len(entry) != 2:
+            raise ValueError(
+                f"{name} must be a pair (positions (s, 3), moments (s, 3)); got {_show(entry)}"
+            )
+        p = as_array(entry[0], f"{name} positions", ("s", 3))
+        q = as_array(entry[1], f"{name} moments", (p.shape[0], 3))
+        return p, q
+
+    @staticmethod
+    def _as_names(names, m: int) -> tuple[str, ...]:
+        if (
+            isinstance(names, str)
+            or not isinstance(names, Sequence)
+            or len(names) != m
+            or not all(isinstance(n, str) for n in names)
+        ):
+            raise ValueError(f"names must be a sequence of {m} strings; got {_show(names)}")
+        return tuple(names)
+
+    def _where(self) -> str:
+        return "" if self.origin is None else f" (model {self.origin})"
+
+    def _source_label(self, q: int) -> str:
+        j = int(self.channel[q])
+        first = int(np.nonzero(self.channel == j)[0][0])
+        owner = "Offset" if j < 0 else self.names[j]
+        return f"source {q - first} of {owner}"
+
+    def _how_to_change(self, name: str, value) -> str:
+        hint = {"currents": "with_currents", "max_current": "with_limits"}.get(name)
+        if hint is not None:
+            return f"use .{hint}(...) for a changed copy"
+        return super()._how_to_change(name, value)
+
+    # -- channels --------------------------------------------------------------------------------
+    @property
+    def channels(self) -> tuple[str, ...]:
+        """The current channels (the coils' names), length m."""
+        return self.names
+
+    @property
+    def currents(self) -> np.ndarray:
+        """Present coil currents, shape (m,), A (a copy)."""
+        return self._currents.copy()
+
+    @property
+    def max_current(self) -> np.ndarray:
+        """Current limit of each coil, shape (m,), A (``inf``: none; a copy)."""
+        return self._max_current.copy()
+
+    @property
+    def length_scale(self) -> float:
+        """Distance from :attr:`center` to the nearest source, m."""
+        return float(np.linalg.norm(self.positions - self.center, axis=1).min())
+
+    def _check_limits(self, currents: np.ndarray, name: str = "currents") -> None:
+        over = np.nonzero(np.abs(currents) > self._max_current)[0]
+        if over.size:
+            j = int(over[0])
+            raise ValueError(
+                f"{name}[{j}] = {currents[j]:g} A exceeds max_current[{j}] = "
+                f"{self._max_current[j]:g} A (channel {j}: {self.names[j]}){self._where()}"
+            )
+
+    def _coils_offset(self):
+        m = len(self.names)
+        coils = tuple(
+            (self.positions[self.channel == j], self.moments[self.channel == j]) for j in range(m)
+        )
+        fixed = self.channel < 0
+        offset = (self.positions[fixed], self.moments[fixed]) if fixed.any() else None
+        return coils, offset
+
+    def with_currents(self, currents) -> MPEM:
+        """The same model with the coils driven by ``currents`` (shape (m,), A, within
+        :attr:`max_current`; a ``ValueError`` names the channel over its limit)."""
+        current = as_vector(currents, "currents", len(self.names))
+        self._check_limits(current)
+        return self.replace(currents=current)
+
+    def with_limits(self, max_current) -> MPEM:
+        """The same model with other current limits (A, scalar or (m,); the present currents
+        must respect them)."""
+        return self.replace(max_current=max_current)
+
+    # -- evaluation -------------------------------------------------------------------------------
+    def _run(self, pts, pos, mom, B, G, H) -> None:
+        hit = dipole_sum(
+            np.ascontiguousarray(pts), pos, mom, ON_SOURCE * self.length_scale, B, G, H
+        )
+        if hit >= 0:
+            k, q = divmod(hit, pos.shape[0])
+            # q indexes the sources passed; find it among all sources by position
+            full = int(np.nonzero(np.all(self.positions == pos[q], axis=1))[0][0])
+            raise ValueError(
+                f"points[{k}] = {_fmt_mm(pts[k])} is on {self._source_label(full)}"
+                f"{self._where()}: a point dipole's field is infinite there"
+            )
+
+    def _effective(self):
+        scale = np.where(self.channel < 0, 1.0, self._currents[np.maximum(self.channel, 0)])
+        return self.moments * scale[:, None]
+
+    def _add_to(self, pts, B, G, H, factor):
+        self._run(pts, self.positions, factor * self._effective(), B, G, H)
+
+    def _eval(self, pts, want_B, want_G, want_H):
+        n = pts.shape[0]
+        B = np.zeros((n, 3)) if want_B else None
+        G = np.zeros((n, 3, 3)) if want_G else None
+        H = np.zeros((n, 3, 3, 3)) if want_H else None
+        self._add_to(pts, B, G, H, 1.0)
+        return B, G, H
+
+    def _B(self, pts):
+        return self._eval(pts, True, False, False)[0]
+
+    def _gradient(self, pts):
+        return self._eval(pts, False, True, False)[1]
+
+    def _B_and_gradient(self, pts):
+        return self._eval(pts, True, True, False)[:2]
+
+    def _hessian(self, pts):
+        return self._eval(pts, False, False, True)[2]
+
+    def _B_gradient_hessian(self, pts):
+        return self._eval(pts, True, True, True)
+
+    def unit_fields(self, points, *, hessian: bool = False):
+        """Field, gradient (and hessian) per ampere of every coil at ``points``.
+
+        Parameters
+        ----------
+        points : array-like, shape (n, 3) or (3,)
+            Positions, m.
+        hessian : bool
+            Also return the second derivatives per ampere.
+
+        Returns
+        -------
+        B : ndarray, shape (n, 3, m)
+            T/A.
+        G : ndarray, shape (n, 3, 3, m)
+            ``dB_i/dx_l`` per ampere, T/(A m).
+        H : ndarray, shape (n, 3, 3, 3, m)
+            Only with ``hessian``, T/(A m^2).
+
+        Notes
+        -----
+        The offset is not included: the field is ``fixed_field + B @ currents``.
+        """
+        pts = np.ascontiguousarray(as_points(points))
+        hessian = as_bool(hessian, "hessian")
+        n, m = pts.shape[0], len(self.names)
+        B = np.zeros((m, n, 3))
+        G = np.zeros((m, n, 3, 3))
+        H = np.zeros((m, n, 3, 3, 3)) if hessian else None
+        for j in range(m):
+            sel = self.channel == j
+            self._run(
+                pts,
+                np.ascontiguousarray(self.positions[sel]),
+                np.ascontiguousarray(self.moments[sel]),
+                B[j],
+                G[j],
+                H[j] if hessian else None,
+            )
+        out = (
+            np.ascontiguousarray(np.moveaxis(B, 0, -1)),
+            np.ascontiguousarray(np.moveaxis(G, 0, -1)),
+        )
+        if hessian:
+            out += (np.ascontiguousarray(np.moveaxis(H, 0, -1)),)
+        return out
+
+    def fixed_field(self, points) -> tuple[np.ndarray, np.ndarray]:
+        """B (n, 3) in T and gradient (n, 3, 3) in T/m of the offset sources at ``points``."""
+        pts = np.ascontiguousarray(as_points(points))
+        n = pts.shape[0]
+        B, G = np.zeros((n, 3)), np.zeros((n, 3, 3))
+        sel = self.channel < 0
+        if sel.any():
+            self._run(
+                pts,
+                np.ascontiguousarray(self.positions[sel]),
+                np.ascontiguousarray(self.moments[sel]),
+                B,
+                G,
+                None,
+            )
+        return B, G
+
+    def currents_for(self, B=None, gradient=None, *, at=None, weights=None) -> np.ndarray:
+        """The least-``sum w I^2`` currents that make a field and/or gradient at a point.
+
+        Parameters
+        ----------
+        B : array-like, shape (3,), optional
+            Target flux density, T.
+        gradient : array-like, shape (3, 3), optional
+            Target gradient ``dB_i/dx_j`` (symmetric, traceless), T/m.
+        at : array-like, shape (3,), optional
+            The point, m; default :attr:`center`.
+        weights : array-like, shape (m,), optional
+            Positive weights (default equal: the least ``sum I^2``).
+
+        Returns
+        -------
+        ndarray, shape (m,)
+            Currents, A, within :attr:`max_current`.
+
+        Raises
+        ------
+        ValueError
+            As :meth:`coils.CoilSystem.currents_for`: a target the coils cannot make (what
+            they miss by), one beyond the limits (the fraction they allow), a bad argument.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from coils import presets
+        >>> navion = presets.navion()
+        >>> I = navion.currents_for(B=(0.0, 0.0, 20e-3))
+        >>> np.round(1e3 * navion.with_currents(I).B([0.0, 0.0, 0.0])[0], 9) + 0.0
+        array([ 0.,  0., 20.])
+        """
+        from .currents import minimum_power
+
+        if B is None and gradient is None:
+            raise ValueError("give a target: B (3,) in T and/or gradient (3, 3) in T/m")
+        m = len(self.names)
+        point = self.center if at is None else as_vector(at, "at")
+        if weights is None:
+            w = np.ones(m)
+        else:
+            w = as_vector(weights, "weights", m)
+            if not np.all(w > 0):
+                raise ValueError(f"weights must be positive; got {w.tolist()}")
+        Bu, Gu = self.unit_fields(point)
+        Bf, Gf = self.fixed_field(point)
+        ell = self.length_scale
+        rows, rhs = [], []
+        if B is not None:
+            rows.append(Bu[0])
+            rhs.append(as_vector(B, "B") - Bf[0])
+        if gradient is not None:
+            target_G = as_array(gradient, "gradient", (3, 3))
+            size = float(np.abs(target_G).max())
+            asym = float(np.abs(target_G - target_G.T).max())
+            trace = float(np.trace(target_G))
+            if asym > 1e-9 * size or abs(trace) > 1e-9 * size:
+                raise ValueError(
+                    f"gradient must be symmetric and traceless (curl B = div B = 0 in free "
+                    f"space); got asymmetry {asym:.3g} T/m and trace {trace:.3g} T/m"
+                )
+            rows.append(ell * Gu[0].reshape(9, m))
+            rhs.append(ell * (target_G - Gf[0]).reshape(9))
+        A, b = np.vstack(rows), np.concatenate(rhs)
+        sol = minimum_power(A, b, w, self._max_current)
+        if sol.currents is not None:
+            return sol.currents
+        where = _fmt_mm(point)
+        if not sol.reachable:
+            miss, k = [], 0
+            if B is not None:
+                miss.append(f"B by {_show_vec(1e3 * sol.residual[:3])} mT")
+                k = 3
+            if gradient is not None:
+                miss.append(f"the gradient by {_show_vec(sol.residual[k:] / ell)} T/m")
+            total = (3 if B is not None else 0) + (5 if gradient is not None else 0)
+            raise ValueError(
+                f"the model{self._where()} cannot make this target at {where}: its {m} coils "
+                f"make {sol.rank} of the {total} independent components asked for; the nearest "
+                f"it makes misses {' and '.join(miss)}"
+            )
+        j = int(np.argmax(np.abs(sol.unlimited) / self._max_current))
+        raise ValueError(
+            f"the target at {where} exceeds the current limits{self._where()}: at most "
+            f"{100 * sol.fraction:.4g} % of the field the coils must make (the target less the "
+            f"offset field) can be made within max_current (the least-norm currents need "
+            f"{sol.unlimited[j]:.4g} A in coil {j} ({self.names[j]}), limit "
+            f"{self._max_current[j]:g} A)"
+        )
+
+    def ideal(self, zero_tol: float = 1e-12):
+        """The LinearField of B and gradient at :attr:`center` (:func:`coils.linearize`)."""
+        from .ideal import linearize
+
+        return linearize(self, self.center, zero_tol)
+
+    def __repr__(self):
+        return (
+            f"MPEM({len(self.names)} coils, {self.positions.shape[0]} sources"
+            f"{'' if self.origin is None else ', ' + repr(self.origin)})"
+        )
+
+    # -- files ------------------------------------------------------------------------------------
+    @classmethod
+    def from_yaml(cls, path, *, max_current=None, currents=None, center=(0.0, 0.0, 0.0)):
+        """Read a calibration in the YAML format of the Tesla / mag_manip tools (ETH Zurich).
+
+        Parameters
+        ----------
+        path : str or path-like
+            The file: ``Coil_List`` (coil keys, in channel order), per coil a ``Source_List``
+            and per source ``Source_Position`` (3 values, m), ``Source_Direction`` (3 values,
+            unit to within 1e-3; used as written), ``B_Coeff`` (one value, T m^3/A) and
+            ``A_Coeff: ~``; optionally ``Offset`` (sources of the current-independent field,
+            ``B_Coeff`` in T m^3).  ``System_Name`` and ``Workspace_Dimensions`` are read and
+            ignored.
+        max_current, currents, center
+            As for the constructor.
+
+        Returns
+        -------
+        MPEM
+
+        Raises
+        ------
+        ValueError
+            Naming the file, the coil (or ``Offset``), the source and the key: a missing key,
+            a wrong length, a non-unit direction, a non-finite number; and for models this
+            class does not support, a non-null ``A_Coeff`` (higher-order sources) or
+            saturation functions (the field would not be linear in the currents).
+        """
+        import yaml
+
+        path = Path(path)
+        where = str(path)
+        try:
+            text = path.read_text()
+        except OSError as err:
+            raise ValueError(f"cannot read the MPEM file {where}: {err}") from None
+        try:
+            doc = yaml.safe_load(text)
+        except yaml.YAMLError as err:
+            raise ValueError(f"{where} is not valid YAML: {err}") from None
+        if not isinstance(doc, dict):
+            raise ValueError(f"{where}: expected a mapping with Coil_List; got {_show(doc)}")
+        for key in doc:
+            if "satur" in str(key).lower():
+                raise ValueError(
+                    f"{where}: key {key!r}: saturation functions are not supported (the field "
+                    f"would not be linear in the currents); use a model without them"
+                )
+        if "Coil_List" not in doc:
+            raise ValueError(f"{where}: missing key 'Coil_List' (the list of coil keys)")
+        coil_list = doc["Coil_List"]
+        if not isinstance(coil_list, list) or not coil_list:
+            raise ValueError(f"{where}: Coil_List must be a non-empty list of coil keys")
+        coils = [cls._read_sources(doc, str(name), where, per_ampere=True) for name in coil_list]
+        offset = (
+            cls._read_sources(doc, "Offset", where, per_ampere=False) if "Offset" in doc else None
+        )
+        return cls(
+            coils,
+            offset,
+            currents=currents,
+            max_current=max_current,
+            names=[str(n) for n in coil_list],
+            center=center,
+            origin=path.name,
+        )
+
+    @staticmethod
+    def _read_sources(doc: dict, coil: str, where: str, per_ampere: bool):
+        if coil not in doc:
+            raise ValueError(f"{where}: coil {coil!r} is in Coil_List but has no entry")
+        entry = doc[coil]
+        if not isinstance(entry, dict) or "Source_List" not in entry:
+            raise ValueError(f"{where}: {coil}: missing key 'Source_List'")
+        for key in entry:
+            if "satur" in str(key).lower():
+                raise ValueError(
+                    f"{where}: {coil}: key {key!r}: saturation functions are not supported "
+                    f"(the field would not be linear in the currents)"
+                )
+        names = entry["Source_List"]
+        if not isinstance(names, list) or not names:
+            raise ValueError(f"{where}: {coil}: Source_List must be a non-empty list")
+        pos, mom = [], []
+        for src in names:
+            at = f"{where}: {coil}: {src}"
+            if src not in entry or not isinstance(entry[src], dict):
+                raise ValueError(f"{at}: listed in Source_List but has no entry")
+            s = entry[src]
+            for key in ("Source_Position", "Source_Direction", "B_Coeff"):
+                if key not in s:
+                    raise ValueError(f"{at}: missing key {key!r}")
+            if s.get("A_Coeff") is not None:
+                raise ValueError(
+                    f"{at}: A_Coeff is given ({_show(s['A_Coeff'])}): only dipole sources "
+                    f"(A_Coeff: ~) are supported"
+                )
+            unknown = set(s) - {"Source_Position", "Source_Direction", "B_Coeff", "A_Coeff"}
+            if unknown:
+                raise ValueError(f"{at}: unknown key(s) {sorted(map(str, unknown))}")
+            p = _numbers(s["Source_Position"], 3, f"{at}: Source_Position")
+            d = _numbers(s["Source_Direction"], 3, f"{at}: Source_Direction")
+            c = _numbers(s["B_Coeff"], 1, f"{at}: B_Coeff")[0]
+            norm = float(np.linalg.norm(d))
+            if abs(norm - 1.0) > UNIT_TOL:
+                raise ValueError(
+                    f"{at}: Source_Direction must be a unit vector; got |d| = {norm:.6g}"
+                )
+            pos.append(p)
+            mom.append(c * d)
+        return np.array(pos), np.array(mom)
+
+
+def _numbers(value, size: int, name: str) -> np.ndarray:
+    if not isinstance(value, list):
+        value = [value]
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be {size} numbers; got {_show(value)}") from None
+    if arr.shape != (size,):
+        raise ValueError(f"{name} must have {size} entries; got {len(value)}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite; got {arr.tolist()}")
+    return arr
