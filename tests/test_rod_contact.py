@@ -292,3 +292,38 @@ def test_richardson_keeps_the_rod_admissible():
     h = np.diff(res.s)
     corners = res.centerline(0)[:-1] + 0.5 * h[:, None] * R[:-1, :, 0]
     np.testing.assert_allclose(res.gaps(0)[:-1, 0], wall.gap(corners), atol=1e-15)
+
+
+def test_contact_jacobian_against_finite_differences():
+    # the corner contact's blocks (force, moment and complementarity rows in a node's
+    # positions, rotations and multipliers) against central differences of the residual,
+    # at a random state touching a tilted wall and a curved vessel wall
+    from coilrod.rod.solve import build_spatial_problem, make_mesh
+
+    rod = _rod()
+    G = 0.4 * np.array([[-0.5, 0, 0], [0, 1, 0], [0, 0, -0.5]])
+    field = coils.LinearField(B0=(0, 0.01, 0.002), gradient=G)
+    bend = Vessel.bend(bend_radius=0.02, angle=np.pi / 2, radius=0.004, straight_before=0.02,
+                       straight_after=0.03)  # fmt: skip
+    obstacles = [Wall((0, 0.01, 0), (0, -1, 0.2)), bend]
+    P = build_spatial_problem(rod, field, make_mesh(rod, 5), np.array([0.02, 0, 0]), np.eye(3),
+                              obstacles=obstacles)  # fmt: skip
+    rng = np.random.default_rng(0)
+    u = P.straight().reshape(P.n, P.nv)
+    u[:, 0:3] += 0.01 * rng.standard_normal((P.n, 3))
+    u[:, 3:6] += 0.2 * rng.standard_normal((P.n, 3))
+    u[:, 6:] = rng.standard_normal((P.n, P.nv - 6))
+    u = u.ravel()
+    J = P.dense_jacobian(u, 0.7)
+
+    def residual(v):
+        return P.linearize(v[None], 0.7, tangent=False).residual[0]
+
+    eps = 1e-6
+    fd = np.array([(residual(u + eps * e) - residual(u - eps * e)) / (2 * eps)
+                   for e in np.eye(P.size)]).T  # fmt: skip
+    assert np.abs(J - fd).max() < 1e-8 * np.abs(J).max()
+    # the new moment row is there: the moment rows depend on the multipliers
+    lam_cols = (np.arange(P.n)[:, None] * P.nv + 9 + np.arange(P.nc)).ravel()
+    moment_rows = (np.arange(1, P.n)[:, None] * P.nv + 3 + np.arange(3)).ravel()
+    assert np.abs(J[np.ix_(moment_rows, lam_cols)]).max() > 0
