@@ -45,7 +45,7 @@ def flat_support(graded: bool, segments: int):
     q0 = rod.bending_stiffness / L**3
     G = np.zeros((3, 3))
     G[0, 1] = -q0 / (rod.area * M0)
-    floor = Wall((0, -1e-3 * L, 0), (0, 1, 0))
+    floor = Wall((0, -1e-3 * L - 1e-3, 0), (0, 1, 0))  # 1e-3 L below the 2 mm rod's surface
     t0 = time.process_time()
     res = solve_rod(rod, coils.LinearField(B0=(0, 0, 0), gradient=G), [1.0], nodes=segments,
                     richardson=False, obstacles=[floor], stability=False)  # fmt: skip

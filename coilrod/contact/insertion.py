@@ -65,6 +65,7 @@ class Insertion:
     _forces: list = dataclasses.field(repr=False, default_factory=list)
     vessel: object = dataclasses.field(repr=False, default=None)
     _points: list = dataclasses.field(repr=False, default_factory=list)
+    _half_width: float = dataclasses.field(repr=False, default=0.0)
 
     def __len__(self) -> int:
         return len(self.lengths)
@@ -100,7 +101,8 @@ class Insertion:
         return self._s[k].copy()
 
     def plot(self, steps=None, ax=None, force_range=(0.1, 0.4)):
-        """Shapes of ``steps`` (default: about eight) in the x-y plane over the vessel (mm),
+        """Shapes of ``steps`` (default: about eight) in the x-y plane over the vessel (mm):
+        the centreline and the rod's width in the plane (its surface is what touches),
         contact points in contact marked, and the total wall force per step (mN, log scale) against
         the clinical range ``force_range`` (N) in a second panel.  Returns the figure."""
         import matplotlib.pyplot as plt
@@ -122,7 +124,14 @@ class Insertion:
             label = f"{self.lengths[k] * 1e3:.0f} mm"
             # shorter shapes on top: follow-the-leader shapes share their proximal part, and
             # a short one drawn first would vanish under the longer ones
-            axes[0].plot(x[:, 0], x[:, 1], color=color, lw=1.5, label=label, zorder=3 - i / 100)
+            axes[0].plot(x[:, 0], x[:, 1], color=color, lw=1.0, label=label, zorder=3 - i / 100)
+            if self._half_width > 0:  # the rod's width in the plane: its surface meets walls
+                t = self._frames[k][:, 0:2, 0]
+                perp = np.c_[-t[:, 1], t[:, 0]] / np.linalg.norm(t, axis=1)[:, None]
+                edge = self._half_width * perp
+                outline = np.concatenate([x[:, 0:2] + edge, (x[:, 0:2] - edge)[::-1]])
+                axes[0].fill(outline[:, 0], outline[:, 1], color=color, alpha=0.3, lw=0,
+                             zorder=3 - i / 100)  # fmt: skip
             on = self.contact_nodes[k]
             p = self._points[k] if self._points else x
             axes[0].plot(p[on, 0], p[on, 1], "o", color="crimson", ms=3)
@@ -438,6 +447,7 @@ class _Record:
         self.lengths, self.vessel = lengths, vessel
         keys = ("tip", "wall", "fmax", "nodes", "gap", "stable", "sub", "s", "x", "R", "f", "p")
         self.out = {key: [] for key in keys}
+        self.half_width = 0.0
 
     def add(self, problem, u, free, stable, solves):
         out = self.out
@@ -459,6 +469,7 @@ class _Record:
         out["R"].append(R)
         out["f"].append(per_length)
         out["p"].append(problem.points(problem.contact_points(u[None])[0]))
+        self.half_width = float(problem._half[0] * L)  # in-plane (normal) half-extent, m
 
     def result(self) -> Insertion:
         out = self.out
@@ -477,6 +488,7 @@ class _Record:
             _forces=out["f"],
             vessel=self.vessel,
             _points=out["p"],
+            _half_width=self.half_width,
         )
 
 

@@ -130,6 +130,7 @@ def build_spatial_problem(
         tol,
         mixed,
         obstacles,
+        section=rod.section if obstacles else None,
     )
 
 
@@ -350,7 +351,8 @@ def _check_obstacles(obstacles) -> tuple:
 
 
 def _check_start(problems, obstacles) -> None:
-    """ValueError unless the straight unloaded rod (every mesh's nodes) is admissible."""
+    """ValueError unless the straight unloaded rod (every mesh's nodes) is admissible: its
+    centreline, and its surface (a rod thicker than the space it starts in is an error)."""
     for problem in problems:
         pts = problem.points(problem.node_positions(problem.straight()[None])[0])
         for i, ob in enumerate(obstacles):
@@ -367,6 +369,19 @@ def _check_start(problems, obstacles) -> None:
                     f"node at s = {problem.mesh.s[j] * problem.L:.4g} m, "
                     f"{np.round(pts[j], 6).tolist()} m, lies {-gap[j]:.3g} m inside it"
                 )
+        U0 = problem.straight()[None]
+        gaps = problem.contact_state(U0)[1][0]  # the surface's gaps, units of L
+        bad = np.argwhere(gaps < -1e-12)
+        if bad.size:
+            j, i = (int(v) for v in bad[0])
+            half = problem._half * problem.L
+            raise ValueError(
+                f"obstacles[{i}] leaves no room for the rod's surface: the straight rod's "
+                f"section (half-extents {1e3 * half[0]:.4g} x {1e3 * half[1]:.4g} mm) at "
+                f"s = {problem.L * (problem.mesh.s[j] + problem._contact_geometry()[0][j]):.4g}"
+                f" m reaches {-gaps[j, i] * problem.L:.3g} m into it (a rod thicker than the "
+                "vessel, or a clamp too close to the wall)"
+            )
 
 
 def _refine(problems, states, scales, opts):
@@ -541,15 +556,8 @@ def _extrapolation_admissible(problems, states, fine_states, x, frames) -> np.nd
     _, gf, af = fine.contact_state(fine_states)
     af_pairs = af[:, 0:-1:2] | af[:, 1::2]  # fine corners 2j, 2j+1 make coarse corner j
     same = np.all(ac[:, :-1] == af_pairs, axis=(1, 2)) & np.all(ac[:, -1] == af[:, -1], axis=1)
-    c, _ = coarse._contact_geometry()
-    pts = coarse.points(x + c[:, None] * frames[..., :, 0])
-    k, n = x.shape[:2]
-    deepest = np.minimum(gf.min(axis=(1, 2)), 0.0) * coarse.L  # m
-    ok = same.copy()
-    for ob in coarse.obstacles:
-        g = np.asarray(ob.gap(np.concatenate([pts, coarse.points(x)], 1).reshape(-1, 3)), float)
-        ok &= g.reshape(k, -1).min(axis=1) >= deepest - 1e-10 * coarse.L
-    return ok
+    deepest = np.minimum(gf.min(axis=(1, 2)), 0.0)  # units of L
+    return same & (coarse.surface_gaps(x, frames).min(axis=(1, 2)) >= deepest - 1e-10)
 
 
 def _contact_data(problems, states, fine_states, rod, x, frames, extrapolated):
@@ -572,12 +580,7 @@ def _contact_data(problems, states, fine_states, rod, x, frames, extrapolated):
         totals = np.where(done, (4 * totals - coarse_totals) / 3, totals)
     totals = totals * (EI / L**2)  # N
     step = 1 if fine_states is None else 2
-    pts = coarse.points(x + coarse._contact_geometry()[0][:, None] * frames[..., :, 0])
-    k, n = x.shape[:2]
-    gap = np.stack(
-        [np.asarray(ob.gap(pts.reshape(-1, 3)), float).reshape(k, n) for ob in coarse.obstacles],
-        axis=-1,
-    )
+    gap = coarse.surface_gaps(x, frames) * L
     return {
         "s": s[::step],
         "force": per_length[:, ::step],

@@ -93,6 +93,14 @@ class SpatialRod(DiscreteRod):
         Newton tolerance on the scaled residual (as :class:`~coilrod.rod.planar.PlanarRod`).
     mixed : bool
         Use the mixed layout even in a uniform field (sensitivities to a field gradient).
+    obstacles : sequence
+        Rigid obstacles (the gap interface of :mod:`coilrod.contact.obstacle`).
+    section : Circle or Rectangle, optional
+        The cross-section (m): contact is with the rod's surface, the gap of a contact point
+        minus the section's half-extent along the contact normal (a circle's radius; a
+        rectangle's ``(thickness |n . d_2| + width |n . d_3|) / 2`` with d_2, d_3 the
+        section's axes), the force applied at the section's touching point.  None: the
+        centreline.
     """
 
     batched = True
@@ -116,6 +124,7 @@ class SpatialRod(DiscreteRod):
         tol=1e-9,
         mixed=False,
         obstacles=(),
+        section=None,
     ):
         self.mesh = mesh
         self.mu = np.asarray(mu, float)
@@ -126,6 +135,14 @@ class SpatialRod(DiscreteRod):
         self.R0 = np.asarray(clamp_rotation, float)
         self.tol = float(tol)
         self.obstacles = tuple(obstacles)
+        # the section's half-extents along (normal, binormal), units of L; round: a circle
+        self._half, self._round = np.zeros(2), True
+        if section is not None:
+            if hasattr(section, "diameter"):
+                self._half = np.full(2, 0.5 * float(section.diameter) / float(length))
+            else:
+                self._half = 0.5 * np.array([section.thickness, section.width]) / float(length)
+                self._round = False
         self.nc = len(self.obstacles)  # contact multipliers per node, one per obstacle
         if self.nc:  # semi-smooth Newton: a step that switches contacts may raise the residual
             self.full_step_growth = 1e3
@@ -366,14 +383,16 @@ class SpatialRod(DiscreteRod):
         t = self.frames(U)[..., :, 0]
         return self.node_positions(U) + c[:, None] * t
 
-    def _contact_terms(self, V: np.ndarray, x: np.ndarray, t: np.ndarray, hessian: bool):
-        """Contact multipliers lam (k, n, nc) (force per length, EI_z / L^3 units), gaps
-        (k, n, nc) (units of L), unit normals (k, n, nc, 3) and gap hessians
+    def _contact_terms(self, V: np.ndarray, x: np.ndarray, frames: np.ndarray, hessian: bool):
+        """Contact multipliers lam (k, n, nc) (force per length, EI_z / L^3 units), gaps of
+        the rod's surface (k, n, nc) (units of L), unit normals (k, n, nc, 3), gap hessians
         (k, n, nc, 3, 3) (1/m, times L: per unit of L) at the contact points
-        ``x_j + c_j t_j`` (node positions x, tangents t (k, n, 3))."""
+        ``x_j + c_j t_j`` (node positions x, frames (k, n, 3, 3)), and the offset of a
+        rectangle's touching corner from the contact point, ``-arm`` (k, n, nc, 3) in units
+        of L (None for a round section: it touches along the normal)."""
         k, n = V.shape[0], self.n
         c, _ = self._contact_geometry()
-        pts = self.points(x + c[:, None] * t).reshape(-1, 3)
+        pts = self.points(x + c[:, None] * frames[..., :, 0]).reshape(-1, 3)
         lam = V[:, :, 9 : 9 + self.nc]
         gaps = np.empty((k, n, self.nc))
         normals = np.empty((k, n, self.nc, 3))
@@ -388,7 +407,21 @@ class SpatialRod(DiscreteRod):
             normals[:, :, o] = np.asarray(grad, float).reshape(k, n, 3)
             if hessian:
                 hess[:, :, o] = np.asarray(hs, float).reshape(k, n, 3, 3)
-        return lam, gaps, normals, hess
+        arm = None
+        if self._round:
+            gaps -= self._half[0]
+        else:  # support of the rectangle along the normal: arm = sum_a half_a sign(n.d_a) d_a
+            d = np.einsum("knoi,knia->knoa", normals, frames[..., :, 1:3])  # (k, n, nc, 2)
+            gaps -= np.abs(d) @ self._half
+            arm = np.einsum("knoa,knia->knoi", np.sign(d) * self._half, frames[..., :, 1:3])
+        return lam, gaps, normals, hess, arm
+
+    def surface_gaps(self, x: np.ndarray, frames: np.ndarray) -> np.ndarray:
+        """Gaps of the rod's surface at the contact points of a rod given by its node
+        positions x (k, n, 3) (units of L relative to the clamp) and frames (k, n, 3, 3)
+        (e.g. a Richardson extrapolation): (k, n, nc), units of L."""
+        V = np.zeros(x.shape[:2] + (self.nv,))
+        return self._contact_terms(V, x, frames, False)[1]
 
     def contact_state(self, U: np.ndarray):
         """Contact of states (k, size) at the contact points (:meth:`contact_points`): force
@@ -397,8 +430,7 @@ class SpatialRod(DiscreteRod):
         (points where the gap is closed and the wall pushes)."""
         U = np.atleast_2d(U)
         V = U.reshape(U.shape[0], self.n, self.nv)
-        t = self.frames(U)[..., :, 0]
-        lam, gaps, normals, _ = self._contact_terms(V, V[:, :, 0:3], t, False)
+        lam, gaps, normals, _, _ = self._contact_terms(V, V[:, :, 0:3], self.frames(U), False)
         force = lam[..., None] * normals
         force[:, 0] = 0.0
         active = self.kappa * gaps < lam
@@ -598,12 +630,15 @@ class SpatialRod(DiscreteRod):
         if self.nc:  # contact at the polygon's corners and the tip (_contact_geometry)
             cc, om = self._contact_geometry()
             tt = frames[:, :, :, 0]
-            contact = self._contact_terms(V, X, tt, tangent)
-            lam, gaps, normals, _ = contact
+            contact = self._contact_terms(V, X, frames, tangent)
+            lam, gaps, normals, _, arm = contact
             f_c = np.einsum("kno,knoi->kni", lam, normals)  # (k, n, 3)
             m_c = -(om * cc)[:, None] * cross(tt, f_c)  # contact moments (world)
+            m_arm = 0.0
+            if arm is not None:  # the force acts at the rectangle's corner, p - arm
+                m_arm = om[:, None] * np.einsum("kno,knoi->kni", lam, cross(arm, normals))
             R[:, :-1, 6:9] -= om[1:, None] * f_c[:, 1:]
-            R[:, 1:, 3:6] += m_c[:, 1:]
+            R[:, 1:, 3:6] += (m_c + m_arm)[:, 1:]
             R[:, :, 9:] = self._ncp(lam, gaps)[0]
             R[:, 0, 9:] = lam[:, 0]
         R = R.reshape(k, -1)
@@ -624,7 +659,7 @@ class SpatialRod(DiscreteRod):
         f_phi = blk[:, 1:, 9]
         m_x = blk[:, 1:, 5]
         if self.nc:
-            lam, gaps, normals, hess = contact
+            lam, gaps, normals, hess, arm = contact
             oc = (om * cc)[1:, None, None]
             tt = frames[:, 1:, :, 0]
             That, Jl = hat(tt), left_jacobian(phi[:, 1:])
@@ -648,13 +683,34 @@ class SpatialRod(DiscreteRod):
             c_lam[..., np.arange(nc), np.arange(nc)] = d_lam
             n_t = np.swapaxes(normals[:, 1:], -1, -2)  # (k, n-1, 3, nc)
             tn = cross(tt[:, :, None, :], normals[:, 1:])  # (k, n-1, nc, 3): dg/dd / c
+            gx = normals[:, 1:]  # d(surface gap)/dx, (k, n-1, nc, 3)
+            gd = cc[1:, None, None] * tn  # d(surface gap)/dd
+            turn_lam = -oc * np.swapaxes(tn, -1, -2)  # d(moment row)/dlam
+            if arm is not None:  # the corner's gap n . arm turns with the frame and n(p)
+                a1 = arm[:, 1:]
+                w_ = L * np.einsum("knoij,knoj->knoi", hess[:, 1:], a1)  # L H arm
+                an = cross(a1, normals[:, 1:])  # (k, n-1, nc, 3)
+                gx = gx - w_
+                gd = cc[1:, None, None] * cross(tt[:, :, None, :], normals[:, 1:] - w_) - an
+                turn_lam = turn_lam + om[1:, None, None] * np.swapaxes(an, -1, -2)
+                ahat = hat(a1)  # (k, n-1, nc, 3, 3)
+                aLH = np.einsum("kno,knoij,knojl->knil", lam[:, 1:], ahat, L * hess[:, 1:])
+                m_x = m_x + om[1:, None, None] * aLH
+                frame_turn = np.einsum("kno,knoij,knojl->knil", lam[:, 1:], hat(normals[:, 1:]),
+                                       ahat)  # fmt: skip
+                arm_d = om[1:, None, None] * (frame_turn - cc[1:, None, None] * aLH @ That)
+                mc_d = mc_d + arm_d  # (a derivative of the row: no hat(m) / 2 term)
+                # the second variation (stability) takes its symmetric part and the whole
+                # moment's hat(m)/2 (zero at an equilibrium with the core's)
+                mc_d_sym = mc_d_sym + 0.5 * (arm_d + np.swapaxes(arm_d, -1, -2))
+                m_c = m_c + m_arm
             blocks.update(
                 {
                     "clamp_lam": np.eye(nc),
                     "f_lamnext": -om[1:, None, None] * n_t,
-                    "m_lam": -oc * np.swapaxes(tn, -1, -2),
-                    "c_x": (d_gap * self.kappa)[..., None] * normals[:, 1:],
-                    "c_phi": ((d_gap * self.kappa)[..., None] * cc[1:, None, None] * tn) @ Jl,
+                    "m_lam": turn_lam,
+                    "c_x": (d_gap * self.kappa)[..., None] * gx,
+                    "c_phi": ((d_gap * self.kappa)[..., None] * gd) @ Jl,
                     "c_lam": c_lam,
                 }
             )
@@ -701,7 +757,7 @@ class SpatialRod(DiscreteRod):
             coupling = np.where(act[:, :, None, :], coupling, 0.0)
             D[:, :, 0:3, 9:] = coupling
             D[:, :, 9:, 0:3] = np.swapaxes(coupling, -1, -2)
-            turn = np.where(act[:, :, None, :], -oc * np.swapaxes(tn, -1, -2), 0.0)
+            turn = np.where(act[:, :, None, :], turn_lam, 0.0)
             D[:, :, 6:9, 9:] = turn
             D[:, :, 9:, 6:9] = np.swapaxes(turn, -1, -2)
             D[:, :, 9:, 9:][..., np.arange(nc), np.arange(nc)] = np.where(act, 0.0, 1.0)
