@@ -375,3 +375,20 @@ class TestSurface:
             coilrod.insert(
                 rod, Vessel.straight(0.1, 0.8e-3), [0.01], coils.UniformField(B=(0, 0, 0))
             )
+
+
+def test_close_first_reaches_the_same_state(monkeypatch):
+    # Newton steps that end where the first open contact closes (an option) change the path
+    # to the state, not the state: the tip-contact cantilever's tip and wall force agree
+    from coilrod.rod.spatial import SpatialRod
+
+    rod = _rod()
+    wall = Wall((0, 0.2 * L, 0), (0, -1, 0))
+    field = coils.UniformField(B=(0, rod.field_for_lambda(6.0), 0))
+    out = []
+    for close_first in (False, True):
+        monkeypatch.setattr(SpatialRod, "close_first", close_first)
+        res = solve_rod(rod, field, [1.0], nodes=16, obstacles=[wall], stability=False)
+        out.append((res.tip[0], res.obstacle_forces(0)[0]))
+    np.testing.assert_allclose(out[0][0], out[1][0], rtol=0, atol=1e-9 * L)
+    np.testing.assert_allclose(out[0][1], out[1][1], rtol=1e-7)

@@ -328,7 +328,28 @@ class SpatialRod(DiscreteRod):
         d = self.rotations(np.atleast_2d(du))
         rot = np.sqrt(np.einsum("kni,kni->kn", d, d)).max(axis=1)
         with np.errstate(divide="ignore"):
-            return np.where(rot > 0, np.minimum(1.0, self.max_rotation / rot), 1.0)
+            lim = np.where(rot > 0, np.minimum(1.0, self.max_rotation / rot), 1.0)
+        if self.nc and not self.uniform and self.close_first:
+            lim = np.minimum(lim, self._closing_limit(np.atleast_2d(u), np.atleast_2d(du)))
+        return lim
+
+    #: Newton steps end where the first open contact point would close (see
+    #: :meth:`_closing_limit`).  Off by default: it halves the iterations of a tip contact
+    #: at 32 segments but costs two gap evaluations per step, and an insertion through a
+    #: bend is slower with it (benchmarks/bench_contact.py).
+    close_first = False
+
+    def _closing_limit(self, U, dU):
+        """Fraction (k,) of each Newton step at which the first open contact point (surface
+        gap > 1e-6 L) reaches the wall, 1 if none does: the step then ends on the wall
+        instead of overshooting it, and the next one sees the contact."""
+        g0 = self.surface_gaps(self.node_positions(U), self.frames(U))
+        U1 = U + dU
+        g1 = self.surface_gaps(self.node_positions(U1), self.frames(U1))
+        closing = (g0 > 1e-6) & (g1 < 0.0)
+        with np.errstate(all="ignore"):
+            frac = np.where(closing, g0 / (g0 - g1), 1.0)
+        return frac.min(axis=(1, 2))
 
     def distance(self, du):
         """Largest change of a node rotation vector, rad, shape (k,)."""
