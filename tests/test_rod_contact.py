@@ -392,3 +392,18 @@ def test_close_first_reaches_the_same_state(monkeypatch):
         out.append((res.tip[0], res.obstacle_forces(0)[0]))
     np.testing.assert_allclose(out[0][0], out[1][0], rtol=0, atol=1e-9 * L)
     np.testing.assert_allclose(out[0][1], out[1][1], rtol=1e-7)
+
+
+def test_closing_fraction_of_a_rigid_translation():
+    # the straight rod's surface 3 mm below a wall, moved 12 mm up: it touches at 1/4
+    from coilrod.rod.solve import build_spatial_problem, make_mesh
+
+    rod = _rod()
+    wall = Wall((0, 4e-3, 0), (0, -1, 0))  # the axis 4 mm below: the surface 3 mm
+    P = build_spatial_problem(rod, coils.UniformField(B=(0, 1e-3, 0)), make_mesh(rod, 8),
+                              np.zeros(3), np.eye(3), obstacles=[wall])  # fmt: skip
+    u = P.straight()
+    du = np.zeros((P.n, P.nv))
+    du[:, 1] = 12e-3 / L
+    assert abs(P.closing_fraction(u[None], du.reshape(1, -1))[0] - 0.25) < 1e-12
+    assert P.closing_fraction(u[None], -du.reshape(1, -1))[0] == 1.0  # moving away

@@ -330,19 +330,21 @@ class SpatialRod(DiscreteRod):
         with np.errstate(divide="ignore"):
             lim = np.where(rot > 0, np.minimum(1.0, self.max_rotation / rot), 1.0)
         if self.nc and not self.uniform and self.close_first:
-            lim = np.minimum(lim, self._closing_limit(np.atleast_2d(u), np.atleast_2d(du)))
+            lim = np.minimum(lim, self.closing_fraction(np.atleast_2d(u), np.atleast_2d(du)))
         return lim
 
     #: Newton steps end where the first open contact point would close (see
-    #: :meth:`_closing_limit`).  Off by default: it halves the iterations of a tip contact
+    #: :meth:`closing_fraction`).  Off by default: it halves the iterations of a tip contact
     #: at 32 segments but costs two gap evaluations per step, and an insertion through a
     #: bend is slower with it (benchmarks/bench_contact.py).
     close_first = False
 
-    def _closing_limit(self, U, dU):
-        """Fraction (k,) of each Newton step at which the first open contact point (surface
-        gap > 1e-6 L) reaches the wall, 1 if none does: the step then ends on the wall
-        instead of overshooting it, and the next one sees the contact."""
+    def closing_fraction(self, U, dU):
+        """Fraction (k,) of each change dU (k, size) of states U (k, size) at which the first
+        open contact point (surface gap > 1e-6 L) reaches the wall, 1 if none does.  A Newton
+        step limited to it (:attr:`close_first`) ends on the wall instead of overshooting
+        it, and the next one sees the contact; a load step's prediction limited to it (a
+        hook the path engine does not call yet) ends where the first contact closes."""
         g0 = self.surface_gaps(self.node_positions(U), self.frames(U))
         U1 = U + dU
         g1 = self.surface_gaps(self.node_positions(U1), self.frames(U1))
