@@ -98,13 +98,15 @@ def test_spatial_example_runs():
 
 
 def test_contact_example_runs():
-    """The contact example: the tip rests on the wall (8 mm) with a positive force on it, and
-    the insertion gets round the bend without penetrating the wall."""
+    """The contact example: the 2 mm rod's surface rests on the wall (8 mm; its axis at 7 mm)
+    with a positive force on it, and the insertion gets round the bend without penetrating
+    the wall; the largest wall force is the largest magnitude."""
     ns = _block("obstacles=[wall]")
     res, ins = ns["res"], ns["ins"]
     L = ns["rod"].length
-    assert res.gaps(1).min() >= -1e-6 * L
-    assert abs(res.tip[1, 1] - 0.008) < 1e-9
+    assert res.gaps(1).min() >= -1e-9 * L
+    assert abs(res.tip[1, 1] - (0.008 - 0.5 * ns["rod"].section.diameter)) < 1e-9
+    assert ins.wall_force_magnitude.max() == np.linalg.norm(ins.wall_force, axis=1).max()
     assert res.obstacle_forces(1)[0][1] > 0
     assert ins.min_gap.min() >= -1e-6 * L
     assert ins.tip[-1, 1] > 0.02

@@ -15,6 +15,7 @@ from ..errors import ConvergenceError
 from ..path.corrector import NewtonOptions, newton
 from ..robot.magnetization import Magnetization
 from ..robot.rod import Rod
+from ..rod.solve import build_spatial_problem, make_mesh
 
 __all__ = ["insert", "Insertion", "free_part"]
 
@@ -33,13 +34,17 @@ class Insertion:
     tip : ndarray, shape (m, 3)
         Tip positions, m.
     wall_force : ndarray, shape (m, 3)
-        Total force the rod exerts on the vessel wall, N.
+        Total force the rod exerts on the vessel wall, N: a vector per step, so
+        ``wall_force.max()`` is its largest *component*; the size of the force is
+        :attr:`wall_force_magnitude` (``wall_force_magnitude.max()``: the largest total
+        wall force along the insertion).
     max_contact_force : ndarray, shape (m,)
         Largest contact force per unit length along the rod, N/m.
     contact_nodes : list of ndarray of bool
-        Nodes in contact with the wall, per step (n_k,).
+        Contact points in contact with the wall, per step (n_k,): the corners of the rod's
+        polygon half a segment after each node, and the tip (:meth:`contact_points`).
     min_gap : ndarray, shape (m,)
-        Smallest node gap to the wall, m (>= -1e-6 L: no penetration).
+        Smallest gap of a contact point to the wall, m (>= -1e-6 L: no penetration).
     stable : ndarray of bool, shape (m,)
         Positive second variation (active contacts as constraints).
     substeps : ndarray of int, shape (m,)
@@ -59,9 +64,24 @@ class Insertion:
     _frames: list = dataclasses.field(repr=False, default_factory=list)
     _forces: list = dataclasses.field(repr=False, default_factory=list)
     vessel: object = dataclasses.field(repr=False, default=None)
+    _points: list = dataclasses.field(repr=False, default_factory=list)
+    _half_width: float = dataclasses.field(repr=False, default=0.0)
 
     def __len__(self) -> int:
         return len(self.lengths)
+
+    @property
+    def wall_force_magnitude(self) -> np.ndarray:
+        """Size of the total force on the vessel wall per step, ``|wall_force|``, shape (m,),
+        N."""
+        return np.linalg.norm(self.wall_force, axis=1)
+
+    def contact_points(self, k: int) -> np.ndarray:
+        """Contact points of step ``k``, (n_k, 3), m: the corners of the rod's polygon (node
+        j's straight piece along its tangent ends at ``x_j + (h_j/2) t_j``) and the tip.
+        They are what the contact keeps inside the wall; on a concave wall the nodes
+        between them may cross it by the piece's sagitta ``h^2 / (8 R)``."""
+        return self._points[k].copy()
 
     def centerline(self, k: int) -> np.ndarray:
         """Centreline of step ``k``, shape (n_k, 3), m."""
@@ -72,7 +92,8 @@ class Insertion:
         return self._frames[k].copy()
 
     def contact_force(self, k: int) -> np.ndarray:
-        """Contact force per unit length on the rod at the nodes of step ``k``, (n_k, 3), N/m."""
+        """Contact force per unit length on the rod at the contact points of step ``k``
+        (:meth:`contact_points`), (n_k, 3), N/m."""
         return self._forces[k].copy()
 
     def s(self, k: int) -> np.ndarray:
@@ -80,8 +101,9 @@ class Insertion:
         return self._s[k].copy()
 
     def plot(self, steps=None, ax=None, force_range=(0.1, 0.4)):
-        """Shapes of ``steps`` (default: about eight) in the x-y plane over the vessel (mm),
-        nodes in contact marked, and the total wall force per step (mN, log scale) against
+        """Shapes of ``steps`` (default: about eight) in the x-y plane over the vessel (mm):
+        the centreline and the rod's width in the plane (its surface is what touches),
+        contact points in contact marked, and the total wall force per step (mN, log scale) against
         the clinical range ``force_range`` (N) in a second panel.  Returns the figure."""
         import matplotlib.pyplot as plt
         from matplotlib.ticker import FuncFormatter
@@ -102,9 +124,17 @@ class Insertion:
             label = f"{self.lengths[k] * 1e3:.0f} mm"
             # shorter shapes on top: follow-the-leader shapes share their proximal part, and
             # a short one drawn first would vanish under the longer ones
-            axes[0].plot(x[:, 0], x[:, 1], color=color, lw=1.5, label=label, zorder=3 - i / 100)
+            axes[0].plot(x[:, 0], x[:, 1], color=color, lw=1.0, label=label, zorder=3 - i / 100)
+            if self._half_width > 0:  # the rod's width in the plane: its surface meets walls
+                t = self._frames[k][:, 0:2, 0]
+                perp = np.c_[-t[:, 1], t[:, 0]] / np.linalg.norm(t, axis=1)[:, None]
+                edge = self._half_width * perp
+                outline = np.concatenate([x[:, 0:2] + edge, (x[:, 0:2] - edge)[::-1]])
+                axes[0].fill(outline[:, 0], outline[:, 1], color=color, alpha=0.3, lw=0,
+                             zorder=3 - i / 100)  # fmt: skip
             on = self.contact_nodes[k]
-            axes[0].plot(x[on, 0], x[on, 1], "o", color="crimson", ms=3)
+            p = self._points[k] if self._points else x
+            axes[0].plot(p[on, 0], p[on, 1], "o", color="crimson", ms=3)
         mm = FuncFormatter(lambda v, _pos: f"{v * 1e3:g}")
         axes[0].xaxis.set_major_formatter(mm)
         axes[0].yaxis.set_major_formatter(mm)
@@ -258,7 +288,8 @@ def insert(
     Each step starts from the previous shape (follow-the-leader: the rotations and contact
     forces as functions of the arc length from the clamp, extended along the old tip) and is
     solved by the contact Newton method of the spatial rod
-    (:class:`~coilrod.rod.spatial.SpatialRod`; frictionless, contact at the nodes); a step
+    (:class:`~coilrod.rod.spatial.SpatialRod`; frictionless, contact at the corners of the
+    rod's polygon and its tip); a step
     that fails is split in halves (free length and field blended linearly), up to
     :data:`MAX_HALVINGS` times.  The first step is loaded from the straight rod by
     :func:`~coilrod.solve_rod`.
@@ -295,15 +326,55 @@ def insert(
         A step could not be reached even after :data:`MAX_HALVINGS` halvings; ``result`` holds
         the :class:`Insertion` up to the last step reached.
     """
-    from ..rod.model import as_rotation
-    from ..rod.solve import build_spatial_problem, make_mesh, solve_rod
-
     lengths = as_array(lengths, "lengths", ("m",))
     if lengths.size == 0 or not np.all(np.isfinite(lengths)):
         raise ValueError(f"lengths must be a non-empty sequence of finite lengths; got {lengths}")
     if np.any(lengths <= 0) or np.any(lengths > rod.length * (1 + 1e-12)):
         raise ValueError(f"lengths must lie in (0, {rod.length:g}] m (the rod's length)")
     schedule = _fields(field_schedule, lengths.size)
+    clamp, R0 = _introducer(vessel, clamp_position, clamp_rotation)
+    rec = _Record(lengths, vessel)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=lengths.size, desc="insert", unit="step")
+    try:
+        # step 0: load the straight free part from zero field
+        field0 = schedule(0, float(lengths[0]))
+        free0 = free_part(rod, float(lengths[0]))
+        problem, u, stable = _first_step(free0, field0, nodes, clamp, R0, vessel, tol)
+        rec.add(problem, u, free0, stable, 1)
+        if bar is not None:
+            bar.update(1)
+        prev = (float(lengths[0]), field0)
+        for k in range(1, lengths.size):
+            target = (float(lengths[k]), schedule(k, float(lengths[k])))
+
+            def build(length, field):
+                free = free_part(rod, length)
+                mesh = make_mesh(free, nodes)
+                trial = build_spatial_problem(free, field, mesh, clamp, R0, tol, obstacles=[vessel])
+                return free, trial
+
+            problem, u, free, stable, solves = _step(build, problem, u, prev, target, k)
+            rec.add(problem, u, free, stable, solves)
+            prev = target
+            if bar is not None:
+                bar.update(1)
+    except ConvergenceError as err:
+        err.result = rec.result() if rec.out["tip"] else None
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+    return rec.result()
+
+
+def _introducer(vessel, clamp_position, clamp_rotation):
+    """The introducer's pose (clamp (3,) m, rotation (3, 3)), checked inside the vessel."""
+    from ..rod.model import as_rotation
+
     if clamp_position is None or clamp_rotation is None:
         p0, R0 = _default_clamp(vessel)
         clamp = p0 if clamp_position is None else as_array(clamp_position, "clamp_position", (3,))
@@ -314,19 +385,72 @@ def insert(
     check = getattr(vessel, "check_start", None)
     if callable(check):
         check(clamp[None], "the clamp (introducer)")
+    return clamp, R0
+
+
+def _first_step(free, field, nodes, clamp, R0, vessel, tol):
+    """The first free part loaded from the straight rod by solve_rod: (problem, state,
+    stable)."""
+    from ..rod.solve import solve_rod
+
+    try:
+        first = solve_rod(
+            free, field, [1.0], nodes=nodes, richardson=False, clamp_position=clamp,
+            clamp_rotation=R0, obstacles=[vessel], tol=tol, model="spatial",
+        )  # fmt: skip
+    except ConvergenceError as err:
+        err.result = None
+        raise
+    return first._solution.problems[0], first._solution.states[0][0], bool(first.stable[0])
+
+
+def _step(build, problem, u, prev, target, k):
+    """One insertion step from the solved (problem, u) at (length, field) ``prev`` to
+    ``target``, halving the step on failure: (problem, state, free rod, stable, solves)."""
     # semi-smooth Newton: the error may stall for a few iterations while the contact set
     # settles (then it converges quadratically)
     opts = NewtonOptions(max_iter=40, stagnation=12)
-    out = dict(
-        tip=[], wall=[], fmax=[], nodes=[], gap=[], stable=[], sub=[], s=[], x=[], R=[], f=[]
-    )
-    bar = None
-    if progress:
-        from tqdm import tqdm
+    (prev_len, prev_field), (target_len, target_field) = prev, target
+    t, dt, solves, halvings = 0.0, 1.0, 0, 0
+    cur_problem, cur_u, cur_lin, free = problem, u, None, None
+    while t < 1.0:
+        t1 = min(1.0, t + dt)
+        length = prev_len + t1 * (target_len - prev_len)
+        field = target_field if t1 == 1.0 else prev_field * (1 - t1) + target_field * t1
+        trial_free, trial = build(length, field)
+        res = newton(trial, _carry(cur_problem, cur_u, trial), 1.0, opts)
+        solves += 1
+        if res.ok:  # (its linearization carries the state's stability)
+            t, cur_problem, cur_u, cur_lin, free = t1, trial, res.u, res.lin, trial_free
+            dt = min(1.0 - t, 2 * dt) if t < 1.0 else dt
+            continue
+        halvings += 1
+        if halvings > MAX_HALVINGS:
+            raise ConvergenceError(
+                f"insert could not reach free length {target_len:.6g} m (step {k}): it "
+                f"stopped at {prev_len + t * (target_len - prev_len):.6g} m after "
+                f"{MAX_HALVINGS} halvings (error {float(res.error):.3g} of the "
+                f"tolerance){_reason(trial)}",
+                reached=prev_len + t * (target_len - prev_len),
+                target=target_len,
+                residual=float(res.error),
+            )
+        dt /= 2
+    stable = np.ravel(cur_problem.stability(cur_lin))[0] > 0
+    return cur_problem, cur_u, free, bool(stable), solves
 
-        bar = tqdm(total=lengths.size, desc="insert", unit="step")
 
-    def record(problem, u, free, stable):
+class _Record:
+    """The per-step figures of an insertion, and the :class:`Insertion` they make."""
+
+    def __init__(self, lengths, vessel):
+        self.lengths, self.vessel = lengths, vessel
+        keys = ("tip", "wall", "fmax", "nodes", "gap", "stable", "sub", "s", "x", "R", "f", "p")
+        self.out = {key: [] for key in keys}
+        self.half_width = 0.0
+
+    def add(self, problem, u, free, stable, solves):
+        out = self.out
         V = u.reshape(problem.n, problem.nv)
         R = problem.frames(u[None])[0]
         x = problem.points(V[:, 0:3])
@@ -339,19 +463,18 @@ def insert(
         out["nodes"].append(active[0].any(axis=1))
         out["gap"].append(float(gaps.min() * L))
         out["stable"].append(bool(stable))
+        out["sub"].append(int(solves))
         out["s"].append(problem.mesh.s * L)
         out["x"].append(x)
         out["R"].append(R)
         out["f"].append(per_length)
+        out["p"].append(problem.points(problem.contact_points(u[None])[0]))
+        self.half_width = float(problem._half[0] * L)  # in-plane (normal) half-extent, m
 
-    def build(length, field):
-        free = free_part(rod, length)
-        mesh = make_mesh(free, nodes)
-        return free, build_spatial_problem(free, field, mesh, clamp, R0, tol, obstacles=[vessel])
-
-    def result():
+    def result(self) -> Insertion:
+        out = self.out
         return Insertion(
-            lengths=lengths[: len(out["tip"])].copy(),
+            lengths=self.lengths[: len(out["tip"])].copy(),
             tip=np.array(out["tip"]).reshape(-1, 3),
             wall_force=np.array(out["wall"]).reshape(-1, 3),
             max_contact_force=np.array(out["fmax"]),
@@ -363,77 +486,10 @@ def insert(
             _shapes=out["x"],
             _frames=out["R"],
             _forces=out["f"],
-            vessel=vessel,
+            vessel=self.vessel,
+            _points=out["p"],
+            _half_width=self.half_width,
         )
-
-    try:
-        # step 0: load the straight free part from zero field
-        field0 = schedule(0, float(lengths[0]))
-        free0 = free_part(rod, float(lengths[0]))
-        try:
-            first = solve_rod(
-                free0,
-                field0,
-                [1.0],
-                nodes=nodes,
-                richardson=False,
-                clamp_position=clamp,
-                clamp_rotation=R0,
-                obstacles=[vessel],
-                tol=tol,
-                model="spatial",
-            )
-        except ConvergenceError as err:
-            err.result = None
-            raise
-        problem = first._solution.problems[0]
-        u = first._solution.states[0][0]
-        record(problem, u, free0, first.stable[0])
-        out["sub"].append(1)
-        if bar is not None:
-            bar.update(1)
-        prev_len, prev_field = float(lengths[0]), field0
-        for k in range(1, lengths.size):
-            target_len, target_field = float(lengths[k]), schedule(k, float(lengths[k]))
-            t, dt, solves, halvings = 0.0, 1.0, 0, 0
-            cur_problem, cur_u, cur_lin = problem, u, None
-            while t < 1.0:
-                t1 = min(1.0, t + dt)
-                length = prev_len + t1 * (target_len - prev_len)
-                field = target_field if t1 == 1.0 else prev_field * (1 - t1) + target_field * t1
-                free, trial = build(length, field)
-                guess = _carry(cur_problem, cur_u, trial)
-                res = newton(trial, guess, 1.0, opts)
-                solves += 1
-                if res.ok:  # (its linearization carries the state's stability)
-                    t, cur_problem, cur_u, cur_lin = t1, trial, res.u, res.lin
-                    dt = min(1.0 - t, 2 * dt) if t < 1.0 else dt
-                    continue
-                halvings += 1
-                if halvings > MAX_HALVINGS:
-                    raise ConvergenceError(
-                        f"insert could not reach free length {target_len:.6g} m (step {k}): "
-                        f"it stopped at {prev_len + t * (target_len - prev_len):.6g} m after "
-                        f"{MAX_HALVINGS} halvings (error {float(res.error):.3g} of the "
-                        f"tolerance){_reason(trial)}",
-                        reached=prev_len + t * (target_len - prev_len),
-                        target=target_len,
-                        residual=float(res.error),
-                    )
-                dt /= 2
-            problem, u = cur_problem, cur_u
-            record(problem, u, free, np.ravel(problem.stability(cur_lin))[0] > 0)
-            out["sub"].append(solves)
-            prev_len, prev_field = target_len, target_field
-            if bar is not None:
-                bar.update(1)
-    except ConvergenceError as err:
-        err.result = result() if out["tip"] else None
-        raise
-    finally:
-        if bar is not None:
-            bar.close()
-    return result()
 
 
 def _reason(problem) -> str:

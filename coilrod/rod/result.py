@@ -132,11 +132,23 @@ class RodResult:
             raise ValueError("this result has no obstacles (solve_rod(..., obstacles=[...]))")
         return self._contact[name][k].copy()
 
+    @property
+    def contact_s(self) -> np.ndarray:
+        """Arc lengths of the contact points, shape (n,), m: contact is at the corners of
+        the rod's polygon (node j's straight piece along its tangent ends half a segment
+        after it, at ``s_j + h_j / 2``) and at the tip; :meth:`contact_force`,
+        :meth:`gaps` and :meth:`contact_set` are given there (with the Richardson
+        extrapolation: the force and the set of the refined mesh at its corner after each
+        output node, ``s_j + h_j / 4``)."""
+        if self._contact is None:
+            raise ValueError("this result has no obstacles (solve_rod(..., obstacles=[...]))")
+        return self._contact["s"].copy()
+
     def contact_force(self, k: int) -> np.ndarray:
-        """Contact force per unit length on the rod at the nodes :attr:`s` of state ``k``,
-        shape (n, 3), N/m (summed over the obstacles; frictionless: along each wall's
-        normal).  A contact at a single point appears as one node's force over its
-        trapezoid weight; :meth:`obstacle_forces` gives the mesh-independent totals."""
+        """Contact force per unit length on the rod at the contact points :attr:`contact_s`
+        of state ``k``, shape (n, 3), N/m (summed over the obstacles; frictionless: along
+        each wall's normal).  A contact at a single point appears as one point's force over
+        its weight; :meth:`obstacle_forces` gives the mesh-independent totals."""
         return self._contact_item("force", k).sum(axis=1)
 
     def obstacle_forces(self, k: int) -> list[np.ndarray]:
@@ -145,12 +157,15 @@ class RodResult:
         return list(self._contact_item("totals", k))
 
     def gaps(self, k: int) -> np.ndarray:
-        """Gap of each node to each obstacle in state ``k``, shape (n, n_obstacles), m (>= 0
-        up to the Newton tolerance: no penetration at the nodes)."""
+        """Gap of each contact point of the returned rod (the corners of its polygon after
+        each node and the tip, :attr:`contact_s`) to each obstacle in state ``k``, shape
+        (n, n_obstacles), m (>= 0 up to the Newton tolerance: no penetration; the
+        Richardson extrapolation is used only where it keeps them admissible)."""
         return self._contact_item("gap", k)
 
     def contact_set(self, k: int) -> np.ndarray:
-        """Nodes in contact with each obstacle in state ``k``, bool (n, n_obstacles)."""
+        """Contact points (:attr:`contact_s`) in contact with each obstacle in state ``k``,
+        bool (n, n_obstacles)."""
         return self._contact_item("active", k)
 
     def write_vtk(self, path, states=None, *, frames: bool = True):

@@ -130,6 +130,7 @@ def build_spatial_problem(
         tol,
         mixed,
         obstacles,
+        section=rod.section if obstacles else None,
     )
 
 
@@ -350,7 +351,8 @@ def _check_obstacles(obstacles) -> tuple:
 
 
 def _check_start(problems, obstacles) -> None:
-    """ValueError unless the straight unloaded rod (every mesh's nodes) is admissible."""
+    """ValueError unless the straight unloaded rod (every mesh's nodes) is admissible: its
+    centreline, and its surface (a rod thicker than the space it starts in is an error)."""
     for problem in problems:
         pts = problem.points(problem.node_positions(problem.straight()[None])[0])
         for i, ob in enumerate(obstacles):
@@ -367,6 +369,19 @@ def _check_start(problems, obstacles) -> None:
                     f"node at s = {problem.mesh.s[j] * problem.L:.4g} m, "
                     f"{np.round(pts[j], 6).tolist()} m, lies {-gap[j]:.3g} m inside it"
                 )
+        U0 = problem.straight()[None]
+        gaps = problem.contact_state(U0)[1][0]  # the surface's gaps, units of L
+        bad = np.argwhere(gaps < -1e-12)
+        if bad.size:
+            j, i = (int(v) for v in bad[0])
+            half = problem._half * problem.L
+            raise ValueError(
+                f"obstacles[{i}] leaves no room for the rod's surface: the straight rod's "
+                f"section (half-extents {1e3 * half[0]:.4g} x {1e3 * half[1]:.4g} mm) at "
+                f"s = {problem.L * (problem.mesh.s[j] + problem._contact_geometry()[0][j]):.4g}"
+                f" m reaches {-gaps[j, i] * problem.L:.3g} m into it (a rod thicker than the "
+                "vessel, or a clamp too close to the wall)"
+            )
 
 
 def _refine(problems, states, scales, opts):
@@ -505,45 +520,74 @@ def _result_spatial(rod, problems, points, iterations, events, opts) -> RodResul
     if len(problems) == 2:
         fine = problems[1]
         R_f = fine.frames(fine_states)
-        x = (4 * fine.positions_from_frames(R_f)[:, ::2] - x_c) / 3
+        x_f = fine.positions_from_frames(R_f)[:, ::2]
+        x = (4 * x_f - x_c) / 3
         R_f = R_f[:, ::2]
         # R_c = R exp(4 e), R_f = R exp(e) to leading order: R = R_f exp(-log(R_f^T R_c) / 3)
         frames = R_f @ expm(-logm(np.swapaxes(R_f, -1, -2) @ R_c) / 3)
+        if getattr(coarse, "nc", 0):  # only where admissible: else the fine mesh's state
+            extrapolated = _extrapolation_admissible(problems, states, fine_states, x, frames)
+            x[~extrapolated], frames[~extrapolated] = x_f[~extrapolated], R_f[~extrapolated]
     else:
         x, frames = x_c, R_c
+    contact = None
+    if getattr(coarse, "nc", 0):
+        done = extrapolated if len(problems) == 2 else None
+        contact = _contact_data(problems, states, fine_states, rod, x, frames, done)
     return _assemble_result(
         rod, problems, points, events, opts, states, fine_states, iterations, residual, measured,
         points_xyz=coarse.points(x),
         tip_angle=_tip_azimuth(frames[:, -1], coarse.rotations(states)[:, -1], coarse.R0),
         _theta=None, model="spatial", _frames=frames,
-        _contact=_contact_data(problems, states, fine_states, rod),
+        _contact=contact,
     )  # fmt: skip
 
 
-def _contact_data(problems, states, fine_states, rod):
-    """Contact of each state on the finest mesh solved, at the output nodes: force per length
-    (k, n, nc, 3) N/m, gaps (k, n, nc) m, active set (k, n, nc); and the total force the rod
-    exerts on each obstacle (k, nc, 3) N (Richardson-extrapolated from the two meshes like
-    the tip).  None without obstacles."""
-    problem = problems[-1]
-    if not getattr(problem, "nc", 0):
-        return None
+def _extrapolation_admissible(problems, states, fine_states, x, frames) -> np.ndarray:
+    """Whether the Richardson extrapolation (x (k, n, 3) units of L, frames (k, n, 3, 3)) of
+    each state is admissible, shape (k,): both meshes have the same contact set at the
+    coarse mesh's contact points (a fine corner pair in contact where the coarse corner
+    is, the tips alike) and no contact point of the extrapolated rod penetrates an
+    obstacle more than the fine solution's deepest point (plus 1e-10 L).  Where the sets
+    differ (an obstacle between the coarse and the fine free shapes) the error does not
+    expand in powers of h and the extrapolation can cross the wall."""
+    coarse, fine = problems
+    _, gc, ac = coarse.contact_state(states)
+    _, gf, af = fine.contact_state(fine_states)
+    af_pairs = af[:, 0:-1:2] | af[:, 1::2]  # fine corners 2j, 2j+1 make coarse corner j
+    same = np.all(ac[:, :-1] == af_pairs, axis=(1, 2)) & np.all(ac[:, -1] == af[:, -1], axis=1)
+    deepest = np.minimum(gf.min(axis=(1, 2)), 0.0)  # units of L
+    return same & (coarse.surface_gaps(x, frames).min(axis=(1, 2)) >= deepest - 1e-10)
+
+
+def _contact_data(problems, states, fine_states, rod, x, frames, extrapolated):
+    """Contact of each state: the force per length (k, n, nc, 3) N/m and the active set
+    (k, n, nc) of the finest mesh solved at every second contact point (the corner after
+    each output node, the tip; arc lengths "s" (n,) m); the gaps (k, n, nc) m of the
+    returned rod's contact points (positions x (k, n, 3) units of L and ``frames`` as
+    returned: extrapolated or not); the total force the rod exerts on each obstacle
+    (k, nc, 3) N (Richardson-extrapolated like the tip where ``extrapolated`` (k,) is)."""
+    coarse, problem = problems[0], problems[-1]
     EI, L = rod.bending_stiffness, rod.length
     U = states if fine_states is None else fine_states
     force, gaps, active = problem.contact_state(U)
+    s = (problem.mesh.s + problem._contact_geometry()[0]) * L
     per_length = force * (EI / L**3)  # EI_z / L^3 units -> N/m
     totals = problem.contact_totals(force)
-    if fine_states is not None:  # Richardson, as the tip
-        coarse = problems[0]
-        totals = (4 * totals - coarse.contact_totals(coarse.contact_state(states)[0])) / 3
+    if fine_states is not None:  # Richardson, as the tip (where it was extrapolated)
+        coarse_totals = coarse.contact_totals(coarse.contact_state(states)[0])
+        done = extrapolated[:, None, None]
+        totals = np.where(done, (4 * totals - coarse_totals) / 3, totals)
     totals = totals * (EI / L**2)  # N
     step = 1 if fine_states is None else 2
+    gap = coarse.surface_gaps(x, frames) * L
     return {
+        "s": s[::step],
         "force": per_length[:, ::step],
-        "gap": gaps[:, ::step] * L,
+        "gap": gap,
         "active": active[:, ::step],
         "totals": totals,
-        "min_gap": gaps.min(axis=1) * L,
+        "min_gap": np.minimum(gaps.min(axis=1) * L, gap.min(axis=1)),
     }
 
 

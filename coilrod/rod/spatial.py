@@ -93,6 +93,14 @@ class SpatialRod(DiscreteRod):
         Newton tolerance on the scaled residual (as :class:`~coilrod.rod.planar.PlanarRod`).
     mixed : bool
         Use the mixed layout even in a uniform field (sensitivities to a field gradient).
+    obstacles : sequence
+        Rigid obstacles (the gap interface of :mod:`coilrod.contact.obstacle`).
+    section : Circle or Rectangle, optional
+        The cross-section (m): contact is with the rod's surface, the gap of a contact point
+        minus the section's half-extent along the contact normal (a circle's radius; a
+        rectangle's ``(thickness |n . d_2| + width |n . d_3|) / 2`` with d_2, d_3 the
+        section's axes), the force applied at the section's touching point.  None: the
+        centreline.
     """
 
     batched = True
@@ -116,6 +124,7 @@ class SpatialRod(DiscreteRod):
         tol=1e-9,
         mixed=False,
         obstacles=(),
+        section=None,
     ):
         self.mesh = mesh
         self.mu = np.asarray(mu, float)
@@ -126,6 +135,14 @@ class SpatialRod(DiscreteRod):
         self.R0 = np.asarray(clamp_rotation, float)
         self.tol = float(tol)
         self.obstacles = tuple(obstacles)
+        # the section's half-extents along (normal, binormal), units of L; round: a circle
+        self._half, self._round = np.zeros(2), True
+        if section is not None:
+            if hasattr(section, "diameter"):
+                self._half = np.full(2, 0.5 * float(section.diameter) / float(length))
+            else:
+                self._half = 0.5 * np.array([section.thickness, section.width]) / float(length)
+                self._round = False
         self.nc = len(self.obstacles)  # contact multipliers per node, one per obstacle
         if self.nc:  # semi-smooth Newton: a step that switches contacts may raise the residual
             self.full_step_growth = 1e3
@@ -228,7 +245,8 @@ class SpatialRod(DiscreteRod):
         if self.nc:
             # contact force per length: a distributed contact keeps it, a point contact keeps
             # the node's force (w lam) -- the mean of the two is a start Newton corrects fast
-            ratio = self.mesh.w / fine.mesh.w[::2]
+            ratio = self._contact_geometry()[1] / fine._contact_geometry()[1][::2]
+            ratio[0] = 1.0
             out[:, ::2, 9:] *= (0.5 * (1.0 + ratio))[None, :, None]
         out = out.reshape(v.shape[0], -1)
         return out[0] if np.ndim(u) == 1 else out
@@ -310,7 +328,30 @@ class SpatialRod(DiscreteRod):
         d = self.rotations(np.atleast_2d(du))
         rot = np.sqrt(np.einsum("kni,kni->kn", d, d)).max(axis=1)
         with np.errstate(divide="ignore"):
-            return np.where(rot > 0, np.minimum(1.0, self.max_rotation / rot), 1.0)
+            lim = np.where(rot > 0, np.minimum(1.0, self.max_rotation / rot), 1.0)
+        if self.nc and not self.uniform and self.close_first:
+            lim = np.minimum(lim, self.closing_fraction(np.atleast_2d(u), np.atleast_2d(du)))
+        return lim
+
+    #: Newton steps end where the first open contact point would close (see
+    #: :meth:`closing_fraction`).  Off by default: it halves the iterations of a tip contact
+    #: at 32 segments but costs two gap evaluations per step, and an insertion through a
+    #: bend is slower with it (benchmarks/bench_contact.py).
+    close_first = False
+
+    def closing_fraction(self, U, dU):
+        """Fraction (k,) of each change dU (k, size) of states U (k, size) at which the first
+        open contact point (surface gap > 1e-6 L) reaches the wall, 1 if none does.  A Newton
+        step limited to it (:attr:`close_first`) ends on the wall instead of overshooting
+        it, and the next one sees the contact; a load step's prediction limited to it (a
+        hook the path engine does not call yet) ends where the first contact closes."""
+        g0 = self.surface_gaps(self.node_positions(U), self.frames(U))
+        U1 = U + dU
+        g1 = self.surface_gaps(self.node_positions(U1), self.frames(U1))
+        closing = (g0 > 1e-6) & (g1 < 0.0)
+        with np.errstate(all="ignore"):
+            frac = np.where(closing, g0 / (g0 - g1), 1.0)
+        return frac.min(axis=(1, 2))
 
     def distance(self, du):
         """Largest change of a node rotation vector, rad, shape (k,)."""
@@ -343,12 +384,38 @@ class SpatialRod(DiscreteRod):
         db = np.where(r > 0, 1.0 - b / safe, 1.0 - 2**-0.5)
         return a + b - r, da, db
 
-    def _contact_terms(self, V: np.ndarray, x: np.ndarray, hessian: bool):
-        """Contact multipliers lam (k, n, nc) (force per length, EI_z / L^3 units), gaps
-        (k, n, nc) (units of L), unit normals (k, n, nc, 3) and gap hessians
-        (k, n, nc, 3, 3) (1/m, times L: per unit of L) at the nodes."""
+    def _contact_geometry(self):
+        """Offsets c (n,) of the contact points along the node tangents and their weights
+        omega (n,) (units of L): the corners of the rod's polygon ``p_j = x_j + (h_j/2) t_j``
+        (j < N; node j's straight piece ends there) and the tip ``p_N = x_N``; weights
+        ``omega_j = h_j``, the last corner's and the tip's ``h_{N-1}/2`` (node 0's corner is
+        held by the clamp and carries no multiplier)."""
+        h, n = self.mesh.h, self.n
+        c = np.zeros(n)
+        c[:-1] = 0.5 * h
+        om = np.zeros(n)
+        om[:-1] = h
+        om[-2] = om[-1] = 0.5 * h[-1]
+        return c, om
+
+    def contact_points(self, U: np.ndarray) -> np.ndarray:
+        """Contact points of states (k, size): the polygon's corners and the tip (k, n, 3),
+        units of L relative to the clamp (see :meth:`_contact_geometry`)."""
+        U = np.atleast_2d(U)
+        c, _ = self._contact_geometry()
+        t = self.frames(U)[..., :, 0]
+        return self.node_positions(U) + c[:, None] * t
+
+    def _contact_terms(self, V: np.ndarray, x: np.ndarray, frames: np.ndarray, hessian: bool):
+        """Contact multipliers lam (k, n, nc) (force per length, EI_z / L^3 units), gaps of
+        the rod's surface (k, n, nc) (units of L), unit normals (k, n, nc, 3), gap hessians
+        (k, n, nc, 3, 3) (1/m, times L: per unit of L) at the contact points
+        ``x_j + c_j t_j`` (node positions x, frames (k, n, 3, 3)), and the offset of a
+        rectangle's touching corner from the contact point, ``-arm`` (k, n, nc, 3) in units
+        of L (None for a round section: it touches along the normal)."""
         k, n = V.shape[0], self.n
-        pts = self.points(x).reshape(-1, 3)
+        c, _ = self._contact_geometry()
+        pts = self.points(x + c[:, None] * frames[..., :, 0]).reshape(-1, 3)
         lam = V[:, :, 9 : 9 + self.nc]
         gaps = np.empty((k, n, self.nc))
         normals = np.empty((k, n, self.nc, 3))
@@ -363,15 +430,30 @@ class SpatialRod(DiscreteRod):
             normals[:, :, o] = np.asarray(grad, float).reshape(k, n, 3)
             if hessian:
                 hess[:, :, o] = np.asarray(hs, float).reshape(k, n, 3, 3)
-        return lam, gaps, normals, hess
+        arm = None
+        if self._round:
+            gaps -= self._half[0]
+        else:  # support of the rectangle along the normal: arm = sum_a half_a sign(n.d_a) d_a
+            d = np.einsum("knoi,knia->knoa", normals, frames[..., :, 1:3])  # (k, n, nc, 2)
+            gaps -= np.abs(d) @ self._half
+            arm = np.einsum("knoa,knia->knoi", np.sign(d) * self._half, frames[..., :, 1:3])
+        return lam, gaps, normals, hess, arm
+
+    def surface_gaps(self, x: np.ndarray, frames: np.ndarray) -> np.ndarray:
+        """Gaps of the rod's surface at the contact points of a rod given by its node
+        positions x (k, n, 3) (units of L relative to the clamp) and frames (k, n, 3, 3)
+        (e.g. a Richardson extrapolation): (k, n, nc), units of L."""
+        V = np.zeros(x.shape[:2] + (self.nv,))
+        return self._contact_terms(V, x, frames, False)[1]
 
     def contact_state(self, U: np.ndarray):
-        """Contact of states (k, size): force per length on the rod at the nodes (k, n, nc, 3)
-        in EI_z / L^3 units (times w_i: the node forces), gaps (k, n, nc) in units of L, and
-        the active set (k, n, nc) (nodes where the gap is closed and the wall pushes)."""
+        """Contact of states (k, size) at the contact points (:meth:`contact_points`): force
+        per length on the rod (k, n, nc, 3) in EI_z / L^3 units (times the weights omega_j:
+        the point forces), gaps (k, n, nc) in units of L, and the active set (k, n, nc)
+        (points where the gap is closed and the wall pushes)."""
         U = np.atleast_2d(U)
         V = U.reshape(U.shape[0], self.n, self.nv)
-        lam, gaps, normals, _ = self._contact_terms(V, V[:, :, 0:3], False)
+        lam, gaps, normals, _, _ = self._contact_terms(V, V[:, :, 0:3], self.frames(U), False)
         force = lam[..., None] * normals
         force[:, 0] = 0.0
         active = self.kappa * gaps < lam
@@ -381,8 +463,8 @@ class SpatialRod(DiscreteRod):
     def contact_totals(self, force: np.ndarray) -> np.ndarray:
         """Total force the rod exerts on each obstacle, (k, nc, 3) in EI_z / L^2 units, from
         the contact force per length on the rod (k, n, nc, 3) of :meth:`contact_state` (minus
-        its trapezoid integral)."""
-        return -np.einsum("n,knoi->koi", self.mesh.w, force)
+        its integral with the contact points' weights)."""
+        return -np.einsum("n,knoi->koi", self._contact_geometry()[1], force)
 
     # -- derivatives of the tip (sensitivities) --------------------------------------------------
     def tip_gradients(self, U: np.ndarray) -> np.ndarray:
@@ -483,7 +565,9 @@ class SpatialRod(DiscreteRod):
                 {
                     "clamp_lam": block([0], ol, [0], ol, nc, nc),
                     "f_lamnext": block(j - 1, of, j, ol, 3, nc),
+                    "m_lam": block(j, op, j, ol, 3, nc),
                     "c_x": block(j, ol, j, ox, nc, 3),
+                    "c_phi": block(j, ol, j, op, nc, 3),
                     "c_lam": block(j, ol, j, ol, nc, nc),
                 }
             )
@@ -566,10 +650,18 @@ class SpatialRod(DiscreteRod):
             self.mu, self.K, h, w, self.R0, L, frames, R, R1, blk, diag, A_ab, m,
         )  # fmt: skip
         contact = None
-        if self.nc:
-            contact = self._contact_terms(V, X, tangent)
-            lam, gaps, normals, _ = contact
-            R[:, :-1, 6:9] -= w[1:, None] * np.einsum("kno,knoi->kni", lam, normals)[:, 1:]
+        if self.nc:  # contact at the polygon's corners and the tip (_contact_geometry)
+            cc, om = self._contact_geometry()
+            tt = frames[:, :, :, 0]
+            contact = self._contact_terms(V, X, frames, tangent)
+            lam, gaps, normals, _, arm = contact
+            f_c = np.einsum("kno,knoi->kni", lam, normals)  # (k, n, 3)
+            m_c = -(om * cc)[:, None] * cross(tt, f_c)  # contact moments (world)
+            m_arm = 0.0
+            if arm is not None:  # the force acts at the rectangle's corner, p - arm
+                m_arm = om[:, None] * np.einsum("kno,knoi->kni", lam, cross(arm, normals))
+            R[:, :-1, 6:9] -= om[1:, None] * f_c[:, 1:]
+            R[:, 1:, 3:6] += (m_c + m_arm)[:, 1:]
             R[:, :, 9:] = self._ncp(lam, gaps)[0]
             R[:, 0, 9:] = lam[:, 0]
         R = R.reshape(k, -1)
@@ -587,24 +679,65 @@ class SpatialRod(DiscreteRod):
             ab = self._scatter(k, blocks) if band else None
             return R, R1, ab, (diag[:, 1:], A_ab[:, 1:])
         f_x = blk[:, 1:, 8]
+        f_phi = blk[:, 1:, 9]
+        m_x = blk[:, 1:, 5]
         if self.nc:
-            lam, gaps, normals, hess = contact
-            f_x = f_x - (w[1:, None, None] * L) * np.einsum(
-                "kno,knoij->knij", lam[:, 1:], hess[:, 1:]
-            )
+            lam, gaps, normals, hess, arm = contact
+            oc = (om * cc)[1:, None, None]
+            tt = frames[:, 1:, :, 0]
+            That, Jl = hat(tt), left_jacobian(phi[:, 1:])
+            LH = L * np.einsum("kno,knoij->knij", lam[:, 1:], hess[:, 1:])  # sum lam L H
+            # world-rotation derivatives of the contact point p = x + c t: dp = -c hat(t) d
+            fc_x = -om[1:, None, None] * LH  # force row wrt x_j
+            fc_d = oc * (LH @ That)  # force row wrt the world rotation d_j
+            mc_x = -oc * (That @ LH)  # moment row wrt x_j (the transpose of fc_d)
+            # moment row wrt d_j: the second variation of -om lam g(p) minus hat(m_c) / 2
+            mc_d = -(om * cc)[1:, None, None] * _sym_term(tt, f_c[:, 1:])
+            mc_d = mc_d + (oc * cc[1:, None, None]) * (That @ LH @ That)
+            mc_d_sym = mc_d
+            mc_d = mc_d - 0.5 * hat(m_c[:, 1:])
+            f_x = f_x + fc_x
+            f_phi = f_phi + fc_d @ Jl
+            m_x = m_x + mc_x
             act = (self.kappa * gaps < lam)[:, 1:]
             nc = self.nc
             _, d_lam, d_gap = self._ncp(lam[:, 1:], gaps[:, 1:])
             c_lam = np.zeros((k, n - 1, nc, nc))
             c_lam[..., np.arange(nc), np.arange(nc)] = d_lam
+            n_t = np.swapaxes(normals[:, 1:], -1, -2)  # (k, n-1, 3, nc)
+            tn = cross(tt[:, :, None, :], normals[:, 1:])  # (k, n-1, nc, 3): dg/dd / c
+            gx = normals[:, 1:]  # d(surface gap)/dx, (k, n-1, nc, 3)
+            gd = cc[1:, None, None] * tn  # d(surface gap)/dd
+            turn_lam = -oc * np.swapaxes(tn, -1, -2)  # d(moment row)/dlam
+            if arm is not None:  # the corner's gap n . arm turns with the frame and n(p)
+                a1 = arm[:, 1:]
+                w_ = L * np.einsum("knoij,knoj->knoi", hess[:, 1:], a1)  # L H arm
+                an = cross(a1, normals[:, 1:])  # (k, n-1, nc, 3)
+                gx = gx - w_
+                gd = cc[1:, None, None] * cross(tt[:, :, None, :], normals[:, 1:] - w_) - an
+                turn_lam = turn_lam + om[1:, None, None] * np.swapaxes(an, -1, -2)
+                ahat = hat(a1)  # (k, n-1, nc, 3, 3)
+                aLH = np.einsum("kno,knoij,knojl->knil", lam[:, 1:], ahat, L * hess[:, 1:])
+                m_x = m_x + om[1:, None, None] * aLH
+                frame_turn = np.einsum("kno,knoij,knojl->knil", lam[:, 1:], hat(normals[:, 1:]),
+                                       ahat)  # fmt: skip
+                arm_d = om[1:, None, None] * (frame_turn - cc[1:, None, None] * aLH @ That)
+                mc_d = mc_d + arm_d  # (a derivative of the row: no hat(m) / 2 term)
+                # the second variation (stability) takes its symmetric part and the whole
+                # moment's hat(m)/2 (zero at an equilibrium with the core's)
+                mc_d_sym = mc_d_sym + 0.5 * (arm_d + np.swapaxes(arm_d, -1, -2))
+                m_c = m_c + m_arm
             blocks.update(
                 {
                     "clamp_lam": np.eye(nc),
-                    "f_lamnext": -w[1:, None, None] * np.swapaxes(normals[:, 1:], -1, -2),
-                    "c_x": (d_gap * self.kappa)[..., None] * normals[:, 1:],
+                    "f_lamnext": -om[1:, None, None] * n_t,
+                    "m_lam": turn_lam,
+                    "c_x": (d_gap * self.kappa)[..., None] * gx,
+                    "c_phi": ((d_gap * self.kappa)[..., None] * gd) @ Jl,
                     "c_lam": c_lam,
                 }
             )
+            blocks["m_diag"] = blocks["m_diag"] + mc_d @ Jl
         blocks.update(
             {
                 "clamp_x": I3,
@@ -612,13 +745,13 @@ class SpatialRod(DiscreteRod):
                 "p_xprev": -I3,
                 "p_phiprev": blk[:, 1:, 3],
                 "p_phi": blk[:, 1:, 4],
-                "m_x": blk[:, 1:, 5],
+                "m_x": m_x,
                 "m_Fprev": blk[:, 1:, 6],
                 "m_F": blk[:, 1:-1, 7],
                 "f_F": I3,
                 "f_Fnext": -I3,
                 "f_xnext": f_x,
-                "f_phinext": blk[:, 1:, 9],
+                "f_phinext": f_phi,
             }
         )
         # the second variation (Lagrangian Hessian) in blocks Z_j = (x_j, F_{j-1}, d_j, lam_j)
@@ -640,10 +773,16 @@ class SpatialRod(DiscreteRod):
         E[:, :, 6:9, 3:6] = -0.5 * h[1:, None, None] * hat(t[:, 1:-1])
         E[:, :, 6:9, 6:9] = A_ab[:, 1:]
         if self.nc:
-            coupling = -w[1:, None, None] * np.swapaxes(normals[:, 1:], -1, -2)
+            D[:, :, 0:3, 6:9] += fc_d
+            D[:, :, 6:9, 0:3] += np.swapaxes(fc_d, -1, -2)
+            D[:, :, 6:9, 6:9] += mc_d_sym - 0.5 * hat(m_c[:, 1:])
+            coupling = -om[1:, None, None] * n_t
             coupling = np.where(act[:, :, None, :], coupling, 0.0)
             D[:, :, 0:3, 9:] = coupling
             D[:, :, 9:, 0:3] = np.swapaxes(coupling, -1, -2)
+            turn = np.where(act[:, :, None, :], turn_lam, 0.0)
+            D[:, :, 6:9, 9:] = turn
+            D[:, :, 9:, 6:9] = np.swapaxes(turn, -1, -2)
             D[:, :, 9:, 9:][..., np.arange(nc), np.arange(nc)] = np.where(act, 0.0, 1.0)
         return R, R1, (self._scatter(k, blocks) if band else None), (D, E)
 

@@ -1,0 +1,137 @@
+"""Contact benchmark: convergence of distributed contact and the cost of a contact state.
+
+1. A cantilever laid on a flat floor by a body force per length q (a gradient field on an
+   axial magnetization; graded magnetization for a non-uniform q = q0 (1 + 2 s^2 / L^2)):
+   where the rod lies flat the contact force per length is q(s) exactly (no curvature, no
+   shear), so max |p / q - 1| over 0.7 L < s < 0.95 L measures the discrete contact force.
+   Contact is at the corners of the rod's polygon and the tip (coilrod.rod.spatial).
+2. The cost of a contact state against the free state in the same (mixed) layout, and an
+   insertion through a bend (50 steps, 48 segments).
+
+Run: ``python benchmarks/bench_contact.py`` (prints markdown tables; ~1 min).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import sys  # noqa: E402
+import time  # noqa: E402
+import warnings  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _machine import machine_info  # noqa: E402
+
+import coils  # noqa: E402
+from coilrod import Circle, Magnetization, Rod, Vessel, Wall, insert, solve_rod  # noqa: E402
+from coilrod.rod.spatial import SpatialRod  # noqa: E402
+
+L = 0.04
+M0 = 128e3
+
+
+def flat_support(graded: bool, segments: int):
+    """(max |p/q - 1| on the flat part, Newton iterations, CPU s)."""
+    if graded:
+        mag = Magnetization(lambda s: M0 * (1 + 2 * (np.asarray(s) / L) ** 2), 0.0)
+    else:
+        mag = Magnetization(M0, 0.0)
+    rod = Rod(L, 1e6, Circle(2e-3), mag)
+    q0 = rod.bending_stiffness / L**3
+    G = np.zeros((3, 3))
+    G[0, 1] = -q0 / (rod.area * M0)
+    floor = Wall((0, -1e-3 * L - 1e-3, 0), (0, 1, 0))  # 1e-3 L below the 2 mm rod's surface
+    t0 = time.process_time()
+    res = solve_rod(rod, coils.LinearField(B0=(0, 0, 0), gradient=G), [1.0], nodes=segments,
+                    richardson=False, obstacles=[floor], stability=False)  # fmt: skip
+    cpu = time.process_time() - t0
+    s = res.contact_s
+    inner = (s > 0.7 * L) & (s < 0.95 * L)
+    q = q0 * (1 + 2 * (s[inner] / L) ** 2) if graded else q0
+    err = np.abs(res.contact_force(0)[inner, 1] / q - 1).max()
+    return err, int(res.iterations[0]), cpu
+
+
+def free_against_contact(segments: int):
+    """CPU s and Newton iterations of the tip-contact cantilever and of the same load free
+    (both in the mixed layout: a gradient field)."""
+    rod = Rod(L, 1e6, Circle(2e-3), Magnetization(M0, 0.0))
+    b = rod.field_for_lambda(6.0)
+    # a negligible gradient: the free state in the mixed layout too (a uniform field would
+    # solve it in rotations alone)
+    field = coils.LinearField(B0=(0, b, 0), gradient=1e-9 * np.diag([-0.5, 1.0, -0.5]))
+    out = []
+    for obstacles in (None, [Wall((0, 0.2 * L, 0), (0, -1, 0))]):
+        t0 = time.process_time()
+        res = solve_rod(rod, field, [1.0], nodes=segments, richardson=False,
+                        obstacles=obstacles, stability=False)  # fmt: skip
+        out.append((time.process_time() - t0, int(res.iterations.sum())))
+    return out
+
+
+def insertion():
+    mag = Magnetization.segments([0.04, 0.01], [0.0, 128e3], [0.0, 0.0])
+    cath = Rod(0.05, 1e6, Circle(1e-3), mag)
+    vessel = Vessel.bend(bend_radius=0.02, angle=np.pi / 2, radius=0.002,
+                         straight_before=0.02, straight_after=0.03)  # fmt: skip
+
+    def schedule(k, length):
+        a = np.pi / 2 * min(1.0, max(0.0, (length - 0.015) / 0.02))
+        return coils.UniformField(B=0.01 * np.array([np.cos(a), np.sin(a), 0.0]))
+
+    t0 = time.process_time()
+    ins = insert(cath, vessel, np.linspace(0.012, 0.05, 50), schedule, nodes=48)
+    return time.process_time() - t0, int(ins.substeps.sum())
+
+
+def main() -> None:
+    warnings.simplefilter("ignore")
+    print("# Contact: convergence and cost")
+    print()
+    print(f"Machine: {machine_info()}; CPU time, one run.")
+    print()
+    print("## Distributed contact on a flat support (contact at the polygon's corners)")
+    print()
+    print("| segments | uniform q: max abs(p/q - 1) | iterations | q = 1 + 2 s^2: max "
+          "abs(p/q - 1) | rate | iterations | CPU (s) |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|")
+    prev = None
+    for n in (16, 32, 64, 128):
+        e_u, it_u, _ = flat_support(False, n)
+        e_g, it_g, cpu = flat_support(True, n)
+        rate = "-" if prev is None else f"{np.log2(prev / e_g):.2f}"
+        print(f"| {n} | {e_u:.1e} | {it_u} | {e_g:.2e} | {rate} | {it_g} | {cpu:.2f} |")
+        prev = e_g
+    print()
+    print("## A contact state against the free state (tip on a wall, mixed layout)")
+    print()
+    print("Default, and with Newton steps that end where the first open contact closes")
+    print("(`SpatialRod.close_first = True`):")
+    print()
+    print("| segments | free: CPU (s) | iterations | contact: CPU (s) | iterations | ratio | "
+          "close_first: CPU (s) | iterations |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|")
+    for n in (32, 64, 128):
+        (tf, itf), (tc, itc) = free_against_contact(n)
+        SpatialRod.close_first = True
+        (_, _), (to, ito) = free_against_contact(n)
+        SpatialRod.close_first = False
+        print(f"| {n} | {tf:.3f} | {itf} | {tc:.3f} | {itc} | {tc / tf:.1f} | {to:.3f} | {ito} |")
+    print()
+    for close_first in (False, True):
+        SpatialRod.close_first = close_first
+        cpu, solves = insertion()
+        print(f"Insertion through a bend, 50 steps, 48 segments (close_first={close_first}): "
+              f"{cpu:.2f} s CPU, {solves} solves.")  # fmt: skip
+        print()
+    SpatialRod.close_first = False
+
+
+if __name__ == "__main__":
+    main()
