@@ -11,6 +11,7 @@ only this interface.
 ``Vessel``         a tube around a polyline, a C2 spline or exact line/arc pieces; constant,
                    piecewise-linear or smooth radius; ends extended or rounded
 ``VesselNetwork``  the union of several vessels' lumens (gap = max)
+``MeshVessel``     the lumen inside a triangle surface mesh (STL, OBJ, PLY; exact distances)
 ``presets``        ``straight``, ``bend``, ``aneurysm``, ``branch`` (also ``Vessel.<name>``)
 ``insert``         quasi-static insertion of a rod into a vessel (:mod:`.insertion`)
 =================  =========================================================================
@@ -18,6 +19,7 @@ only this interface.
 
 from . import presets
 from .insertion import Insertion, insert
+from .mesh_vessel import MeshVessel, phantom_path, tessellate
 from .network import VesselNetwork
 from .obstacle import GapEvaluation, Obstacle
 from .vessel import Vessel
@@ -29,6 +31,9 @@ __all__ = [
     "Wall",
     "Vessel",
     "VesselNetwork",
+    "MeshVessel",
+    "tessellate",
+    "phantom_path",
     "presets",
     "insert",
     "Insertion",
