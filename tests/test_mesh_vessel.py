@@ -177,3 +177,67 @@ def test_missing_file_and_bad_units(tmp_path):
         MeshVessel.from_file(tmp_path / "nope.stl")
     with pytest.raises(ValueError, match="units"):
         MeshVessel.from_file(phantom_path(), units="inch")
+
+
+# -- centrelines with radii (VMTK) --------------------------------------------------------------
+from coilrod.contact import read_centerline  # noqa: E402
+
+
+def _vtp(points, radii, order, fmt="ascii"):
+    pts = " ".join(f"{v:.17g}" for v in np.ravel(points))
+    rad = " ".join(f"{v:.17g}" for v in radii)
+    con = " ".join(str(i) for i in order)
+    return f"""<?xml version="1.0"?>
+<VTKFile type="PolyData" version="0.1">
+ <PolyData><Piece NumberOfPoints="{len(points)}" NumberOfLines="1">
+  <Points><DataArray type="Float64" NumberOfComponents="3" format="{fmt}">{pts}</DataArray>
+  </Points>
+  <PointData><DataArray type="Float64" Name="MaximumInscribedSphereRadius" format="ascii">{rad}
+  </DataArray></PointData>
+  <Lines><DataArray type="Int64" Name="connectivity" format="ascii">{con}</DataArray>
+  <DataArray type="Int64" Name="offsets" format="ascii">{len(order)}</DataArray></Lines>
+ </Piece></PolyData>
+</VTKFile>"""
+
+
+def test_centerline_csv_and_vtp_give_the_tube_with_those_radii(tmp_path):
+    # straight centreline on x, radius 2 mm (closed form gap r - distance from the axis)
+    x = np.linspace(0.0, 40.0, 5)
+    pts = np.column_stack([x, 0 * x, 0 * x])
+    csv = tmp_path / "c.csv"
+    csv.write_text(
+        "x,y,z,MaximumInscribedSphereRadius\n" + "".join(f"{a},{b},{c},2.0\n" for a, b, c in pts)
+    )
+    v = read_centerline(csv, units="mm")
+    p = np.array([[0.01, 0.0005, 0.0], [0.03, 0.0, -0.0025]])
+    np.testing.assert_allclose(v.gap(p), [1.5e-3, -0.5e-3], atol=1e-15)
+    # VTP with the points stored out of order: the polyline's connectivity orders them;
+    # varying radii as Vessel(points, radii) takes them
+    r = np.array([1.0, 1.5, 2.0, 1.5, 1.0])
+    perm = np.array([3, 0, 4, 1, 2])
+    vtp = tmp_path / "c.vtp"
+    vtp.write_text(_vtp(pts[perm], r[perm], np.argsort(perm)))
+    w = read_centerline(vtp, units="mm")
+    q = np.array([[0.015, 0.001, 0.0], [0.025, 0.0, 0.0012]])
+    np.testing.assert_allclose(w.gap(q), Vessel(pts * 1e-3, r * 1e-3).gap(q), atol=1e-15)
+
+
+def test_centerline_bad_input_names_the_file(tmp_path):
+    bad = tmp_path / "nor.csv"
+    bad.write_text("x,y,z\n0,0,0\n1,0,0\n")
+    with pytest.raises(ValueError, match="nor.csv.*radius column"):
+        read_centerline(bad)
+    neg = tmp_path / "neg.csv"
+    neg.write_text("x,y,z,radius\n0,0,0,1\n1,0,0,-1\n")
+    with pytest.raises(ValueError, match=r"neg.csv.*radius of point 1"):
+        read_centerline(neg)
+    binary = tmp_path / "bin.vtp"
+    binary.write_text(_vtp(np.eye(3), [1, 1, 1], [0, 1, 2], fmt="binary"))
+    with pytest.raises(ValueError, match="bin.vtp.*only ASCII"):
+        read_centerline(binary)
+    broken = tmp_path / "broken.vtp"
+    broken.write_text("<VTKFile><PolyData>")
+    with pytest.raises(ValueError, match="broken.vtp.*not valid XML"):
+        read_centerline(broken)
+    with pytest.raises(ValueError, match="format must be"):
+        read_centerline(phantom_path())
