@@ -6,7 +6,7 @@ models) driven by ``path`` (the one path-following engine) -> results; ``design`
 """
 
 from . import _moved  # noqa: F401  (old 0.1 module paths stay importable)
-from .contact import Insertion, Vessel, VesselNetwork, Wall, insert
+from .contact import Insertion, MeshVessel, Vessel, VesselNetwork, Wall, insert
 from .control import ControlResult, solve_currents
 from .design.calibrate import Calibration, IdentifiabilityError, calibrate
 from .design.optimize import MagnetizationDesign, optimize_magnetization
@@ -49,6 +49,7 @@ __all__ = [
     "IdentifiabilityError",
     "Wall",
     "Vessel",
+    "MeshVessel",
     "VesselNetwork",
     "insert",
     "Insertion",

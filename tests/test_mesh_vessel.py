@@ -177,6 +177,9 @@ def test_missing_file_and_bad_units(tmp_path):
         MeshVessel.from_file(tmp_path / "nope.stl")
     with pytest.raises(ValueError, match="units"):
         MeshVessel.from_file(phantom_path(), units="inch")
+    with pytest.raises(ValueError, match="friction"):
+        MeshVessel.from_file(phantom_path(), friction=-0.1)
+    assert MeshVessel.from_file(phantom_path(), friction=0.2).friction == 0.2
 
 
 # -- centrelines with radii (VMTK) --------------------------------------------------------------
@@ -217,7 +220,7 @@ def test_centerline_csv_and_vtp_give_the_tube_with_those_radii(tmp_path):
     perm = np.array([3, 0, 4, 1, 2])
     vtp = tmp_path / "c.vtp"
     vtp.write_text(_vtp(pts[perm], r[perm], np.argsort(perm)))
-    w = read_centerline(vtp, units="mm")
+    w = Vessel.from_centerline_file(vtp, units="mm")
     q = np.array([[0.015, 0.001, 0.0], [0.025, 0.0, 0.0012]])
     np.testing.assert_allclose(w.gap(q), Vessel(pts * 1e-3, r * 1e-3).gap(q), atol=1e-15)
 

@@ -24,7 +24,7 @@ from importlib import resources
 
 import numpy as np
 
-from coils._validate import as_choice, as_count, as_points
+from coils._validate import as_choice, as_count, as_points, nonnegative
 
 from .obstacle import Obstacle, _mm
 
@@ -53,6 +53,9 @@ class MeshVessel(Obstacle):
         Inward-facing meshes are turned around with a warning.
     source : str, optional
         Where the mesh came from (a file name), used in messages.
+    friction : float
+        Coulomb friction coefficient mu >= 0 of the wall (stored for the contact models; the
+        contact terms are frictionless until they read it).
 
     Attributes
     ----------
@@ -84,12 +87,13 @@ class MeshVessel(Obstacle):
     _outside = "outside the vessel mesh"
     _immutable = True
 
-    def __init__(self, vertices, faces, *, source: str | None = None):
+    def __init__(self, vertices, faces, *, source: str | None = None, friction=0.0):
         import trimesh
         from scipy.spatial import cKDTree
 
         label = "mesh" if source is None else f"mesh {source!r}"
         self.source = source
+        self.friction = nonnegative(friction, "friction")
         v = as_points(vertices, "vertices")
         f = np.asarray(faces)
         if f.ndim != 2 or f.shape[1] != 3 or not np.issubdtype(f.dtype, np.integer):
@@ -166,7 +170,7 @@ class MeshVessel(Obstacle):
 
     # -- files ----------------------------------------------------------------------------------
     @classmethod
-    def from_file(cls, path, units: str = "m") -> MeshVessel:
+    def from_file(cls, path, units: str = "m", friction=0.0) -> MeshVessel:
         """Read a lumen from a surface mesh file (STL, OBJ, PLY, ... as trimesh reads them).
 
         Parameters
@@ -175,6 +179,8 @@ class MeshVessel(Obstacle):
             The file.
         units : {"m", "mm"}
             Length unit of the file's coordinates (converted to m).
+        friction : float
+            Friction coefficient mu >= 0 (see :class:`MeshVessel`).
 
         Raises
         ------
@@ -199,7 +205,9 @@ class MeshVessel(Obstacle):
         vertices = np.asarray(loaded.vertices, dtype=float)
         if not np.all(np.isfinite(vertices)):
             raise ValueError(f"mesh file {path!r} has non-finite vertex coordinates")
-        return cls(vertices * _UNITS[units], np.asarray(loaded.faces), source=path)
+        return cls(
+            vertices * _UNITS[units], np.asarray(loaded.faces), source=path, friction=friction
+        )
 
     # -- gap ------------------------------------------------------------------------------------
     def closest(self, points) -> np.ndarray:

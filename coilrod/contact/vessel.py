@@ -223,6 +223,14 @@ class Vessel(Obstacle):
         self._seal(None)  # the preset records its parameters (remembers_recipe)
         return self
 
+    @classmethod
+    def from_centerline_file(cls, path, units: str = "m", smooth: bool = False) -> Vessel:
+        """The vessel of a VMTK centreline with maximum inscribed sphere radii (CSV or ASCII
+        VTP); see :func:`coilrod.contact.read_centerline`."""
+        from .centerline_file import read_centerline
+
+        return read_centerline(path, units, smooth)
+
     # -- presets (coilrod.contact.presets) ------------------------------------------------------
     @classmethod
     def straight(
