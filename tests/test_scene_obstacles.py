@@ -101,3 +101,35 @@ def test_wall_mesh_and_friction(tmp_path):
 def test_bad_obstacles_are_named(obstacles, models, match):
     with pytest.raises(SceneError, match=match):
         parse_scene(_scene(obstacles, models))
+
+
+def test_navigation_scene_runs_against_the_wall(tmp_path):
+    # the tip is stopped by the lumen's wall 3 mm from the axis (contact at the nodes); the
+    # shapes figure draws the vessel and the contact forces
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from coilrod.scene.figures import plot_scene_shapes
+    from coilrod.scene.runner import run_scene
+
+    data = _scene(
+        {
+            "vessel": [
+                {
+                    "preset": "straight",
+                    "length": "50 mm",
+                    "radius": "3 mm",
+                    "start": ["-1 mm", "0 mm", "0 mm"],
+                }
+            ]
+        }
+    )
+    data["field"]["B"] = "12 mT"
+    data["rod"] = {"nodes": 24}
+    result = run_scene(parse_scene(data))
+    (run,) = result.runs
+    tip = run.result.centerline(-1)[-1]
+    assert tip[1] == pytest.approx(3e-3, abs=1e-8)
+    assert np.linalg.norm(run.result.contact_force(len(run.scales) - 1), axis=1).max() > 0
+    ax = plot_scene_shapes(result)
+    assert any("contact force" in t.get_text() for t in ax.get_legend().get_texts())
