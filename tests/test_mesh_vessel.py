@@ -244,3 +244,38 @@ def test_centerline_bad_input_names_the_file(tmp_path):
         read_centerline(broken)
     with pytest.raises(ValueError, match="format must be"):
         read_centerline(phantom_path())
+
+
+def test_contact_modules_import_no_circle():
+    # every import between coilrod.contact's modules, at module level or inside functions:
+    # the graph has no cycle (it had vessel -> presets -> vessel and network -> vessel -> presets
+    # -> network)
+    import ast
+    from pathlib import Path
+
+    import coilrod.contact
+
+    folder = Path(coilrod.contact.__file__).parent
+    graph = {}
+    for path in folder.glob("*.py"):
+        if path.stem == "__init__":
+            continue
+        deps = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module:
+                deps.add(node.module.split(".")[0])
+        graph[path.stem] = deps & {p.stem for p in folder.glob("*.py")}
+    state = {}
+
+    def visit(m, trail):
+        if state.get(m) == "done":
+            return
+        assert state.get(m) != "open", f"import circle: {' -> '.join([*trail, m])}"
+        state[m] = "open"
+        for d in graph[m]:
+            visit(d, [*trail, m])
+        state[m] = "done"
+
+    for m in graph:
+        visit(m, [])
+    assert "bend" in (Vessel.bend.__doc__ or "")

@@ -19,12 +19,11 @@ only this interface.
 """
 
 from . import presets
-from .centerline_file import read_centerline
 from .insertion import Insertion, insert
 from .mesh_vessel import MeshVessel, phantom_path, tessellate
 from .network import VesselNetwork
 from .obstacle import GapEvaluation, Obstacle
-from .vessel import Vessel
+from .vessel import Vessel, read_centerline
 from .wall import Wall
 
 __all__ = [

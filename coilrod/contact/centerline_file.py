@@ -1,11 +1,11 @@
 """A vessel from a centreline with radii, as VMTK writes it (``vmtkcenterlines``).
 
 VMTK's centreline table holds the centreline points and, per point, the radius of the maximum
-inscribed sphere (array ``MaximumInscribedSphereRadius``).  :func:`read_centerline` reads it
+inscribed sphere (array ``MaximumInscribedSphereRadius``).  :func:`read_table` reads it
 from a CSV table (columns ``x, y, z`` and ``MaximumInscribedSphereRadius`` or ``radius``) or
 from an ASCII VTK PolyData file (``.vtp``; the points in their order, or in the order of the
-first polyline) and returns the :class:`~coilrod.contact.Vessel` with those radii (linear in
-arc length between points).
+first polyline); :meth:`Vessel.from_centerline_file` (or
+:func:`~coilrod.contact.read_centerline`) builds the vessel with those radii.
 """
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from coils._validate import as_bool, as_choice
+from coils._validate import as_choice
 
-__all__ = ["read_centerline"]
+__all__ = ["read_table"]
 
 _UNITS = {"m": 1.0, "mm": 1e-3}
 _RADIUS_NAMES = ("maximuminscribedsphereradius", "radius", "r")
@@ -91,55 +91,29 @@ def _read_vtp(path: str):
     return pts, radius
 
 
-def read_centerline(path, units: str = "m", smooth: bool = False):
-    """The vessel of a centreline with per-point radii (VMTK's table, CSV or ASCII VTP).
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        ``.csv`` (header ``x, y, z, MaximumInscribedSphereRadius``; ``radius`` accepted) or
-        ``.vtp`` (ASCII; point data ``MaximumInscribedSphereRadius``).
-    units : {"m", "mm"}
-        Length unit of the file (points and radii), converted to m.
-    smooth : bool
-        The centreline as the C2 spline through the points (:class:`~coilrod.contact.Vessel`).
-
-    Returns
-    -------
-    Vessel
-        Radii linear in arc length between the points.
-
-    Raises
-    ------
-    ValueError
-        Missing or unreadable files, missing columns or arrays, non-finite or non-positive
-        radii, fewer than 2 points; every message names the file.
-    """
-    from .vessel import Vessel
-
+def read_table(path, units: str = "m"):
+    """Points (n, 3) and radii (n,) in m of a centreline file, and the file's label for
+    messages; see :func:`coilrod.contact.read_centerline`."""
     units = as_choice(units, "units", tuple(_UNITS))
-    smooth = as_bool(smooth, "smooth")
     if not isinstance(path, str | os.PathLike):
         raise ValueError(f"path must be a file name; got {path!r}")
     path = os.fspath(path)
+    label = f"centreline file {path!r}"
     if not os.path.isfile(path):
-        raise ValueError(f"centreline file {path!r} does not exist")
+        raise ValueError(f"{label} does not exist")
     ext = os.path.splitext(path)[1].lower()
     if ext == ".csv":
         pts, radius = _read_csv(path)
     elif ext == ".vtp":
         pts, radius = _read_vtp(path)
     else:
-        raise ValueError(f"centreline file {path!r}: the format must be .csv or .vtp")
+        raise ValueError(f"{label}: the format must be .csv or .vtp")
     if len(pts) < 2:
-        raise ValueError(f"centreline file {path!r} has {len(pts)} points; at least 2 needed")
+        raise ValueError(f"{label} has {len(pts)} points; at least 2 needed")
     if not (np.all(np.isfinite(pts)) and np.all(np.isfinite(radius))):
-        raise ValueError(f"centreline file {path!r} has non-finite values")
+        raise ValueError(f"{label} has non-finite values")
     if np.any(radius <= 0):
         k = int(np.flatnonzero(radius <= 0)[0])
-        raise ValueError(f"centreline file {path!r}: radius of point {k} is {radius[k]} (<= 0)")
+        raise ValueError(f"{label}: radius of point {k} is {radius[k]} (<= 0)")
     scale = _UNITS[units]
-    try:
-        return Vessel(pts * scale, radius * scale, smooth=smooth)
-    except ValueError as exc:
-        raise ValueError(f"centreline file {path!r}: {exc}") from None
+    return pts * scale, radius * scale, label

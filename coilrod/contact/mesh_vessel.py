@@ -27,6 +27,7 @@ import numpy as np
 from coils._validate import as_choice, as_count, as_points, nonnegative
 
 from .obstacle import Obstacle, _mm
+from .vessel import Vessel
 
 __all__ = ["MeshVessel", "tessellate", "phantom_path"]
 
@@ -378,8 +379,6 @@ def tessellate(vessel, n_around: int = 16, spacing=None):
     faces : ndarray, shape (m, 3)
         Outward normals.
     """
-    from .vessel import Vessel
-
     if not isinstance(vessel, Vessel):
         raise ValueError(f"vessel must be a Vessel; got {type(vessel).__name__}")
     n_around = as_count(n_around, "n_around", minimum=3)
