@@ -90,6 +90,21 @@ def test_wall_mesh_and_friction(tmp_path):
             ["rod"],
             r"obstacles.vessel\[0\]",
         ),
+        (
+            {
+                "vessel": [
+                    {
+                        "preset": "straight",
+                        "length": "50 mm",
+                        "radius": "0.9 mm",
+                        "start": ["-1 mm", "0 mm", "0 mm"],
+                    }
+                ]
+            },
+            ["rod"],
+            r"obstacles.vessel\[0\]: the robot \(1 mm from its axis.*thicker than the lumen "
+            r"\(radius 0.9 mm",
+        ),
         ({"mesh": [{"file": "missing.stl"}]}, ["rod"], r"obstacles.mesh\[0\].file: .*missing.stl"),
         (
             {"wall": [{"point": ["0 mm", "8 mm", "0 mm"], "normal": "-y"}]},

@@ -613,6 +613,11 @@ class Vessel(Obstacle):
         return self._section(np.asarray(s, dtype=float))
 
     @property
+    def min_radius(self) -> float:
+        """The smallest cross-section radius, m (a device thicker than twice this cannot pass)."""
+        return float(self._section.minimum)
+
+    @property
     def bounds(self) -> np.ndarray:
         """Box (2, 3) of the tube between its end cross-sections, m: the centreline's exact
         box grown by the largest radius (the straight extensions of open ends are not

@@ -157,7 +157,14 @@ def _file_obstacle(item, key, base: Path, kind: str):
         raise SceneError(f"{key}.file: {exc}") from None
 
 
-def parse_obstacles(data, source: str = "<embedded>", length=None):
+def _narrowest(ob) -> float | None:
+    """The smallest lumen radius of a vessel or network of vessels (None for walls, meshes)."""
+    radii = [getattr(m, "min_radius", None) for m in getattr(ob, "vessels", [ob])]
+    radii = [r for r in radii if r is not None]
+    return min(radii) if radii else None
+
+
+def parse_obstacles(data, source: str = "<embedded>", length=None, thickness=None):
     """The obstacles of a scene's ``[obstacles]`` table.
 
     Parameters
@@ -170,6 +177,8 @@ def parse_obstacles(data, source: str = "<embedded>", length=None):
         The robot's length (m): its straight starting state along +x from the clamp at the
         origin is checked to lie in every obstacle's admissible region (the clamp alone if
         None).
+    thickness : float, optional
+        The robot's largest half-width (m): a vessel narrower than it is a problem.
 
     Returns
     -------
@@ -206,6 +215,12 @@ def parse_obstacles(data, source: str = "<embedded>", length=None):
                 ob = p.take(_file_obstacle, item, key, base, kind)
             if not hasattr(ob, "gap"):  # its problems are recorded
                 continue
+            narrow = _narrowest(ob)
+            if thickness is not None and narrow is not None and narrow <= thickness:
+                p.add(
+                    f"{key}: the robot ({1e3 * thickness:.4g} mm from its axis to its surface) "
+                    f"is thicker than the lumen (radius {1e3 * narrow:.4g} mm at its narrowest)"
+                )
             gap = ob.gap(start)
             if gap[0] < 0:
                 p.add(f"{key}: the clamp lies {1e3 * -gap[0]:.4g} mm outside it")

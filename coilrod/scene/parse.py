@@ -1202,7 +1202,13 @@ def parse_scene(data: dict, source: str = "<embedded>") -> Scene:
         if [m for m in models if m != "rod"]:
             p.add("obstacles: contact is modelled by the rod only -- run the rod alone")
         length = robot[0].length if _ok(robot) else None
-        found = p.take(parse_obstacles, data["obstacles"], source, length)
+        half = None
+        if _ok(robot):
+            sec = robot[0].section
+            half = sec.diameter / 2 if hasattr(sec, "diameter") else None
+            if hasattr(sec, "width"):
+                half = 0.5 * float(np.hypot(sec.width, sec.thickness))
+        found = p.take(parse_obstacles, data["obstacles"], source, length, half)
         if _ok(found):
             rod_options = {**rod_options, "obstacles": found[0]}
     fem_options = p.take(_parse_fem_options, data.get("fem", {}), p)
