@@ -1,9 +1,10 @@
 """A vessel lumen from a triangle surface mesh (STL, OBJ, PLY): exact gaps to the polyhedron.
 
 The lumen is the volume the mesh encloses (its faces' normals point out of it, away from the
-lumen).  The gap of a point is its exact signed distance to the polyhedron (> 0 inside),
-found by trimesh's closest-point query (an R-tree over the triangles, vectorised over the
-points).  The sign comes from the angle-weighted pseudo-normal of the closest feature (face,
+lumen).  The gap of a point is its exact signed distance to the polyhedron (> 0 inside):
+candidate triangles from KD-trees over the vertices and the triangle centroids, exact closest
+points on them (vectorised over points and candidates; trimesh reads and checks the mesh).
+The sign comes from the angle-weighted pseudo-normal of the closest feature (face,
 edge or vertex; Baerentzen & Aanaes 2005), which is exact for a closed, consistently oriented
 mesh.  Gradient and hessian are those of the distance to the closest feature: a face (a
 plane: hessian 0), an edge (a line: ``(I - t t^T - u u^T) / d``) or a vertex (a point:
