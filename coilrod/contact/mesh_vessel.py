@@ -8,8 +8,8 @@ The sign comes from the angle-weighted pseudo-normal of the closest feature (fac
 edge or vertex; Baerentzen & Aanaes 2005), which is exact for a closed, consistently oriented
 mesh.  Gradient and hessian are those of the distance to the closest feature: a face (a
 plane: hessian 0), an edge (a line: ``(I - t t^T - u u^T) / d``) or a vertex (a point:
-``(I - u u^T) / d``), so a faceted wall has no curvature within its faces; the gap, its
-gradient and the contact forces converge to a smooth vessel's as the mesh is refined
+``(I - u u^T) / d``), so a faceted wall has no curvature within its faces; the gap and its
+gradient converge to a smooth vessel's as the mesh is refined
 (``benchmarks/bench_mesh_vessel.py``: second order in the edge length for the gap).
 
 :func:`tessellate` turns an analytic :class:`~coilrod.contact.Vessel` into such a mesh (rings
