@@ -13,6 +13,7 @@ import importlib
 #: ``coilrod --help`` or ``import coilrod.robot`` loads neither scipy's optimisers nor numba.
 _LAZY = {
     "Insertion": ".contact",
+    "MeshVessel": ".contact",
     "Vessel": ".contact",
     "VesselNetwork": ".contact",
     "Wall": ".contact",
@@ -87,6 +88,7 @@ __all__ = [
     "IdentifiabilityError",
     "Wall",
     "Vessel",
+    "MeshVessel",
     "VesselNetwork",
     "insert",
     "Insertion",

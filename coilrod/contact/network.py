@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._lumens import _draw_lumens
 from .obstacle import Obstacle
 
 __all__ = ["VesselNetwork"]
@@ -86,11 +87,9 @@ class VesselNetwork(Obstacle):
     def _draw(self, ax, **kwargs):
         """The outline of the union of the vessels' lumens (the walls across a junction's
         opening are not drawn) and the other members."""
-        from .vessel import Vessel, _draw_lumens
-
-        vessels = [v for v in self.vessels if isinstance(v, Vessel)]
+        vessels = [v for v in self.vessels if hasattr(v, "_shadow")]  # tubes (Vessel)
         if vessels:
             _draw_lumens(ax, vessels, **kwargs)
         for v in self.vessels:
-            if not isinstance(v, Vessel):
+            if not hasattr(v, "_shadow"):
                 v._draw(ax, **kwargs)

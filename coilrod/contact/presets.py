@@ -9,6 +9,7 @@ again with the changes (``presets.bend(0.02, 1.2, 1e-3).replace(angle=0.6)``).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -20,7 +21,7 @@ from .centerline import Pieces, arc_piece, line_pieces, split_lines
 from .network import VesselNetwork
 from .obstacle import _mm
 from .profile import Smooth, SmoothSection
-from .vessel import Vessel
+from .vessel import Vessel, _as_ends
 
 __all__ = ["straight", "bend", "aneurysm", "branch"]
 
@@ -303,7 +304,6 @@ def branch(
         raise ValueError(f"branch_at must lie in [0, length] = [0, {_mm(length)}]; got {_mm(at)}")
     start = as_vector(start, "start")
     d, _, q = _frame(direction, plane_normal)
-    from .vessel import _as_ends
 
     main_ends = _as_ends(ends)
     main = Vessel(np.array([start, start + length * d]), radius, ends=main_ends)
@@ -311,3 +311,22 @@ def branch(
     tip = root + blen * (math.cos(angle) * d + math.sin(angle) * q)
     side = Vessel(np.array([root, tip]), brad, ends=("round", main_ends[1]))
     return VesselNetwork([main, side])
+
+
+def _as_classmethod(func):
+    """``Vessel.<name>(...)``: the preset ``func`` as a class method of Vessel (attached here,
+    so that vessel.py does not import this module)."""
+
+    @functools.wraps(func)
+    def method(cls, *args, **kwargs):
+        return func(*args, **kwargs)
+
+    method.__doc__ = (
+        f"{func.__doc__.splitlines()[0]} See :func:`coilrod.contact.presets.{func.__name__}`."
+    )
+    return classmethod(method)
+
+
+for _preset in (straight, bend, aneurysm, branch):
+    setattr(Vessel, _preset.__name__, _as_classmethod(_preset))
+del _preset

@@ -92,6 +92,7 @@ import numpy as np
 
 from coils._validate import as_bool, as_choice, as_points
 
+from ._lumens import _draw_lumens
 from .centerline import (
     ARC,
     CUBIC,
@@ -104,6 +105,7 @@ from .centerline import (
     spline_pieces,
     split_lines,
 )
+from .centerline_file import read_table
 from .obstacle import Obstacle, _mm, _point_mm
 from .profile import BallProfile, section_from
 
@@ -223,94 +225,20 @@ class Vessel(Obstacle):
         self._seal(None)  # the preset records its parameters (remembers_recipe)
         return self
 
-    # -- presets (coilrod.contact.presets) ------------------------------------------------------
     @classmethod
-    def straight(
-        cls, length, radius, start=(0.0, 0.0, 0.0), direction=(1.0, 0.0, 0.0), ends="extend"
-    ) -> Vessel:
-        """A straight tube; see :func:`coilrod.contact.presets.straight`."""
-        from .presets import straight
+    def from_centerline_file(cls, path, units: str = "m", smooth: bool = False) -> Vessel:
+        """The vessel of a VMTK centreline with maximum inscribed sphere radii (CSV or ASCII
+        VTP), radii linear in arc length between the points; see
+        :func:`coilrod.contact.read_centerline` (the same)."""
+        smooth = as_bool(smooth, "smooth")
+        points, radii, label = read_table(path, units)
+        try:
+            return cls(points, radii, smooth=smooth)
+        except ValueError as exc:
+            raise ValueError(f"{label}: {exc}") from None
 
-        return straight(length, radius, start, direction, ends)
-
-    @classmethod
-    def bend(
-        cls,
-        bend_radius,
-        angle,
-        radius,
-        straight_before=0.0,
-        straight_after=0.0,
-        start=(0.0, 0.0, 0.0),
-        direction=(1.0, 0.0, 0.0),
-        plane_normal=(0.0, 0.0, 1.0),
-        ends="extend",
-    ) -> Vessel:
-        """Straight - exact circular arc - straight; see :func:`coilrod.contact.presets.bend`."""
-        from .presets import bend
-
-        return bend(
-            bend_radius,
-            angle,
-            radius,
-            straight_before,
-            straight_after,
-            start,
-            direction,
-            plane_normal,
-            ends,
-        )
-
-    @classmethod
-    def aneurysm(
-        cls,
-        length,
-        radius,
-        bulge_radius,
-        bulge_center=None,
-        bulge_width=None,
-        start=(0.0, 0.0, 0.0),
-        direction=(1.0, 0.0, 0.0),
-        ends="extend",
-    ) -> Vessel:
-        """A straight tube with a smooth local bulge (or narrowing); see
-        :func:`coilrod.contact.presets.aneurysm`."""
-        from .presets import aneurysm
-
-        return aneurysm(
-            length, radius, bulge_radius, bulge_center, bulge_width, start, direction, ends
-        )
-
-    @classmethod
-    def branch(
-        cls,
-        length,
-        radius,
-        branch_length,
-        branch_radius=None,
-        branch_angle=math.pi / 2,
-        branch_at=None,
-        start=(0.0, 0.0, 0.0),
-        direction=(1.0, 0.0, 0.0),
-        plane_normal=(0.0, 0.0, 1.0),
-        ends="extend",
-    ):
-        """A main tube with a side branch, a :class:`~coilrod.contact.VesselNetwork`; see
-        :func:`coilrod.contact.presets.branch`."""
-        from .presets import branch
-
-        return branch(
-            length,
-            radius,
-            branch_length,
-            branch_radius,
-            branch_angle,
-            branch_at,
-            start,
-            direction,
-            plane_normal,
-            ends,
-        )
+    # the presets Vessel.straight, .bend, .aneurysm, .branch are attached by
+    # coilrod.contact.presets (so that this module does not import it)
 
     # -- construction ---------------------------------------------------------------------------
     def _setup(self, finite: Pieces, section, ends, corners) -> None:
@@ -685,6 +613,11 @@ class Vessel(Obstacle):
         return self._section(np.asarray(s, dtype=float))
 
     @property
+    def min_radius(self) -> float:
+        """The smallest cross-section radius, m (a device thicker than twice this cannot pass)."""
+        return float(self._section.minimum)
+
+    @property
     def bounds(self) -> np.ndarray:
         """Box (2, 3) of the tube between its end cross-sections, m: the centreline's exact
         box grown by the largest radius (the straight extensions of open ends are not
@@ -750,33 +683,6 @@ class Vessel(Obstacle):
 
     def _draw(self, ax, **kwargs):
         _draw_lumens(ax, [self], **kwargs)
-
-
-def _draw_lumens(ax, vessels, **kwargs) -> None:
-    """Outline of the union of the vessels' lumens (x-y projection) with dashed centrelines."""
-    import shapely
-
-    shapes, cuts = [], []
-    for v in vessels:
-        shape, cut = v._shadow()
-        shapes.append(shape)
-        cuts.extend(cut)
-    outline = shapely.union_all(shapes).boundary
-    if cuts:
-        outline = outline.difference(
-            shapely.union_all([shapely.Point(c).buffer(1.0001 * r, quad_segs=32) for c, r in cuts])
-        )
-    kwargs.setdefault("color", "k")
-    kwargs.setdefault("linewidth", 1.2)
-    for line in getattr(outline, "geoms", [outline]):
-        if line.is_empty:
-            continue
-        xy = np.asarray(line.coords)
-        ax.plot(xy[:, 0], xy[:, 1], **kwargs)
-    for v in vessels:
-        c = v._centerline_xy()
-        ax.plot(c[:, 0], c[:, 1], linestyle="--", linewidth=0.6, color=kwargs["color"], alpha=0.5)
-    ax.autoscale_view()
 
 
 # -- geometric helpers --------------------------------------------------------------------------
@@ -874,3 +780,30 @@ def _check_self_approach(s, x, radius, seq, ends) -> None:
         f"{_mm(d[k])} apart, less than the sum of the radii there, "
         f"{_mm(radius[a] + radius[b])}{hint}"
     )
+
+
+def read_centerline(path, units: str = "m", smooth: bool = False) -> Vessel:
+    """The vessel of a centreline with per-point radii (VMTK's table, CSV or ASCII VTP).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.csv`` (header ``x, y, z, MaximumInscribedSphereRadius``; ``radius`` accepted) or
+        ``.vtp`` (ASCII; point data ``MaximumInscribedSphereRadius``).
+    units : {"m", "mm"}
+        Length unit of the file (points and radii), converted to m.
+    smooth : bool
+        The centreline as the C2 spline through the points.
+
+    Returns
+    -------
+    Vessel
+        Radii linear in arc length between the points.
+
+    Raises
+    ------
+    ValueError
+        Missing or unreadable files, missing columns or arrays, non-finite or non-positive
+        radii, fewer than 2 points; every message names the file.
+    """
+    return Vessel.from_centerline_file(path, units, smooth)

@@ -164,12 +164,47 @@ def plot_scene_shapes(result, ax=None, k: int = -1):
         )
     ax.plot([0, 1e3 * L], [0, 0], color="0.6", lw=1, label="undeformed", zorder=1.5)
     ax.plot(0, 0, "ks", ms=6)
+    _draw_contacts(ax, scene, shapes, k)
     ax.set_aspect("equal")
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
     ax.legend(fontsize=7, loc="best")
     ax.set_title(_title(scene.name), fontsize=10)
     return ax
+
+
+def _draw_contacts(ax, scene, shapes, k: int) -> None:
+    """The scene's obstacles (x-y outlines, in mm) and, for rod runs, the contact nodes with
+    their contact forces per length (arrows, scaled to a tenth of the robot length)."""
+    from matplotlib.transforms import Affine2D
+
+    obstacles = scene.rod_options.get("obstacles") or []
+    if not obstacles:
+        return
+    to_mm = Affine2D().scale(1e3) + ax.transData
+    for ob in obstacles:
+        ob._draw(ax, color="0.35", linewidth=1, transform=to_mm)
+    for r, c in shapes:
+        res = r.result
+        if not hasattr(res, "contact_force"):
+            continue
+        f = res.contact_force(k)
+        on = np.linalg.norm(f, axis=1) > 0
+        if not np.any(on) or len(f) != len(c):
+            continue
+        scale = 0.1 * scene.rod.length / np.max(np.linalg.norm(f[on], axis=1))
+        ax.quiver(
+            1e3 * c[on, 0],
+            1e3 * c[on, 1],
+            1e3 * scale * f[on, 0],
+            1e3 * scale * f[on, 1],
+            angles="xy",
+            scale_units="xy",
+            scale=1,
+            color="tab:red",
+            width=0.004,
+            label=f"contact force (max {np.max(np.linalg.norm(f, axis=1)):.3g} N/m)",
+        )
 
 
 def leaves_plane(result, tol: float = 1e-9) -> bool:

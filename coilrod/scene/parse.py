@@ -1209,6 +1209,7 @@ def parse_scene(data: dict, source: str = "<embedded>") -> Scene:
             "fem",
             "output",
             "control",
+            "obstacles",
         },
     )
     name = p.take(_text, data, "name", "", Path(source).stem)
@@ -1234,6 +1235,21 @@ def parse_scene(data: dict, source: str = "<embedded>") -> Scene:
                 "along +x; a rotated clamp applies to rod runs only -- run the rod alone"
             )
             rod_options = _BAD
+    if "obstacles" in data and _ok(rod_options, models):
+        from .obstacles import parse_obstacles
+
+        if [m for m in models if m != "rod"]:
+            p.add("obstacles: contact is modelled by the rod only -- run the rod alone")
+        length = robot[0].length if _ok(robot) else None
+        half = None
+        if _ok(robot):
+            sec = robot[0].section
+            half = sec.diameter / 2 if hasattr(sec, "diameter") else None
+            if hasattr(sec, "width"):
+                half = 0.5 * float(np.hypot(sec.width, sec.thickness))
+        found = p.take(parse_obstacles, data["obstacles"], source, length, half)
+        if _ok(found):
+            rod_options = {**rod_options, "obstacles": found[0]}
     fem_options = p.take(_parse_fem_options, data.get("fem", {}), p)
     outputs = p.take(_parse_outputs, data.get("output", {}), p)
     control = None

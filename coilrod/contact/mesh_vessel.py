@@ -1,0 +1,436 @@
+"""A vessel lumen from a triangle surface mesh (STL, OBJ, PLY): exact gaps to the polyhedron.
+
+The lumen is the volume the mesh encloses (its faces' normals point out of it, away from the
+lumen).  The gap of a point is its exact signed distance to the polyhedron (> 0 inside):
+candidate triangles from KD-trees over the vertices and the triangle centroids, exact closest
+points on them (vectorised over points and candidates; trimesh reads and checks the mesh).
+The sign comes from the angle-weighted pseudo-normal of the closest feature (face,
+edge or vertex; Baerentzen & Aanaes 2005), which is exact for a closed, consistently oriented
+mesh.  Gradient and hessian are those of the distance to the closest feature: a face (a
+plane: hessian 0), an edge (a line: ``(I - t t^T - u u^T) / d``) or a vertex (a point:
+``(I - u u^T) / d``), so a faceted wall has no curvature within its faces; the gap and its
+gradient converge to a smooth vessel's as the mesh is refined
+(``benchmarks/bench_mesh_vessel.py``: second order in the edge length for the gap).
+
+:func:`tessellate` turns an analytic :class:`~coilrod.contact.Vessel` into such a mesh (rings
+of vertices on its wall, capped ends): the phantoms shipped in ``coilrod/contact/data/`` were
+made by the project this way from its own presets (no patient data).
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from importlib import resources
+
+import numpy as np
+
+from coils._validate import as_choice, as_count, as_points, nonnegative
+
+from .obstacle import Obstacle, _mm
+from .vessel import Vessel
+
+__all__ = ["MeshVessel", "tessellate", "phantom_path"]
+
+_UNITS = {"m": 1.0, "mm": 1e-3}
+
+
+def phantom_path(name: str = "bend") -> str:
+    """Path of a phantom shipped with coilrod (``"bend"``: :func:`tessellate` of
+    ``Vessel.bend(0.02, pi/2, 2e-3, 0.01, 0.01, ends="round")`` with 12 vertices
+    per ring and rings 1 mm apart, made by the project, a binary STL in metres)."""
+    name = as_choice(name, "name", ("bend",))
+    return str(resources.files("coilrod.contact") / "data" / f"{name}_phantom.stl")
+
+
+class MeshVessel(Obstacle):
+    """Rigid lumen enclosed by a triangle surface mesh.
+
+    Parameters
+    ----------
+    vertices : array-like, shape (n, 3)
+        Vertex positions, m.
+    faces : array-like of int, shape (m, 3)
+        Vertex indices of the triangles, normals (right-hand rule) pointing out of the lumen.
+        Inward-facing meshes are turned around with a warning.
+    source : str, optional
+        Where the mesh came from (a file name), used in messages.
+    friction : float
+        Coulomb friction coefficient mu >= 0 of the wall (stored for the contact models; the
+        contact terms are frictionless until they read it).
+
+    Attributes
+    ----------
+    vertices : ndarray, shape (n, 3)
+        m, read-only (after any reorientation).
+    faces : ndarray, shape (m, 3)
+    watertight : bool
+        Whether the mesh is closed (every edge shared by exactly two faces).  An open mesh
+        (a tube without end caps) is accepted with a warning: the gap is still the signed
+        distance to its surface, but beyond its open ends it is not a lumen.
+    volume : float
+        Enclosed volume, m^3 (closed meshes; nan for open ones).
+
+    Raises
+    ------
+    ValueError
+        Fewer than 4 vertices or 4 faces, non-finite vertices, bad indices, degenerate
+        faces, non-manifold edges (shared by more than two faces) or inconsistent winding;
+        each message names ``source``.
+
+    Examples
+    --------
+    >>> from coilrod.contact import Vessel
+    >>> tube = MeshVessel(*tessellate(Vessel.straight(0.04, 1e-3), 32, 1e-3))
+    >>> float(tube.gap([0.02, 0.0, 0.0])[0]) > 0.99e-3
+    True
+    """
+
+    _outside = "outside the vessel mesh"
+    _immutable = True
+
+    def __init__(self, vertices, faces, *, source: str | None = None, friction=0.0):
+        import trimesh
+        from scipy.spatial import cKDTree
+
+        label = "mesh" if source is None else f"mesh {source!r}"
+        self.source = source
+        self.friction = nonnegative(friction, "friction")
+        v = as_points(vertices, "vertices")
+        f = np.asarray(faces)
+        if f.ndim != 2 or f.shape[1] != 3 or not np.issubdtype(f.dtype, np.integer):
+            raise ValueError(f"{label}: faces must be an integer array of shape (m, 3)")
+        if len(v) < 4 or len(f) < 4:
+            raise ValueError(f"{label} has {len(v)} vertices and {len(f)} faces; a lumen needs 4+")
+        if f.min() < 0 or f.max() >= len(v):
+            raise ValueError(f"{label}: face indices must lie in [0, {len(v)})")
+        mesh = trimesh.Trimesh(v, f, process=True, validate=False)
+        area = mesh.area_faces
+        if np.any(area <= 1e-14 * mesh.scale**2):
+            k = int(np.argmin(area))
+            raise ValueError(f"{label}: face {k} is degenerate (zero area)")
+        counts = np.bincount(mesh.edges_unique_inverse, minlength=len(mesh.edges_unique))
+        if np.any(counts > 2):
+            k = int(np.argmax(counts))
+            raise ValueError(
+                f"{label} is not manifold: edge {mesh.edges_unique[k].tolist()} is shared by "
+                f"{counts[k]} faces"
+            )
+        if not mesh.is_winding_consistent:
+            raise ValueError(
+                f"{label}: the faces are not consistently oriented (neighbouring normals "
+                "point to opposite sides); repair it (e.g. trimesh.repair.fix_winding)"
+            )
+        self.watertight = bool(mesh.is_watertight)
+        if self.watertight:
+            if mesh.volume < 0:
+                warnings.warn(
+                    f"{label}: the face normals point into the lumen; turned around "
+                    "(the lumen is the enclosed volume)",
+                    stacklevel=2,
+                )
+                mesh.invert()
+            self.volume = float(mesh.volume)
+        else:
+            warnings.warn(
+                f"{label} is not watertight (open boundary edges): its orientation cannot be "
+                "checked and beyond its open ends the gap is not a lumen's",
+                stacklevel=2,
+            )
+            self.volume = float("nan")
+        self._mesh = mesh
+        self.vertices = np.array(mesh.vertices, dtype=float)
+        self.faces = np.array(mesh.faces, dtype=np.int64)
+        self._normals(mesh)
+        tris = self.vertices[self.faces]
+        cen = tris.mean(axis=1)
+        self._ctree = cKDTree(cen)
+        self._vtree = cKDTree(self.vertices)
+        self._rmax = float(np.max(np.linalg.norm(tris - cen[:, None], axis=2)))
+
+    def _normals(self, mesh) -> None:
+        """Angle-weighted pseudo-normals of faces, edges (by face and local index) and vertices."""
+        nf = np.asarray(mesh.face_normals, dtype=float)
+        self._face_normals = nf
+        # edge k of a face joins its vertices k and k+1 (trimesh's faces_unique_edges)
+        fue = np.asarray(mesh.faces_unique_edges)
+        ne = np.zeros((len(mesh.edges_unique), 3))
+        np.add.at(ne, fue.ravel(), np.repeat(nf, 3, axis=0))
+        ne /= np.maximum(np.linalg.norm(ne, axis=1, keepdims=True), 1e-300)
+        self._edge_of_face = fue
+        self._edge_normals = ne
+        self._edge_dirs = np.diff(self.vertices[mesh.edges_unique], axis=1)[:, 0]
+        self._edge_dirs /= np.linalg.norm(self._edge_dirs, axis=1, keepdims=True)
+        nv = np.zeros((len(self.vertices), 3))
+        np.add.at(
+            nv,
+            self.faces.ravel(),
+            (np.asarray(mesh.face_angles)[:, :, None] * nf[:, None, :]).reshape(-1, 3),
+        )
+        nv /= np.maximum(np.linalg.norm(nv, axis=1, keepdims=True), 1e-300)
+        self._vertex_normals = nv
+
+    # -- files ----------------------------------------------------------------------------------
+    @classmethod
+    def from_file(cls, path, units: str = "m", friction=0.0) -> MeshVessel:
+        """Read a lumen from a surface mesh file (STL, OBJ, PLY, ... as trimesh reads them).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The file.
+        units : {"m", "mm"}
+            Length unit of the file's coordinates (converted to m).
+        friction : float
+            Friction coefficient mu >= 0 (see :class:`MeshVessel`).
+
+        Raises
+        ------
+        ValueError
+            Missing, unreadable or corrupted files, files without one triangle surface, and
+            the mesh errors of :class:`MeshVessel`; every message names the file.
+        """
+        import trimesh
+
+        units = as_choice(units, "units", tuple(_UNITS))
+        if not isinstance(path, str | os.PathLike):
+            raise ValueError(f"path must be a file name; got {path!r}")
+        path = os.fspath(path)
+        if not os.path.isfile(path):
+            raise ValueError(f"mesh file {path!r} does not exist")
+        try:
+            loaded = trimesh.load(path, force="mesh", process=False)
+        except Exception as exc:  # trimesh raises many types for bad files
+            raise ValueError(f"mesh file {path!r} cannot be read: {exc}") from None
+        if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+            raise ValueError(f"mesh file {path!r} holds no triangle surface")
+        vertices = np.asarray(loaded.vertices, dtype=float)
+        if not np.all(np.isfinite(vertices)):
+            raise ValueError(f"mesh file {path!r} has non-finite vertex coordinates")
+        return cls(
+            vertices * _UNITS[units], np.asarray(loaded.faces), source=path, friction=friction
+        )
+
+    # -- gap ------------------------------------------------------------------------------------
+    def closest(self, points) -> np.ndarray:
+        """Closest points on the wall, shape (n, 3), m."""
+        return self._nearest(as_points(points))[0]
+
+    def _nearest(self, points: np.ndarray):
+        """Exact closest points (n, 3), distances (n,) and triangles (n,).
+
+        The distance ``D`` to the nearest vertex (a KD-tree over the vertices) bounds the
+        distance to the surface; every triangle within ``D`` has its centroid within
+        ``D + rmax`` (its largest centroid-to-corner distance), so a KD-tree over the centroids
+        gives all candidates, measured exactly (:func:`_closest_on_triangles`) and vectorised.
+        (trimesh's ``nearest.on_surface`` is not used: with trimesh 5.2 it misses the closest
+        triangle of some points by 1e-4 of the radius and more.)
+        """
+        bound = self._vtree.query(points)[0]
+        cand = self._ctree.query_ball_point(points, bound * (1 + 1e-9) + self._rmax)
+        lens = np.fromiter((len(c) for c in cand), dtype=np.int64, count=len(points))
+        idx = np.concatenate([np.asarray(c, dtype=np.int64) for c in cand])
+        owner = np.repeat(np.arange(len(points)), lens)
+        cp = _closest_on_triangles(self.vertices[self.faces[idx]], points[owner])
+        dist = np.linalg.norm(cp - points[owner], axis=1)
+        order = np.lexsort((dist, owner))
+        first = order[np.r_[0, np.cumsum(lens)[:-1]]]
+        return cp[first], dist[first], idx[first]
+
+    def _evaluate(self, points: np.ndarray, order: int):
+        c, d, tri = self._nearest(points)
+        diff = points - c
+        # closest feature from the barycentric coordinates of c
+        corners = self.vertices[self.faces[tri]]
+        bary = _barycentric(c, corners)
+        small = bary <= 1e-9
+        nzero = small.sum(axis=1)
+        normal = self._face_normals[tri].copy()
+        on_edge = nzero == 1
+        if np.any(on_edge):
+            j = np.argmax(small[on_edge], axis=1)  # vertex opposite the edge
+            e = self._edge_of_face[tri[on_edge], (j + 1) % 3]
+            normal[on_edge] = self._edge_normals[e]
+        on_vertex = nzero >= 2
+        if np.any(on_vertex):
+            j = np.argmax(~small[on_vertex], axis=1)
+            normal[on_vertex] = self._vertex_normals[self.faces[tri[on_vertex], j]]
+        sign = np.where(np.einsum("ij,ij->i", diff, normal) > 0.0, -1.0, 1.0)  # + inside
+        gap = sign * d
+        grad = hess = None
+        if order >= 1:
+            tiny = d <= 1e-12 * self._mesh.scale
+            u = np.where(tiny[:, None], -normal, diff / np.where(tiny, 1.0, d)[:, None])
+            grad = np.where(tiny[:, None], -normal, sign[:, None] * u)
+            if order >= 2:
+                hess = np.zeros((len(points), 3, 3))
+                curved = (nzero >= 1) & ~tiny
+                if np.any(curved):
+                    uu = u[curved]
+                    h = np.eye(3) - uu[:, :, None] * uu[:, None, :]
+                    edge = on_edge[curved]
+                    if np.any(edge):
+                        rows = np.flatnonzero(curved)[edge]
+                        j = np.argmax(small[rows], axis=1)
+                        t = self._edge_dirs[self._edge_of_face[tri[rows], (j + 1) % 3]]
+                        h[edge] -= t[:, :, None] * t[:, None, :]
+                    hess[curved] = (sign[curved] / d[curved])[:, None, None] * h
+        return gap, grad, hess
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """Box (2, 3) of the mesh, m."""
+        return np.array(self._mesh.bounds, dtype=float)
+
+    def __repr__(self) -> str:
+        src = "" if self.source is None else f"{self.source!r}, "
+        closed = "watertight" if self.watertight else "open"
+        size = _mm(float(np.max(np.ptp(self.vertices, axis=0))))
+        return f"MeshVessel({src}{len(self.faces)} faces, {closed}, size {size})"
+
+    def _draw(self, ax, **kwargs):
+        kwargs.setdefault("color", "0.5")
+        kwargs.setdefault("linewidth", 0.3)
+        # the silhouette in x-y: the boundary edges of the faces seen from +z and -z
+        edges = self._mesh.edges_unique
+        adj = self._mesh.face_adjacency_edges
+        up = self._face_normals[:, 2] >= 0
+        a, b = self._mesh.face_adjacency.T
+        sil = adj[up[a] != up[b]]
+        sel = sil if len(sil) else edges
+        xy = self.vertices[sel][:, :, :2]
+        segs = np.full((len(sel), 3, 2), np.nan)
+        segs[:, :2] = xy
+        ax.plot(segs[:, :, 0].ravel(), segs[:, :, 1].ravel(), **kwargs)
+
+
+def _closest_on_triangles(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Closest points (n, 3) of triangles tri (n, 3, 3) to points p (n, 3) (Ericson 2005,
+    5.1.5, vectorised over the Voronoi regions of the corners, edges and face)."""
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    ab, ac, ap = b - a, c - a, p - a
+
+    def dot(u, v):
+        return np.einsum("ij,ij->i", u, v)
+
+    d1, d2 = dot(ab, ap), dot(ac, ap)
+    bp = p - b
+    d3, d4 = dot(ab, bp), dot(ac, bp)
+    cp = p - c
+    d5, d6 = dot(ab, cp), dot(ac, cp)
+    va = d3 * d6 - d5 * d4
+    vb = d5 * d2 - d1 * d6
+    vc = d1 * d4 - d3 * d2
+    den = va + vb + vc
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = vb / den
+        w = vc / den
+        out = a + v[:, None] * ab + w[:, None] * ac  # face region
+        t_ab = d1 / (d1 - d3)
+        t_ac = d2 / (d2 - d6)
+        t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+    e_bc = (va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0)
+    out = np.where(e_bc[:, None], b + np.nan_to_num(t_bc)[:, None] * (c - b), out)
+    e_ac = (vb <= 0) & (d2 >= 0) & (d6 <= 0)
+    out = np.where(e_ac[:, None], a + np.nan_to_num(t_ac)[:, None] * ac, out)
+    e_ab = (vc <= 0) & (d1 >= 0) & (d3 <= 0)
+    out = np.where(e_ab[:, None], a + np.nan_to_num(t_ab)[:, None] * ab, out)
+    out = np.where(((d6 >= 0) & (d5 <= d6))[:, None], c, out)
+    out = np.where(((d3 >= 0) & (d4 <= d3))[:, None], b, out)
+    out = np.where(((d1 <= 0) & (d2 <= 0))[:, None], a, out)
+    return out
+
+
+def _barycentric(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """Barycentric coordinates (n, 3) of points p (n, 3) in triangles tri (n, 3, 3)."""
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    v0, v1, v2 = b - a, c - a, p - a
+    d00 = np.einsum("ij,ij->i", v0, v0)
+    d01 = np.einsum("ij,ij->i", v0, v1)
+    d11 = np.einsum("ij,ij->i", v1, v1)
+    d20 = np.einsum("ij,ij->i", v2, v0)
+    d21 = np.einsum("ij,ij->i", v2, v1)
+    den = d00 * d11 - d01 * d01
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    return np.stack([1.0 - v - w, v, w], axis=1)
+
+
+def tessellate(vessel, n_around: int = 16, spacing=None):
+    """Triangle mesh of an analytic vessel's wall between its end cross-sections, capped.
+
+    Rings of ``n_around`` vertices on the exact wall at arc-length steps of about
+    ``spacing`` (the ring's edge length by default), joined by triangles; each end is closed
+    by a fan to its centre.  Vertices lie on the analytic wall, so the mesh's gap tends to the
+    vessel's at second order in the edge length.
+
+    Parameters
+    ----------
+    vessel : Vessel
+        A single tube (a :class:`~coilrod.contact.VesselNetwork` is tessellated per member).
+    n_around : int
+        Vertices per ring (>= 3).
+    spacing : float, optional
+        Ring spacing along the centreline, m.
+
+    Returns
+    -------
+    vertices : ndarray, shape (n, 3)
+        m.
+    faces : ndarray, shape (m, 3)
+        Outward normals.
+    """
+    if not isinstance(vessel, Vessel):
+        raise ValueError(f"vessel must be a Vessel; got {type(vessel).__name__}")
+    n_around = as_count(n_around, "n_around", minimum=3)
+    r_min = float(np.min(vessel.radius_at(np.linspace(0.0, vessel.length, 65))))
+    if spacing is None:
+        spacing = 2 * np.pi * r_min / n_around
+    from coils._validate import positive
+
+    spacing = positive(spacing, "spacing")
+    n_rings = max(2, int(np.ceil(vessel.length / spacing)) + 1)
+    s = np.linspace(0.0, vessel.length, n_rings)
+    x = vessel.position(s)
+    t = vessel.tangent(s)
+    r = vessel.radius_at(s)
+    # rotation-minimising frame along the centreline (double reflection, Wang et al. 2008)
+    ref = np.array([0.0, 0.0, 1.0]) if abs(t[0, 2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    n = np.empty_like(t)
+    n[0] = np.cross(ref, t[0])
+    n[0] /= np.linalg.norm(n[0])
+    for i in range(n_rings - 1):  # n_rings steps, not triangles
+        v1 = x[i + 1] - x[i]
+        c1 = v1 @ v1
+        rl = n[i] - (2 / c1) * (v1 @ n[i]) * v1
+        tl = t[i] - (2 / c1) * (v1 @ t[i]) * v1
+        v2 = t[i + 1] - tl
+        c2 = v2 @ v2
+        n[i + 1] = rl - (2 / c2) * (v2 @ rl) * v2 if c2 > 0 else rl
+    b = np.cross(t, n)
+    th = 2 * np.pi * np.arange(n_around) / n_around
+    ring = (
+        x[:, None, :]
+        + r[:, None, None]
+        * (np.cos(th)[None, :, None] * n[:, None, :] + np.sin(th)[None, :, None] * b[:, None, :])
+    ).reshape(-1, 3)
+    vertices = np.vstack([ring, x[0], x[-1]])
+    i = np.arange(n_rings - 1)[:, None] * n_around
+    k = np.arange(n_around)[None, :]
+    a0, a1 = i + k, i + (k + 1) % n_around
+    b0, b1 = a0 + n_around, a1 + n_around
+    side = np.concatenate(
+        [np.stack([a0, a1, b1], -1).reshape(-1, 3), np.stack([a0, b1, b0], -1).reshape(-1, 3)]
+    )
+    c0, c1 = len(ring), len(ring) + 1
+    k = np.arange(n_around)
+    last = (n_rings - 1) * n_around
+    cap0 = np.stack([np.full(n_around, c0), (k + 1) % n_around, k], -1)
+    cap1 = np.stack([np.full(n_around, c1), last + k, last + (k + 1) % n_around], -1)
+    faces = np.concatenate([side, cap0, cap1]).astype(np.int64)
+    # outward: the enclosed volume is positive
+    import trimesh
+
+    if trimesh.Trimesh(vertices, faces, process=False).volume < 0:
+        faces = faces[:, ::-1].copy()
+    return vertices, faces

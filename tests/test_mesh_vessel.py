@@ -1,0 +1,281 @@
+"""MeshVessel: exact distances to a polyhedron, convergence to the analytic Vessel, bad input."""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+trimesh = pytest.importorskip("trimesh")
+
+from coilrod.contact import MeshVessel, Vessel, VesselNetwork, phantom_path, tessellate  # noqa: E402
+
+
+def _box(half=1e-3):
+    m = trimesh.creation.box(extents=(2 * half,) * 3)
+    return np.asarray(m.vertices), np.asarray(m.faces)
+
+
+def _box_gap(p, h):
+    """Closed-form signed distance (inside positive) of a cube of half-side h."""
+    q = np.abs(p) - h
+    outside = np.linalg.norm(np.maximum(q, 0.0), axis=1)
+    return np.where(np.max(q, axis=1) > 0, -outside, -np.max(q, axis=1))
+
+
+def test_cube_gap_is_exact_signed_distance_at_faces_edges_and_corners():
+    # closed form of a cube's signed distance: the sign near edges and corners needs the
+    # pseudo-normals, the magnitude the exact closest point on every triangle
+    h = 1e-3
+    cube = MeshVessel(*_box(h))
+    assert cube.watertight
+    assert cube.volume == pytest.approx(8 * h**3)
+    rng = np.random.default_rng(3)
+    p = rng.uniform(-2.5 * h, 2.5 * h, (600, 3))
+    np.testing.assert_allclose(cube.gap(p), _box_gap(p, h), atol=1e-15)
+    # corner and edge regions outside: the gradient is the unit vector to the corner/edge
+    corner = np.array([[1.5 * h, 1.2 * h, 1.1 * h]])
+    u = corner - h
+    np.testing.assert_allclose(cube.gap_gradient(corner), -u / np.linalg.norm(u), atol=1e-12)
+
+
+def test_gradient_and_hessian_are_the_gap_derivatives():
+    # central differences of the gap and of its gradient (edge, vertex and face regions)
+    h = 1e-3
+    cube = MeshVessel(*_box(h))
+    p = np.array(
+        [[1.4 * h, 1.3 * h, 0.2 * h], [1.4 * h, 1.3 * h, 1.2 * h], [0.3 * h, 0.1 * h, 0.2 * h]]
+    )
+    ev = cube.evaluate(p, 2)
+    step = 1e-9
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = step
+        fd = (cube.gap(p + e) - cube.gap(p - e)) / (2 * step)
+        np.testing.assert_allclose(fd, ev.gradient[:, k], atol=1e-6)
+        fdg = (cube.gap_gradient(p + e) - cube.gap_gradient(p - e)) / (2 * step)
+        np.testing.assert_allclose(fdg, ev.hessian[:, :, k], atol=1e-6 / h)
+    assert np.abs(ev.hessian[1]).max() > 0.1 / h  # the corner region is curved
+
+
+def _bend_samples(v, n=200, seed=0):
+    rng = np.random.default_rng(seed)
+    s = rng.uniform(0.005, v.length - 0.005, n)
+    x, t = v.position(s), v.tangent(s)
+    d = rng.normal(size=(n, 3))
+    d -= np.einsum("ij,ij->i", d, t)[:, None] * t
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return x + d * rng.uniform(0.5e-3, 2.3e-3, n)[:, None]
+
+
+def test_tessellated_bend_converges_to_the_analytic_vessel_at_second_order():
+    # vertices on the exact wall: the gap error is the facets' sagitta r (1 - cos(pi/n)),
+    # quartered when n doubles; the normal's error halves
+    v = Vessel.bend(0.02, math.pi / 2, 2e-3, 0.01, 0.01)
+    p = _bend_samples(v)
+    ref = v.evaluate(p, 1)
+    errs, nerrs = [], []
+    for n in (8, 16):
+        ev = MeshVessel(*tessellate(v, n)).evaluate(p, 1)
+        errs.append(np.abs(ev.gap - ref.gap).max())
+        nerrs.append(np.abs(ev.gradient - ref.gradient).max())
+        # (10% more: the quads between rings are twisted on the bend; their diagonals sag more)
+        assert errs[-1] <= 2e-3 * (1 - math.cos(math.pi / n)) * 1.15
+    assert math.log2(errs[0] / errs[1]) > 1.8
+    assert math.log2(nerrs[0] / nerrs[1]) > 0.8
+
+
+def test_branch_as_a_network_of_meshes_tends_to_the_analytic_branch():
+    net = Vessel.branch(0.03, 1.5e-3, 0.012, ends="round")
+    meshes = VesselNetwork([MeshVessel(*tessellate(m, 16)) for m in net.vessels])
+    rng = np.random.default_rng(1)
+    lo, hi = net.bounds
+    p = rng.uniform(lo, hi, (400, 3))
+    g = net.gap(p)
+    # away from the members' ends (the tessellation caps them flat, the presets round them)
+    ends = np.array([[m.position(0.0), m.position(m.length)] for m in net.vessels]).reshape(-1, 3)
+    far = np.min(np.linalg.norm(p[:, None] - ends[None], axis=2), axis=1) > 3e-3
+    near = (g > -1e-3) & far
+    assert near.sum() > 50
+    bound = 1.5e-3 * (1 - math.cos(math.pi / 16)) * 1.05
+    assert np.abs(meshes.gap(p[near]) - g[near]).max() <= bound
+
+
+def test_phantom_is_the_shipped_bend():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ph = MeshVessel.from_file(phantom_path("bend"))
+    assert ph.watertight
+    v = Vessel.bend(0.02, math.pi / 2, 2e-3, 0.01, 0.01)
+    p = _bend_samples(v, 100)
+    # 12 per ring: sagitta 2 mm (1 - cos 15 deg) = 68 um; rings 1 mm apart on a 20 mm bend add
+    # (1 mm)^2 / (8 * 18 mm) = 7 um
+    assert np.abs(ph.gap(p) - v.gap(p)).max() <= 0.08e-3
+    with pytest.raises(ValueError, match="clamp at .* outside the vessel mesh"):
+        ph.check_start([0.0, 0.005, 0.0], "clamp")
+    assert "bend_phantom.stl" in repr(ph)
+
+
+def test_mm_units(tmp_path):
+    path = tmp_path / "cube.stl"
+    trimesh.Trimesh(*_box(1.0)).export(path)
+    cube = MeshVessel.from_file(path, units="mm")
+    assert cube.gap([0.0, 0.0, 0.0])[0] == pytest.approx(1e-3)
+
+
+def test_inward_normals_are_turned_with_a_warning(tmp_path):
+    v, f = _box()
+    path = tmp_path / "inside_out.stl"
+    trimesh.Trimesh(v, f[:, ::-1], process=False).export(path)
+    with pytest.warns(UserWarning, match="inside_out.stl.*point into the lumen"):
+        cube = MeshVessel.from_file(path)
+    assert cube.gap([0.0, 0.0, 0.0])[0] == pytest.approx(1e-3)
+
+
+def test_open_mesh_is_reported(tmp_path):
+    v, f = _box()
+    with pytest.warns(UserWarning, match="not watertight"):
+        m = MeshVessel(v, f[:-1], source="open.stl")
+    assert not m.watertight
+    assert "open" in repr(m)
+
+
+def test_non_manifold_mesh_is_rejected():
+    v, f = _box()
+    # a fin: a third face on an edge of the cube
+    v2 = np.vstack([v, [[5e-3, 5e-3, 5e-3]]])
+    f2 = np.vstack([f, [[f[0, 0], f[0, 1], len(v)]]])
+    with pytest.raises(ValueError, match="fin.stl.*not manifold"):
+        MeshVessel(v2, f2, source="fin.stl")
+
+
+def test_inconsistent_winding_is_rejected():
+    v, f = _box()
+    f = f.copy()
+    f[0] = f[0, ::-1]
+    with pytest.raises(ValueError, match="consistently oriented"):
+        MeshVessel(v, f)
+
+
+@pytest.mark.parametrize(
+    ("content", "match"),
+    [
+        (b"solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0\n", "cannot be read|no triangle"),
+        (b"\x00\x01garbage" * 3, "cannot be read|no triangle"),
+        (b"", "cannot be read|no triangle"),
+    ],
+)
+def test_corrupted_files_name_the_file(tmp_path, content, match):
+    path = tmp_path / "broken.stl"
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match=f"broken.stl.*({match})"):
+        MeshVessel.from_file(path)
+
+
+def test_missing_file_and_bad_units(tmp_path):
+    with pytest.raises(ValueError, match="nope.stl.*does not exist"):
+        MeshVessel.from_file(tmp_path / "nope.stl")
+    with pytest.raises(ValueError, match="units"):
+        MeshVessel.from_file(phantom_path(), units="inch")
+    with pytest.raises(ValueError, match="friction"):
+        MeshVessel.from_file(phantom_path(), friction=-0.1)
+    assert MeshVessel.from_file(phantom_path(), friction=0.2).friction == 0.2
+
+
+# -- centrelines with radii (VMTK) --------------------------------------------------------------
+from coilrod.contact import read_centerline  # noqa: E402
+
+
+def _vtp(points, radii, order, fmt="ascii"):
+    pts = " ".join(f"{v:.17g}" for v in np.ravel(points))
+    rad = " ".join(f"{v:.17g}" for v in radii)
+    con = " ".join(str(i) for i in order)
+    return f"""<?xml version="1.0"?>
+<VTKFile type="PolyData" version="0.1">
+ <PolyData><Piece NumberOfPoints="{len(points)}" NumberOfLines="1">
+  <Points><DataArray type="Float64" NumberOfComponents="3" format="{fmt}">{pts}</DataArray>
+  </Points>
+  <PointData><DataArray type="Float64" Name="MaximumInscribedSphereRadius" format="ascii">{rad}
+  </DataArray></PointData>
+  <Lines><DataArray type="Int64" Name="connectivity" format="ascii">{con}</DataArray>
+  <DataArray type="Int64" Name="offsets" format="ascii">{len(order)}</DataArray></Lines>
+ </Piece></PolyData>
+</VTKFile>"""
+
+
+def test_centerline_csv_and_vtp_give_the_tube_with_those_radii(tmp_path):
+    # straight centreline on x, radius 2 mm (closed form gap r - distance from the axis)
+    x = np.linspace(0.0, 40.0, 5)
+    pts = np.column_stack([x, 0 * x, 0 * x])
+    csv = tmp_path / "c.csv"
+    csv.write_text(
+        "x,y,z,MaximumInscribedSphereRadius\n" + "".join(f"{a},{b},{c},2.0\n" for a, b, c in pts)
+    )
+    v = read_centerline(csv, units="mm")
+    p = np.array([[0.01, 0.0005, 0.0], [0.03, 0.0, -0.0025]])
+    np.testing.assert_allclose(v.gap(p), [1.5e-3, -0.5e-3], atol=1e-15)
+    # VTP with the points stored out of order: the polyline's connectivity orders them;
+    # varying radii as Vessel(points, radii) takes them
+    r = np.array([1.0, 1.5, 2.0, 1.5, 1.0])
+    perm = np.array([3, 0, 4, 1, 2])
+    vtp = tmp_path / "c.vtp"
+    vtp.write_text(_vtp(pts[perm], r[perm], np.argsort(perm)))
+    w = Vessel.from_centerline_file(vtp, units="mm")
+    q = np.array([[0.015, 0.001, 0.0], [0.025, 0.0, 0.0012]])
+    np.testing.assert_allclose(w.gap(q), Vessel(pts * 1e-3, r * 1e-3).gap(q), atol=1e-15)
+
+
+def test_centerline_bad_input_names_the_file(tmp_path):
+    bad = tmp_path / "nor.csv"
+    bad.write_text("x,y,z\n0,0,0\n1,0,0\n")
+    with pytest.raises(ValueError, match="nor.csv.*radius column"):
+        read_centerline(bad)
+    neg = tmp_path / "neg.csv"
+    neg.write_text("x,y,z,radius\n0,0,0,1\n1,0,0,-1\n")
+    with pytest.raises(ValueError, match=r"neg.csv.*radius of point 1"):
+        read_centerline(neg)
+    binary = tmp_path / "bin.vtp"
+    binary.write_text(_vtp(np.eye(3), [1, 1, 1], [0, 1, 2], fmt="binary"))
+    with pytest.raises(ValueError, match="bin.vtp.*only ASCII"):
+        read_centerline(binary)
+    broken = tmp_path / "broken.vtp"
+    broken.write_text("<VTKFile><PolyData>")
+    with pytest.raises(ValueError, match="broken.vtp.*not valid XML"):
+        read_centerline(broken)
+    with pytest.raises(ValueError, match="format must be"):
+        read_centerline(phantom_path())
+
+
+def test_contact_modules_import_no_circle():
+    # every import between coilrod.contact's modules, at module level or inside functions:
+    # the graph has no cycle (it had vessel -> presets -> vessel and network -> vessel -> presets
+    # -> network)
+    import ast
+    from pathlib import Path
+
+    import coilrod.contact
+
+    folder = Path(coilrod.contact.__file__).parent
+    graph = {}
+    for path in folder.glob("*.py"):
+        if path.stem == "__init__":
+            continue
+        deps = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module:
+                deps.add(node.module.split(".")[0])
+        graph[path.stem] = deps & {p.stem for p in folder.glob("*.py")}
+    state = {}
+
+    def visit(m, trail):
+        if state.get(m) == "done":
+            return
+        assert state.get(m) != "open", f"import circle: {' -> '.join([*trail, m])}"
+        state[m] = "open"
+        for d in graph[m]:
+            visit(d, [*trail, m])
+        state[m] = "done"
+
+    for m in graph:
+        visit(m, [])
+    assert "bend" in (Vessel.bend.__doc__ or "")
