@@ -119,7 +119,7 @@ def test_bad_obstacles_are_named(obstacles, models, match):
 
 
 def test_navigation_scene_runs_against_the_wall(tmp_path):
-    # the tip is stopped by the lumen's wall 3 mm from the axis (contact at the nodes); the
+    # the tip's surface is stopped by the lumen's wall 3 mm from the axis; the
     # shapes figure draws the vessel and the contact forces
     import matplotlib
 
@@ -144,7 +144,8 @@ def test_navigation_scene_runs_against_the_wall(tmp_path):
     result = run_scene(parse_scene(data))
     (run,) = result.runs
     tip = run.result.centerline(-1)[-1]
-    assert tip[1] == pytest.approx(3e-3, abs=1e-8)
+    # the 2 mm rod's surface stops at the wall: its axis 3 mm - 1 mm from the vessel's axis
+    assert tip[1] == pytest.approx(3e-3 - 1e-3, abs=1e-8)
     assert np.linalg.norm(run.result.contact_force(len(run.scales) - 1), axis=1).max() > 0
     ax = plot_scene_shapes(result)
     assert any("contact force" in t.get_text() for t in ax.get_legend().get_texts())

@@ -662,7 +662,9 @@ class PlanarRod(DiscreteRod):
         B, G, H = self._field_by_member(U.reshape(k, n, _NV)[:, :, 0:2], tangent)
         R = np.empty((k, self.size))
         R1 = np.empty((k, self.size))
-        shape = (2 * _KL + _KU + 1, k * self.size) if tangent else (1, 1)
+        # (2, 2) when unused: a (1, 1) array is C- and F-contiguous alike, numba types it as C
+        # and would compile a second specialisation of the kernel (~2 s CPU on a cold cache)
+        shape = (2 * _KL + _KU + 1, k * self.size) if tangent else (2, 2)
         ab = np.zeros(shape, order="F")  # Fortran order: LAPACK factorises it in place
         finite = np.empty(k, dtype=np.bool_)
         has_h = H is not None
