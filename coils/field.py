@@ -206,7 +206,35 @@ def as_field(value, name: str = "field") -> Field:
     return value
 
 
-class FieldSum(Field):
+class AccumulatedField(Field):
+    """A field whose every evaluation is one :meth:`_add_to` into zeroed arrays (sums of
+    sources: superpositions, dipole sums); subclasses define ``_add_to`` only."""
+
+    def _sum(self, pts, want_B: bool, want_G: bool, want_H: bool):
+        n = pts.shape[0]
+        B = np.zeros((n, 3)) if want_B else None
+        G = np.zeros((n, 3, 3)) if want_G else None
+        H = np.zeros((n, 3, 3, 3)) if want_H else None
+        self._add_to(pts, B, G, H, 1.0)
+        return B, G, H
+
+    def _B(self, pts):
+        return self._sum(pts, True, False, False)[0]
+
+    def _gradient(self, pts):
+        return self._sum(pts, False, True, False)[1]
+
+    def _B_and_gradient(self, pts):
+        return self._sum(pts, True, True, False)[:2]
+
+    def _hessian(self, pts):
+        return self._sum(pts, False, False, True)[2]
+
+    def _B_gradient_hessian(self, pts):
+        return self._sum(pts, True, True, True)
+
+
+class FieldSum(AccumulatedField):
     """Superposition of fields: B and its derivatives add.
 
     Parameters
@@ -243,29 +271,6 @@ class FieldSum(Field):
                 None if (p.uniform or p.linear) else H,
                 factor,
             )
-
-    def _sum(self, pts, want_B: bool, want_G: bool, want_H: bool):
-        n = pts.shape[0]
-        B = np.zeros((n, 3)) if want_B else None
-        G = np.zeros((n, 3, 3)) if want_G else None
-        H = np.zeros((n, 3, 3, 3)) if want_H else None
-        self._add_to(pts, B, G, H, 1.0)
-        return B, G, H
-
-    def _B(self, pts):
-        return self._sum(pts, True, False, False)[0]
-
-    def _gradient(self, pts):
-        return self._sum(pts, False, True, False)[1]
-
-    def _B_and_gradient(self, pts):
-        return self._sum(pts, True, True, False)[:2]
-
-    def _hessian(self, pts):
-        return self._sum(pts, False, False, True)[2]
-
-    def _B_gradient_hessian(self, pts):
-        return self._sum(pts, True, True, True)
 
     def __repr__(self):
         return f"{type(self).__name__}({list(self.parts)!r})"

@@ -26,7 +26,7 @@ from ._immutable import sealed
 from ._validate import _show, as_array, as_axis, as_vector, finite_scalar, positive
 from .coaxial import CoaxialCoils, frame_from_axis
 from .dipoles import dipole_sum
-from .field import Field
+from .field import AccumulatedField, Field
 
 __all__ = [
     "Dipole",
@@ -242,7 +242,7 @@ def _cuboid_terms(p, h):
 
 
 # -- public sources -------------------------------------------------------------------------------
-class Dipole(Field):
+class Dipole(AccumulatedField):
     """A point magnetic dipole.
 
     Parameters
@@ -284,29 +284,6 @@ class Dipole(Field):
                 f"points[{hit}] = {pts[hit].tolist()} m is at the dipole's centre: its field is "
                 f"infinite there"
             )
-
-    def _eval(self, pts, want_B, want_G, want_H):
-        n = pts.shape[0]
-        B = np.zeros((n, 3)) if want_B else None
-        G = np.zeros((n, 3, 3)) if want_G else None
-        H = np.zeros((n, 3, 3, 3)) if want_H else None
-        self._add_to(pts, B, G, H, 1.0)
-        return B, G, H
-
-    def _B(self, pts):
-        return self._eval(pts, True, False, False)[0]
-
-    def _gradient(self, pts):
-        return self._eval(pts, False, True, False)[1]
-
-    def _B_and_gradient(self, pts):
-        return self._eval(pts, True, True, False)[:2]
-
-    def _hessian(self, pts):
-        return self._eval(pts, False, False, True)[2]
-
-    def _B_gradient_hessian(self, pts):
-        return self._eval(pts, True, True, True)
 
     def __repr__(self):
         return f"Dipole(moment={self.moment.tolist()}, center={self.center.tolist()})"

@@ -29,7 +29,7 @@ import numpy as np
 from ._immutable import sealed
 from ._validate import _show, as_array, as_bool, as_limits, as_points, as_vector
 from .dipoles import dipole_sum
-from .field import Field
+from .field import AccumulatedField
 
 __all__ = ["MPEM"]
 
@@ -48,7 +48,7 @@ def _show_vec(v) -> str:
     return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
 
 
-class MPEM(Field):
+class MPEM(AccumulatedField):
     """A calibrated multipole electromagnet model: point dipoles driven by coil currents.
 
     Parameters
@@ -240,29 +240,6 @@ class MPEM(Field):
 
     def _add_to(self, pts, B, G, H, factor):
         self._run(pts, self.positions, factor * self._effective(), B, G, H)
-
-    def _eval(self, pts, want_B, want_G, want_H):
-        n = pts.shape[0]
-        B = np.zeros((n, 3)) if want_B else None
-        G = np.zeros((n, 3, 3)) if want_G else None
-        H = np.zeros((n, 3, 3, 3)) if want_H else None
-        self._add_to(pts, B, G, H, 1.0)
-        return B, G, H
-
-    def _B(self, pts):
-        return self._eval(pts, True, False, False)[0]
-
-    def _gradient(self, pts):
-        return self._eval(pts, False, True, False)[1]
-
-    def _B_and_gradient(self, pts):
-        return self._eval(pts, True, True, False)[:2]
-
-    def _hessian(self, pts):
-        return self._eval(pts, False, False, True)[2]
-
-    def _B_gradient_hessian(self, pts):
-        return self._eval(pts, True, True, True)
 
     def unit_fields(self, points, *, hessian: bool = False):
         """Field, gradient (and hessian) per ampere of every coil at ``points``.
