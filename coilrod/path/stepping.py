@@ -324,6 +324,7 @@ class _Tracker:
         snaps = 0
         failures = 0
         locating = False  # a change of stability lies ahead: bisect, do not grow the step
+        seen_at = None  # the trial scale where the change was seen
         residual = np.inf
         while True:
             remaining = target - cur.scale
@@ -347,7 +348,7 @@ class _Tracker:
                     if abs(h) > opts.bifurcation_tol * abs(full):
                         h /= 2.0  # locate the change of stability: shorten the step
                         self.cuts += 1
-                        locating = True
+                        locating, seen_at = True, s1
                         continue
                     locating = False
                     self.record_bifurcation(cur, s1, stab, k, first_of, target)
@@ -357,8 +358,16 @@ class _Tracker:
                 prev, cur = cur, new
                 failures = 0
                 self.steps += 1
+                if locating and (s1 - seen_at) * full >= 0:
+                    # passed the trial state where the change was seen without meeting it
+                    # (that trial had converged to another branch): stop bisecting
+                    locating = False
                 if res.iterations[0] <= 4 and not locating:
                     h *= 2.0
+                elif res.iterations[0] <= 4:
+                    # bisecting toward the change: grow, but never past the scale where it
+                    # was seen (a step cut for another reason must not creep on at its size)
+                    h = float(np.copysign(min(2.0 * abs(h), abs(seen_at - s1)), h))
                 continue
             h /= 2.0
             failures += 1
