@@ -183,3 +183,77 @@ def minimum_power(
         raise RuntimeError("the least-distance program failed on a feasible current target")
     J = np.clip(J0 + null @ z, -u, u)  # the last ulp at an active limit
     return Solution(J / root, residual, rank, fraction, unlimited)
+
+
+def _fmt_mm(point) -> str:
+    return "(" + ", ".join(f"{1e3 * v:.4g}" for v in point) + ") mm"
+
+
+def _show_vec(v) -> str:
+    return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
+
+
+def currents_for_target(source, point, B, gradient, weights, default_weights, names, words):
+    """The minimum-power currents (A, shape (m,)) with which the multi-channel ``source``
+    (:class:`coils.CoilSystem`, :class:`coils.MPEM`: ``unit_fields``, ``fixed_field``,
+    ``length_scale``, ``_max_current``) makes ``B`` (3,) T and/or ``gradient`` (3, 3) T/m
+    at ``point`` (3,) m; a ValueError that tells an unreachable target from one beyond the
+    current limits otherwise.  ``weights`` (m,) as given (None: ``default_weights``);
+    ``names`` (m,) the channels' names; ``words`` the source's wording of the errors (keys
+    ``who``, ``channels``, ``channel``, ``limits``, ``fixed``, ``currents``)."""
+    from ._validate import as_array, as_vector
+
+    if B is None and gradient is None:
+        raise ValueError("give a target: B (3,) in T and/or gradient (3, 3) in T/m")
+    m = len(names)
+    if weights is None:
+        w = default_weights
+    else:
+        w = as_vector(weights, "weights", m)
+        if not np.all(w > 0):
+            raise ValueError(f"weights must be positive; got {w.tolist()}")
+    Bu, Gu = source.unit_fields(point)
+    Bf, Gf = source.fixed_field(point)
+    ell = source.length_scale  # gradient rows in T: comparable with the field rows
+    rows, rhs = [], []
+    if B is not None:
+        rows.append(Bu[0])
+        rhs.append(as_vector(B, "B") - Bf[0])
+    if gradient is not None:
+        target_G = as_array(gradient, "gradient", (3, 3))
+        size = float(np.abs(target_G).max())
+        asym = float(np.abs(target_G - target_G.T).max())
+        trace = float(np.trace(target_G))
+        if asym > 1e-9 * size or abs(trace) > 1e-9 * size:
+            raise ValueError(
+                f"gradient must be symmetric and traceless (curl B = div B = 0 in free "
+                f"space); got asymmetry {asym:.3g} T/m and trace {trace:.3g} T/m"
+            )
+        rows.append(ell * Gu[0].reshape(9, m))
+        rhs.append(ell * (target_G - Gf[0]).reshape(9))
+    limits = source._max_current
+    sol = minimum_power(np.vstack(rows), np.concatenate(rhs), w, limits)
+    if sol.currents is not None:
+        return sol.currents
+    where = _fmt_mm(point)
+    if not sol.reachable:
+        miss, k = [], 0
+        if B is not None:
+            miss.append(f"B by {_show_vec(1e3 * sol.residual[:3])} mT")
+            k = 3
+        if gradient is not None:
+            miss.append(f"the gradient by {_show_vec(sol.residual[k:] / ell)} T/m")
+        total = (3 if B is not None else 0) + (5 if gradient is not None else 0)
+        raise ValueError(
+            f"{words['who']} cannot make this target at {where}: its {m} {words['channels']} "
+            f"make {sol.rank} of the {total} independent components asked for; the nearest it "
+            f"makes misses {' and '.join(miss)}"
+        )
+    j = int(np.argmax(np.abs(sol.unlimited) / limits))
+    raise ValueError(
+        f"the target at {where} exceeds the current limits{words['limits']}: at most "
+        f"{100 * sol.fraction:.4g} % of the field the {words['channels']} must make (the target "
+        f"less {words['fixed']}) can be made within max_current (the {words['currents']} "
+        f"currents need {sol.unlimited[j]:.4g} A in {words['channel']} {j} ({names[j]}), "
+        f"limit {limits[j]:g} A)"
+    )

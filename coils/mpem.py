@@ -28,6 +28,7 @@ import numpy as np
 
 from ._immutable import sealed
 from ._validate import _show, as_array, as_bool, as_limits, as_points, as_vector
+from .currents import _fmt_mm
 from .dipoles import dipole_sum
 from .field import AccumulatedField
 
@@ -38,14 +39,6 @@ ON_SOURCE = 1e-9
 #: Largest accepted deviation of ``|Source_Direction|`` from 1 in a calibration file (the
 #: public files round directions to 3 or more digits); the direction is used as written.
 UNIT_TOL = 1e-3
-
-
-def _fmt_mm(point) -> str:
-    return "(" + ", ".join(f"{1e3 * v:.4g}" for v in point) + ") mm"
-
-
-def _show_vec(v) -> str:
-    return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
 
 
 class MPEM(AccumulatedField):
@@ -339,63 +332,19 @@ class MPEM(AccumulatedField):
         >>> np.round(1e3 * navion.with_currents(I).B([0.0, 0.0, 0.0])[0], 9) + 0.0
         array([ 0.,  0., 20.])
         """
-        from .currents import minimum_power
+        from .currents import currents_for_target
 
-        if B is None and gradient is None:
-            raise ValueError("give a target: B (3,) in T and/or gradient (3, 3) in T/m")
-        m = len(self.names)
         point = self.center if at is None else as_vector(at, "at")
-        if weights is None:
-            w = np.ones(m)
-        else:
-            w = as_vector(weights, "weights", m)
-            if not np.all(w > 0):
-                raise ValueError(f"weights must be positive; got {w.tolist()}")
-        Bu, Gu = self.unit_fields(point)
-        Bf, Gf = self.fixed_field(point)
-        ell = self.length_scale
-        rows, rhs = [], []
-        if B is not None:
-            rows.append(Bu[0])
-            rhs.append(as_vector(B, "B") - Bf[0])
-        if gradient is not None:
-            target_G = as_array(gradient, "gradient", (3, 3))
-            size = float(np.abs(target_G).max())
-            asym = float(np.abs(target_G - target_G.T).max())
-            trace = float(np.trace(target_G))
-            if asym > 1e-9 * size or abs(trace) > 1e-9 * size:
-                raise ValueError(
-                    f"gradient must be symmetric and traceless (curl B = div B = 0 in free "
-                    f"space); got asymmetry {asym:.3g} T/m and trace {trace:.3g} T/m"
-                )
-            rows.append(ell * Gu[0].reshape(9, m))
-            rhs.append(ell * (target_G - Gf[0]).reshape(9))
-        A, b = np.vstack(rows), np.concatenate(rhs)
-        sol = minimum_power(A, b, w, self._max_current)
-        if sol.currents is not None:
-            return sol.currents
-        where = _fmt_mm(point)
-        if not sol.reachable:
-            miss, k = [], 0
-            if B is not None:
-                miss.append(f"B by {_show_vec(1e3 * sol.residual[:3])} mT")
-                k = 3
-            if gradient is not None:
-                miss.append(f"the gradient by {_show_vec(sol.residual[k:] / ell)} T/m")
-            total = (3 if B is not None else 0) + (5 if gradient is not None else 0)
-            raise ValueError(
-                f"the model{self._where()} cannot make this target at {where}: its {m} coils "
-                f"make {sol.rank} of the {total} independent components asked for; the nearest "
-                f"it makes misses {' and '.join(miss)}"
-            )
-        j = int(np.argmax(np.abs(sol.unlimited) / self._max_current))
-        raise ValueError(
-            f"the target at {where} exceeds the current limits{self._where()}: at most "
-            f"{100 * sol.fraction:.4g} % of the field the coils must make (the target less the "
-            f"offset field) can be made within max_current (the least-norm currents need "
-            f"{sol.unlimited[j]:.4g} A in coil {j} ({self.names[j]}), limit "
-            f"{self._max_current[j]:g} A)"
-        )
+        words = {
+            "who": f"the model{self._where()}",
+            "channels": "coils",
+            "channel": "coil",
+            "limits": self._where(),
+            "fixed": "the offset field",
+            "currents": "least-norm",
+        }
+        default = np.ones(len(self.names))
+        return currents_for_target(self, point, B, gradient, weights, default, self.names, words)
 
     def ideal(self, zero_tol: float = 1e-12):
         """The LinearField of B and gradient at :attr:`center` (:func:`coils.linearize`)."""

@@ -53,10 +53,6 @@ def _default_name(channel) -> str:
     return f"{type(channel).__name__} axis {_axis_label(channel.axis)}"
 
 
-def _fmt_mm(point) -> str:
-    return "(" + ", ".join(f"{1e3 * v:.4g}" for v in point) + ") mm"
-
-
 class CoilSystem(FieldSum):
     """A superposition of field sources whose coils are driven by current channels.
 
@@ -457,69 +453,23 @@ class CoilSystem(FieldSum):
         >>> np.round(1e3 * system.with_currents(I).B(system.center)[0], 9) + 0.0   # mT
         array([0., 5., 0.])
         """
-        if B is None and gradient is None:
-            raise ValueError("give a target: B (3,) in T and/or gradient (3, 3) in T/m")
+        from .currents import currents_for_target
+
         m = len(self._channels)
-        if m == 0:
+        if m == 0 and (B is not None or gradient is not None):
             raise ValueError("the system has no current channels (only fixed parts)")
         point = self.center if at is None else as_vector(at, "at")
-        if weights is None:
-            R = [ch.resistance for ch in self._channels]
-            w = np.ones(m) if any(r is None for r in R) else np.array(R, dtype=float)
-        else:
-            w = as_vector(weights, "weights", m)
-            if not np.all(w > 0):
-                raise ValueError(f"weights must be positive; got {w.tolist()}")
-        Bu, Gu = self.unit_fields(point)
-        Bf, Gf = self.fixed_field(point)
-        ell = self.length_scale  # gradient rows in T: comparable with the field rows
-        rows, rhs = [], []
-        if B is not None:
-            target_B = as_vector(B, "B")
-            rows.append(Bu[0])
-            rhs.append(target_B - Bf[0])
-        if gradient is not None:
-            target_G = as_array(gradient, "gradient", (3, 3))
-            size = float(np.abs(target_G).max())
-            asym = float(np.abs(target_G - target_G.T).max())
-            trace = float(np.trace(target_G))
-            if asym > 1e-9 * size or abs(trace) > 1e-9 * size:
-                raise ValueError(
-                    f"gradient must be symmetric and traceless (curl B = div B = 0 in free "
-                    f"space); got asymmetry {asym:.3g} T/m and trace {trace:.3g} T/m"
-                )
-            rows.append(ell * Gu[0].reshape(9, m))
-            rhs.append(ell * (target_G - Gf[0]).reshape(9))
-        from .currents import minimum_power
-
-        A, b = np.vstack(rows), np.concatenate(rhs)
-        sol = minimum_power(A, b, w, self._max_current)
-        if sol.currents is not None:
-            return sol.currents
-        where = _fmt_mm(point)
-        if not sol.reachable:
-            miss = []
-            k = 0
-            if B is not None:
-                miss.append(f"B by {_show_vec(1e3 * sol.residual[:3])} mT")
-                k = 3
-            if gradient is not None:
-                g = sol.residual[k:].reshape(3, 3) / ell
-                miss.append(f"the gradient by {_show_vec(g.ravel())} T/m")
-            total = (3 if B is not None else 0) + (5 if gradient is not None else 0)
-            raise ValueError(
-                f"the coil system cannot make this target at {where}: its {m} channels make "
-                f"{sol.rank} of the {total} independent components asked for; the nearest it "
-                f"makes misses {' and '.join(miss)}"
-            )
-        j = int(np.argmax(np.abs(sol.unlimited) / self._max_current))
-        raise ValueError(
-            f"the target at {where} exceeds the current limits: at most "
-            f"{100 * sol.fraction:.4g} % of the field the channels must make (the target less "
-            f"the fixed parts' field) can be made within max_current (the "
-            f"minimum-power currents need {sol.unlimited[j]:.4g} A in channel {j} "
-            f"({self._names[j]}), limit {self._max_current[j]:g} A)"
-        )
+        R = [ch.resistance for ch in self._channels]
+        default = np.ones(m) if any(r is None for r in R) else np.array(R, dtype=float)
+        words = {
+            "who": "the coil system",
+            "channels": "channels",
+            "channel": "channel",
+            "limits": "",
+            "fixed": "the fixed parts' field",
+            "currents": "minimum-power",
+        }
+        return currents_for_target(self, point, B, gradient, weights, default, self._names, words)
 
     # -- as before ------------------------------------------------------------------------------
     def ideal(self, zero_tol: float = 1e-12):
@@ -534,7 +484,3 @@ class CoilSystem(FieldSum):
 
         children = [p.to_magpylib() for p in self.parts if hasattr(p, "to_magpylib")]
         return magpy.Collection(*children)
-
-
-def _show_vec(v) -> str:
-    return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
