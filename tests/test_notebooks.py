@@ -15,21 +15,61 @@ NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
 pytestmark = pytest.mark.slow
 
 
+_KERNEL = {}
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _shared_kernel():
+    """One Jupyter kernel for the module's notebooks, shut down after the last one.
+
+    Starting a kernel and importing numpy, scipy, matplotlib and coilrod in it costs ~2 s of
+    CPU; the notebooks share one, and each starts from an empty namespace (``%reset -f``) and
+    closed figures, so a notebook cannot lean on another's variables."""
+    yield
+    km = _KERNEL.pop("km", None)
+    if km is not None:
+        km.shutdown_kernel(now=True)
+
+
+def _kernel_manager():
+    """The module's kernel, started on first use with ``COILROD_QUICK=1`` in its environment."""
+    if "km" not in _KERNEL:
+        from jupyter_client.manager import KernelManager
+
+        km = KernelManager(kernel_name="python3")
+        with pytest.MonkeyPatch.context() as env:
+            env.setenv("COILROD_QUICK", "1")  # inherited by the kernel
+            km.start_kernel(cwd=str(NOTEBOOKS))
+        _KERNEL["km"] = km
+    return _KERNEL["km"]
+
+
+RESET = (
+    "get_ipython().run_line_magic('reset', '-f')\n"
+    "import matplotlib.pyplot\n"
+    "matplotlib.pyplot.close('all')"
+)
+
+
 def execute(name: str) -> dict:
     """Run a notebook and return the dict it prints after 'RESULTS '.
 
     The kernel runs with ``COILROD_QUICK=1``: a notebook whose full grids cost minutes reads it
     in its first cell and runs the same steps on small grids (the assertions below check the
-    numbers it prints at those grids against independent references)."""
+    numbers it prints at those grids against independent references).  Every cell runs, in
+    order, after a reset of the shared kernel's namespace."""
     nbformat = pytest.importorskip("nbformat")
     nbclient = pytest.importorskip("nbclient")
     nb = nbformat.read(NOTEBOOKS / name, as_version=4)
+    nb.cells.insert(0, nbformat.v4.new_code_cell(RESET))
     client = nbclient.NotebookClient(
-        nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(NOTEBOOKS)}}
+        nb,
+        km=_kernel_manager(),
+        timeout=300,
+        kernel_name="python3",
+        resources={"metadata": {"path": str(NOTEBOOKS)}},
     )
-    with pytest.MonkeyPatch.context() as env:
-        env.setenv("COILROD_QUICK", "1")  # inherited by the kernel nbclient starts
-        client.execute()
+    client.execute()
     for cell in reversed(nb.cells):
         for out in cell.get("outputs", []):
             text = out.get("text", "")
