@@ -1,12 +1,20 @@
 """Shared test configuration: one BLAS thread, headless matplotlib, common fixtures."""
 
 import os
+import sys
 
 # One BLAS thread, for this process and the notebook kernels and CLI subprocesses it starts
 # (set before numpy is imported; an explicit setting is kept): the tests' matrices are small,
 # and OpenBLAS's extra threads spin -- on the shared 2-core machine they doubled the CPU time
 # of the FEM tests (measured: 12.7 s CPU alone, 4.9 s with one thread, for the same test)
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+# Byte-code caching on, for this process and the CLI subprocesses and notebook kernel it
+# starts: with PYTHONDONTWRITEBYTECODE set (as on the shared machines) every process compiles
+# coilrod's sources again, and pytest rewrites every test module's asserts on every run
+# (collection: 7.2 s CPU without the cache, 3.6 s with it)
+sys.dont_write_bytecode = False
+os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
 
 import matplotlib  # noqa: E402
 
