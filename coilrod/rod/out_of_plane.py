@@ -22,7 +22,8 @@ Notes
 -----
 At a planar state the relative rotation of segment i is ``psi_i = (0, 0, delta_i)``,
 ``delta_i = theta_{i+1} - theta_i``, and ``J_r(psi)^-1 = I + hat(psi)/2 + c hat(psi)^2`` has the
-in-plane block ``a I + b J`` (``a = 1 - c delta^2``, ``b = delta / 2``, ``J`` the quarter turn),
+in-plane block ``a I + b J`` (``b = delta / 2``, ``a = 1 - c delta^2 = b cot b``, ``J`` the
+quarter turn),
 so the segment's bending block ``P_i = R_{i+1} (M^T K M / h + sym(M^T N)) R_{i+1}^T`` of
 :func:`coilrod.rod.spatial.numpy_core` is, in the plane,
 
@@ -46,10 +47,10 @@ own blocks and against closed-form out-of-plane buckling loads.
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg.lapack import dpbtrf
 
 from ..path.protocol import Linearization
 from ._spectrum import closest_to_zero, lowest_from_inverse
-from .so3 import inv_right_jacobian_coefficients
 
 __all__ = ["OutOfPlane"]
 
@@ -117,82 +118,94 @@ class OutOfPlane:
         Hzz = None if H is None else H.reshape(k, n, 3, 3, 3)[..., 0:2, 2, 2]
         return B, Gzz, Hzz
 
-    def odd_blocks(self, lin: Linearization, fields=None) -> tuple[np.ndarray, np.ndarray]:
+    def odd_blocks(self, lin: Linearization, fields=None, band: bool = False):
         """Diagonal (k, n - 1, nb, nb) and upper (k, n - 2, nb, nb) blocks of the
         out-of-plane block of the 3D second variation at the planar states of ``lin``, free
         nodes only (nb = 2: ``(d_x, d_y)``; mixed layout nb = 4: ``(x_z, F_z, d_x, d_y)``);
-        ``fields`` (k, 3) T: a uniform field per member (a fan of field directions)."""
+        ``fields`` (k, 3) T: a uniform field per member (a fan of field directions).
+        ``band`` (uniform layout): instead, the symmetric part in LAPACK's upper band storage
+        (k, 4, 2 (n - 1)) of the unknowns ``(d_x1, d_y1, d_x2, ...)``."""
         P = self.planar
         U = np.atleast_2d(lin.u)
         k, n = U.shape[0], P.n
         S = np.broadcast_to(np.asarray(lin.scale, float), (k,))[:, None]
         h, w, inv_h = P.mesh.h, P.mesh.w, P._inv_h
         th = P.theta(U)
-        c, s = np.cos(th), np.sin(th)
-        mx = c * P.mu[:, 0] - s * P.mu[:, 1]
-        my = s * P.mu[:, 0] + c * P.mu[:, 1]
+        thf = th[:, 1:]  # free nodes: everything below is per free node or per segment
+        c, s = np.cos(thf), np.sin(thf)
+        mu = P.mu[1:]
+        mx = c * mu[:, 0] - s * mu[:, 1]
+        my = s * mu[:, 0] + c * mu[:, 1]
         B, Gzz, Hzz = self._node_fields(lin, fields, k)
-        bx, by = B[..., 0], B[..., 1]
-        # bending blocks of the segments (module notes)
-        delta = th[:, 1:] - th[:, :-1]
-        cc, _ = inv_right_jacobian_coefficients(np.abs(delta))
-        a = 1.0 - cc * delta * delta
-        b = 0.5 * delta
+        bx, by = B[:, 1:, 0], B[:, 1:, 1]
+        # bending blocks of the segments (module notes); a = 1 - c delta^2 = b cot b
+        b = 0.5 * (thf - th[:, :-1])
+        sb = np.sin(b)
+        a = np.divide(b * np.cos(b), sb, out=np.ones_like(b), where=sb != 0.0)
         k1, k2 = self.stiffness[0], self.stiffness[1]
-        alpha = (0.5 * (k1 + k2) * (a * a + b * b) + a * (1.0 - a) - b * b) * inv_h
-        zr, zi = a * a - b * b, -2.0 * a * b
-        c2, s2 = np.cos(2.0 * th[:, 1:]), np.sin(2.0 * th[:, 1:])
+        aa, bb = a * a, b * b
+        alpha = (0.5 * (k1 + k2) * (aa + bb) + a - aa - bb) * inv_h
+        zr, zi = aa - bb, -2.0 * a * b
+        c2, s2 = c * c - s * s, 2.0 * c * s  # of 2 theta_{i+1}
         fac = 0.5 * (k1 - k2) * inv_h
         r = fac * (zr * c2 - zi * s2)
         q = fac * (zr * s2 + zi * c2)
-        pz = delta * inv_h
-        # node blocks: magnetic term and the moment residual about z
-        Sw = S * w
-        dxx = Sw * (my * by)
-        dyy = Sw * (mx * bx)
-        dxy = -0.5 * Sw * (mx * by + my * bx)
-        Mz = -Sw * (mx * by - my * bx)
-        Mz[:, 1:] += pz
-        Mz[:, :-1] -= pz
-        if not self.uniform:  # internal forces h F / 2 of the segments on both their nodes
-            V = U.reshape(k, n, 5)
-            fx, fy = 0.5 * h * V[:, :-1, 3], 0.5 * h * V[:, :-1, 4]
-            for node in (slice(1, None), slice(None, -1)):  # each segment's far and near node
-                cj, sj = c[:, node], s[:, node]
-                Mz[:, node] -= cj * fy - sj * fx
-                dxx[:, node] += sj * fy
-                dyy[:, node] += cj * fx
-                dxy[:, node] -= 0.5 * (cj * fy + sj * fx)
-        for node in (slice(1, None), slice(None, -1)):  # each segment's far and near node
-            dxx[:, node] += alpha + r
-            dyy[:, node] += alpha - r
-            dxy[:, node] += q
-        nb, off = self.nb, 0 if self.uniform else 2
-        D = np.zeros((k, n - 1, nb, nb))
-        E = np.zeros((k, max(n - 2, 0), nb, nb))
-        D[:, :, off, off] = dxx[:, 1:]
-        D[:, :, off + 1, off + 1] = dyy[:, 1:]
-        D[:, :, off, off + 1] = dxy[:, 1:] + 0.5 * Mz[:, 1:]
-        D[:, :, off + 1, off] = dxy[:, 1:] - 0.5 * Mz[:, 1:]
-        E[:, :, off, off] = -(alpha + r)[:, 1:]
-        E[:, :, off + 1, off + 1] = -(alpha - r)[:, 1:]
-        E[:, :, off, off + 1] = -q[:, 1:] - 0.5 * pz[:, 1:]
-        E[:, :, off + 1, off] = -q[:, 1:] + 0.5 * pz[:, 1:]
+        pz = 2.0 * b * inv_h
+        Ap, Am = alpha + r, alpha - r
+        # free node j: segments j - 1 and j (the last node has only the first), magnetic
+        # term and the moment residual about z
+        Sw = S * w[1:]
+        dxx = Sw * (my * by) + Ap
+        dyy = Sw * (mx * bx) + Am
+        dxy = q - 0.5 * Sw * (mx * by + my * bx)
+        Mz = pz - Sw * (mx * by - my * bx)
+        dxx[:, :-1] += Ap[:, 1:]
+        dyy[:, :-1] += Am[:, 1:]
+        dxy[:, :-1] += q[:, 1:]
+        Mz[:, :-1] -= pz[:, 1:]
         if self.uniform:
-            return D, E
+            if band:  # symmetric part, LAPACK upper band storage (kd = 3) of (d_x1, d_y1, ...)
+                ab = np.zeros((k, 4, 2 * (n - 1)))
+                ab[:, 3, 0::2], ab[:, 3, 1::2], ab[:, 2, 1::2] = dxx, dyy, dxy
+                ab[:, 2, 2::2] = (0.5 * pz - q)[:, 1:]  # (y_j, x_j+1)
+                ab[:, 1, 2::2], ab[:, 1, 3::2] = -Ap[:, 1:], -Am[:, 1:]
+                ab[:, 0, 3::2] = (-q - 0.5 * pz)[:, 1:]  # (x_j, y_j+1)
+                return ab
+            D = np.stack([dxx, dxy + 0.5 * Mz, dxy - 0.5 * Mz, dyy], axis=-1)
+            E = np.stack([-Ap, -q - 0.5 * pz, -q + 0.5 * pz, -Am], axis=-1)[:, 1:]
+            return D.reshape(k, n - 1, 2, 2), E.reshape(k, n - 2, 2, 2)
+        # internal forces h F / 2 of the segments before and after each free node
+        V = U.reshape(k, n, 5)
+        fx, fy = 0.5 * h * V[:, :-1, 3], 0.5 * h * V[:, :-1, 4]
+        fx[:, :-1] += fx[:, 1:]
+        fy[:, :-1] += fy[:, 1:]
+        Mz -= c * fy - s * fx
+        dxx += s * fy
+        dyy += c * fx
+        dxy -= 0.5 * (c * fy + s * fx)
+        D = np.zeros((k, n - 1, 4, 4))
+        E = np.zeros((k, max(n - 2, 0), 4, 4))
+        D[:, :, 2, 2] = dxx
+        D[:, :, 3, 3] = dyy
+        D[:, :, 2, 3] = dxy + 0.5 * Mz
+        D[:, :, 3, 2] = dxy - 0.5 * Mz
+        E[:, :, 2, 2] = -Ap[:, 1:]
+        E[:, :, 3, 3] = -Am[:, 1:]
+        E[:, :, 2, 3] = -q[:, 1:] - 0.5 * pz[:, 1:]
+        E[:, :, 3, 2] = -q[:, 1:] + 0.5 * pz[:, 1:]
         L = P.L
-        cwL = (Sw * L)[:, 1:]
+        cwL = Sw * L
         if Hzz is not None:
-            D[:, :, 0, 0] = -cwL * L * (mx * Hzz[..., 0] + my * Hzz[..., 1])[:, 1:]
+            D[:, :, 0, 0] = -cwL * L * (mx * Hzz[:, 1:, 0] + my * Hzz[:, 1:, 1])
         D[:, :, 0, 1] = D[:, :, 1, 0] = 1.0
-        D[:, :, 0, 2] = D[:, :, 2, 0] = -cwL * (Gzz * my)[:, 1:]
-        D[:, :, 0, 3] = D[:, :, 3, 0] = cwL * (Gzz * mx)[:, 1:]
+        D[:, :, 0, 2] = D[:, :, 2, 0] = -cwL * Gzz[:, 1:] * my
+        D[:, :, 0, 3] = D[:, :, 3, 0] = cwL * Gzz[:, 1:] * mx
         hh = 0.5 * h
-        D[:, :, 1, 2] = D[:, :, 2, 1] = -hh * s[:, 1:]
-        D[:, :, 1, 3] = D[:, :, 3, 1] = hh * c[:, 1:]
+        D[:, :, 1, 2] = D[:, :, 2, 1] = -hh * s
+        D[:, :, 1, 3] = D[:, :, 3, 1] = hh * c
         E[:, :, 0, 1] = -1.0
-        E[:, :, 2, 1] = -hh[1:] * s[:, 1:-1]
-        E[:, :, 3, 1] = hh[1:] * c[:, 1:-1]
+        E[:, :, 2, 1] = -hh[1:] * s[:, :-1]
+        E[:, :, 3, 1] = hh[1:] * c[:, :-1]
         return D, E
 
     def odd_count(self, lin: Linearization, fields=None) -> np.ndarray:
@@ -201,11 +214,24 @@ class OutOfPlane:
         from ._inertia import block_tridiagonal_inertia
 
         with np.errstate(all="ignore"):
+            if self.uniform:  # a Cholesky factorisation proves a stable state at once
+                ab = self.odd_blocks(lin, fields, band=True)
+                out = np.full(ab.shape[0], -1)
+                for j in range(ab.shape[0]):
+                    if np.isfinite(ab[j]).all() and dpbtrf(ab[j], lower=0)[1] == 0:
+                        out[j] = 0
+                todo = np.flatnonzero(out < 0)
+                if todo.size == 0:
+                    return out
+                lin = _members(lin, todo, fields)
+                fields = None if fields is None else np.asarray(fields)[todo]
             D, E = self.odd_blocks(lin, fields)
-        out, _ = block_tridiagonal_inertia(D, E)
-        if not self.uniform:  # one negative per z-position constraint of a free node
-            out = np.where(out >= 0, out - (self.planar.n - 1), out)
-        return out
+        counts, _ = block_tridiagonal_inertia(D, E)
+        if self.uniform:
+            out[todo] = counts
+            return out
+        # one negative per z-position constraint of a free node
+        return np.where(counts >= 0, counts - (self.planar.n - 1), counts)
 
     def lowest(self, lin: Linearization, fields=None) -> np.ndarray:
         """Smallest eigenvalue of the out-of-plane block's ``H z = mu W z`` (W: the trapezoid
@@ -255,3 +281,11 @@ class OutOfPlane:
             return sq * lu.solve(rhs)[rot]
 
         return closest_to_zero(matvec, rot.size, 1.0)
+
+
+def _members(lin: Linearization, rows: np.ndarray, fields) -> Linearization:
+    """The states and scales of members ``rows`` of ``lin`` (what :meth:`OutOfPlane.odd_blocks`
+    reads in the uniform layout)."""
+    k = np.atleast_2d(lin.u).shape[0]
+    S = np.broadcast_to(np.asarray(lin.scale, float), (k,))
+    return Linearization(u=np.atleast_2d(lin.u)[rows], scale=S[rows], residual=None, ok=None)
