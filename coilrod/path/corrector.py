@@ -324,6 +324,8 @@ class _Iteration:
         if failed.size:
             self.alive[failed] = False
             self.iters[failed] += 1
+        if len(moved) == 1:  # (each round's members are in act's sorted order)
+            return moved[0], rounds
         moved = np.sort(np.concatenate(moved)) if moved else act[:0]
         return moved, rounds
 

@@ -54,6 +54,7 @@ _DIAG = _KL + _KU  # row of the diagonal in LAPACK's factorisation band storage
 _DENSE_STABILITY = 96
 #: Multiple of eps times the size of a residual's terms below which it is round-off.
 _FLOOR = 32.0
+_EPS = float(np.finfo(float).eps)
 
 
 def _rot(theta: np.ndarray, mu: np.ndarray) -> np.ndarray:
@@ -101,7 +102,8 @@ class RodTangent:
         d = d.ravel()
         n = self.size
         while True:
-            self.bad |= ~np.isfinite(d.reshape(self.k, n)).all(axis=1)
+            if not np.isfinite(d).all():
+                self.bad |= ~np.isfinite(d.reshape(self.k, n)).all(axis=1)
             if self.bad.any():
                 d, dl, du = d.copy(), dl.copy(), du.copy()
                 for j in np.flatnonzero(self.bad):  # replace by identity blocks
@@ -263,7 +265,7 @@ class PlanarRod(DiscreteRod):
         bend[1:] += self._inv_h
         bend[:-1] += self._inv_h
         self._bend_scale = bend * self._inv_w
-        self._floor_bend = _FLOOR * np.finfo(float).eps * self._bend_scale[1:]
+        self._floor_bend = _FLOOR * _EPS * self._bend_scale[1:]
         self._stab_e = -self._inv_h[1:] / np.sqrt(w[1:-1] * w[2:])
         self._mu0 = None
         self._tri_cache: dict = {}
@@ -446,7 +448,7 @@ class PlanarRod(DiscreteRod):
                 R, R1, parts = self._uniform(U, S, tangent)
             else:
                 R, R1, parts, field_values = self._mixed(U, S, tangent)
-            ok = np.all(np.isfinite(R), axis=1)
+            ok = np.isfinite(R).all(axis=1)
         tan = RodTangent(U.shape[0], self.size, self.uniform, parts, R1) if tangent else None
         if tan is not None:
             tan.bad |= ~ok
@@ -476,7 +478,6 @@ class PlanarRod(DiscreteRod):
         """max over equations of |scaled residual| / (tol + its round-off floor), shape (k,)."""
         R, U = lin.residual, lin.u
         k = R.shape[0]
-        eps = np.finfo(float).eps
         if self.uniform:
             with np.errstate(all="ignore"):
                 size_th = 1.0 + np.abs(U).max(axis=1, keepdims=True)
@@ -485,7 +486,7 @@ class PlanarRod(DiscreteRod):
         from ._compiled import mixed_error
 
         out = np.empty(k)
-        mixed_error(R, U, self._inv_w, self._inv_h, self._bend_scale, self.tol, _FLOOR * eps, out)
+        mixed_error(R, U, self._inv_w, self._inv_h, self._bend_scale, self.tol, _FLOOR * _EPS, out)
         return out
 
     def residual_norm(self, residual) -> np.ndarray:
