@@ -98,14 +98,16 @@ class OutOfPlane:
 
     # -- the odd block ----------------------------------------------------------------------
     def _node_fields(self, lin: Linearization, fields, k: int):
-        """B (k, n, 2) T at the nodes; mixed layout also dB_z/dz (k, n) T/m and
+        """(B_x, B_y) T at the free nodes ((k, n - 1) each; uniform layout: scalars or
+        (k, 1)); mixed layout also dB_z/dz (k, n) T/m and
         ``m . d^2 b / dz^2`` needs the hessian ``H[:, :, 0:2, 2, 2]`` (k, n, 2) T/m^2 (zeros for
         a linear field)."""
         P, n = self.planar, self.planar.n
-        if self.uniform:
-            b = self._b if fields is None else np.asarray(fields, float).reshape(-1, 3)
-            B = np.broadcast_to(b.reshape(-1, 1, 3)[..., 0:2], (k, n, 2))
-            return B, None, None
+        if self.uniform:  # (bx, by): scalars, or (k, 1) arrays for one field per member
+            if fields is None:
+                return (self._b[0], self._b[1]), None, None
+            b = np.asarray(fields, float).reshape(-1, 3)
+            return (b[:, 0:1], b[:, 1:2]), None, None
         fv = getattr(lin, "field_values", None)
         H = getattr(lin, "field_hessian", None)
         if fv is None or (H is None and not P.linear):  # evaluate here (hessian included)
@@ -113,7 +115,8 @@ class OutOfPlane:
             B, G, H = P._field_by_member(x, True)
         else:
             B, G = fv
-        B = B.reshape(k, n, 3)[..., 0:2]
+        B = B.reshape(k, n, 3)
+        B = (B[:, 1:, 0], B[:, 1:, 1])
         Gzz = G.reshape(k, n, 3, 3)[..., 2, 2]
         Hzz = None if H is None else H.reshape(k, n, 3, 3, 3)[..., 0:2, 2, 2]
         return B, Gzz, Hzz
@@ -128,7 +131,8 @@ class OutOfPlane:
         P = self.planar
         U = np.atleast_2d(lin.u)
         k, n = U.shape[0], P.n
-        S = np.broadcast_to(np.asarray(lin.scale, float), (k,))[:, None]
+        S = np.asarray(lin.scale, float)
+        S = S[:, None] if S.shape == (k,) else np.broadcast_to(S, (k,))[:, None]
         h, w, inv_h = P.mesh.h, P.mesh.w, P._inv_h
         th = P.theta(U)
         thf = th[:, 1:]  # free nodes: everything below is per free node or per segment
@@ -136,8 +140,7 @@ class OutOfPlane:
         mu = P.mu[1:]
         mx = c * mu[:, 0] - s * mu[:, 1]
         my = s * mu[:, 0] + c * mu[:, 1]
-        B, Gzz, Hzz = self._node_fields(lin, fields, k)
-        bx, by = B[:, 1:, 0], B[:, 1:, 1]
+        (bx, by), Gzz, Hzz = self._node_fields(lin, fields, k)
         # bending blocks of the segments (module notes); a = 1 - c delta^2 = b cot b
         b = 0.5 * (thf - th[:, :-1])
         sb = np.sin(b)
@@ -215,11 +218,7 @@ class OutOfPlane:
 
         with np.errstate(all="ignore"):
             if self.uniform:  # a Cholesky factorisation proves a stable state at once
-                ab = self.odd_blocks(lin, fields, band=True)
-                out = np.full(ab.shape[0], -1)
-                for j in range(ab.shape[0]):
-                    if np.isfinite(ab[j]).all() and dpbtrf(ab[j], lower=0)[1] == 0:
-                        out[j] = 0
+                out = _positive_definite(self.odd_blocks(lin, fields, band=True)) - 1
                 todo = np.flatnonzero(out < 0)
                 if todo.size == 0:
                     return out
@@ -289,3 +288,30 @@ def _members(lin: Linearization, rows: np.ndarray, fields) -> Linearization:
     k = np.atleast_2d(lin.u).shape[0]
     S = np.broadcast_to(np.asarray(lin.scale, float), (k,))
     return Linearization(u=np.atleast_2d(lin.u)[rows], scale=S[rows], residual=None, ok=None)
+
+
+def _positive_definite(ab: np.ndarray) -> np.ndarray:
+    """1 for each member of a stack of symmetric band matrices (k, kd + 1, m) (LAPACK upper
+    band storage, no coupling into a member's first kd columns) that a Cholesky factorisation
+    proves positive definite, else 0, shape (k,).  The members are factorised as one block
+    diagonal band matrix (one LAPACK call while they are all positive definite; after a
+    failing member, the factorisation restarts behind it)."""
+    k, rows, m = ab.shape
+    out = np.zeros(k, dtype=int)
+    finite = np.isfinite(ab).all(axis=(1, 2))
+    if not finite.all():  # (a NaN can pass LAPACK's pivot test): a stand-in, counted apart
+        ab = ab.copy()
+        ab[~finite] = 0.0
+        ab[~finite, -1] = 1.0
+    flat = np.ascontiguousarray(np.moveaxis(ab, 0, 1).reshape(rows, k * m))
+    start = 0
+    while start < k:
+        _, info = dpbtrf(flat[:, start * m :], lower=0)
+        if info == 0:
+            out[start:] = 1
+            break
+        fail = start + (info - 1) // m
+        out[start:fail] = 1
+        start = fail + 1
+    out[~finite] = 0
+    return out
