@@ -303,7 +303,7 @@ def _positive_definite(ab: np.ndarray) -> np.ndarray:
         ab = ab.copy()
         ab[~finite] = 0.0
         ab[~finite, -1] = 1.0
-    flat = np.ascontiguousarray(np.moveaxis(ab, 0, 1).reshape(rows, k * m))
+    flat = ab[0] if k == 1 else np.ascontiguousarray(np.moveaxis(ab, 0, 1).reshape(rows, k * m))
     start = 0
     while start < k:
         _, info = dpbtrf(flat[:, start * m :], lower=0)
