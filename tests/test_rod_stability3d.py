@@ -32,45 +32,40 @@ def _uniform(b, degrees):
 
 
 def _energy_3d(rod, s, frames, B):
-    """Discrete 3D energy (J) of node frames (n, 3, 3) in a uniform field B (T): bending and
-    torsion sum psi^T K psi / (2 h) with psi = log(R_i^T R_{i+1}), magnetic -sum w A m . B
-    with the trapezoid weights w and the node magnetization M(s_i) in the body frame."""
+    """Discrete 3D energy (J) of node frames (..., n, 3, 3) in a uniform field B (T): bending
+    and torsion sum psi^T K psi / (2 h) with psi = log(R_i^T R_{i+1}), magnetic
+    -sum w A m . B with the trapezoid weights w and the node magnetization M(s_i) in the body
+    frame; shape (...)."""
     h = np.diff(s)
     w = np.zeros(s.size)
     w[:-1] += h / 2
     w[1:] += h / 2
-    rel = np.einsum("nji,njk->nik", frames[:-1], frames[1:])
-    psi = Rotation.from_matrix(rel).as_rotvec()
+    rel = np.einsum("...nji,...njk->...nik", frames[..., :-1, :, :], frames[..., 1:, :, :])
+    psi = Rotation.from_matrix(rel.reshape(-1, 3, 3)).as_rotvec().reshape(rel.shape[:-1])
     K = np.asarray(rod.stiffnesses, float)
-    bend = np.sum(np.einsum("ni,i,ni->n", psi, K, psi) / (2 * h))
+    bend = np.sum(np.einsum("...ni,i,...ni->...n", psi, K, psi) / (2 * h), axis=-1)
     M = rod.magnetization.vector3(s)
-    m = np.einsum("nij,nj->ni", frames, M)
-    return bend - rod.area * np.sum(w * (m @ np.asarray(B, float)))
+    m = np.einsum("...nij,nj->...ni", frames, M)
+    return bend - rod.area * np.sum(w * (m @ np.asarray(B, float)), axis=-1)
 
 
 def _out_of_plane_hessian(rod, s, theta, B, d=1e-4):
     """Central-difference Hessian (J/rad^2) of :func:`_energy_3d` in world rotations about x
-    and y of the free nodes, at the planar state with node angles theta."""
+    and y of the free nodes, at the planar state with node angles theta (every perturbed
+    state evaluated in one batch)."""
     n = s.size
     base = Rotation.from_euler("z", np.asarray(theta)[:, None]).as_matrix()
     free = 2 * (n - 1)
-
-    def energy(v):
-        rv = np.zeros((n, 3))
-        rv[1:, :2] = v.reshape(n - 1, 2)
-        frames = Rotation.from_rotvec(rv).as_matrix() @ base
-        return _energy_3d(rod, s, frames, B)
-
-    H = np.zeros((free, free))
+    i, j = np.triu_indices(free)
     e = np.eye(free) * d
-    for i in range(free):
-        for j in range(i, free):
-            H[i, j] = H[j, i] = (
-                energy(e[i] + e[j])
-                - energy(e[i] - e[j])
-                - energy(-e[i] + e[j])
-                + energy(-e[i] - e[j])
-            ) / (4 * d * d)
+    signs = np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]])  # the four corners of (i, j)
+    v = signs[:, None, 0, None] * e[i] + signs[:, None, 1, None] * e[j]  # (4, pairs, free)
+    rv = np.zeros(v.shape[:2] + (n, 3))
+    rv[..., 1:, :2] = v.reshape(v.shape[:2] + (n - 1, 2))
+    frames = Rotation.from_rotvec(rv.reshape(-1, 3)).as_matrix().reshape(rv.shape + (3,))
+    E = _energy_3d(rod, s, frames @ base, B)  # (4, pairs)
+    H = np.zeros((free, free))
+    H[i, j] = H[j, i] = (E[0] - E[1] - E[2] + E[3]) / (4 * d * d)
     return H
 
 
