@@ -4,12 +4,14 @@ Prints (and writes to benchmarks/results/rod_profile.md), all in one run, one BL
 process CPU time, best of several runs:
 
 1. a single state of M(1) at lambda 5 (defaults) and the 50-step sweep to lambda 20 with this
-   version and with 0.1 (each in its own subprocess, ``PYTHONPATH`` = the checkout), and a
-   single state with scipy ``solve_bvp`` (tol 1e-6) -- the ratios of issue 19;
+   version and with 0.1 (each in its own subprocess, ``PYTHONPATH`` = the checkout, the two
+   alternating over three rounds, best kept), and a single state with scipy ``solve_bvp``
+   (tol 1e-6) -- the ratios of issue 19;
 2. the cost of one Newton iteration (linearize, solve, error) of one state against the
    segment count: its fixed part is the 4-segment figure;
-3. a per-phase breakdown (cumulative time of the engine's and the model's phases) and the
-   cProfile top functions of 200 single-state solves.
+3. a per-phase breakdown (cumulative time of the engine's and the model's phases: cProfile,
+   and a plain per-phase timer without the profiler's per-call cost) and the cProfile top
+   functions of 200 single-state solves.
 
 Run:  python benchmarks/profile_rod.py [--v01 PATH]   (PATH: a checkout of 0.1, d8091c8;
 default /work/wt-v01; skipped if absent)
@@ -34,6 +36,8 @@ os.environ.setdefault("MKL_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 REPEAT = 15
+#: Alternating rounds of the two versions' subprocesses.
+ROUNDS = 3
 
 #: Run in a subprocess against either version (the public API is the same).
 CHILD = r"""
@@ -72,6 +76,13 @@ def child(path: str) -> dict:
         check=True,
     )
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _best(a: dict | None, b: dict) -> dict:
+    """The faster of two child measurements, key by key."""
+    if a is None:
+        return b
+    return {key: min(a[key], b[key]) if key != "tip" else b[key] for key in b}
 
 
 def bvp_single(lam: float = 5.0, tol: float = 1e-6):
@@ -175,6 +186,59 @@ def profile(states: int = 200):
     return rows, top_rows
 
 
+def phase_timer(states: int = 200):
+    """CPU time per state (ms) of the phases without the profiler's per-call cost: each phase
+    function wrapped by a process-time accumulator, 200 single-state solves."""
+    import functools
+
+    from coilrod.path import stepping
+    from coilrod.rod import out_of_plane, planar
+    from coilrod.rod import solve as solve_module
+
+    targets = [
+        ("solve_rod (whole call)", solve_module, "solve_rod"),
+        ("  follow_load (path engine)", solve_module, "follow_load"),
+        ("    newton (load steps)", stepping, "newton"),
+        ("    stability (3D count)", planar.PlanarRod, "stability"),
+        ("      out-of-plane block count", out_of_plane.OutOfPlane, "odd_count"),
+        ("    path rate (one solve)", stepping._Tracker, "rate"),
+        ("  newton (Richardson second mesh)", solve_module, "newton"),
+        ("  build_problem (both meshes)", solve_module, "build_problem"),
+        ("model linearize (all)", planar.PlanarRod, "linearize"),
+        ("model solve (all)", planar.PlanarRod, "solve"),
+        ("model error (all)", planar.PlanarRod, "error"),
+    ]
+    acc = {label: [0, 0.0] for label, _, _ in targets}
+    saved = []
+
+    def wrap(label, fn):
+        @functools.wraps(fn)
+        def timed(*a, **k):
+            t0 = time.process_time()
+            try:
+                return fn(*a, **k)
+            finally:
+                acc[label][0] += 1
+                acc[label][1] += time.process_time() - t0
+
+        return timed
+
+    for label, owner, name in targets:
+        saved.append((owner, name, getattr(owner, name)))
+        setattr(owner, name, wrap(label, getattr(owner, name)))
+    try:
+        rod, field = unit_rod()
+        solve_module.solve_rod(rod, field, [5.0])
+        for entry in acc.values():
+            entry[:] = [0, 0.0]
+        for _ in range(states):
+            solve_module.solve_rod(rod, field, [5.0])
+    finally:
+        for owner, name, fn in saved:
+            setattr(owner, name, fn)
+    return [(label, n / states, 1e3 * t / states) for label, (n, t) in acc.items()]
+
+
 def main(v01: str) -> str:
     lines = []
 
@@ -190,8 +254,14 @@ def main(v01: str) -> str:
     out()
     out(f"Machine: {machine_info()}. One BLAS thread, process CPU time, best of {REPEAT}.")
     out()
-    new = child(here)
-    old = child(v01) if Path(v01, "coilrod").is_dir() else None
+    # the two versions alternate (ROUNDS each, best kept): a busy shared machine slows
+    # whatever runs at the time, and alternating spreads that over both
+    new = old = None
+    have_old = Path(v01, "coilrod").is_dir()
+    for _ in range(ROUNDS):
+        new = _best(new, child(here))
+        if have_old:
+            old = _best(old, child(v01))
     t_bvp = best_cpu(bvp_single)
     out("## 1. M(1), lambda 5 single state; 50-step sweep to lambda 20 (defaults)")
     out()
@@ -225,6 +295,15 @@ def main(v01: str) -> str:
     out("| phase | calls / state | CPU ms / state (cumulative, profiled) |")
     out("|---|---|---|")
     for label, calls, ms in rows:
+        depth = (len(label) - len(label.lstrip())) // 2
+        out(f"| {'. ' * depth}{label.strip()} | {calls:.1f} | {ms:.3f} |")
+    out()
+    out("Per-phase timer (each phase function wrapped by a process-time accumulator, no")
+    out("profiler; 200 single-state solves, per state):")
+    out()
+    out("| phase | calls / state | CPU ms / state |")
+    out("|---|---|---|")
+    for label, calls, ms in phase_timer():
         depth = (len(label) - len(label.lstrip())) // 2
         out(f"| {'. ' * depth}{label.strip()} | {calls:.1f} | {ms:.3f} |")
     out()

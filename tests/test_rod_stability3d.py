@@ -32,45 +32,40 @@ def _uniform(b, degrees):
 
 
 def _energy_3d(rod, s, frames, B):
-    """Discrete 3D energy (J) of node frames (n, 3, 3) in a uniform field B (T): bending and
-    torsion sum psi^T K psi / (2 h) with psi = log(R_i^T R_{i+1}), magnetic -sum w A m . B
-    with the trapezoid weights w and the node magnetization M(s_i) in the body frame."""
+    """Discrete 3D energy (J) of node frames (..., n, 3, 3) in a uniform field B (T): bending
+    and torsion sum psi^T K psi / (2 h) with psi = log(R_i^T R_{i+1}), magnetic
+    -sum w A m . B with the trapezoid weights w and the node magnetization M(s_i) in the body
+    frame; shape (...)."""
     h = np.diff(s)
     w = np.zeros(s.size)
     w[:-1] += h / 2
     w[1:] += h / 2
-    rel = np.einsum("nji,njk->nik", frames[:-1], frames[1:])
-    psi = Rotation.from_matrix(rel).as_rotvec()
+    rel = np.einsum("...nji,...njk->...nik", frames[..., :-1, :, :], frames[..., 1:, :, :])
+    psi = Rotation.from_matrix(rel.reshape(-1, 3, 3)).as_rotvec().reshape(rel.shape[:-1])
     K = np.asarray(rod.stiffnesses, float)
-    bend = np.sum(np.einsum("ni,i,ni->n", psi, K, psi) / (2 * h))
+    bend = np.sum(np.einsum("...ni,i,...ni->...n", psi, K, psi) / (2 * h), axis=-1)
     M = rod.magnetization.vector3(s)
-    m = np.einsum("nij,nj->ni", frames, M)
-    return bend - rod.area * np.sum(w * (m @ np.asarray(B, float)))
+    m = np.einsum("...nij,nj->...ni", frames, M)
+    return bend - rod.area * np.sum(w * (m @ np.asarray(B, float)), axis=-1)
 
 
 def _out_of_plane_hessian(rod, s, theta, B, d=1e-4):
     """Central-difference Hessian (J/rad^2) of :func:`_energy_3d` in world rotations about x
-    and y of the free nodes, at the planar state with node angles theta."""
+    and y of the free nodes, at the planar state with node angles theta (every perturbed
+    state evaluated in one batch)."""
     n = s.size
     base = Rotation.from_euler("z", np.asarray(theta)[:, None]).as_matrix()
     free = 2 * (n - 1)
-
-    def energy(v):
-        rv = np.zeros((n, 3))
-        rv[1:, :2] = v.reshape(n - 1, 2)
-        frames = Rotation.from_rotvec(rv).as_matrix() @ base
-        return _energy_3d(rod, s, frames, B)
-
-    H = np.zeros((free, free))
+    i, j = np.triu_indices(free)
     e = np.eye(free) * d
-    for i in range(free):
-        for j in range(i, free):
-            H[i, j] = H[j, i] = (
-                energy(e[i] + e[j])
-                - energy(e[i] - e[j])
-                - energy(-e[i] + e[j])
-                + energy(-e[i] - e[j])
-            ) / (4 * d * d)
+    signs = np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]])  # the four corners of (i, j)
+    v = signs[:, None, 0, None] * e[i] + signs[:, None, 1, None] * e[j]  # (4, pairs, free)
+    rv = np.zeros(v.shape[:2] + (n, 3))
+    rv[..., 1:, :2] = v.reshape(v.shape[:2] + (n - 1, 2))
+    frames = Rotation.from_rotvec(rv.reshape(-1, 3)).as_matrix().reshape(rv.shape + (3,))
+    E = _energy_3d(rod, s, frames @ base, B)  # (4, pairs)
+    H = np.zeros((free, free))
+    H[i, j] = H[j, i] = (E[0] - E[1] - E[2] + E[3]) / (4 * d * d)
     return H
 
 
@@ -171,12 +166,34 @@ def test_planar_and_spatial_agree_on_stability_of_in_plane_states(angles, direct
     np.testing.assert_array_equal(out["planar"].stable, out["spatial"].stable)
 
 
+def _spatial_odd_blocks(problem, lin, fields=None):
+    """The odd (out-of-plane) slices of the spatial rod's own second-variation blocks at the
+    planar states of ``lin`` (its numpy reference pass: nothing compiled)."""
+    from coilrod.rod.so3 import about_z
+    from coilrod.rod.spatial import SpatialRod, numpy_core
+
+    mu = np.zeros((problem.n, 3))
+    mu[:, :2] = problem.mu
+    rod3 = SpatialRod(
+        problem.mesh, mu, problem.out_of_plane.stiffness, problem.field, problem.L,
+        problem.clamp, about_z(problem.theta0), mixed=not problem.uniform,
+    )  # fmt: skip
+    if fields is not None:
+        rod3._b_uniform = fields[:, None, :]
+    U3 = problem.out_of_plane.spatial_states(lin.u)
+    _, _, _, (D, E) = rod3._assemble(U3, lin.scale, True, core=numpy_core, band=False)
+    odd = np.array([0, 1]) if problem.uniform else np.array([2, 5, 6, 7])
+    return D[:, :, odd][:, :, :, odd], E[:, :, odd][:, :, :, odd]
+
+
 def test_planar_blocks_equal_the_spatial_rods_own():
-    # the numpy second variation at planar states (uniform fields: nothing compiled for a
-    # planar run) against the spatial rod's blocks at the same states, random states and
-    # one field per member (a fan of directions), a rectangle with GJ != EI_y != EI_z
-    from coilrod.rod.out_of_plane import uniform_blocks
-    from coilrod.rod.solve import build_problem, make_mesh
+    # the out-of-plane block assembled from planar states (nothing of the spatial rod
+    # compiled for a planar run) against the spatial rod's own blocks at the same states:
+    # random states, a rectangle with GJ != EI_y != EI_z; uniform layout with one field per
+    # member (a fan of directions), mixed layout in a Maxwell pair's field (gradient and
+    # curvature terms, internal forces)
+    from coilrod.rod.planar import PlanarRod
+    from coilrod.rod.solve import build_problem, make_mesh, rod_stiffnesses
 
     rng = np.random.default_rng(1)
     rod = coilrod.Rod(
@@ -187,18 +204,79 @@ def test_planar_blocks_equal_the_spatial_rods_own():
         poisson_ratio=0.3,
     )
     problem = build_problem(rod, _uniform(8e-3, 70.0), make_mesh(rod, 16), np.zeros(3), 0.4)
-    twin = problem.out_of_plane.twin
     theta = 0.4 + np.cumsum(rng.normal(0.0, 0.3, (3, problem.n)), axis=1)
     theta[:, 0] = 0.4
-    scales = np.array([0.3, 1.0, 2.5])
-    for fields in (twin._b_uniform, rng.normal(0.0, 5e-3, (3, 1, 3)) * [1, 1, 0]):
-        twin._b_uniform = fields
-        _, _, _, (D, E) = twin._assemble(
-            problem.out_of_plane.spatial_states(theta), scales, True, band=False
-        )
-        D2, E2 = uniform_blocks(theta, scales, twin, fields)
+    lin = problem.linearize(theta, np.array([0.3, 1.0, 2.5]))
+    for fields in (None, rng.normal(0.0, 5e-3, (3, 3)) * [1, 1, 0]):
+        D, E = _spatial_odd_blocks(problem, lin, fields)
+        D2, E2 = problem.out_of_plane.odd_blocks(lin, fields)
         np.testing.assert_allclose(D2, D, rtol=0, atol=1e-12 * np.abs(D).max())
         np.testing.assert_allclose(E2, E, rtol=0, atol=1e-12 * np.abs(E).max())
+    maxwell = coils.MaxwellPair(radius=0.08, turns=200, current=2.0, axis="y", center=(0.02, 0, 0))
+    field = maxwell + coils.UniformField(B=(0.0, 2e-3, 0.0))
+    mesh = make_mesh(rod, 8)
+    mixed = PlanarRod(mesh, problem.mu[::2], field, rod.length, np.zeros(3), 0.4, mixed=True)
+    mixed.with_out_of_plane(rod_stiffnesses(rod))
+    U = np.stack([mixed.from_theta(t[::2], 1.5) for t in theta])
+    U[:, 3::5] += rng.normal(0.0, 0.5, (3, mixed.n))  # forces off their equilibrium values
+    lin = mixed.linearize(U, np.array([0.5, 1.5, 4.0]))
+    D, E = _spatial_odd_blocks(mixed, lin)
+    D2, E2 = mixed.out_of_plane.odd_blocks(lin)
+    np.testing.assert_allclose(D2, D, rtol=0, atol=1e-12 * np.abs(D).max())
+    np.testing.assert_allclose(E2, E, rtol=0, atol=1e-12 * np.abs(E).max())
+
+
+@pytest.mark.parametrize("mixed", [False, True])
+def test_straight_rod_buckles_out_of_plane_at_the_euler_load_of_its_weak_axis(mixed):
+    # a straight clamped rod magnetized along its axis in an antiparallel field is an Euler
+    # column: it buckles about each section axis at lambda = (pi^2 / 4) EI / EI_z (closed
+    # form).  A strip of width w < thickness t (I_y / I_z = (w / t)^2 = 1/4) leaves its plane
+    # first, at pi^2 / 16; the planar rod must count that mode, and the in-plane one at pi^2/4
+    from coilrod.rod.planar import PlanarRod
+    from coilrod.rod.solve import _node_moments, make_mesh, rod_stiffnesses
+
+    rod = coilrod.Rod(0.04, 1e6, coilrod.Rectangle(1e-3, 2e-3), coilrod.Magnetization(128e3, 0.0))
+    field = coils.UniformField(B=(-rod.field_for_lambda(1.0), 0.0, 0.0))
+    mesh = make_mesh(rod, 16)
+    problem = PlanarRod(
+        mesh, _node_moments(rod, mesh, dim=2), field, rod.length, np.zeros(3), 0.0, mixed=mixed
+    ).with_out_of_plane(rod_stiffnesses(rod))
+    out_c, in_c = np.pi**2 / 16, np.pi**2 / 4
+    scales = np.array([0.98 * out_c, 1.02 * out_c, 0.98 * in_c, 1.02 * in_c])
+    lin = problem.linearize(np.stack([problem.straight()] * 4), scales)
+    total, odd = problem.negative_counts(lin)
+    np.testing.assert_array_equal(odd, [0, 1, 1, 1])
+    np.testing.assert_array_equal(total, [0, 1, 1, 2])
+    mu = problem.stability(lin, precise=True)  # the 3D figure changes sign at the weak load
+    assert mu[0] > 0 > mu[1]
+
+
+def test_a_planar_solve_in_a_coil_field_leaves_the_spatial_rod_alone():
+    # the 3D stability of planar states (count and eigenvalue) needs nothing of the spatial
+    # rod: neither its module nor its compiled kernels are loaded (a cold start compiles
+    # them for seconds)
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = (
+        "import sys, coils, coilrod\n"
+        "from coilrod import presets\n"
+        "rod = presets.seed_rod()\n"
+        "pair = coils.HelmholtzPair(radius=0.08, turns=200, current=1.0, axis='y')\n"
+        "res = coilrod.solve_rod(rod, pair, [20.0], nodes=4)\n"
+        "assert res.stable.all() and res.min_eigenvalue[0] > 0, res.min_eigenvalue\n"
+        "loaded = sorted(m for m in sys.modules if m.startswith('coilrod.rod.'))\n"
+        "print(' '.join(loaded))\n"
+    )
+    root = Path(__file__).resolve().parent.parent
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=root, capture_output=True, text=True, check=True
+    )
+    loaded = out.stdout.split()
+    assert "coilrod.rod.out_of_plane" in loaded  # it did count the out-of-plane modes
+    assert "coilrod.rod.spatial" not in loaded
+    assert "coilrod.rod._compiled_spatial" not in loaded
 
 
 def test_scenes_and_sweep_rows_report_the_3d_figure():

@@ -248,15 +248,17 @@ class _Iteration:
         n = int(np.count_nonzero(active))
         if n == 0:
             return False
-        act = self.everyone if n == len(U) else np.flatnonzero(active)
+        whole = n == len(U)  # every member active: plain arrays instead of index copies
+        act = self.everyone if whole else np.flatnonzero(active)
         chord = self.chords and float(self.ratio[act].max()) <= opts.chord
-        if not chord and not self.fresh[act].all():  # a new tangent at the current states
+        if not chord and not (self.fresh if whole else self.fresh[act]).all():
+            # a new tangent at the current states
             self.T, self.owners = P.linearize(U[act], S[act]), act
             self.fresh[act] = True
             self.R[act] = self.T.residual
             self._set_last(self.T, act)
         if self.owners.size == n:  # act is T's members (they only drop out)
-            dU = P.solve(self.T, -self.R[act])
+            dU = P.solve(self.T, -(self.R if whole else self.R[act]))
         else:  # a subset of T's members: zero right-hand sides for the others
             rows = np.searchsorted(self.owners, act)
             rhs = np.zeros((self.owners.size, P.size))
@@ -268,7 +270,8 @@ class _Iteration:
             act, dU = act[finite], dU[finite]
             if act.size == 0:
                 return False
-        full = np.minimum(1.0, np.asarray(P.step_limit(U[act], dU), float))
+        current = U if act is self.everyone else U[act]
+        full = np.minimum(1.0, np.asarray(P.step_limit(current, dU), float))
         moved, rounds = self._line_search(act, dU, full, chord)
         if not chord and moved.size:  # the new states carry their own tangent
             if rounds == 1 and moved.size == act.size:
@@ -293,9 +296,13 @@ class _Iteration:
         rounds = 0
         for _ in range(self.opts.backtracks + 1):
             rounds += 1
-            members = act[pos]
-            step = alpha[:, None] * dU[pos]
-            trial = U[members] + step
+            if rounds == 1:  # every member of act (pos is all of them)
+                members, step = act, alpha[:, None] * dU
+                trial = (U if act is self.everyone else U[act]) + step
+            else:
+                members = act[pos]
+                step = alpha[:, None] * dU[pos]
+                trial = U[members] + step
             tlin = P.linearize(trial, S[members], tangent=not chord)
             e_new = _errors(P, tlin, step)
             e_old = self.err[members]
@@ -324,6 +331,8 @@ class _Iteration:
         if failed.size:
             self.alive[failed] = False
             self.iters[failed] += 1
+        if len(moved) == 1:  # (each round's members are in act's sorted order)
+            return moved[0], rounds
         moved = np.sort(np.concatenate(moved)) if moved else act[:0]
         return moved, rounds
 
@@ -335,6 +344,8 @@ class _Iteration:
 
     def _take(self, members, trial, tlin, e_new, e_old, rows):
         """Accept the trial states of ``members`` (rows ``rows`` of ``tlin``)."""
+        if members is self.everyone:
+            members = slice(None)
         self.slow[members] = np.where(e_new > 0.5 * e_old, self.slow[members] + 1, 0)
         self.ratio[members] = np.where(e_old > 0, e_new / e_old, 0.0)
         self.U[members] = trial

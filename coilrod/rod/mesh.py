@@ -119,7 +119,8 @@ def node_magnetization(magnetization, mesh: RodMesh, length: float, dim: int = 2
         raise ValueError(f"dim must be 2 or 3; got {dim!r}")
     vector = magnetization.vector if dim == 2 else magnetization.vector3
     left, right, hl, hr = _one_sided(mesh, length)
-    return hl[:, None] * vector(left) + hr[:, None] * vector(right)
+    both = vector(np.concatenate([left, right]))  # one evaluation of the profile
+    return hl[:, None] * both[: left.size] + hr[:, None] * both[left.size :]
 
 
 def segment_weights(edges: np.ndarray, mesh: RodMesh, length: float) -> np.ndarray:

@@ -1,38 +1,65 @@
-"""Stability of planar states in 3D: the spatial rod's second variation at a planar state.
+"""Stability of planar states in 3D: the out-of-plane block of the spatial rod's second variation.
 
 The planar rod (:mod:`coilrod.rod.planar`) sees in-plane perturbations only; a state that is
 stable among them can buckle out of the plane (twist and bend about the in-plane normal), e.g.
 the seed's M(2b) in a field at 255 deg.  A planar state is an exact state of the spatial rod
 (:mod:`coilrod.rod.spatial`: its discrete energy restricted to rotations about z is the planar
 one), so the full 3D stability of a planar state is the inertia of the spatial rod's second
-variation there.  :class:`OutOfPlane` maps planar states (both layouts) to spatial ones and
-counts the negative eigenvalues of that second variation (block LDL^T, exact count), in total
-and in the out-of-plane subspace alone.
+variation there.
 
 Reflection through the plane maps a planar state in a planar load (``B_z = 0``,
 ``dB_z/dx = dB_z/dy = 0`` on the plane; curl-free, so ``dB_x/dz = dB_y/dz = 0`` there too) to
 itself, so the second variation splits into the even (in-plane: x, y, F_x, F_y and the rotation
-about z) and odd (out-of-plane: z, F_z and the rotations about x and y) subspaces; the count of
-the odd block is the number of out-of-plane unstable modes.
+about z -- the planar rod's own) and the odd (out-of-plane) subspaces.  :class:`OutOfPlane`
+assembles the odd block directly from the planar state, vectorised, in blocks per free node j:
+
+* uniform layout: the world rotations ``(d_x, d_y)`` of node j (2 x 2 blocks);
+* mixed layout: ``(x_z, F_z, d_x, d_y)`` -- the node's out-of-plane position, the out-of-plane
+  force of the segment before it (the multiplier of its position constraint) and the rotations
+  (4 x 4 blocks of the Lagrangian's Hessian, one negative eigenvalue per constraint).
+
+Notes
+-----
+At a planar state the relative rotation of segment i is ``psi_i = (0, 0, delta_i)``,
+``delta_i = theta_{i+1} - theta_i``, and ``J_r(psi)^-1 = I + hat(psi)/2 + c hat(psi)^2`` has the
+in-plane block ``a I + b J`` (``b = delta / 2``, ``a = 1 - c delta^2 = b cot b``, ``J`` the
+quarter turn),
+so the segment's bending block ``P_i = R_{i+1} (M^T K M / h + sym(M^T N)) R_{i+1}^T`` of
+:func:`coilrod.rod.spatial.numpy_core` is, in the plane,
+
+    P_i = alpha_i I + [[r_i, q_i], [q_i, -r_i]],
+    alpha_i = ((GJ + EI_y)(a^2 + b^2) / 2 + a (1 - a) - b^2) / h_i,
+    r_i + i q_i = (GJ - EI_y) / (2 h_i) conj(a + i b)^2 exp(2 i theta_{i+1}),
+
+(stiffnesses over EI_z).  The node blocks add the magnetic term ``-c w (m b^T + b m^T)/2 +
+c w (m . b) I``, the internal forces' ``-sym(t, h F / 2)`` of both adjacent segments and
+``-hat(M)/2`` (``M`` the moment residual, zero at an equilibrium); the blocks above the
+diagonal are ``-P_i + hat(p_i)/2`` with ``p_i = delta_i / h_i e_z``.  The mixed layout adds the
+field's curvature ``-c w L^2 m . d^2 b / dz^2`` on ``x_z``, its coupling
+``c w L dB_z/dz (-m_y, m_x)`` to the rotations and the constraints' rows
+``x_z,j - x_z,j-1 - h (t_z,j-1 + t_z,j) / 2`` (``dt_z = d_x t_y - d_y t_x``).
 
 All quantities are non-dimensional like the rods' (eigenvalues in EI_z / L^3 per unit length).
+The count is exact (block LDL^T, :mod:`coilrod.rod._inertia`); tested against the spatial rod's
+own blocks and against closed-form out-of-plane buckling loads.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg.lapack import dpbtrf
 
 from ..path.protocol import Linearization
+from ._spectrum import closest_to_zero, lowest_from_inverse
 
 __all__ = ["OutOfPlane"]
 
-# positions of the out-of-plane unknowns in the second variation's blocks
-_ODD_UNIFORM = np.array([0, 1])  # world rotations about x and y (blocks: rotations)
-_ODD_MIXED = np.array([2, 5, 6, 7])  # x_z, F_z, rotations about x and y (blocks: x, F, d)
+#: Free rotational unknowns up to which the odd block's eigenvalue is found densely.
+_DENSE = 600
 
 
 class OutOfPlane:
-    """The spatial twin of a planar rod problem, for the 3D stability of its states.
+    """The out-of-plane (odd) block of the 3D second variation at the states of a planar rod.
 
     Parameters
     ----------
@@ -46,33 +73,21 @@ class OutOfPlane:
         self.planar = planar
         self.theta0 = planar.theta0
         self.stiffness = np.asarray(stiffness, float)
-        self._twin = None
-
-    @property
-    def twin(self):
-        """The :class:`~coilrod.rod.spatial.SpatialRod` of the same rod, field, clamp, mesh and
-        layout (built on first use)."""
-        if self._twin is None:
-            from .so3 import about_z
-            from .spatial import SpatialRod
-
-            P = self.planar
-            mu = np.zeros((P.n, 3))
-            mu[:, :2] = P.mu
-            self._twin = SpatialRod(
-                P.mesh, mu, self.stiffness, P.field, P.L, P.clamp, about_z(P.theta0), P.tol,
-                mixed=not P.uniform,
-            )  # fmt: skip
-        return self._twin
+        self.uniform = planar.uniform
+        self.nb = 2 if self.uniform else 4  # unknowns per free node in the odd block
+        if self.uniform:
+            self._b = np.asarray(planar.field.B(planar.clamp)[0], float)
 
     # -- states -----------------------------------------------------------------------------
     def spatial_states(self, U: np.ndarray) -> np.ndarray:
-        """Spatial states (k, twin.size) of planar states (k, planar.size): rotations
-        ``(0, 0, theta - theta_0)`` about z, positions ``(x, y, 0)``, forces ``(F_x, F_y, 0)``."""
+        """States of the spatial rod's layout (k, n nv) (nv = 3 uniform, 9 mixed) of planar
+        states (k, planar.size): rotations ``(0, 0, theta - theta_0)`` about z, positions
+        ``(x, y, 0)``, forces ``(F_x, F_y, 0)`` (to compare with
+        :class:`~coilrod.rod.spatial.SpatialRod`)."""
         U = np.atleast_2d(U)
         k, n = U.shape[0], self.planar.n
-        out = np.zeros((k, n, 3 if self.planar.uniform else 9))
-        if self.planar.uniform:
+        out = np.zeros((k, n, 3 if self.uniform else 9))
+        if self.uniform:
             out[:, :, 2] = U - self.theta0
         else:
             v = U.reshape(k, n, 5)
@@ -81,109 +96,222 @@ class OutOfPlane:
             out[:, :, 6:8] = v[:, :, 3:5]
         return out.reshape(k, -1)
 
-    def _with_fields(self, fields, run):
-        """``run()`` with the twin's uniform field replaced by one per member (k, 3) T."""
-        twin = self.twin
-        if fields is None or not twin.uniform:
-            return run()
-        saved = twin._b_uniform
-        try:
-            twin._b_uniform = np.asarray(fields, float)[:, None, :]
-            return run()
-        finally:
-            twin._b_uniform = saved
+    # -- the odd block ----------------------------------------------------------------------
+    def _node_fields(self, lin: Linearization, fields, k: int):
+        """(B_x, B_y) T at the free nodes ((k, n - 1) each; uniform layout: scalars or
+        (k, 1)); mixed layout also dB_z/dz (k, n) T/m and
+        ``m . d^2 b / dz^2`` needs the hessian ``H[:, :, 0:2, 2, 2]`` (k, n, 2) T/m^2 (zeros for
+        a linear field)."""
+        P, n = self.planar, self.planar.n
+        if self.uniform:  # (bx, by): scalars, or (k, 1) arrays for one field per member
+            if fields is None:
+                return (self._b[0], self._b[1]), None, None
+            b = np.asarray(fields, float).reshape(-1, 3)
+            return (b[:, 0:1], b[:, 1:2]), None, None
+        fv = getattr(lin, "field_values", None)
+        H = getattr(lin, "field_hessian", None)
+        if fv is None or (H is None and not P.linear):  # evaluate here (hessian included)
+            x = np.atleast_2d(lin.u).reshape(k, n, 5)[:, :, 0:2]
+            B, G, H = P._field_by_member(x, True)
+        else:
+            B, G = fv
+        B = B.reshape(k, n, 3)
+        B = (B[:, 1:, 0], B[:, 1:, 1])
+        Gzz = G.reshape(k, n, 3, 3)[..., 2, 2]
+        Hzz = None if H is None else H.reshape(k, n, 3, 3, 3)[..., 0:2, 2, 2]
+        return B, Gzz, Hzz
 
-    def linearize(self, lin: Linearization, fields=None) -> Linearization:
-        """The twin's linearization (with its tangent) at the planar states of ``lin``;
-        ``fields`` (k, 3) T: a uniform field per member (a fan of field directions)."""
-        U3 = self.spatial_states(lin.u)
-        return self._with_fields(fields, lambda: self.twin.linearize(U3, lin.scale))
+    def odd_blocks(self, lin: Linearization, fields=None, band: bool = False):
+        """Diagonal (k, n - 1, nb, nb) and upper (k, n - 2, nb, nb) blocks of the
+        out-of-plane block of the 3D second variation at the planar states of ``lin``, free
+        nodes only (nb = 2: ``(d_x, d_y)``; mixed layout nb = 4: ``(x_z, F_z, d_x, d_y)``);
+        ``fields`` (k, 3) T: a uniform field per member (a fan of field directions).
+        ``band`` (uniform layout): instead, the symmetric part in LAPACK's upper band storage
+        (k, 4, 2 (n - 1)) of the unknowns ``(d_x1, d_y1, d_x2, ...)``."""
+        P = self.planar
+        U = np.atleast_2d(lin.u)
+        k, n = U.shape[0], P.n
+        S = np.asarray(lin.scale, float)
+        S = S[:, None] if S.shape == (k,) else np.broadcast_to(S, (k,))[:, None]
+        h, w, inv_h = P.mesh.h, P.mesh.w, P._inv_h
+        th = P.theta(U)
+        thf = th[:, 1:]  # free nodes: everything below is per free node or per segment
+        c, s = np.cos(thf), np.sin(thf)
+        mu = P.mu[1:]
+        mx = c * mu[:, 0] - s * mu[:, 1]
+        my = s * mu[:, 0] + c * mu[:, 1]
+        (bx, by), Gzz, Hzz = self._node_fields(lin, fields, k)
+        # bending blocks of the segments (module notes); a = 1 - c delta^2 = b cot b
+        b = 0.5 * (thf - th[:, :-1])
+        sb = np.sin(b)
+        a = np.divide(b * np.cos(b), sb, out=np.ones_like(b), where=sb != 0.0)
+        k1, k2 = self.stiffness[0], self.stiffness[1]
+        aa, bb = a * a, b * b
+        alpha = (0.5 * (k1 + k2) * (aa + bb) + a - aa - bb) * inv_h
+        zr, zi = aa - bb, -2.0 * a * b
+        c2, s2 = c * c - s * s, 2.0 * c * s  # of 2 theta_{i+1}
+        fac = 0.5 * (k1 - k2) * inv_h
+        r = fac * (zr * c2 - zi * s2)
+        q = fac * (zr * s2 + zi * c2)
+        pz = 2.0 * b * inv_h
+        Ap, Am = alpha + r, alpha - r
+        # free node j: segments j - 1 and j (the last node has only the first), magnetic
+        # term and the moment residual about z
+        Sw = S * w[1:]
+        dxx = Sw * (my * by) + Ap
+        dyy = Sw * (mx * bx) + Am
+        dxy = q - 0.5 * Sw * (mx * by + my * bx)
+        Mz = pz - Sw * (mx * by - my * bx)
+        dxx[:, :-1] += Ap[:, 1:]
+        dyy[:, :-1] += Am[:, 1:]
+        dxy[:, :-1] += q[:, 1:]
+        Mz[:, :-1] -= pz[:, 1:]
+        if self.uniform:
+            if band:  # symmetric part, LAPACK upper band storage (kd = 3) of (d_x1, d_y1, ...)
+                ab = np.zeros((k, 4, 2 * (n - 1)))
+                ab[:, 3, 0::2], ab[:, 3, 1::2], ab[:, 2, 1::2] = dxx, dyy, dxy
+                ab[:, 2, 2::2] = (0.5 * pz - q)[:, 1:]  # (y_j, x_j+1)
+                ab[:, 1, 2::2], ab[:, 1, 3::2] = -Ap[:, 1:], -Am[:, 1:]
+                ab[:, 0, 3::2] = (-q - 0.5 * pz)[:, 1:]  # (x_j, y_j+1)
+                return ab
+            D = np.stack([dxx, dxy + 0.5 * Mz, dxy - 0.5 * Mz, dyy], axis=-1)
+            E = np.stack([-Ap, -q - 0.5 * pz, -q + 0.5 * pz, -Am], axis=-1)[:, 1:]
+            return D.reshape(k, n - 1, 2, 2), E.reshape(k, n - 2, 2, 2)
+        # internal forces h F / 2 of the segments before and after each free node
+        V = U.reshape(k, n, 5)
+        fx, fy = 0.5 * h * V[:, :-1, 3], 0.5 * h * V[:, :-1, 4]
+        fx[:, :-1] += fx[:, 1:]
+        fy[:, :-1] += fy[:, 1:]
+        Mz -= c * fy - s * fx
+        dxx += s * fy
+        dyy += c * fx
+        dxy -= 0.5 * (c * fy + s * fx)
+        D = np.zeros((k, n - 1, 4, 4))
+        E = np.zeros((k, max(n - 2, 0), 4, 4))
+        D[:, :, 2, 2] = dxx
+        D[:, :, 3, 3] = dyy
+        D[:, :, 2, 3] = dxy + 0.5 * Mz
+        D[:, :, 3, 2] = dxy - 0.5 * Mz
+        E[:, :, 2, 2] = -Ap[:, 1:]
+        E[:, :, 3, 3] = -Am[:, 1:]
+        E[:, :, 2, 3] = -q[:, 1:] - 0.5 * pz[:, 1:]
+        E[:, :, 3, 2] = -q[:, 1:] + 0.5 * pz[:, 1:]
+        L = P.L
+        cwL = Sw * L
+        if Hzz is not None:
+            D[:, :, 0, 0] = -cwL * L * (mx * Hzz[:, 1:, 0] + my * Hzz[:, 1:, 1])
+        D[:, :, 0, 1] = D[:, :, 1, 0] = 1.0
+        D[:, :, 0, 2] = D[:, :, 2, 0] = -cwL * Gzz[:, 1:] * my
+        D[:, :, 0, 3] = D[:, :, 3, 0] = cwL * Gzz[:, 1:] * mx
+        hh = 0.5 * h
+        D[:, :, 1, 2] = D[:, :, 2, 1] = -hh * s
+        D[:, :, 1, 3] = D[:, :, 3, 1] = hh * c
+        E[:, :, 0, 1] = -1.0
+        E[:, :, 2, 1] = -hh[1:] * s[:, :-1]
+        E[:, :, 3, 1] = hh[1:] * c[:, :-1]
+        return D, E
 
     def odd_count(self, lin: Linearization, fields=None) -> np.ndarray:
         """Negative eigenvalues of the out-of-plane block of the 3D second variation at the
         planar states of ``lin``, shape (k,) int (-1 where not finite)."""
         from ._inertia import block_tridiagonal_inertia
 
-        S = np.broadcast_to(np.asarray(lin.scale, float), (np.atleast_2d(lin.u).shape[0],))
-        S = S.copy()
-        fv = getattr(lin, "field_values", None)
-        known = None
-        if fv is not None and not self.twin.uniform:
-            H = getattr(lin, "field_hessian", None)
-            if H is not None or self.twin.linear:  # the planar pass's field at the same nodes
-                known = (fv[0].reshape(-1, 3), fv[1].reshape(-1, 3, 3), H)
+        with np.errstate(all="ignore"):
+            if self.uniform:  # a Cholesky factorisation proves a stable state at once
+                out = _positive_definite(self.odd_blocks(lin, fields, band=True)) - 1
+                todo = np.flatnonzero(out < 0)
+                if todo.size == 0:
+                    return out
+                lin = _members(lin, todo, fields)
+                fields = None if fields is None else np.asarray(fields)[todo]
+            D, E = self.odd_blocks(lin, fields)
+        counts, _ = block_tridiagonal_inertia(D, E)
+        if self.uniform:
+            out[todo] = counts
+            return out
+        # one negative per z-position constraint of a free node
+        return np.where(counts >= 0, counts - (self.planar.n - 1), counts)
 
-        def blocks():
-            with np.errstate(all="ignore"):
-                if self.twin.uniform:  # numpy, at planar states: nothing to compile
-                    b = self.twin._b_uniform
-                    return uniform_blocks(self.planar.theta(lin.u), S, self.twin, b)
-                U3 = self.spatial_states(lin.u)
-                return self.twin._assemble(U3, S, True, band=False, fields=known)[3]
-
-        D, E = self._with_fields(fields, blocks)
-        odd = _ODD_UNIFORM if self.twin.uniform else _ODD_MIXED
-        Do = np.ascontiguousarray(D[:, :, odd][:, :, :, odd])
-        Eo = np.ascontiguousarray(E[:, :, odd][:, :, :, odd])
-        out, _ = block_tridiagonal_inertia(Do, Eo)
-        if not self.twin.uniform:  # one negative per z-position constraint of a free node
-            out = np.where(out >= 0, out - (self.planar.n - 1), out)
-        return out
-
-    def lowest(self, lin3: Linearization, counts: np.ndarray) -> np.ndarray:
-        """Smallest eigenvalue of the 3D second variation ``H z = mu W z`` of each member
-        (see :meth:`coilrod.rod.spatial.SpatialRod.stability`) from the twin's linearization
-        and the negative counts (k,), shape (k,)."""
-        from .planar import _take_tangent
-
-        out = np.full(lin3.tangent.k, np.nan)
-        for j in range(lin3.tangent.k):
-            if counts[j] < 0:
+    def lowest(self, lin: Linearization, fields=None) -> np.ndarray:
+        """Smallest eigenvalue of the out-of-plane block's ``H z = mu W z`` (W: the trapezoid
+        weight of each rotation; positions and forces eliminated) at the planar states of
+        ``lin``, shape (k,) (NaN where not finite): with the planar rod's in-plane figure,
+        the smallest of the two is the 3D one (the subspaces decouple)."""
+        with np.errstate(all="ignore"):
+            D, E = self.odd_blocks(lin, fields)
+        k, nf, nb = D.shape[0], D.shape[1], self.nb
+        rot = np.arange(nf)[:, None] * nb + (nb - 2) + np.arange(2)  # rows of (d_x, d_y)
+        rot = rot.ravel()
+        sq = np.repeat(np.sqrt(self.planar.mesh.w[1:]), 2)
+        out = np.full(k, np.nan)
+        i = np.arange(nf)
+        for j in range(k):
+            A = np.zeros((nf, nf, nb, nb))
+            A[i, i] = D[j]
+            A[i[:-1], i[1:]] = E[j]
+            A[i[1:], i[:-1]] = np.swapaxes(E[j], -1, -2)
+            A = A.transpose(0, 2, 1, 3).reshape(nf * nb, nf * nb)
+            if not np.all(np.isfinite(A)):
                 continue
-            one = _take_tangent(lin3.tangent, [j])
-            out[j] = self.twin._lowest(one, lin3.u[j], 1.0 if counts[j] == 0 else -1.0)
+            if rot.size <= _DENSE:
+                rhs = np.zeros((nf * nb, rot.size))
+                rhs[rot, np.arange(rot.size)] = sq
+                try:
+                    Sm = sq[:, None] * np.linalg.solve(A, rhs)[rot]
+                except np.linalg.LinAlgError:
+                    continue
+                out[j] = lowest_from_inverse(0.5 * (Sm + Sm.T))
+                continue
+            out[j] = self._lowest_sparse(A, rot, sq)
         return out
 
+    @staticmethod
+    def _lowest_sparse(A, rot, sq) -> float:
+        """:meth:`lowest` of a large block by ARPACK with a sparse LU of the block."""
+        from scipy.sparse import csc_matrix
+        from scipy.sparse.linalg import splu
 
-def uniform_blocks(theta: np.ndarray, S: np.ndarray, twin, b) -> tuple[np.ndarray, np.ndarray]:
-    """The spatial rod's second variation in world rotations, diagonal (k, n - 1, 3, 3) and
-    upper (k, n - 2, 3, 3) blocks of the free nodes, at planar states with node angles theta
-    (k, n) in a uniform field ``b`` ((3,) or (k, 1, 3), T at scale 1) at scales S (k,).
+        lu = splu(csc_matrix(A))
+        rhs = np.zeros(A.shape[0])
 
-    The uniform-layout tangent of :func:`coilrod.rod.spatial.numpy_core` specialised to
-    rotations about z: the segment rotation is psi_i = (0, 0, theta_{i+1} - theta_i), so the
-    frames, logarithms and the terms of ``psi x g`` need no series (tested against the
-    spatial rod's own blocks to round-off)."""
-    from .so3 import about_z, cross, hat, inv_right_jacobian_coefficients
-    from .spatial import _sym_term
+        def matvec(v):
+            rhs[:] = 0.0
+            rhs[rot] = sq * np.ravel(v)
+            return sq * lu.solve(rhs)[rot]
 
-    K, h, w = twin.K, twin.mesh.h, twin.mesh.w
-    k, n = theta.shape
-    R = about_z(theta)  # (k, n, 3, 3)
-    m = np.einsum("knij,nj->kni", R, twin.mu)
-    B = np.broadcast_to(np.asarray(b, float), (k, n, 3))
-    delta = np.diff(theta, axis=1)  # (k, n - 1)
-    psi = np.zeros((k, n - 1, 3))
-    psi[..., 2] = delta
-    g = psi * (K / h[:, None])[None]
-    cc, _ = inv_right_jacobian_coefficients(np.abs(delta))
-    Psi = hat(psi)
-    Minv = np.eye(3) + 0.5 * Psi + cc[..., None, None] * (Psi @ Psi)
-    MtKM = np.swapaxes(Minv, -1, -2) @ ((K[None, :, None] / h[:, None, None]) * Minv)
-    Gm = hat(g)
-    N = -0.5 * Gm - cc[..., None, None] * (Gm @ Psi)  # psi || g: the other terms vanish
-    MtN = np.swapaxes(Minv, -1, -2) @ N
-    Rb = R[:, 1:]
-    P = Rb @ (MtKM + 0.5 * (MtN + np.swapaxes(MtN, -1, -2))) @ np.swapaxes(Rb, -1, -2)
-    p = np.einsum("knij,knj->kni", Rb, g)
-    Sc = np.asarray(S, float)[:, None, None]
-    M = -Sc * w[None, :, None] * cross(m, B)
-    M[:, 1:] += p
-    M[:, :-1] -= p
-    A_ab = -P + 0.5 * hat(p)
-    diag = np.zeros((k, n, 3, 3))
-    diag[:, 1:] += P
-    diag[:, :-1] += P
-    diag -= Sc[..., None] * w[None, :, None, None] * _sym_term(m, B)
-    diag -= 0.5 * hat(M)
-    return diag[:, 1:], A_ab[:, 1:]
+        return closest_to_zero(matvec, rot.size, 1.0)
+
+
+def _members(lin: Linearization, rows: np.ndarray, fields) -> Linearization:
+    """The states and scales of members ``rows`` of ``lin`` (what :meth:`OutOfPlane.odd_blocks`
+    reads in the uniform layout)."""
+    k = np.atleast_2d(lin.u).shape[0]
+    S = np.broadcast_to(np.asarray(lin.scale, float), (k,))
+    return Linearization(u=np.atleast_2d(lin.u)[rows], scale=S[rows], residual=None, ok=None)
+
+
+def _positive_definite(ab: np.ndarray) -> np.ndarray:
+    """1 for each member of a stack of symmetric band matrices (k, kd + 1, m) (LAPACK upper
+    band storage, no coupling into a member's first kd columns) that a Cholesky factorisation
+    proves positive definite, else 0, shape (k,).  The members are factorised as one block
+    diagonal band matrix (one LAPACK call while they are all positive definite; after a
+    failing member, the factorisation restarts behind it)."""
+    k, rows, m = ab.shape
+    out = np.zeros(k, dtype=int)
+    finite = np.isfinite(ab).all(axis=(1, 2))
+    if not finite.all():  # (a NaN can pass LAPACK's pivot test): a stand-in, counted apart
+        ab = ab.copy()
+        ab[~finite] = 0.0
+        ab[~finite, -1] = 1.0
+    flat = ab[0] if k == 1 else np.ascontiguousarray(np.moveaxis(ab, 0, 1).reshape(rows, k * m))
+    start = 0
+    while start < k:
+        _, info = dpbtrf(flat[:, start * m :], lower=0)
+        if info == 0:
+            out[start:] = 1
+            break
+        fail = start + (info - 1) // m
+        out[start:fail] = 1
+        start = fail + 1
+    out[~finite] = 0
+    return out

@@ -40,6 +40,8 @@ from scipy.linalg.lapack import dgttrf, dgttrs
 from scipy.linalg.lapack import dstebz as _stebz
 
 from ..path.protocol import Linearization
+from ._spectrum import closest_to_zero
+from ._spectrum import lowest_from_inverse as _lowest_from_inverse
 from .discrete import DiscreteRod
 
 __all__ = ["PlanarRod", "RodTangent"]
@@ -52,6 +54,7 @@ _DIAG = _KL + _KU  # row of the diagonal in LAPACK's factorisation band storage
 _DENSE_STABILITY = 96
 #: Multiple of eps times the size of a residual's terms below which it is round-off.
 _FLOOR = 32.0
+_EPS = float(np.finfo(float).eps)
 
 
 def _rot(theta: np.ndarray, mu: np.ndarray) -> np.ndarray:
@@ -99,7 +102,8 @@ class RodTangent:
         d = d.ravel()
         n = self.size
         while True:
-            self.bad |= ~np.isfinite(d.reshape(self.k, n)).all(axis=1)
+            if not np.isfinite(d).all():
+                self.bad |= ~np.isfinite(d.reshape(self.k, n)).all(axis=1)
             if self.bad.any():
                 d, dl, du = d.copy(), dl.copy(), du.copy()
                 for j in np.flatnonzero(self.bad):  # replace by identity blocks
@@ -261,7 +265,7 @@ class PlanarRod(DiscreteRod):
         bend[1:] += self._inv_h
         bend[:-1] += self._inv_h
         self._bend_scale = bend * self._inv_w
-        self._floor_bend = _FLOOR * np.finfo(float).eps * self._bend_scale[1:]
+        self._floor_bend = _FLOOR * _EPS * self._bend_scale[1:]
         self._stab_e = -self._inv_h[1:] / np.sqrt(w[1:-1] * w[2:])
         self._mu0 = None
         self._tri_cache: dict = {}
@@ -444,14 +448,14 @@ class PlanarRod(DiscreteRod):
                 R, R1, parts = self._uniform(U, S, tangent)
             else:
                 R, R1, parts, field_values = self._mixed(U, S, tangent)
-            ok = np.all(np.isfinite(R), axis=1)
+            ok = np.isfinite(R).all(axis=1)
         tan = RodTangent(U.shape[0], self.size, self.uniform, parts, R1) if tangent else None
         if tan is not None:
             tan.bad |= ~ok
         lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
         lin.load_rate = R1
         # mixed layout: B (k, n, 3), G (k, n, 3, 3) at the nodes; the hessian (k n, 3, 3, 3)
-        # or None (a linear field, or no tangent) for the 3D stability's twin
+        # or None (a linear field, or no tangent) for the out-of-plane block
         lin.field_values = None if field_values is None else field_values[:2]
         lin.field_hessian = None if field_values is None else field_values[2]
         return lin
@@ -474,7 +478,6 @@ class PlanarRod(DiscreteRod):
         """max over equations of |scaled residual| / (tol + its round-off floor), shape (k,)."""
         R, U = lin.residual, lin.u
         k = R.shape[0]
-        eps = np.finfo(float).eps
         if self.uniform:
             with np.errstate(all="ignore"):
                 size_th = 1.0 + np.abs(U).max(axis=1, keepdims=True)
@@ -483,7 +486,7 @@ class PlanarRod(DiscreteRod):
         from ._compiled import mixed_error
 
         out = np.empty(k)
-        mixed_error(R, U, self._inv_w, self._inv_h, self._bend_scale, self.tol, _FLOOR * eps, out)
+        mixed_error(R, U, self._inv_w, self._inv_h, self._bend_scale, self.tol, _FLOOR * _EPS, out)
         return out
 
     def residual_norm(self, residual) -> np.ndarray:
@@ -520,8 +523,9 @@ class PlanarRod(DiscreteRod):
         w[np.arange(self.n) * (self.size // self.n) + (0 if self.uniform else _TH)] = 1 / self.n
         return w
 
-    #: The spatial twin (:class:`~coilrod.rod.out_of_plane.OutOfPlane`) whose second
-    #: variation gives the 3D stability of the planar states; None: in-plane stability only.
+    #: The out-of-plane block (:class:`~coilrod.rod.out_of_plane.OutOfPlane`) of the spatial
+    #: rod's second variation that gives the 3D stability of the planar states; None:
+    #: in-plane stability only.
     out_of_plane = None
 
     def with_out_of_plane(self, stiffness) -> PlanarRod:
@@ -534,7 +538,7 @@ class PlanarRod(DiscreteRod):
 
     def stability(self, lin: Linearization, precise: bool = False) -> np.ndarray:
         """Stability of the states of ``lin`` in 3D when the problem has an
-        :attr:`out_of_plane` twin, else in the plane (:meth:`stability_in_plane`).
+        :attr:`out_of_plane` block, else in the plane (:meth:`stability_in_plane`).
 
         3D: the cheap indicator is +1 for a stable state and minus the number of negative
         eigenvalues of the spatial second variation otherwise (0 where it cannot be
@@ -547,17 +551,20 @@ class PlanarRod(DiscreteRod):
         signs = np.where(total == 0, 1.0, np.where(total > 0, -total.astype(float), 0.0))
         if not precise:
             return signs
-        lin3 = self.out_of_plane.linearize(lin, getattr(lin, "uniform_fields", None))
-        return self.out_of_plane.lowest(lin3, total)
+        odd = self.out_of_plane.lowest(lin, getattr(lin, "uniform_fields", None))
+        out = np.fmin(self.stability_in_plane(lin, precise=True), odd)
+        out[total < 0] = np.nan
+        return out
 
     def negative_counts(self, lin: Linearization):
         """Negative eigenvalues of the 3D second variation at the states of ``lin``: (in all,
         out of the plane), two int arrays (k,) (-1 where not finite); cached on ``lin``.
 
         The in-plane count is the parity of the planar determinant's sign (the planar rod's
-        eigenvalues are simple); the out-of-plane one is exact (block LDL^T of the twin's
-        odd block, :meth:`~coilrod.rod.out_of_plane.OutOfPlane.odd_count`): reflection
-        through the plane decouples the two exactly.  Needs :attr:`out_of_plane`."""
+        eigenvalues are simple); the out-of-plane one is exact (block LDL^T of the odd block
+        of the spatial rod's second variation,
+        :meth:`~coilrod.rod.out_of_plane.OutOfPlane.odd_count`): reflection through the
+        plane decouples the two exactly.  Needs :attr:`out_of_plane`."""
         cached = getattr(lin, "_counts_3d", None)
         if cached is not None:
             return cached
@@ -744,21 +751,6 @@ class PlanarRod(DiscreteRod):
         return closest_to_zero(matvec, self.n - 1, sign)
 
 
-def closest_to_zero(matvec, size: int, sign: float) -> float:
-    """Eigenvalue mu closest to zero of H z = mu W z from products ``matvec(v)`` with
-    ``S = W^1/2 H^-1 W^1/2`` (size ``size``), by ARPACK on S's dominant eigenvalue 1 / mu;
-    ``sign`` < 0 (an unstable state) makes a positive result negative (its closest-to-zero
-    eigenvalue may be positive while another is negative)."""
-    from scipy.sparse.linalg import LinearOperator, eigsh
-
-    op = LinearOperator((size, size), matvec=matvec, dtype=float)
-    sigma = eigsh(op, k=1, which="LM", tol=1e-10, return_eigenvectors=False)[0]
-    mu = 1.0 / sigma
-    if mu > 0 and sign < 0:
-        return -abs(mu)
-    return float(mu)
-
-
 def _take_tangent(tan: RodTangent, rows) -> RodTangent:
     """Members ``rows`` of a stacked tangent (factors sliced: the blocks are independent)."""
     rows = np.asarray(rows, dtype=int)
@@ -806,17 +798,3 @@ def _dominant_batched(tan: RodTangent, rows, sq, rtol: float = 1e-13, max_iter: 
         if np.all(done | ~np.isfinite(new)):
             break
     return sigma
-
-
-def _lowest_from_inverse(S: np.ndarray) -> float:
-    """Smallest eigenvalue mu of H z = mu W z from S = W^1/2 H^-1 W^1/2 (sigma = 1/mu), dense:
-    the negative sigma closest to zero gives the most negative mu; sigma of |sigma| below
-    1e-10 sigma_max are round-off (they would be eigenvalues mu beyond any physical load) and
-    are ignored."""
-    ev = np.linalg.eigvalsh(S)
-    big = np.max(np.abs(ev))
-    neg = ev[ev < -1e-10 * big]
-    if neg.size:
-        return float(1.0 / np.max(neg))
-    pos = ev[ev > 0]
-    return float(1.0 / np.max(pos)) if pos.size else float("nan")
