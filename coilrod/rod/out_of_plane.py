@@ -47,6 +47,7 @@ own blocks and against closed-form out-of-plane buckling loads.
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import solve_banded
 from scipy.linalg.lapack import dpbtrf
 
 from ..path.protocol import Linearization
@@ -54,8 +55,10 @@ from ._spectrum import closest_to_zero, lowest_from_inverse
 
 __all__ = ["OutOfPlane"]
 
-#: Free rotational unknowns up to which the odd block's eigenvalue is found densely.
-_DENSE = 600
+#: Free rotational unknowns (two per free node) up to which the odd block's eigenvalue is
+#: found from its dense inverse (banded solves), beyond by ARPACK: 200 free nodes, where the
+#: spatial rod switches too.
+_DENSE = 400
 
 
 class OutOfPlane:
@@ -261,8 +264,13 @@ class OutOfPlane:
             A = A.transpose(0, 2, 1, 3).reshape(nf * nb, nf * nb)
             rhs = np.zeros((nf * nb, rot.size))
             rhs[rot, np.arange(rot.size)] = sq
+            bw = 2 * nb - 1  # bandwidth of a block tridiagonal matrix of nb x nb blocks
+            ab = np.zeros((2 * bw + 1, nf * nb))
+            for off in range(-bw, bw + 1):  # ab[bw + r - c, c] = A[r, c]
+                diag = np.diagonal(A, off)
+                ab[bw - off, max(off, 0) : max(off, 0) + diag.size] = diag
             try:
-                Sm = sq[:, None] * np.linalg.solve(A, rhs)[rot]
+                Sm = sq[:, None] * solve_banded((bw, bw), ab, rhs, check_finite=False)[rot]
             except np.linalg.LinAlgError:
                 continue
             out[j] = lowest_from_inverse(0.5 * (Sm + Sm.T))
