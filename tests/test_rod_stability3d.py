@@ -302,3 +302,31 @@ def test_scenes_and_sweep_rows_report_the_3d_figure():
     assert run.result.model == "planar"
     np.testing.assert_array_equal(run.stable, [False, False])
     assert run.result.stable_in_plane.all()
+
+
+def test_large_out_of_plane_blocks_take_the_sparse_eigenvalue(monkeypatch):
+    # past _DENSE unknowns the out-of-plane eigenvalue comes from ARPACK on a sparse LU: the
+    # same figure as the dense spectrum, stable (positive) and buckled (negative) alike, in
+    # both layouts (the straight strip of the Euler test, its weak-axis load +-2 %)
+    from coilrod.rod import out_of_plane
+    from coilrod.rod.planar import PlanarRod
+    from coilrod.rod.solve import _node_moments, make_mesh, rod_stiffnesses
+
+    rod = coilrod.Rod(0.04, 1e6, coilrod.Rectangle(1e-3, 2e-3), coilrod.Magnetization(128e3, 0.0))
+    field = coils.UniformField(B=(-rod.field_for_lambda(1.0), 0.0, 0.0))
+    mesh = make_mesh(rod, 12)
+    scales = np.array([0.98, 1.02]) * np.pi**2 / 16
+    for mixed in (False, True):
+        problem = PlanarRod(
+            mesh, _node_moments(rod, mesh, dim=2), field, rod.length, np.zeros(3), 0.0,
+            mixed=mixed,
+        ).with_out_of_plane(rod_stiffnesses(rod))  # fmt: skip
+        lin = problem.linearize(np.stack([problem.straight()] * 2), scales)
+        counts = problem.out_of_plane.odd_count(lin)
+        dense = problem.out_of_plane.lowest(lin, None, counts)
+        monkeypatch.setattr(out_of_plane, "_DENSE", 4)
+        sparse = problem.out_of_plane.lowest(lin, None, counts)
+        monkeypatch.undo()
+        np.testing.assert_array_equal(counts, [0, 1])
+        assert dense[0] > 0 > dense[1]
+        np.testing.assert_allclose(sparse, dense, rtol=1e-8)

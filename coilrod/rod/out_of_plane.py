@@ -47,6 +47,7 @@ own blocks and against closed-form out-of-plane buckling loads.
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import solve_banded
 from scipy.linalg.lapack import dpbtrf
 
 from ..path.protocol import Linearization
@@ -54,8 +55,10 @@ from ._spectrum import closest_to_zero, lowest_from_inverse
 
 __all__ = ["OutOfPlane"]
 
-#: Free rotational unknowns up to which the odd block's eigenvalue is found densely.
-_DENSE = 600
+#: Free rotational unknowns (two per free node) up to which the odd block's eigenvalue is
+#: found from its dense inverse (banded solves), beyond by ARPACK: 200 free nodes, where the
+#: spatial rod switches too.
+_DENSE = 400
 
 
 class OutOfPlane:
@@ -232,11 +235,13 @@ class OutOfPlane:
         # one negative per z-position constraint of a free node
         return np.where(counts >= 0, counts - (self.planar.n - 1), counts)
 
-    def lowest(self, lin: Linearization, fields=None) -> np.ndarray:
+    def lowest(self, lin: Linearization, fields=None, counts=None) -> np.ndarray:
         """Smallest eigenvalue of the out-of-plane block's ``H z = mu W z`` (W: the trapezoid
         weight of each rotation; positions and forces eliminated) at the planar states of
         ``lin``, shape (k,) (NaN where not finite): with the planar rod's in-plane figure,
-        the smallest of the two is the 3D one (the subspaces decouple)."""
+        the smallest of the two is the 3D one (the subspaces decouple).  ``counts`` (k,): the
+        block's negative eigenvalues (:meth:`odd_count`), which sign the eigenvalue closest to
+        zero of a large block (ARPACK)."""
         with np.errstate(all="ignore"):
             D, E = self.odd_blocks(lin, fields)
         k, nf, nb = D.shape[0], D.shape[1], self.nb
@@ -246,40 +251,57 @@ class OutOfPlane:
         out = np.full(k, np.nan)
         i = np.arange(nf)
         for j in range(k):
+            if not (np.isfinite(D[j]).all() and np.isfinite(E[j]).all()):
+                continue
+            if rot.size > _DENSE:
+                sign = -1.0 if counts is not None and counts[j] > 0 else 1.0
+                out[j] = _lowest_sparse(D[j], E[j], rot, sq, sign)
+                continue
             A = np.zeros((nf, nf, nb, nb))
             A[i, i] = D[j]
             A[i[:-1], i[1:]] = E[j]
             A[i[1:], i[:-1]] = np.swapaxes(E[j], -1, -2)
             A = A.transpose(0, 2, 1, 3).reshape(nf * nb, nf * nb)
-            if not np.all(np.isfinite(A)):
+            rhs = np.zeros((nf * nb, rot.size))
+            rhs[rot, np.arange(rot.size)] = sq
+            bw = 2 * nb - 1  # bandwidth of a block tridiagonal matrix of nb x nb blocks
+            ab = np.zeros((2 * bw + 1, nf * nb))
+            for off in range(-bw, bw + 1):  # ab[bw + r - c, c] = A[r, c]
+                diag = np.diagonal(A, off)
+                ab[bw - off, max(off, 0) : max(off, 0) + diag.size] = diag
+            try:
+                Sm = sq[:, None] * solve_banded((bw, bw), ab, rhs, check_finite=False)[rot]
+            except np.linalg.LinAlgError:
                 continue
-            if rot.size <= _DENSE:
-                rhs = np.zeros((nf * nb, rot.size))
-                rhs[rot, np.arange(rot.size)] = sq
-                try:
-                    Sm = sq[:, None] * np.linalg.solve(A, rhs)[rot]
-                except np.linalg.LinAlgError:
-                    continue
-                out[j] = lowest_from_inverse(0.5 * (Sm + Sm.T))
-                continue
-            out[j] = self._lowest_sparse(A, rot, sq)
+            out[j] = lowest_from_inverse(0.5 * (Sm + Sm.T))
         return out
 
-    @staticmethod
-    def _lowest_sparse(A, rot, sq) -> float:
-        """:meth:`lowest` of a large block by ARPACK with a sparse LU of the block."""
-        from scipy.sparse import csc_matrix
-        from scipy.sparse.linalg import splu
 
-        lu = splu(csc_matrix(A))
-        rhs = np.zeros(A.shape[0])
+def _lowest_sparse(D, E, rot, sq, sign) -> float:
+    """:meth:`OutOfPlane.lowest` of one large block, diagonal blocks D (nf, nb, nb) and upper
+    E (nf - 1, nb, nb), by ARPACK with a sparse LU."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.linalg import splu
 
-        def matvec(v):
-            rhs[:] = 0.0
-            rhs[rot] = sq * np.ravel(v)
-            return sq * lu.solve(rhs)[rot]
+    nf, nb = D.shape[0], D.shape[1]
+    i = np.arange(nf)
+    R = np.concatenate([i, i[:-1], i[1:]])  # block rows and columns: diagonal, upper, lower
+    C = np.concatenate([i, i[1:], i[:-1]])
+    data = np.concatenate([D, E, np.swapaxes(E, -1, -2)])
+    a = np.arange(nb)
+    rows = np.broadcast_to(R[:, None, None] * nb + a[None, :, None], data.shape)
+    cols = np.broadcast_to(C[:, None, None] * nb + a[None, None, :], data.shape)
+    size = nf * nb
+    A = coo_matrix((data.ravel(), (rows.ravel(), cols.ravel())), shape=(size, size))
+    lu = splu(A.tocsc())
+    rhs = np.zeros(size)
 
-        return closest_to_zero(matvec, rot.size, 1.0)
+    def matvec(v):
+        rhs[:] = 0.0
+        rhs[rot] = sq * np.ravel(v)
+        return sq * lu.solve(rhs)[rot]
+
+    return closest_to_zero(matvec, rot.size, sign)
 
 
 def _members(lin: Linearization, rows: np.ndarray, fields) -> Linearization:

@@ -547,11 +547,11 @@ class PlanarRod(DiscreteRod):
         field per member (a fan of field directions)."""
         if self.out_of_plane is None:
             return self.stability_in_plane(lin, precise)
-        total = self.negative_counts(lin)[0]
+        total, odd_count = self.negative_counts(lin)
         signs = np.where(total == 0, 1.0, np.where(total > 0, -total.astype(float), 0.0))
         if not precise:
             return signs
-        odd = self.out_of_plane.lowest(lin, getattr(lin, "uniform_fields", None))
+        odd = self.out_of_plane.lowest(lin, getattr(lin, "uniform_fields", None), odd_count)
         out = np.fmin(self.stability_in_plane(lin, precise=True), odd)
         out[total < 0] = np.nan
         return out
