@@ -18,8 +18,12 @@ import numpy as np
 
 from .so3 import _C_SERIES, _C_SMALL, _SMALL  # the same series and switch angles
 
+#: The helpers and member passes are called from compiled code only: no Python or C-callable
+#: wrappers (each would cost compile time in a fresh environment).
+_inner = nb.njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
 
-@nb.njit(cache=True)
+
+@_inner
 def _hat(v, out):
     out[0, 0] = 0.0
     out[0, 1] = -v[2]
@@ -32,14 +36,14 @@ def _hat(v, out):
     out[2, 2] = 0.0
 
 
-@nb.njit(cache=True)
+@_inner
 def _cross(a, b, out):
     out[0] = a[1] * b[2] - a[2] * b[1]
     out[1] = a[2] * b[0] - a[0] * b[2]
     out[2] = a[0] * b[1] - a[1] * b[0]
 
 
-@nb.njit(cache=True)
+@_inner
 def _mm(A, B, out):
     for i in range(3):
         for j in range(3):
@@ -49,7 +53,7 @@ def _mm(A, B, out):
             out[i, j] = acc
 
 
-@nb.njit(cache=True)
+@_inner
 def _coefficients(theta):
     t2 = theta * theta
     if theta < _SMALL:
@@ -63,7 +67,7 @@ def _coefficients(theta):
     return a, b, c
 
 
-@nb.njit(cache=True)
+@_inner
 def _exp_and_jl(phi, Q, J):
     """Q = exp(hat(phi)), J = J_l(phi)."""
     theta = math.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
@@ -79,7 +83,7 @@ def _exp_and_jl(phi, Q, J):
             J[i, j] = eye + b * K[i, j] + c * K2[i, j]
 
 
-@nb.njit(cache=True)
+@_inner
 def _log(R, out):
     v0 = 0.5 * (R[2, 1] - R[1, 2])
     v1 = 0.5 * (R[0, 2] - R[2, 0])
@@ -111,7 +115,7 @@ def _log(R, out):
     out[2] = f * v2
 
 
-@nb.njit(cache=True)
+@_inner
 def _c_coefficients(theta):
     if theta < _C_SMALL:
         t2 = theta * theta
@@ -129,7 +133,7 @@ def _c_coefficients(theta):
     return c, dc
 
 
-@nb.njit(cache=True)
+@_inner
 def _sym_term(a, b, scale, out):
     """out += scale * ((a b^T + b a^T) / 2 - (a . b) I)."""
     d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
@@ -175,7 +179,7 @@ def spatial_core(
                              m_out[m], Jl, blk[m])  # fmt: skip
 
 
-@nb.njit(cache=True)
+@_inner
 def _frames(phi, R0, mu, frames, Jl, m_out):
     """One member's node frames ``exp(hat(phi_i)) R0``, ``J_l(phi_i)`` and the world
     magnetization ``frames_i mu_i``."""
@@ -190,7 +194,7 @@ def _frames(phi, R0, mu, frames, Jl, m_out):
             m_out[i, a] = acc
 
 
-@nb.njit(cache=True)
+@_inner
 def _bending(frames, K, h, tangent, p, P):
     """One member's segments: the moment ``p_i = R_{i+1} J_l^-1(psi_i) K psi_i / h_i`` of
     ``psi_i = log(R_i^T R_{i+1})`` and, with ``tangent``, its Hessian block ``P_i``."""
@@ -271,7 +275,7 @@ def _bending(frames, K, h, tangent, p, P):
                 P[i, a, b] = acc
 
 
-@nb.njit(cache=True)
+@_inner
 def _moment_rows(phi, F, s_m, B, uniform, op, h, w, frames, m_out, p, R, R1):
     """One member's moment rows (slots ``op:op+3``) of R and R1: bending, the magnetic
     torque, and (non-uniform field) the moments of the internal forces; the clamp row."""
@@ -310,7 +314,7 @@ def _moment_rows(phi, F, s_m, B, uniform, op, h, w, frames, m_out, p, R, R1):
         R[0, op + a] = phi[0, a]
 
 
-@nb.njit(cache=True)
+@_inner
 def _position_force_rows(X, F, s_m, G, h, w, L, frames, m_out, R, R1):
     """One member's position (slots 0:3) and force (slots 6:9) rows of R and R1 (a
     non-uniform field)."""
@@ -336,7 +340,7 @@ def _position_force_rows(X, F, s_m, G, h, w, L, frames, m_out, R, R1):
             R[i - 1, 6 + a] = F[i - 1, a] - F[i, a] + s_m * f1
 
 
-@nb.njit(cache=True)
+@_inner
 def _rotation_blocks(F, s_m, B, uniform, op, h, w, frames, m_out, p, P, Jl, R, blk, diag, A_ab):
     """One member's second-variation blocks ``diag`` and ``A_ab`` and the Jacobian blocks of
     the moment rows with respect to the rotations (``blk`` 0 m_prev, 1 m_diag, 2 m_next)."""
@@ -393,7 +397,7 @@ def _rotation_blocks(F, s_m, B, uniform, op, h, w, frames, m_out, p, P, Jl, R, b
             _mm(A_ab[i], Jl[i + 1], blk[i, 2])
 
 
-@nb.njit(cache=True)
+@_inner
 def _position_blocks(s_m, G, H, has_h, h, w, L, frames, m_out, Jl, blk):
     """One member's Jacobian blocks of a non-uniform field: ``blk`` 3 p_phiprev, 4 p_phi,
     5 m_x, 6 m_Fprev, 7 m_F, 8 f_xnext, 9 f_phinext."""
