@@ -54,7 +54,9 @@ def _mm(A, B, out):
 
 
 @_inner
-def _coefficients(theta):
+def _exp_and_jl(phi, Q, J):
+    """Q = exp(hat(phi)), J = J_l(phi)."""
+    theta = math.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
     t2 = theta * theta
     if theta < _SMALL:
         a = 1 - t2 / 6 * (1 - t2 / 20 * (1 - t2 / 42))
@@ -64,14 +66,6 @@ def _coefficients(theta):
         a = math.sin(theta) / theta
         b = (1 - math.cos(theta)) / t2
         c = (theta - math.sin(theta)) / (t2 * theta)
-    return a, b, c
-
-
-@_inner
-def _exp_and_jl(phi, Q, J):
-    """Q = exp(hat(phi)), J = J_l(phi)."""
-    theta = math.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
-    a, b, c = _coefficients(theta)
     K = np.empty((3, 3))
     _hat(phi, K)
     K2 = np.empty((3, 3))
@@ -97,13 +91,12 @@ def _log(R, out):
             d = R[i, i] - c
             if d > best:
                 best, col = d, i
-        ax = np.empty(3)
+        for i in range(3):  # the axis, in out
+            out[i] = 0.5 * (R[i, col] + R[col, i]) - (c if i == col else 0.0)
+        nrm = math.sqrt(out[0] ** 2 + out[1] ** 2 + out[2] ** 2)
+        sign = 1.0 if out[0] * v0 + out[1] * v1 + out[2] * v2 >= 0 else -1.0
         for i in range(3):
-            ax[i] = 0.5 * (R[i, col] + R[col, i]) - (c if i == col else 0.0)
-        nrm = math.sqrt(ax[0] ** 2 + ax[1] ** 2 + ax[2] ** 2)
-        sign = 1.0 if ax[0] * v0 + ax[1] * v1 + ax[2] * v2 >= 0 else -1.0
-        for i in range(3):
-            out[i] = sign * theta * ax[i] / nrm
+            out[i] = sign * theta * out[i] / nrm
         return
     if theta < _SMALL:
         t2 = theta * theta
