@@ -20,7 +20,8 @@ Prints (and writes to benchmarks/results/fem3d.md), with the machine:
    (``solve_rod``, the model difference, not a discretisation error).
 
 Timings: process CPU time by default (``BENCH_CLOCK=wall`` for wall clock), best of
-``--repeat`` runs; run with ``OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1`` for one core.
+``--repeat`` runs; one BLAS thread unless ``OMP_NUM_THREADS``/``OPENBLAS_NUM_THREADS`` say
+otherwise (as bench_fem.py).
 
 Run:  python benchmarks/bench_fem3d.py [--baseline DIR] [--repeat 2]
 """
@@ -34,11 +35,15 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from _machine import clock, clock_name, machine_info  # noqa: E402
+from _machine import clock  # noqa: E402
+from bench_fem import machine_line, skfem_bilinear_tangent  # noqa: E402
 
 OUT: list[str] = []
 SCALES = np.linspace(0.1, 1.0, 10)
@@ -166,39 +171,6 @@ def section_curve(args):
     return t, res
 
 
-def skfem_tangent(mesh, u_full, G, K):
-    """The displacement-form neo-Hookean tangent as a plain scikit-fem BilinearForm."""
-    from skfem import Basis, BilinearForm, ElementHex2, ElementVector, asm
-    from skfem.helpers import ddot, det, grad, inv, mul, transpose
-
-    basis = Basis(mesh, ElementVector(ElementHex2()), intorder=5)
-
-    @BilinearForm
-    def tangent(du, v, w):
-        gu = grad(du)
-        F = grad(w["disp"]) + np.eye(3)[:, :, None, None]
-        J = det(F)
-        Fi = inv(F)
-        FiT = transpose(Fi)
-        I1 = ddot(F, F)
-        c = G * J ** (-2.0 / 3.0)
-        FiT_gu = ddot(FiT, gu)
-        F_gu = ddot(F, gu)
-        cross = transpose(mul(Fi, mul(gu, Fi)))
-        dP_iso = c * (
-            gu
-            - 2.0 / 3.0 * (F * FiT_gu + FiT * F_gu)
-            + 2.0 / 9.0 * I1 * FiT * FiT_gu
-            + 1.0 / 3.0 * I1 * cross
-        )
-        p = K * (J - 1.0)
-        dP_vol = K * J * (2 * J - 1) * FiT * FiT_gu - p * J * cross
-        return ddot(dP_iso + dP_vol, grad(v))
-
-    disp = basis.interpolate(u_full)
-    return basis, lambda: asm(tangent, basis, disp=disp)
-
-
 def section_skfem(res, t_curve):
     from scipy.sparse.linalg import spsolve
 
@@ -208,7 +180,7 @@ def section_skfem(res, t_curve):
     rod, _ = problem()
     G, K = moduli(rod.youngs_modulus, 0.4995)
     u_full = asm_.full(res._states[-1])
-    basis, assemble = skfem_tangent(res.mesh, u_full, G, K)
+    basis, assemble = skfem_bilinear_tangent(res.mesh, u_full, G, K)
     t_form, Kf = best_of(assemble, 2)
     fixed = basis.get_dofs(lambda x: np.abs(x[0]) < 1e-12).all()
     free = np.setdiff1d(np.arange(basis.N), fixed)
@@ -278,16 +250,9 @@ def main():
     if args.child:
         child(args.repeat)
         return
-    import skfem
-
     emit("# FEM benchmark: the default 3D Circle curve (benchmarks/bench_fem3d.py)")
     emit()
-    emit(
-        f"Machine: {machine_info()}; scikit-fem {skfem.__version__}; threads "
-        f"OMP={os.environ.get('OMP_NUM_THREADS', 'unset')} "
-        f"OPENBLAS={os.environ.get('OPENBLAS_NUM_THREADS', 'unset')}. {clock_name()} time, "
-        f"best of {args.repeat} (section 3: one run)."
-    )
+    emit(machine_line(f"best of {args.repeat} (section 3: one run)"))
     emit()
     t, res = section_curve(args)
     section_skfem(res, t)

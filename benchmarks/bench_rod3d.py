@@ -12,7 +12,12 @@ Prints (and writes to benchmarks/results/rod3d.md):
    (benchmarks/peers/pyelastica_spatial.py, run in its own environment; its JSON in
    benchmarks/results/pyelastica_spatial.json): time and tip error against ours;
 4. contact: a state pushed against a wall against the free state at the same node count
-   (goal <= 3x), and an insertion of 50 steps through a bend (goal <= 2 s on one core).
+   (goal <= 3x), and an insertion of 50 steps through a bend (goal <= 2 s on one core);
+5. the cost of one Newton iteration of the 3D state of section 2 (one mesh, no Richardson):
+   per iteration at 4 and 64 segments (the part that does not scale with the mesh is the
+   fixed cost) and the model's parts at the converged state (evaluation with and without the
+   tangent, the compiled per-node pass alone, band solve, convergence measure), and a 50-step
+   sweep to the same load.
 
 Run:  python benchmarks/bench_rod3d.py
 """
@@ -32,7 +37,7 @@ from coilrod import Circle, Magnetization, Rod, presets, solve_rod
 HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "tests"))
-from _machine import best_wall, machine_info  # noqa: E402
+from _machine import best_time, best_wall, clock_name, machine_info  # noqa: E402
 from rod3d_bvp_reference import spatial_reference  # noqa: E402
 
 REPEAT = 5
@@ -192,12 +197,78 @@ def contact(lines):
     ]
 
 
+def _per_call(fn, number=200):
+    """Best time (s, the clock of benchmarks/_machine.py) per call of ``fn``."""
+    return best_time(fn, repeat=5, number=number)
+
+
+def iteration_cost(lines):
+    """Section 5: one Newton iteration of the 3D state, and its parts."""
+    from coilrod.rod import _compiled_spatial
+
+    rod, field = _case()
+    lines += ["## 5. One Newton iteration of the 3D state", "", f"{clock_name()} time.", ""]
+    lines += [
+        "| segments | state (s) | Newton iterations | per iteration (ms) |",
+        "|---|---|---|---|",
+    ]
+    per = {}
+    for n in (4, 64):
+        res = solve_rod(rod, field, [1.0], nodes=n, richardson=False)
+        t = best_time(lambda n=n: solve_rod(rod, field, [1.0], nodes=n, richardson=False), 5)
+        its = int(res.iterations[0])
+        per[n] = t / its
+        lines.append(f"| {n} | {t:.4f} | {its} | {1e3 * per[n]:.3f} |")
+    res = solve_rod(rod, field, [1.0], nodes=64, richardson=False)
+    P, U = res._solution.problems[0], np.atleast_2d(res._solution.states[0])
+    S = np.array([1.0])
+    lin = P.linearize(U, S)
+    du = 1e-3 * np.ones_like(U)
+    captured = {}
+
+    def capture(*args):
+        captured["args"] = args
+        _compiled_spatial.spatial_core(*args)
+
+    P._assemble(U, S, True, core=capture)
+    parts = {
+        "evaluation with tangent (`linearize`)": lambda: P.linearize(U, S),
+        "evaluation without tangent": lambda: P.linearize(U, S, tangent=False),
+        "of which the compiled per-node pass (`spatial_core`)": lambda: (
+            _compiled_spatial.spatial_core(*captured["args"])
+        ),
+        "band LU + solve": lambda: P.solve(P.linearize(U, S), -lin.residual),
+        "convergence measure (`error`)": lambda: P.error(lin, du),
+        "step length and distance (`step_limit`, `distance`)": lambda: (
+            P.step_limit(U, du),
+            P.distance(du),
+        ),
+    }
+    times = {name: _per_call(fn) for name, fn in parts.items()}
+    times["band LU + solve"] -= times["evaluation with tangent (`linearize`)"]
+    lines += ["", "| part (64 segments, uniform layout) | time per call (us) |", "|---|---|"]
+    lines += [f"| {name} | {1e6 * t:.1f} |" for name, t in times.items()]
+    fixed = (16 * per[4] - per[64]) / 15  # per-iteration time extrapolated to no segments
+    scales = np.linspace(0.02, 1.0, 50)
+    sweep = solve_rod(rod, field, scales)
+    t_sweep = best_time(lambda: solve_rod(rod, field, scales), 3)
+    lines += [
+        "",
+        f"Per-iteration fixed cost (the 4- and 64-segment times extrapolated to no segments): "
+        f"**{1e6 * fixed:.0f} us**; 64 segments: {1e6 * per[64]:.0f} us per iteration.  "
+        f"50-step sweep to the same load (defaults): {t_sweep:.3f} s, "
+        f"{int(sweep.iterations.sum())} Newton iterations.",
+        "",
+    ]
+
+
 def main():
     lines = ["# Spatial rod and contact benchmark", "", f"Machine: {machine_info()}", ""]
     planar_cases(lines)
     ours, ref = spatial_case(lines)
     pyelastica(lines, ours["ours"], ref)
     contact(lines)
+    iteration_cost(lines)
     text = "\n".join(lines)
     print(text)
     OUT.write_text(text + "\n")

@@ -252,7 +252,7 @@ def solve_fem(
     problem = FEMProblem(asm, rtol, utol)
     min_step = 2.0 ** -int(max_cuts)
     opts = PathOptions(
-        newton=NewtonOptions(max_iter=int(max_iterations), backtracks=10),
+        newton=NewtonOptions(max_iter=int(max_iterations), backtracks=10, chord=FEMProblem.chord),
         min_step=min_step,
         bifurcation_tol=min(0.75, max(1e-4, 2.0 * min_step)),
     )

@@ -18,8 +18,12 @@ import numpy as np
 
 from .so3 import _C_SERIES, _C_SMALL, _SMALL  # the same series and switch angles
 
+#: The helpers and member passes are called from compiled code only: no Python or C-callable
+#: wrappers (each would cost compile time in a fresh environment).
+_inner = nb.njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
 
-@nb.njit(cache=True)
+
+@_inner
 def _hat(v, out):
     out[0, 0] = 0.0
     out[0, 1] = -v[2]
@@ -32,14 +36,14 @@ def _hat(v, out):
     out[2, 2] = 0.0
 
 
-@nb.njit(cache=True)
+@_inner
 def _cross(a, b, out):
     out[0] = a[1] * b[2] - a[2] * b[1]
     out[1] = a[2] * b[0] - a[0] * b[2]
     out[2] = a[0] * b[1] - a[1] * b[0]
 
 
-@nb.njit(cache=True)
+@_inner
 def _mm(A, B, out):
     for i in range(3):
         for j in range(3):
@@ -49,8 +53,10 @@ def _mm(A, B, out):
             out[i, j] = acc
 
 
-@nb.njit(cache=True)
-def _coefficients(theta):
+@_inner
+def _exp_and_jl(phi, Q, J):
+    """Q = exp(hat(phi)), J = J_l(phi)."""
+    theta = math.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
     t2 = theta * theta
     if theta < _SMALL:
         a = 1 - t2 / 6 * (1 - t2 / 20 * (1 - t2 / 42))
@@ -60,14 +66,6 @@ def _coefficients(theta):
         a = math.sin(theta) / theta
         b = (1 - math.cos(theta)) / t2
         c = (theta - math.sin(theta)) / (t2 * theta)
-    return a, b, c
-
-
-@nb.njit(cache=True)
-def _exp_and_jl(phi, Q, J):
-    """Q = exp(hat(phi)), J = J_l(phi)."""
-    theta = math.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
-    a, b, c = _coefficients(theta)
     K = np.empty((3, 3))
     _hat(phi, K)
     K2 = np.empty((3, 3))
@@ -79,7 +77,7 @@ def _exp_and_jl(phi, Q, J):
             J[i, j] = eye + b * K[i, j] + c * K2[i, j]
 
 
-@nb.njit(cache=True)
+@_inner
 def _log(R, out):
     v0 = 0.5 * (R[2, 1] - R[1, 2])
     v1 = 0.5 * (R[0, 2] - R[2, 0])
@@ -93,13 +91,12 @@ def _log(R, out):
             d = R[i, i] - c
             if d > best:
                 best, col = d, i
-        ax = np.empty(3)
+        for i in range(3):  # the axis, in out
+            out[i] = 0.5 * (R[i, col] + R[col, i]) - (c if i == col else 0.0)
+        nrm = math.sqrt(out[0] ** 2 + out[1] ** 2 + out[2] ** 2)
+        sign = 1.0 if out[0] * v0 + out[1] * v1 + out[2] * v2 >= 0 else -1.0
         for i in range(3):
-            ax[i] = 0.5 * (R[i, col] + R[col, i]) - (c if i == col else 0.0)
-        nrm = math.sqrt(ax[0] ** 2 + ax[1] ** 2 + ax[2] ** 2)
-        sign = 1.0 if ax[0] * v0 + ax[1] * v1 + ax[2] * v2 >= 0 else -1.0
-        for i in range(3):
-            out[i] = sign * theta * ax[i] / nrm
+            out[i] = sign * theta * out[i] / nrm
         return
     if theta < _SMALL:
         t2 = theta * theta
@@ -111,7 +108,7 @@ def _log(R, out):
     out[2] = f * v2
 
 
-@nb.njit(cache=True)
+@_inner
 def _c_coefficients(theta):
     if theta < _C_SMALL:
         t2 = theta * theta
@@ -129,7 +126,7 @@ def _c_coefficients(theta):
     return c, dc
 
 
-@nb.njit(cache=True)
+@_inner
 def _sym_term(a, b, scale, out):
     """out += scale * ((a b^T + b a^T) / 2 - (a . b) I)."""
     d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
@@ -148,18 +145,52 @@ def spatial_core(
     1 m_diag, 2 m_next, 3 p_phiprev, 4 p_phi, 5 m_x, 6 m_Fprev, 7 m_F, 8 f_xnext,
     9 f_phinext, each at the node of its row (m_next, m_F at row j: node j; f_* at row j - 1:
     node j) -- the world-rotation diagonal ``diag`` (k, n, 3, 3) and ``A_ab`` (k, n - 1, 3, 3)
-    of the second variation, and the world magnetization ``m_out`` (k, n, 3)."""
+    of the second variation, and the world magnetization ``m_out`` (k, n, 3).
+
+    Member by member: :func:`_frames`, :func:`_bending`, :func:`_moment_rows`, and for a
+    non-uniform field :func:`_position_force_rows`; with ``tangent`` :func:`_rotation_blocks`
+    and, for a non-uniform field, :func:`_position_blocks`."""
     k, n = phi.shape[0], phi.shape[1]
     op = 0 if uniform else 3
-    Q = np.empty((3, 3))
-    Jl = np.empty((k, n, 3, 3))
-    psi = np.empty(3)
-    g = np.empty(3)
-    tmp = np.empty(3)
-    tmp2 = np.empty(3)
-    Jg = np.empty(3)
+    Jl = np.empty((n, 3, 3))
     p = np.empty((n - 1, 3))
     P = np.empty((n - 1, 3, 3))
+    for m in range(k):
+        _frames(phi[m], R0, mu, frames[m], Jl, m_out[m])
+        _bending(frames[m], K, h, tangent, p, P)
+        _moment_rows(phi[m], F[m], S[m], B[m], uniform, op, h, w, frames[m], m_out[m], p,
+                     R[m], R1[m])  # fmt: skip
+        if not uniform:
+            _position_force_rows(X[m], F[m], S[m], G[m], h, w, L, frames[m], m_out[m],
+                                 R[m], R1[m])  # fmt: skip
+        if not tangent:
+            continue
+        _rotation_blocks(F[m], S[m], B[m], uniform, op, h, w, frames[m], m_out[m], p, P, Jl,
+                         R[m], blk[m], diag[m], A_ab[m])  # fmt: skip
+        if not uniform:
+            _position_blocks(S[m], G[m], H[m] if has_h else H[0], has_h, h, w, L, frames[m],
+                             m_out[m], Jl, blk[m])  # fmt: skip
+
+
+@_inner
+def _frames(phi, R0, mu, frames, Jl, m_out):
+    """One member's node frames ``exp(hat(phi_i)) R0``, ``J_l(phi_i)`` and the world
+    magnetization ``frames_i mu_i``."""
+    Q = np.empty((3, 3))
+    for i in range(phi.shape[0]):
+        _exp_and_jl(phi[i], Q, Jl[i])
+        _mm(Q, R0, frames[i])
+        for a in range(3):
+            acc = 0.0
+            for q in range(3):
+                acc += frames[i, a, q] * mu[i, q]
+            m_out[i, a] = acc
+
+
+@_inner
+def _bending(frames, K, h, tangent, p, P):
+    """One member's segments: the moment ``p_i = R_{i+1} J_l^-1(psi_i) K psi_i / h_i`` of
+    ``psi_i = log(R_i^T R_{i+1})`` and, with ``tangent``, its Hessian block ``P_i``."""
     Delta = np.empty((3, 3))
     Psi = np.empty((3, 3))
     Psi2 = np.empty((3, 3))
@@ -168,222 +199,246 @@ def spatial_core(
     Gh = np.empty((3, 3))
     M1 = np.empty((3, 3))
     M2 = np.empty((3, 3))
+    psi = np.empty(3)
+    g = np.empty(3)
+    tmp = np.empty(3)
+    tmp2 = np.empty(3)
+    Jg = np.empty(3)
+    for i in range(frames.shape[0] - 1):
+        Ra = frames[i]
+        Rb = frames[i + 1]
+        for a in range(3):
+            for b in range(3):
+                acc = 0.0
+                for q in range(3):
+                    acc += Ra[q, a] * Rb[q, b]
+                Delta[a, b] = acc
+        _log(Delta, psi)
+        for a in range(3):
+            g[a] = psi[a] * K[a] / h[i]
+        theta = math.sqrt(psi[0] ** 2 + psi[1] ** 2 + psi[2] ** 2)
+        cc, dc = _c_coefficients(theta)
+        _cross(psi, g, tmp)  # psi x g
+        _cross(psi, tmp, tmp2)
+        for a in range(3):
+            Jg[a] = g[a] - 0.5 * tmp[a] + cc * tmp2[a]
+        for a in range(3):
+            acc = 0.0
+            for q in range(3):
+                acc += Rb[a, q] * Jg[q]
+            p[i, a] = acc
+        if not tangent:
+            continue
+        _hat(psi, Psi)
+        _mm(Psi, Psi, Psi2)
+        for a in range(3):
+            for b in range(3):
+                Minv[a, b] = (1.0 if a == b else 0.0) + 0.5 * Psi[a, b] + cc * Psi2[a, b]
+        # N = -hat(g)/2 - c hat(g) hat(psi) - c hat(g x psi) + dc psi (psi^2 g)^T
+        _hat(g, Gh)
+        _mm(Gh, Psi, M1)
+        _cross(g, psi, tmp)
+        _hat(tmp, M2)
+        for a in range(3):
+            acc = 0.0
+            for q in range(3):
+                acc += Psi2[a, q] * g[q]
+            tmp2[a] = acc
+        for a in range(3):
+            for b in range(3):
+                Nm[a, b] = -0.5 * Gh[a, b] - cc * (M1[a, b] + M2[a, b]) + dc * psi[a] * tmp2[b]
+        # inner = Minv^T diag(K/h) Minv + sym(Minv^T N)
+        for a in range(3):
+            for b in range(3):
+                acc = 0.0
+                acc2 = 0.0
+                acc3 = 0.0
+                for q in range(3):
+                    acc += Minv[q, a] * K[q] / h[i] * Minv[q, b]
+                    acc2 += Minv[q, a] * Nm[q, b]
+                    acc3 += Minv[q, b] * Nm[q, a]
+                M1[a, b] = acc + 0.5 * (acc2 + acc3)
+        # P = Rb inner Rb^T
+        _mm(Rb, M1, M2)
+        for a in range(3):
+            for b in range(3):
+                acc = 0.0
+                for q in range(3):
+                    acc += M2[a, q] * Rb[b, q]
+                P[i, a, b] = acc
+
+
+@_inner
+def _moment_rows(phi, F, s_m, B, uniform, op, h, w, frames, m_out, p, R, R1):
+    """One member's moment rows (slots ``op:op+3``) of R and R1: bending, the magnetic
+    torque, and (non-uniform field) the moments of the internal forces; the clamp row."""
+    n = phi.shape[0]
     tau = np.empty(3)
     hF = np.empty(3)
     t = np.empty(3)
-    for m in range(k):
-        s_m = S[m]
-        for i in range(n):
-            _exp_and_jl(phi[m, i], Q, Jl[m, i])
-            _mm(Q, R0, frames[m, i])
-            for a in range(3):
-                acc = 0.0
-                for q in range(3):
-                    acc += frames[m, i, a, q] * mu[i, q]
-                m_out[m, i, a] = acc
-        # segments
-        for i in range(n - 1):
-            Ra = frames[m, i]
-            Rb = frames[m, i + 1]
-            for a in range(3):
-                for b in range(3):
-                    acc = 0.0
-                    for q in range(3):
-                        acc += Ra[q, a] * Rb[q, b]
-                    Delta[a, b] = acc
-            _log(Delta, psi)
-            for a in range(3):
-                g[a] = psi[a] * K[a] / h[i]
-            theta = math.sqrt(psi[0] ** 2 + psi[1] ** 2 + psi[2] ** 2)
-            cc, dc = _c_coefficients(theta)
-            _cross(psi, g, tmp)  # psi x g
-            _cross(psi, tmp, tmp2)
-            for a in range(3):
-                Jg[a] = g[a] - 0.5 * tmp[a] + cc * tmp2[a]
-            for a in range(3):
-                acc = 0.0
-                for q in range(3):
-                    acc += Rb[a, q] * Jg[q]
-                p[i, a] = acc
-            if not tangent:
-                continue
-            _hat(psi, Psi)
-            _mm(Psi, Psi, Psi2)
-            for a in range(3):
-                for b in range(3):
-                    Minv[a, b] = (1.0 if a == b else 0.0) + 0.5 * Psi[a, b] + cc * Psi2[a, b]
-            # N = -hat(g)/2 - c hat(g) hat(psi) - c hat(g x psi) + dc psi (psi^2 g)^T
-            _hat(g, Gh)
-            _mm(Gh, Psi, M1)
-            _cross(g, psi, tmp)
-            _hat(tmp, M2)
-            for a in range(3):
-                acc = 0.0
-                for q in range(3):
-                    acc += Psi2[a, q] * g[q]
-                tmp2[a] = acc
-            for a in range(3):
-                for b in range(3):
-                    Nm[a, b] = -0.5 * Gh[a, b] - cc * (M1[a, b] + M2[a, b]) + dc * psi[a] * tmp2[b]
-            # inner = Minv^T diag(K/h) Minv + sym(Minv^T N)
-            for a in range(3):
-                for b in range(3):
-                    acc = 0.0
-                    acc2 = 0.0
-                    acc3 = 0.0
-                    for q in range(3):
-                        acc += Minv[q, a] * K[q] / h[i] * Minv[q, b]
-                        acc2 += Minv[q, a] * Nm[q, b]
-                        acc3 += Minv[q, b] * Nm[q, a]
-                    M1[a, b] = acc + 0.5 * (acc2 + acc3)
-            # P = Rb inner Rb^T
-            _mm(Rb, M1, M2)
-            for a in range(3):
-                for b in range(3):
-                    acc = 0.0
-                    for q in range(3):
-                        acc += M2[a, q] * Rb[b, q]
-                    P[i, a, b] = acc
-        # residual: moments
-        for i in range(n):
-            for a in range(3):
-                t[a] = frames[m, i, a, 0]
-            _cross(m_out[m, i], B[m, i], tau)
-            for a in range(3):
-                r1 = -w[i] * tau[a]
-                val = s_m * r1
-                if i >= 1:
-                    val += p[i - 1, a]
-                if i <= n - 2:
-                    val -= p[i, a]
-                R1[m, i, op + a] = r1 if i > 0 else 0.0
-                R[m, i, op + a] = val
-            if not uniform:
-                if i >= 1:
-                    for a in range(3):
-                        hF[a] = 0.5 * h[i - 1] * F[m, i - 1, a]
-                    _cross(t, hF, tmp)
-                    for a in range(3):
-                        R[m, i, op + a] -= tmp[a]
-                if i <= n - 2:
-                    for a in range(3):
-                        hF[a] = 0.5 * h[i] * F[m, i, a]
-                    _cross(t, hF, tmp)
-                    for a in range(3):
-                        R[m, i, op + a] -= tmp[a]
+    tmp = np.empty(3)
+    for i in range(n):
         for a in range(3):
-            R[m, 0, op + a] = phi[m, 0, a]
+            t[a] = frames[i, a, 0]
+        _cross(m_out[i], B[i], tau)
+        for a in range(3):
+            r1 = -w[i] * tau[a]
+            val = s_m * r1
+            if i >= 1:
+                val += p[i - 1, a]
+            if i <= n - 2:
+                val -= p[i, a]
+            R1[i, op + a] = r1 if i > 0 else 0.0
+            R[i, op + a] = val
         if not uniform:
-            for a in range(3):
-                R[m, 0, a] = X[m, 0, a]
-                R[m, n - 1, 6 + a] = F[m, n - 1, a]
-                R1[m, n - 1, 6 + a] = 0.0
-                R1[m, 0, a] = 0.0
-            for i in range(1, n):
-                for a in range(3):
-                    R[m, i, a] = (
-                        X[m, i, a]
-                        - X[m, i - 1, a]
-                        - 0.5 * h[i - 1] * (frames[m, i - 1, a, 0] + frames[m, i, a, 0])
-                    )
-                    R1[m, i, a] = 0.0
-                # force row i - 1: F_{i-1} - F_i - c w_i L G_i^T m_i
-                for a in range(3):
-                    acc = 0.0
-                    for q in range(3):
-                        acc += G[m, i, q, a] * m_out[m, i, q]
-                    f1 = -w[i] * L * acc
-                    R1[m, i - 1, 6 + a] = f1
-                    R[m, i - 1, 6 + a] = F[m, i - 1, a] - F[m, i, a] + s_m * f1
-        if not tangent:
-            continue
-        # Jacobian blocks
-        for i in range(n):
-            for a in range(3):
-                t[a] = frames[m, i, a, 0]
-            D = diag[m, i]
-            for a in range(3):
-                for b in range(3):
-                    D[a, b] = 0.0
             if i >= 1:
                 for a in range(3):
-                    for b in range(3):
-                        D[a, b] += P[i - 1, a, b]
+                    hF[a] = 0.5 * h[i - 1] * F[i - 1, a]
+                _cross(t, hF, tmp)
+                for a in range(3):
+                    R[i, op + a] -= tmp[a]
             if i <= n - 2:
                 for a in range(3):
-                    for b in range(3):
-                        D[a, b] += P[i, a, b]
-            _sym_term(m_out[m, i], B[m, i], -s_m * w[i], D)
-            if not uniform:
-                if i >= 1:
-                    for a in range(3):
-                        hF[a] = 0.5 * h[i - 1] * F[m, i - 1, a]
-                    _sym_term(t, hF, -1.0, D)
-                if i <= n - 2:
-                    for a in range(3):
-                        hF[a] = 0.5 * h[i] * F[m, i, a]
-                    _sym_term(t, hF, -1.0, D)
-            for a in range(3):
-                tmp[a] = R[m, i, op + a]
-            _hat(tmp, M1)
+                    hF[a] = 0.5 * h[i] * F[i, a]
+                _cross(t, hF, tmp)
+                for a in range(3):
+                    R[i, op + a] -= tmp[a]
+    for a in range(3):
+        R[0, op + a] = phi[0, a]
+
+
+@_inner
+def _position_force_rows(X, F, s_m, G, h, w, L, frames, m_out, R, R1):
+    """One member's position (slots 0:3) and force (slots 6:9) rows of R and R1 (a
+    non-uniform field)."""
+    n = X.shape[0]
+    for a in range(3):
+        R[0, a] = X[0, a]
+        R[n - 1, 6 + a] = F[n - 1, a]
+        R1[n - 1, 6 + a] = 0.0
+        R1[0, a] = 0.0
+    for i in range(1, n):
+        for a in range(3):
+            R[i, a] = (
+                X[i, a] - X[i - 1, a] - 0.5 * h[i - 1] * (frames[i - 1, a, 0] + frames[i, a, 0])
+            )
+            R1[i, a] = 0.0
+        # force row i - 1: F_{i-1} - F_i - c w_i L G_i^T m_i
+        for a in range(3):
+            acc = 0.0
+            for q in range(3):
+                acc += G[i, q, a] * m_out[i, q]
+            f1 = -w[i] * L * acc
+            R1[i - 1, 6 + a] = f1
+            R[i - 1, 6 + a] = F[i - 1, a] - F[i, a] + s_m * f1
+
+
+@_inner
+def _rotation_blocks(F, s_m, B, uniform, op, h, w, frames, m_out, p, P, Jl, R, blk, diag, A_ab):
+    """One member's second-variation blocks ``diag`` and ``A_ab`` and the Jacobian blocks of
+    the moment rows with respect to the rotations (``blk`` 0 m_prev, 1 m_diag, 2 m_next)."""
+    n = frames.shape[0]
+    t = np.empty(3)
+    hF = np.empty(3)
+    tmp = np.empty(3)
+    M1 = np.empty((3, 3))
+    for i in range(n):
+        for a in range(3):
+            t[a] = frames[i, a, 0]
+        D = diag[i]
+        for a in range(3):
+            for b in range(3):
+                D[a, b] = 0.0
+        if i >= 1:
             for a in range(3):
                 for b in range(3):
-                    D[a, b] -= 0.5 * M1[a, b]
-        for i in range(n - 1):
-            _hat(p[i], M1)
+                    D[a, b] += P[i - 1, a, b]
+        if i <= n - 2:
             for a in range(3):
                 for b in range(3):
-                    A_ab[m, i, a, b] = -P[i, a, b] + 0.5 * M1[a, b]
-        for i in range(1, n):
-            # m_prev: A_ba(seg i-1) Jl_{i-1}; m_diag: diag_i Jl_i; m_next: A_ab(seg i) Jl_{i+1}
-            for a in range(3):
-                for b in range(3):
-                    A_ba = -P[i - 1, a, b] - (A_ab[m, i - 1, a, b] + P[i - 1, a, b])
-                    M1[a, b] = A_ba
-            _mm(M1, Jl[m, i - 1], blk[m, i, 0])
-            _mm(diag[m, i], Jl[m, i], blk[m, i, 1])
+                    D[a, b] += P[i, a, b]
+        _sym_term(m_out[i], B[i], -s_m * w[i], D)
+        if not uniform:
+            if i >= 1:
+                for a in range(3):
+                    hF[a] = 0.5 * h[i - 1] * F[i - 1, a]
+                _sym_term(t, hF, -1.0, D)
             if i <= n - 2:
-                _mm(A_ab[m, i], Jl[m, i + 1], blk[m, i, 2])
-            if uniform:
-                continue
-            hh = 0.5 * h[i - 1]
-            for a in range(3):
-                tmp[a] = frames[m, i - 1, a, 0]
-            _hat(tmp, M1)
-            for a in range(3):
-                for b in range(3):
-                    M1[a, b] *= hh
-            _mm(M1, Jl[m, i - 1], blk[m, i, 3])
-            for a in range(3):
-                t[a] = frames[m, i, a, 0]
-            _hat(t, M2)
-            for a in range(3):
-                for b in range(3):
-                    M1[a, b] = hh * M2[a, b]
-            _mm(M1, Jl[m, i], blk[m, i, 4])
-            # m_x = -c w L hat(m) G ; m_Fprev = -(h_{i-1}/2) hat(t); m_F = -(h_i/2) hat(t)
-            _hat(m_out[m, i], M1)
-            cwL = s_m * w[i] * L
-            for a in range(3):
-                for b in range(3):
-                    acc = 0.0
+                for a in range(3):
+                    hF[a] = 0.5 * h[i] * F[i, a]
+                _sym_term(t, hF, -1.0, D)
+        for a in range(3):
+            tmp[a] = R[i, op + a]
+        _hat(tmp, M1)
+        for a in range(3):
+            for b in range(3):
+                D[a, b] -= 0.5 * M1[a, b]
+    for i in range(n - 1):
+        _hat(p[i], M1)
+        for a in range(3):
+            for b in range(3):
+                A_ab[i, a, b] = -P[i, a, b] + 0.5 * M1[a, b]
+    for i in range(1, n):
+        # m_prev: A_ba(seg i-1) Jl_{i-1}; m_diag: diag_i Jl_i; m_next: A_ab(seg i) Jl_{i+1}
+        for a in range(3):
+            for b in range(3):
+                A_ba = -P[i - 1, a, b] - (A_ab[i - 1, a, b] + P[i - 1, a, b])
+                M1[a, b] = A_ba
+        _mm(M1, Jl[i - 1], blk[i, 0])
+        _mm(diag[i], Jl[i], blk[i, 1])
+        if i <= n - 2:
+            _mm(A_ab[i], Jl[i + 1], blk[i, 2])
+
+
+@_inner
+def _position_blocks(s_m, G, H, has_h, h, w, L, frames, m_out, Jl, blk):
+    """One member's Jacobian blocks of a non-uniform field: ``blk`` 3 p_phiprev, 4 p_phi,
+    5 m_x, 6 m_Fprev, 7 m_F, 8 f_xnext, 9 f_phinext."""
+    n = frames.shape[0]
+    t = np.empty(3)
+    tmp = np.empty(3)
+    M1 = np.empty((3, 3))
+    M2 = np.empty((3, 3))
+    Nm = np.empty((3, 3))
+    for i in range(1, n):
+        hh = 0.5 * h[i - 1]
+        for a in range(3):
+            tmp[a] = frames[i - 1, a, 0]
+        _hat(tmp, M1)
+        for a in range(3):
+            for b in range(3):
+                M1[a, b] *= hh
+        _mm(M1, Jl[i - 1], blk[i, 3])
+        for a in range(3):
+            t[a] = frames[i, a, 0]
+        _hat(t, M2)
+        for a in range(3):
+            for b in range(3):
+                M1[a, b] = hh * M2[a, b]
+        _mm(M1, Jl[i], blk[i, 4])
+        # m_x = -c w L hat(m) G ; m_Fprev = -(h_{i-1}/2) hat(t); m_F = -(h_i/2) hat(t)
+        _hat(m_out[i], M1)
+        cwL = s_m * w[i] * L
+        for a in range(3):
+            for b in range(3):
+                acc = 0.0
+                for q in range(3):
+                    acc += M1[a, q] * G[i, q, b]
+                blk[i, 5, a, b] = -cwL * acc
+                blk[i, 6, a, b] = -hh * M2[a, b]
+                if i <= n - 2:
+                    blk[i, 7, a, b] = -0.5 * h[i] * M2[a, b]
+        # f_xnext (row i - 1, column x_i): -c w L^2 sum_q m_q H[q, a, b]
+        # f_phinext: c w L G^T hat(m) Jl_i
+        for a in range(3):
+            for b in range(3):
+                acc = 0.0
+                if has_h:
                     for q in range(3):
-                        acc += M1[a, q] * G[m, i, q, b]
-                    blk[m, i, 5, a, b] = -cwL * acc
-                    blk[m, i, 6, a, b] = -hh * M2[a, b]
-                    if i <= n - 2:
-                        blk[m, i, 7, a, b] = -0.5 * h[i] * M2[a, b]
-            # f_xnext (row i - 1, column x_i): -c w L^2 sum_q m_q H[q, a, b]
-            # f_phinext: c w L G^T hat(m) Jl_i
-            for a in range(3):
-                for b in range(3):
-                    acc = 0.0
-                    if has_h:
-                        for q in range(3):
-                            acc += m_out[m, i, q] * H[m, i, q, a, b]
-                    blk[m, i, 8, a, b] = -cwL * L * acc
-                    acc2 = 0.0
-                    for q in range(3):
-                        acc2 += G[m, i, q, a] * M1[q, b]
-                    Nm[a, b] = cwL * acc2
-            _mm(Nm, Jl[m, i], blk[m, i, 9])
+                        acc += m_out[i, q] * H[i, q, a, b]
+                blk[i, 8, a, b] = -cwL * L * acc
+                acc2 = 0.0
+                for q in range(3):
+                    acc2 += G[i, q, a] * M1[q, b]
+                Nm[a, b] = cwL * acc2
+        _mm(Nm, Jl[i], blk[i, 9])

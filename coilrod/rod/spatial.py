@@ -306,15 +306,15 @@ class SpatialRod(DiscreteRod):
 
     def error(self, lin: Linearization, du) -> np.ndarray:
         """max over equations of |scaled residual| / (tol + its round-off floor), shape (k,)."""
-        scaled = np.abs(self._scaled(lin.residual))
-        U = lin.u.reshape(lin.u.shape[0], self.n, self.nv)
+        # the largest |scaled residual| of each node, divided by the node's tolerance (the
+        # same maximum as dividing every equation: a positive divisor keeps the order)
+        scaled = np.abs(self._scaled(lin.residual)).max(axis=2)  # (k, n)
         eps = np.finfo(float).eps
         with np.errstate(all="ignore"):
-            size = 1.0 + np.abs(U).max(axis=(1, 2))  # rotations, positions, forces
+            size = 1.0 + np.abs(lin.u).max(axis=1)  # rotations, positions, forces
             load = np.abs(self._scaled(lin.load_rate)).max(axis=(1, 2)) * np.abs(lin.scale)
             floor = _FLOOR * eps * (size[:, None] * self._bend_scale + load[:, None])
-            err = scaled / (self.tol + floor[:, :, None])
-            out = err.max(axis=(1, 2))
+            out = (scaled / (self.tol + floor)).max(axis=1)
         out[~np.isfinite(out)] = np.inf
         return out
 
@@ -326,7 +326,7 @@ class SpatialRod(DiscreteRod):
     def step_limit(self, u, du):
         """No node rotates by more than :attr:`max_rotation` in one Newton step."""
         d = self.rotations(np.atleast_2d(du))
-        rot = np.sqrt(np.einsum("kni,kni->kn", d, d)).max(axis=1)
+        rot = np.sqrt(np.einsum("kni,kni->kn", d, d).max(axis=1))
         with np.errstate(divide="ignore"):
             lim = np.where(rot > 0, np.minimum(1.0, self.max_rotation / rot), 1.0)
         if self.nc and not self.uniform and self.close_first:
@@ -356,7 +356,7 @@ class SpatialRod(DiscreteRod):
     def distance(self, du):
         """Largest change of a node rotation vector, rad, shape (k,)."""
         d = self.rotations(np.atleast_2d(du))
-        return np.sqrt(np.einsum("kni,kni->kn", d, d)).max(axis=1)
+        return np.sqrt(np.einsum("kni,kni->kn", d, d).max(axis=1))
 
     def arclength_weights(self) -> np.ndarray:
         w = np.zeros((self.n, self.nv))
