@@ -353,6 +353,15 @@ class SpatialRod(DiscreteRod):
             frac = np.where(closing, g0 / (g0 - g1), 1.0)
         return frac.min(axis=(1, 2))
 
+    def event_fraction(self, U, dU):
+        """Fraction (k,) of each change dU (k, size) of states U (k, size) at which the
+        contact set first changes (a point closes or an active one releases), 1 if it does
+        not: the path engine ends a load step's prediction there
+        (:mod:`coilrod.rod.contact_predictor`)."""
+        from .contact_predictor import event_fraction
+
+        return event_fraction(self, U, dU)
+
     def distance(self, du):
         """Largest change of a node rotation vector, rad, shape (k,)."""
         d = self.rotations(np.atleast_2d(du))
@@ -368,8 +377,10 @@ class SpatialRod(DiscreteRod):
     #: a contact problem sets 100 / h_min^2).
     kappa = 1.0
 
-    #: Complementarity function: "min" (min(lam, kappa g)) or "fb" (Fischer-Burmeister).
-    ncp = "fb"
+    #: Complementarity function: "min" (min(lam, kappa g); the default: a Newton step drops a
+    #: point whose multiplier went negative at once, where Fischer-Burmeister mixes the two
+    #: rows and releases it over several iterations) or "fb" (Fischer-Burmeister).
+    ncp = "min"
 
     def _ncp(self, lam: np.ndarray, gaps: np.ndarray):
         """Complementarity function of (lam, kappa g) and its partial derivatives in lam and
