@@ -445,3 +445,26 @@ def test_event_fraction_of_a_release():
     assert abs(P.event_fraction(u.reshape(1, -1), du.reshape(1, -1))[0] - 0.5) < 1e-15
     du[-1, 9] = -1.0
     assert P.event_fraction(u.reshape(1, -1), du.reshape(1, -1))[0] == 1.0
+
+
+def test_piecewise_prediction_across_the_tip_closing():
+    # from a free state (scale 0.05) to one with the tip on the wall (0.15): the prediction
+    # that switches the contact set where the tip closes lands within 2 % of the change of
+    # the converged state (an independent solve), the plain path tangent 150 % off (through
+    # the wall)
+    rod = _rod()
+    field = coils.LinearField(
+        B0=(0, rod.field_for_lambda(6.0), 0), gradient=1e-9 * np.diag([-0.5, 1.0, -0.5])
+    )
+    wall = Wall((0, 0.2 * L, 0), (0, -1, 0))
+    res = solve_rod(rod, field, [0.05, 0.15], nodes=16, richardson=False, obstacles=[wall],
+                    stability=False)  # fmt: skip
+    P = res._solution.problems[0]
+    u0, u1 = res._solution.states[0]
+    assert [int(P.contact_state(u[None])[2].sum()) for u in (u0, u1)] == [0, 1]
+    pred = P.piecewise_prediction(u0, 0.05, 0.1)
+    lin = P.linearize(u0[None], np.array([0.05]))
+    plain = u0 - 0.1 * P.solve(lin, lin.load_rate)[0]
+    change = P.distance((u1 - u0)[None])[0]
+    assert P.distance((pred - u1)[None])[0] < 0.02 * change
+    assert P.distance((plain - u1)[None])[0] > 0.5 * change

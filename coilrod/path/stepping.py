@@ -182,6 +182,7 @@ class _Tracker:
         self.cuts = 0
         self.last_change = None  # change of the state in the last accepted step
         self.event = None  # (point, step) of a trial step ended at a contact event
+        self.crossing = None  # the start of a trial step predicted across contact events
         #: Corrections below this (1e-3 of the model's max_correction) never signal a jump.
         limit = self.P.max_correction
         self.negligible = 1e-3 * limit if np.isfinite(limit) else 0.0
@@ -235,7 +236,7 @@ class _Tracker:
         third-order error on a smooth path).  A state on another branch -- reached over a
         fold, where the two rates differ in sign or size -- fails it even when it lies close
         to the prediction and is as stable as ``cur``."""
-        if cur.rate is None or rate is None:
+        if cur.rate is None or rate is None or self.crossing is cur:
             return True
         dist = self.P.distance
         change = u - cur.u
@@ -267,12 +268,26 @@ class _Tracker:
         an accepted one ended so resumes the length it had before.
         """
         event, self.event = self.event, None
+        crossed, self.crossing = self.crossing, None
         if event is not None and event[0] is prev and abs(event[1]) > abs(h):
             h = float(np.copysign(abs(event[1]), h))  # the step ended at an event: resume
+        if prev is not None and (crossed is prev or (event is not None and event[0] is prev)):
+            prev = None  # the last step met a change of the contact set: no Hermite term
         h1, s1, guess = self._trial(cur, prev, h, target)
         hook = getattr(self.model, "event_fraction", None)
         if hook is None:
             return h1, s1, guess
+        across = getattr(self.model, "piecewise_prediction", None)
+        if across is not None and cur.rate is not None:
+            frac = float(hook(cur.u[None], (guess - cur.u)[None])[0])
+            if frac < 1.0:
+                crossed = across(cur.u, cur.scale, h1)
+                limit = self.change_limit()
+                if crossed is not None and float(
+                    self.P.distance((crossed - cur.u)[None])[0]
+                ) <= limit * (1.0 + 1e-9):
+                    self.crossing = cur  # a step across contact events: not smooth
+                    return h1, s1, crossed
         start = h1
         for _ in range(4):  # the Hermite term makes the prediction nonlinear in the step
             frac = float(hook(cur.u[None], (guess - cur.u)[None])[0])

@@ -362,6 +362,14 @@ class SpatialRod(DiscreteRod):
 
         return event_fraction(self, U, dU)
 
+    def piecewise_prediction(self, u, scale, ds):
+        """Prediction (size,) of the state at ``scale + ds`` from the converged state ``u``
+        (size,) across changes of the contact set, or None
+        (:func:`coilrod.rod.contact_predictor.piecewise_prediction`)."""
+        from .contact_predictor import piecewise_prediction
+
+        return piecewise_prediction(self, u, scale, ds)
+
     def distance(self, du):
         """Largest change of a node rotation vector, rad, shape (k,)."""
         d = self.rotations(np.atleast_2d(du))
