@@ -334,17 +334,17 @@ class SpatialRod(DiscreteRod):
         return lim
 
     #: Newton steps end where the first open contact point would close (see
-    #: :meth:`closing_fraction`).  Off by default: it halves the iterations of a tip contact
-    #: at 32 segments but costs two gap evaluations per step, and an insertion through a
-    #: bend is slower with it (benchmarks/bench_contact.py).
+    #: :meth:`closing_fraction`).  Off by default: the load stepping already predicts across
+    #: contact events (:meth:`event_fraction`, :meth:`piecewise_prediction`), and it costs two
+    #: gap evaluations per Newton step (an insertion through a bend was slower with it).
     close_first = False
 
     def closing_fraction(self, U, dU):
         """Fraction (k,) of each change dU (k, size) of states U (k, size) at which the first
         open contact point (surface gap > 1e-6 L) reaches the wall, 1 if none does.  A Newton
         step limited to it (:attr:`close_first`) ends on the wall instead of overshooting
-        it, and the next one sees the contact; a load step's prediction limited to it (a
-        hook the path engine does not call yet) ends where the first contact closes."""
+        it, and the next one sees the contact; the load stepping's contact events
+        (:meth:`event_fraction`) use it for the closing points."""
         g0 = self.surface_gaps(self.node_positions(U), self.frames(U))
         U1 = U + dU
         g1 = self.surface_gaps(self.node_positions(U1), self.frames(U1))
