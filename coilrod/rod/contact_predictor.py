@@ -103,12 +103,13 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     active = problem.kappa * g[1:] < lam0
     x, left = u.copy(), 1.0
     switched = set()
+    g0 = g[1:]
     for _ in range(max_events):
         r = rate(active)
         if r is None:
             return None
         d = left * ds * r
-        g0, g1 = gaps(x), gaps(x + d)
+        g1 = gaps(x + d)
         l0, l1 = x.reshape(n, nv)[1:, 9:], (x + d).reshape(n, nv)[1:, 9:]
         with np.errstate(all="ignore"):
             closing = ~active & (g1 < 0.0) & (g1 < g0)
@@ -120,6 +121,7 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
             return x + d
         x = x + f * d
         left *= 1.0 - f
+        g0 = g0 + f * (g1 - g0)  # the gaps at the event, to the order of the prediction
         at = (f_close <= f) | (f_rel <= f)
         for p in zip(*np.nonzero(at), strict=True):
             key = (p, round(left, 12))
