@@ -263,9 +263,12 @@ class _Tracker:
         curvature term included, which near a fold can carry the prediction across it -- is
         within :meth:`change_limit` (first by the linear part ``|rate| h``, then by shortening
         until the prediction itself complies); a step reaching ``target`` ends exactly there.
-        A model with contact (an ``event_fraction(U, dU)`` method) ends the step where its
-        contact set first changes (:mod:`coilrod.rod.contact_predictor`), and the step after
-        an accepted one ended so resumes the length it had before.
+        A model with contact (an ``event_fraction(U, dU)`` method) predicts a step whose
+        contact set changes by its ``piecewise_prediction(u, scale, ds)`` (the linearised
+        complementarity problem; the trapezoid test of :meth:`smooth` does not apply across
+        the change), else ends the step where the set first changes and resumes the step's
+        length after it (:mod:`coilrod.rod.contact_predictor`); the step after a change
+        predicts without the Hermite term (``prev`` lies on the other side of the kink).
         """
         event, self.event = self.event, None
         crossed, self.crossing = self.crossing, None
