@@ -348,6 +348,7 @@ def insert(
         if bar is not None:
             bar.update(1)
         prev = (float(lengths[0]), field0)
+        layout, band_cache = (problem.size, problem.nc), problem._band_cache
         for k in range(1, lengths.size):
             target = (float(lengths[k]), schedule(k, float(lengths[k])))
 
@@ -355,6 +356,12 @@ def insert(
                 free = free_part(rod, length)
                 mesh = make_mesh(free, nodes)
                 trial = build_spatial_problem(free, field, mesh, clamp, R0, tol, obstacles=[vessel])
+                # a plain Newton from the carried (penetrating) shape: Fischer-Burmeister is
+                # the more robust complementarity function there (the min function cycles
+                # between contact sets; the load stepping's predictions do not need it)
+                trial.ncp = "fb"
+                if (trial.size, trial.nc) == layout:
+                    trial._band_cache = band_cache  # the same layout's templates
                 return free, trial
 
             problem, u, free, stable, solves = _step(build, problem, u, prev, target, k)

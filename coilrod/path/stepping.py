@@ -181,6 +181,8 @@ class _Tracker:
         self.steps = 0
         self.cuts = 0
         self.last_change = None  # change of the state in the last accepted step
+        self.event = None  # (point, step) of a trial step ended at a contact event
+        self.crossing = None  # the start of a trial step predicted across contact events
         #: Corrections below this (1e-3 of the model's max_correction) never signal a jump.
         limit = self.P.max_correction
         self.negligible = 1e-3 * limit if np.isfinite(limit) else 0.0
@@ -234,7 +236,7 @@ class _Tracker:
         third-order error on a smooth path).  A state on another branch -- reached over a
         fold, where the two rates differ in sign or size -- fails it even when it lies close
         to the prediction and is as stable as ``cur``."""
-        if cur.rate is None or rate is None:
+        if cur.rate is None or rate is None or self.crossing is cur:
             return True
         dist = self.P.distance
         change = u - cur.u
@@ -261,7 +263,66 @@ class _Tracker:
         curvature term included, which near a fold can carry the prediction across it -- is
         within :meth:`change_limit` (first by the linear part ``|rate| h``, then by shortening
         until the prediction itself complies); a step reaching ``target`` ends exactly there.
+        A model with contact (an ``event_fraction(U, dU)`` method) predicts a step whose
+        contact set changes by its ``piecewise_prediction(u, scale, ds)`` (the linearised
+        complementarity problem; the trapezoid test of :meth:`smooth` does not apply across
+        the change), else ends the step where the set first changes and resumes the step's
+        length after it (:mod:`coilrod.rod.contact_predictor`); the step after a change
+        predicts without the Hermite term (``prev`` lies on the other side of the kink).
         """
+        event, self.event = self.event, None
+        crossed, self.crossing = self.crossing, None
+        if event is not None and event[0] is prev and abs(event[1]) > abs(h):
+            h = float(np.copysign(abs(event[1]), h))  # the step ended at an event: resume
+        if prev is not None and (crossed is prev or (event is not None and event[0] is prev)):
+            prev = None  # the last step met a change of the contact set: no Hermite term
+        h1, s1, guess = self._trial(cur, prev, h, target)
+        hook = getattr(self.model, "event_fraction", None)
+        if hook is None:
+            return h1, s1, guess
+        across = getattr(self.model, "piecewise_prediction", None)
+        if across is not None and cur.rate is not None:
+            frac = float(hook(cur.u[None], (guess - cur.u)[None])[0])
+            if frac < 1.0:
+                crossed = across(cur.u, cur.scale, h1)
+                limit = self.change_limit()
+                if crossed is not None and float(
+                    self.P.distance((crossed - cur.u)[None])[0]
+                ) <= limit * (1.0 + 1e-9):
+                    self.crossing = cur  # a step across contact events: not smooth
+                    return h1, s1, crossed
+        start = h1
+        for _ in range(4):  # the Hermite term makes the prediction nonlinear in the step
+            frac = float(hook(cur.u[None], (guess - cur.u)[None])[0])
+            if not frac < 1.0:
+                break
+            h1 *= max(frac, 1e-3)
+            s1 = cur.scale + h1
+            guess = self.predict(cur, prev, s1)
+        if h1 != start:
+            self.event = (cur, h)
+        return h1, s1, guess
+
+    def polish(self, res) -> None:
+        """One more Newton iteration on a converged requested state of a model with contact
+        (an ``event_fraction`` method) whose error is not well below the tolerance: its
+        piecewise-linear complementarity rows let Newton stop just under it, and the
+        requested states are what the caller reports (forces that balance to round-off)."""
+        if getattr(self.model, "event_fraction", None) is None or not res.ok[0]:
+            return
+        if res.error[0] <= 1e-3 or res.lin is None or res.lin.tangent is None:
+            return
+        with np.errstate(all="ignore"):
+            du = self.P.solve(res.lin, -np.asarray(res.lin.residual))
+            u = res.u + du
+            lin = self.P.linearize(u, np.asarray(res.lin.scale))
+            err = np.asarray(self.P.error(lin, du), float)
+        if np.all(np.isfinite(err)) and bool(np.all(lin.ok)) and err[0] < res.error[0]:
+            res.u, res.lin, res.error = u, lin, err
+            res.iterations = res.iterations + 1
+
+    def _trial(self, cur: PathPoint, prev, h: float, target: float):
+        """:meth:`trial` without the contact events."""
         limit = self.change_limit()
         bounded = cur.rate is not None and np.isfinite(limit)
         if bounded:
@@ -332,6 +393,8 @@ class _Tracker:
                 return cur, prev, iters
             h, s1, guess = self.trial(cur, prev, h, target)
             res = newton(self.P, guess[None], np.array([s1]), opts.newton)
+            if s1 == target:
+                self.polish(res)
             iters += int(res.iterations[0])
             ok = bool(res.ok[0])
             residual = float(res.error[0])

@@ -334,17 +334,17 @@ class SpatialRod(DiscreteRod):
         return lim
 
     #: Newton steps end where the first open contact point would close (see
-    #: :meth:`closing_fraction`).  Off by default: it halves the iterations of a tip contact
-    #: at 32 segments but costs two gap evaluations per step, and an insertion through a
-    #: bend is slower with it (benchmarks/bench_contact.py).
+    #: :meth:`closing_fraction`).  Off by default: the load stepping already predicts across
+    #: contact events (:meth:`event_fraction`, :meth:`piecewise_prediction`), and it costs two
+    #: gap evaluations per Newton step (an insertion through a bend was slower with it).
     close_first = False
 
     def closing_fraction(self, U, dU):
         """Fraction (k,) of each change dU (k, size) of states U (k, size) at which the first
         open contact point (surface gap > 1e-6 L) reaches the wall, 1 if none does.  A Newton
         step limited to it (:attr:`close_first`) ends on the wall instead of overshooting
-        it, and the next one sees the contact; a load step's prediction limited to it (a
-        hook the path engine does not call yet) ends where the first contact closes."""
+        it, and the next one sees the contact; the load stepping's contact events
+        (:meth:`event_fraction`) use it for the closing points."""
         g0 = self.surface_gaps(self.node_positions(U), self.frames(U))
         U1 = U + dU
         g1 = self.surface_gaps(self.node_positions(U1), self.frames(U1))
@@ -352,6 +352,23 @@ class SpatialRod(DiscreteRod):
         with np.errstate(all="ignore"):
             frac = np.where(closing, g0 / (g0 - g1), 1.0)
         return frac.min(axis=(1, 2))
+
+    def event_fraction(self, U, dU):
+        """Fraction (k,) of each change dU (k, size) of states U (k, size) at which the
+        contact set first changes (a point closes or an active one releases), 1 if it does
+        not: the path engine ends a load step's prediction there
+        (:mod:`coilrod.rod.contact_predictor`)."""
+        from .contact_predictor import event_fraction
+
+        return event_fraction(self, U, dU)
+
+    def piecewise_prediction(self, u, scale, ds):
+        """Prediction (size,) of the state at ``scale + ds`` from the converged state ``u``
+        (size,) across changes of the contact set, or None
+        (:func:`coilrod.rod.contact_predictor.piecewise_prediction`)."""
+        from .contact_predictor import piecewise_prediction
+
+        return piecewise_prediction(self, u, scale, ds)
 
     def distance(self, du):
         """Largest change of a node rotation vector, rad, shape (k,)."""
@@ -368,8 +385,10 @@ class SpatialRod(DiscreteRod):
     #: a contact problem sets 100 / h_min^2).
     kappa = 1.0
 
-    #: Complementarity function: "min" (min(lam, kappa g)) or "fb" (Fischer-Burmeister).
-    ncp = "fb"
+    #: Complementarity function: "min" (min(lam, kappa g); the default: a Newton step drops a
+    #: point whose multiplier went negative at once, where Fischer-Burmeister mixes the two
+    #: rows and releases it over several iterations) or "fb" (Fischer-Burmeister).
+    ncp = "min"
 
     def _ncp(self, lam: np.ndarray, gaps: np.ndarray):
         """Complementarity function of (lam, kappa g) and its partial derivatives in lam and

@@ -1,0 +1,139 @@
+"""Load steps that end where the contact set changes (the spatial rod's contact predictor).
+
+A contact state is a piecewise-smooth function of the load: between changes of the active set
+(a contact point closing on the wall, or an active one whose force per length falls to zero
+and releases) the path is smooth and the path tangent of the active set predicts it to second
+order; across a change the tangent is wrong at first order (it lets the rod penetrate the
+wall, or keeps pulling it onto the wall), and semi-smooth Newton then spends iterations
+finding the new set point by point.  :func:`event_fraction` gives the fraction of a predicted
+change at which the first such event happens; where it is below 1, the path engine's trial
+step (:meth:`coilrod.path.stepping._Tracker.trial`) predicts with
+:func:`piecewise_prediction` (the linearised complementarity problem along the step: the
+active set's tangent, switched at each event), or, if that cannot be formed, ends the step
+at the event -- so that every corrector starts from a prediction with the right contact set.
+(A primal-dual active-set solve of the same linearised problem at the step's end was tried:
+it cycles on the flat support from 64 segments.)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["event_fraction", "piecewise_prediction"]
+
+#: An active multiplier below this fraction of the largest one is taken as already released
+#: (its sign change is left to Newton: ending a step there would stall the stepping).
+_RELEASE_FLOOR = 1e-6
+
+
+def event_fraction(problem, U: np.ndarray, dU: np.ndarray) -> np.ndarray:
+    """Fraction (k,) of the changes ``dU`` (k, size) of states ``U`` (k, size) at which the
+    first contact event of the spatial rod ``problem`` happens, 1 if none does: an open
+    contact point closing (:meth:`~coilrod.rod.spatial.SpatialRod.closing_fraction`,
+    evaluated on the changed state) or an active multiplier (contact force per length)
+    reaching zero (linear in ``dU``)."""
+    U, dU = np.atleast_2d(U), np.atleast_2d(dU)
+    k = U.shape[0]
+    if not problem.nc or problem.uniform:
+        return np.ones(k)
+    frac = problem.closing_fraction(U, dU)
+    lam = U.reshape(k, problem.n, problem.nv)[:, 1:, 9:]
+    d_lam = dU.reshape(k, problem.n, problem.nv)[:, 1:, 9:]
+    floor = _RELEASE_FLOOR * np.abs(lam).max(axis=(1, 2), keepdims=True)
+    releasing = (lam > floor) & (lam + d_lam < 0.0)
+    with np.errstate(all="ignore"):
+        release = np.where(releasing, lam / -d_lam, 1.0)
+    return np.minimum(frac, release.min(axis=(1, 2)))
+
+
+def _contact_entries(problem):
+    """Band-storage indices (rows, cols), each (n - 1, nc, 6 + nc), of the contact rows of the
+    free nodes: their entries in the node's position, rotation and multiplier columns."""
+    n, nv, nc = problem.n, problem.nv, problem.nc
+    j = np.arange(1, n)[:, None, None]
+    rows = nv * j + 9 + np.arange(nc)[None, :, None]
+    offsets = np.concatenate([np.arange(6), 9 + np.arange(nc)])
+    cols = nv * j + offsets[None, None, :]
+    rows, cols = np.broadcast_arrays(rows, cols)
+    return problem.kl + problem.ku + rows - cols, cols
+
+
+def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_events=None):
+    """Prediction of the state at ``scale + ds`` from the converged state ``u`` (size,) of the
+    spatial rod ``problem``, following the path tangent of the active contact set and
+    switching the set where a point closes or an active one releases (the linearised
+    complementarity problem along the step: a piecewise-linear path, one new tangent per
+    event, all at the tangent matrix of ``u``).  Returns the predicted state (size,), or None
+    when it cannot be formed (a singular tangent, more than ``max_events`` switches)."""
+    from .planar import RodTangent
+
+    n, nv, nc = problem.n, problem.nv, problem.nc
+    if max_events is None:
+        max_events = 2 * (n - 1) * nc + 4
+    old = problem.__dict__.get("ncp")
+    problem.ncp = "min"  # contact rows: the gradient of the gap (active) or the multiplier
+    try:
+        lin = problem.linearize(u[None], np.array([scale]))
+        V = u.reshape(n, nv).copy()
+        g = problem.surface_gaps(V[None, :, 0:3], problem.frames(u[None]))[0]
+        V[:, 9:] = np.maximum(V[:, 9:], problem.kappa * np.abs(g) + 1.0)
+        every = problem.linearize(V.reshape(1, -1), np.array([scale]))  # all rows active
+    finally:
+        if old is None:
+            del problem.ncp
+        else:
+            problem.ncp = old
+    if not (bool(lin.ok[0]) and bool(every.ok[0])):
+        return None
+    bi, ci = _contact_entries(problem)
+    base = lin.tangent.parts
+    active_rows = every.tangent.parts[bi, ci]  # (n-1, nc, 6 + nc)
+    inactive_rows = np.zeros_like(active_rows)
+    inactive_rows[..., 6:] = np.eye(nc)
+    rhs = -np.asarray(lin.load_rate, float)  # (1, size)
+    kl, ku = problem.kl, problem.ku
+
+    def rate(active):
+        ab = base.copy(order="F")
+        ab[bi, ci] = np.where(active[..., None], active_rows, inactive_rows)
+        with np.errstate(all="ignore"):
+            r = RodTangent(1, problem.size, False, ab, rhs, kl, ku).solve(rhs)[0]
+        return r if np.all(np.isfinite(r)) else None
+
+    def gaps(x):
+        return problem.surface_gaps(x.reshape(1, n, nv)[:, :, 0:3], problem.frames(x[None]))[0, 1:]
+
+    lam0 = u.reshape(n, nv)[1:, 9:]
+    active = problem.kappa * g[1:] < lam0
+    x, left = u.copy(), 1.0
+    switched = set()
+    g0 = g[1:]
+    for _ in range(max_events):
+        r = rate(active)
+        if r is None:
+            return None
+        d = left * ds * r
+        g1 = gaps(x + d)
+        l0, l1 = x.reshape(n, nv)[1:, 9:], (x + d).reshape(n, nv)[1:, 9:]
+        with np.errstate(all="ignore"):
+            closing = ~active & (g1 < 0.0) & (g1 < g0)
+            f_close = np.where(closing, np.clip(g0 / (g0 - g1), 0.0, 1.0), np.inf)
+            releasing = active & (l1 < 0.0) & (l1 < l0)
+            f_rel = np.where(releasing, np.clip(l0 / (l0 - l1), 0.0, 1.0), np.inf)
+        f = min(float(f_close.min()), float(f_rel.min()))
+        if not f < 1.0:
+            return x + d
+        x = x + f * d
+        left *= 1.0 - f
+        g0 = g0 + f * (g1 - g0)  # the gaps at the event, to the order of the prediction
+        at = (f_close <= f) | (f_rel <= f)
+        for p in zip(*np.nonzero(at), strict=True):
+            key = (p, round(left, 12))
+            if key in switched:  # back and forth at one scale: degenerate, give up
+                return None
+            switched.add(key)
+        active = active ^ at
+        V = x.reshape(n, nv)
+        V[1:, 9:] = np.where((f_rel <= f), 0.0, V[1:, 9:])
+        x = V.ravel()
+    return None
