@@ -27,7 +27,7 @@ def test_cube_gap_is_exact_signed_distance_at_faces_edges_and_corners():
     # closed form of a cube's signed distance: the sign near edges and corners needs the
     # pseudo-normals, the magnitude the exact closest point on every triangle
     h = 1e-3
-    cube = MeshVessel(*_box(h))
+    cube = MeshVessel(*_box(h), smooth=False)
     assert cube.watertight
     assert cube.volume == pytest.approx(8 * h**3)
     rng = np.random.default_rng(3)
@@ -42,7 +42,7 @@ def test_cube_gap_is_exact_signed_distance_at_faces_edges_and_corners():
 def test_gradient_and_hessian_are_the_gap_derivatives():
     # central differences of the gap and of its gradient (edge, vertex and face regions)
     h = 1e-3
-    cube = MeshVessel(*_box(h))
+    cube = MeshVessel(*_box(h), smooth=False)
     p = np.array(
         [[1.4 * h, 1.3 * h, 0.2 * h], [1.4 * h, 1.3 * h, 1.2 * h], [0.3 * h, 0.1 * h, 0.2 * h]]
     )
@@ -76,7 +76,7 @@ def test_tessellated_bend_converges_to_the_analytic_vessel_at_second_order():
     ref = v.evaluate(p, 1)
     errs, nerrs = [], []
     for n in (8, 16):
-        ev = MeshVessel(*tessellate(v, n)).evaluate(p, 1)
+        ev = MeshVessel(*tessellate(v, n), smooth=False).evaluate(p, 1)
         errs.append(np.abs(ev.gap - ref.gap).max())
         nerrs.append(np.abs(ev.gradient - ref.gradient).max())
         # (10% more: the quads between rings are twisted on the bend; their diagonals sag more)
