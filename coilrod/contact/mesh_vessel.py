@@ -160,7 +160,12 @@ class MeshVessel(Obstacle):
         self._support = SUPPORT * longest
         diag = float(np.linalg.norm(np.ptp(self.vertices, axis=0)))
         ball = _ball_radii(self.vertices, self._vertex_normals, self._vtree, diag)
-        self._depth = np.minimum(ball, 50.0 * self._support)
+        self._bases = _tangent_bases(self._vertex_normals)
+        self._curv = _curvatures(self.vertices, self._vertex_normals, self._bases, edges)
+        kmax = np.max(np.linalg.eigvalsh(self._curv), axis=1)
+        with np.errstate(divide="ignore"):
+            radius = np.where(kmax > 0, 0.9 / kmax, np.inf)
+        self._depth = np.minimum(np.minimum(ball, radius), 50.0 * self._support)
         self._reach = float(np.max(np.hypot(self._support, self._depth)))
 
     def _normals(self, mesh) -> None:
@@ -261,6 +266,8 @@ class MeshVessel(Obstacle):
             self._vertex_normals,
             self._support,
             self._depth,
+            self._bases,
+            self._curv,
             self._vtree,
             self._reach,
             order,
@@ -373,11 +380,12 @@ class MeshVessel(Obstacle):
         segs[:, :2] = xy
         ax.plot(segs[:, :, 0].ravel(), segs[:, :, 1].ravel(), **kwargs)
 
+
 # -- the smoothed gap -------------------------------------------------------------------------
 #: Support of a vertex's weight along its tangent plane, in its longest incident edge.
 SUPPORT = 1.5
 #: The normal cut-off keeps a vertex's full weight up to this fraction of its ball radius.
-PLATEAU = 0.6
+PLATEAU = 0.7
 #: The smoothed gap is used alone where the weights sum to more than this (the exact
 #: polyhedral gap alone below half of it: near the lumen's medial axis).
 WEIGHT_FULL = 0.3
@@ -390,6 +398,39 @@ def _smoothstep(t):
     ds = -30.0 * t**2 * (1.0 - t) ** 2
     d2s = -60.0 * t * (1.0 - t) * (1.0 - 2.0 * t)
     return s, ds, d2s
+
+
+def _tangent_bases(normals):
+    """Two unit tangents (n, 3, 2) completing each unit normal (n, 3) to an orthonormal frame."""
+    axis = np.zeros_like(normals)
+    axis[np.arange(len(normals)), np.argmin(np.abs(normals), axis=1)] = 1.0
+    t1 = np.cross(normals, axis)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(normals, t1)
+    return np.stack([t1, t2], axis=2)
+
+
+def _curvatures(vertices, normals, bases, edges):
+    """Curvature tensors (n, 2, 2) in the tangent bases, 1/m, > 0 where the wall curves
+    around the lumen (a tube's circumference: 1/r): least-squares fit of the heights of each
+    vertex's neighbours above its tangent plane, ``z = -a^T K a / 2`` (``a`` their tangent
+    coordinates)."""
+    nv = len(vertices)
+    both = np.concatenate([edges, edges[:, ::-1]])
+    k, j = both[:, 0], both[:, 1]
+    e = vertices[j] - vertices[k]
+    z = np.einsum("ij,ij->i", e, normals[k])
+    a = np.einsum("ij,ijl->il", e, bases[k])
+    rows = np.stack([-0.5 * a[:, 0] ** 2, -a[:, 0] * a[:, 1], -0.5 * a[:, 1] ** 2], axis=1)
+    N = np.zeros((nv, 3, 3))
+    b = np.zeros((nv, 3))
+    np.add.at(N, k, rows[:, :, None] * rows[:, None, :])
+    np.add.at(b, k, rows * z[:, None])
+    ridge = 1e-9 * np.trace(N, axis1=1, axis2=2)[:, None, None] * np.eye(3)
+    c = np.linalg.solve(N + ridge + 1e-300 * np.eye(3), b[:, :, None])[:, :, 0]
+    K = np.empty((nv, 2, 2))
+    K[:, 0, 0], K[:, 0, 1], K[:, 1, 0], K[:, 1, 1] = c[:, 0], c[:, 1], c[:, 1], c[:, 2]
+    return K
 
 
 def _ball_radii(vertices, normals, tree, start):
@@ -415,7 +456,7 @@ def _ball_radii(vertices, normals, tree, start):
     return t
 
 
-def _smooth_sums(points, v, n, h, depth, tree, reach, order):
+def _smooth_sums(points, v, n, h, depth, bases, curv, tree, reach, order):
     """Weighted plane distances of the points (n_p, 3) to the vertices' tangent planes.
 
     Returns W (n_p,), A = sum w d (n_p,) and, with order >= 1, their gradients (n_p, 3) and
@@ -424,7 +465,11 @@ def _smooth_sums(points, v, n, h, depth, tree, reach, order):
     (v_k - p) . n_k`` its plane's distance (> 0 inside), ``P_k`` the projection on its tangent
     plane, ``phi`` Wendland's C2 function of compact support and ``psi`` a C2 step from 1 (at
     ``|d_k| <= PLATEAU D_k``) to 0 (at ``|d_k| >= D_k``, ``D_k`` the vertex's inscribed ball
-    radius: the opposite wall's vertices do not count).
+    radius: the opposite wall's vertices do not count).  The plane distance is corrected for
+    the wall's curvature ``K_k`` at the vertex (its distance from the offset of the osculating
+    quadric): ``c_k = d_k - a^T M a / 2``, ``a`` the tangent coordinates of ``p - v_k``,
+    ``M = K_k (I - d_k K_k)^-1``; on a circle of radius r this is exact to O(r theta^4).
+    The gap is ``sum w_k c_k / sum w_k``.
     """
     npt = len(points)
     cand = tree.query_ball_point(points, reach)
@@ -451,8 +496,20 @@ def _smooth_sums(points, v, n, h, depth, tree, reach, order):
     phi = (1.0 - rho) ** 4 * (4.0 * rho + 1.0)
     psi, dpsi, d2psi = _smoothstep((x - PLATEAU) / (1.0 - PLATEAU))
     w = phi * psi
+    # curvature correction f = a^T M a / 2 (M = K (I - d K)^-1, 2 x 2 in the tangent basis)
+    T = bases[k]
+    Kk = curv[k]
+    a = np.einsum("ij,ijl->il", e, T)
+    A = np.eye(2) - d[:, None, None] * Kk
+    det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
+    Ainv = np.empty_like(A)
+    Ainv[:, 0, 0], Ainv[:, 1, 1] = A[:, 1, 1] / det, A[:, 0, 0] / det
+    Ainv[:, 0, 1], Ainv[:, 1, 0] = -A[:, 0, 1] / det, -A[:, 1, 0] / det
+    M = Kk @ Ainv
+    Ma = np.einsum("ilm,im->il", M, a)
+    c = d - 0.5 * np.einsum("il,il->i", a, Ma)
     np.add.at(out_W, i, w)
-    np.add.at(out_A, i, w * d)
+    np.add.at(out_A, i, w * c)
     if order == 0:
         return out_W, out_A, gW, gA, hW, hA
     # phi's gradient -20 (1 - rho)^3 e_t / h^2; psi's along -sign(d) n / D (x = |d| / D)
@@ -460,8 +517,11 @@ def _smooth_sums(points, v, n, h, depth, tree, reach, order):
     sx = np.sign(d) / (depth[k] * (1.0 - PLATEAU))
     gpsi = (-dpsi * sx)[:, None] * nk
     gw = psi[:, None] * gphi + phi[:, None] * gpsi
+    M2a = np.einsum("ilm,im->il", M, Ma)
+    aM2a = np.einsum("il,il->i", a, M2a)
+    gc = -nk - np.einsum("ijl,il->ij", T, Ma) + (0.5 * aM2a)[:, None] * nk
     np.add.at(gW, i, gw)
-    np.add.at(gA, i, gw * d[:, None] - w[:, None] * nk)
+    np.add.at(gA, i, gw * c[:, None] + w[:, None] * gc)
     if order == 1:
         return out_W, out_A, gW, gA, hW, hA
     eye = np.eye(3)
@@ -480,11 +540,22 @@ def _smooth_sums(points, v, n, h, depth, tree, reach, order):
         + gpsi[:, :, None] * gphi[:, None, :]
         + phi[:, None, None] * hpsi
     )
+    TM2a = np.einsum("ijl,il->ij", T, M2a)
+    aM3a = np.einsum("il,il->i", M2a, Ma)  # a^T M^3 a (M symmetric up to the fit's rounding)
+    hf = (
+        np.einsum("ijl,ilm,ikm->ijk", T, M, T)
+        - TM2a[:, :, None] * nk[:, None, :]
+        - nk[:, :, None] * TM2a[:, None, :]
+        + aM3a[:, None, None] * nk[:, :, None] * nk[:, None, :]
+    )
     np.add.at(hW, i, hw)
     np.add.at(
         hA,
         i,
-        hw * d[:, None, None] - gw[:, :, None] * nk[:, None, :] - nk[:, :, None] * gw[:, None, :],
+        hw * c[:, None, None]
+        + gw[:, :, None] * gc[:, None, :]
+        + gc[:, :, None] * gw[:, None, :]
+        - w[:, None, None] * hf,
     )
     return out_W, out_A, gW, gA, hW, hA
 
