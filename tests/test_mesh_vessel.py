@@ -401,3 +401,25 @@ def test_contact_modules_import_no_circle():
     for m in graph:
         visit(m, [])
     assert "bend" in (Vessel.bend.__doc__ or "")
+
+
+def test_insertion_bad_input_with_a_mesh():
+    # a clamp outside the phantom's lumen, no clamp at all (a mesh has no centreline to put
+    # it on), a rod thicker than a mesh tube: one named error each, before any solve
+    import coils
+
+    import coilrod
+    from coilrod import presets
+
+    rod = presets.seed_rod(presets.M1())  # 2 mm
+    ph = MeshVessel.from_file(phantom_path())
+    field = coils.UniformField(B=(0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match=r"the clamp \(introducer\) at .* outside the vessel mesh"):
+        coilrod.insert(rod, ph, [0.01], field, clamp_position=(0.002, 0.005, 0.0),
+                       clamp_rotation=np.eye(3))  # fmt: skip
+    with pytest.raises(ValueError, match="give clamp_position and clamp_rotation"):
+        coilrod.insert(rod, ph, [0.01], field)
+    thin = MeshVessel(*tessellate(Vessel.straight(0.1, 0.8e-3), 12))
+    with pytest.raises(ValueError, match="thicker than the vessel"):
+        coilrod.insert(rod, thin, [0.01], field, clamp_position=(0.01, 0.0, 0.0),
+                       clamp_rotation=np.eye(3))  # fmt: skip
