@@ -406,9 +406,8 @@ def test_contact_modules_import_no_circle():
 def test_insertion_bad_input_with_a_mesh():
     # a clamp outside the phantom's lumen, no clamp at all (a mesh has no centreline to put
     # it on), a rod thicker than a mesh tube: one named error each, before any solve
-    import coils
-
     import coilrod
+    import coils
     from coilrod import presets
 
     rod = presets.seed_rod(presets.M1())  # 2 mm
