@@ -27,7 +27,7 @@ def test_cube_gap_is_exact_signed_distance_at_faces_edges_and_corners():
     # closed form of a cube's signed distance: the sign near edges and corners needs the
     # pseudo-normals, the magnitude the exact closest point on every triangle
     h = 1e-3
-    cube = MeshVessel(*_box(h))
+    cube = MeshVessel(*_box(h), smooth=False)
     assert cube.watertight
     assert cube.volume == pytest.approx(8 * h**3)
     rng = np.random.default_rng(3)
@@ -42,7 +42,7 @@ def test_cube_gap_is_exact_signed_distance_at_faces_edges_and_corners():
 def test_gradient_and_hessian_are_the_gap_derivatives():
     # central differences of the gap and of its gradient (edge, vertex and face regions)
     h = 1e-3
-    cube = MeshVessel(*_box(h))
+    cube = MeshVessel(*_box(h), smooth=False)
     p = np.array(
         [[1.4 * h, 1.3 * h, 0.2 * h], [1.4 * h, 1.3 * h, 1.2 * h], [0.3 * h, 0.1 * h, 0.2 * h]]
     )
@@ -76,13 +76,135 @@ def test_tessellated_bend_converges_to_the_analytic_vessel_at_second_order():
     ref = v.evaluate(p, 1)
     errs, nerrs = [], []
     for n in (8, 16):
-        ev = MeshVessel(*tessellate(v, n)).evaluate(p, 1)
+        ev = MeshVessel(*tessellate(v, n), smooth=False).evaluate(p, 1)
         errs.append(np.abs(ev.gap - ref.gap).max())
         nerrs.append(np.abs(ev.gradient - ref.gradient).max())
         # (10% more: the quads between rings are twisted on the bend; their diagonals sag more)
         assert errs[-1] <= 2e-3 * (1 - math.cos(math.pi / n)) * 1.15
     assert math.log2(errs[0] / errs[1]) > 1.8
     assert math.log2(nerrs[0] / nerrs[1]) > 0.8
+
+
+def _ring(v, s, depth, n):
+    """n points on the circle at ``depth`` inside the wall of vessel v around its arc length s."""
+    x, t = v.position(s)[0], v.tangent(s)[0]
+    a = np.cross(t, [0.0, 0.0, 1.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(t, a)
+    th = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
+    r = v.radius_at(s)[0] - depth
+    return x + r * (np.cos(th)[:, None] * a + np.sin(th)[:, None] * b)
+
+
+def test_smoothed_gap_derivatives_are_consistent_and_continuous_across_edges():
+    # central differences of the smoothed gap and its gradient, at depths from outside the wall
+    # to 0.75 of the 2 mm lumen's radius (nearer the axis it blends into the polyhedral gap)
+    v = Vessel.bend(0.02, math.pi / 2, 2e-3, 0.01, 0.01)
+    verts, faces = tessellate(v, 12)
+    mesh = MeshVessel(verts, faces)
+    rng = np.random.default_rng(5)
+    p = np.vstack(
+        [
+            _ring(v, np.array([s]), dep, 9)
+            for s, dep in zip(
+                rng.uniform(0.005, v.length - 0.005, 8),
+                (-0.4e-3, 0.0, 0.3e-3, 0.6e-3, 0.9e-3, 1.1e-3, 1.3e-3, 1.5e-3),
+                strict=True,
+            )
+        ]
+    )
+    ev = mesh.evaluate(p, 2)
+    step = 1e-8
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = step
+        fd = (mesh.gap(p + e) - mesh.gap(p - e)) / (2 * step)
+        np.testing.assert_allclose(fd, ev.gradient[:, k], atol=1e-5)
+        fdg = (mesh.gap_gradient(p + e) - mesh.gap_gradient(p - e)) / (2 * step)
+        np.testing.assert_allclose(fdg, ev.hessian[:, :, k], atol=1e-5 * np.abs(ev.hessian).max())
+    # round the lumen 1 mm inside the wall (crossing every edge of a ring): the smoothed
+    # normal turns by its curvature times the 1.6 um spacing; the polyhedron's jumps by the
+    # angle between faces (30 degrees)
+    ring = _ring(v, np.array([0.015]), 1e-3, 4000)
+    jump = np.linalg.norm(np.diff(mesh.gap_gradient(ring), axis=0), axis=1).max()
+    exact = MeshVessel(verts, faces, smooth=False)
+    jump_exact = np.linalg.norm(np.diff(exact.gap_gradient(ring), axis=0), axis=1).max()
+    assert jump < 1e-2 < 0.3 < jump_exact
+
+
+def test_smoothed_gap_converges_to_the_analytic_bend():
+    # 16 -> 32 vertices per ring: gap errors within 1 mm of the wall fall by more than 2^3
+    # (curvature-corrected tangent planes), the normal's by more than 2^2
+    v = Vessel.bend(0.02, math.pi / 2, 2e-3, 0.01, 0.01)
+    p = _bend_samples(v, 150)
+    ref = v.evaluate(p, 1)
+    band = (ref.gap > -0.3e-3) & (ref.gap < 1e-3)
+    assert band.sum() > 40
+    errs, nerrs = [], []
+    for n in (16, 32):
+        ev = MeshVessel(*tessellate(v, n)).evaluate(p[band], 1)
+        errs.append(np.abs(ev.gap - ref.gap[band]).max())
+        nerrs.append(np.abs(ev.gradient - ref.gradient[band]).max())
+    assert errs[0] < 0.02 * 2e-3
+    assert math.log2(errs[0] / errs[1]) > 3.0
+    assert math.log2(nerrs[0] / nerrs[1]) > 2.0
+
+
+def _insert(vessel, rod, clamp_x=0.001, steps=3, b=5e-3):
+    import coilrod
+    import coils
+
+    def schedule(k, length):
+        a = np.pi / 2 * np.clip((length - 0.008) / 0.02, 0, 1)
+        return coils.UniformField(B=b * np.array([np.cos(a), np.sin(a), 0.0]))
+
+    return coilrod.insert(
+        rod,
+        vessel,
+        np.linspace(0.006, 0.03, steps),
+        schedule,
+        nodes=12,
+        clamp_position=(clamp_x, 0.0, 0.0),
+        clamp_rotation=np.eye(3),
+    )
+
+
+def test_insertion_in_tessellated_bends_converges_to_the_analytic_one():
+    # the 2 mm rod pressed round a 1.5 mm lumen's bend (contact 1 mm from the wall's axis):
+    # with the polyhedral gap the contact Newton does not converge (its gradient jumps between
+    # faces); with the smoothed gap the tip and the wall force tend to the analytic vessel's
+    # at second order (16 -> 32 vertices per ring; benchmarks/bench_mesh_vessel.py)
+    from coilrod import presets
+
+    rod = presets.seed_rod(presets.M1())
+    v = Vessel.bend(0.02, np.pi / 2, 1.5e-3, 0.005, 0.03)
+    ref = _insert(v, rod)
+    assert np.linalg.norm(ref.wall_force[-1]) > 1e-3  # it does touch
+    tip, force = [], []
+    for n in (16, 32):
+        ins = _insert(MeshVessel(*tessellate(v, n)), rod)
+        tip.append(np.linalg.norm(ins.tip - ref.tip, axis=1).max())
+        force.append(np.abs(ins.wall_force - ref.wall_force).max())
+    assert tip[0] < 2e-5  # 5e-4 of the rod's length
+    assert math.log2(tip[0] / tip[1]) > 1.6
+    assert math.log2(force[0] / force[1]) > 1.6
+
+
+def test_shipped_phantom_is_insertable():
+    # the 12-per-ring phantom against the analytic bend it was made from (gap error 76 um)
+    from coilrod import presets
+
+    rod = presets.seed_rod(presets.M1())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ph = MeshVessel.from_file(phantom_path())
+    v = Vessel.bend(0.02, math.pi / 2, 2e-3, 0.01, 0.01, ends="round")
+    ref, ins = (_insert(ob, rod, clamp_x=0.002, steps=2, b=8e-3) for ob in (v, ph))
+    assert np.linalg.norm(ref.wall_force[-1]) > 1e-3
+    assert np.linalg.norm(ins.tip - ref.tip, axis=1).max() < 0.1e-3
+    np.testing.assert_allclose(
+        ins.wall_force, ref.wall_force, atol=0.05 * np.abs(ref.wall_force).max()
+    )
 
 
 def test_branch_as_a_network_of_meshes_tends_to_the_analytic_branch():
@@ -279,3 +401,24 @@ def test_contact_modules_import_no_circle():
     for m in graph:
         visit(m, [])
     assert "bend" in (Vessel.bend.__doc__ or "")
+
+
+def test_insertion_bad_input_with_a_mesh():
+    # a clamp outside the phantom's lumen, no clamp at all (a mesh has no centreline to put
+    # it on), a rod thicker than a mesh tube: one named error each, before any solve
+    import coilrod
+    import coils
+    from coilrod import presets
+
+    rod = presets.seed_rod(presets.M1())  # 2 mm
+    ph = MeshVessel.from_file(phantom_path())
+    field = coils.UniformField(B=(0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match=r"the clamp \(introducer\) at .* outside the vessel mesh"):
+        coilrod.insert(rod, ph, [0.01], field, clamp_position=(0.002, 0.005, 0.0),
+                       clamp_rotation=np.eye(3))  # fmt: skip
+    with pytest.raises(ValueError, match="give clamp_position and clamp_rotation"):
+        coilrod.insert(rod, ph, [0.01], field)
+    thin = MeshVessel(*tessellate(Vessel.straight(0.1, 0.8e-3), 12))
+    with pytest.raises(ValueError, match="thicker than the vessel"):
+        coilrod.insert(rod, thin, [0.01], field, clamp_position=(0.01, 0.0, 0.0),
+                       clamp_rotation=np.eye(3))  # fmt: skip

@@ -475,3 +475,15 @@ def test_navigation_notebook():
             assert branch.gap(tip[None])[0] >= -1e-6 * L  # (it may touch the wall)
             assert main.gap(tip[None])[0] < 0
     assert all(v < 1e-3 for v in r["diff"].values())
+    # the shipped phantom: its robot lies in the analytic bend it was made from, up to the
+    # facets' sagitta (68 um), and follows the analytic insertion's tip path
+    bend = coilrod.Vessel.bend(0.02, np.pi / 2, 2e-3, 0.01, 0.01, ends="round")
+    sagitta = 2e-3 * (1 - np.cos(np.pi / 12))
+    ph, an = r["phantom"]["phantom"], r["phantom"]["analytic"]
+    assert r["phantom_gap_error"] < 1.2 * sagitta
+    assert bend.gap(np.asarray(ph["centerline"])).min() >= 1e-3 - 1.2 * sagitta  # 2 mm rod
+    assert np.linalg.norm(np.subtract(ph["tip"], an["tip"]), axis=1).max() < 1.5 * sagitta
+    assert max(an["wall_force"]) > 1e-3
+    np.testing.assert_allclose(
+        ph["wall_force"], an["wall_force"], atol=0.05 * max(an["wall_force"])
+    )

@@ -32,7 +32,7 @@ def _scene(obstacles, models=("rod",)):
 def test_example_scene_builds_the_bend_preset():
     scene = load_scene(parse.__file__.replace("parse.py", "examples/navigation_bend.toml"))
     (vessel,) = scene.rod_options["obstacles"]
-    ref = Vessel.bend(0.02, math.pi / 2, 3e-3, 0.042, 0.03, start=(-1e-3, 0, 0))
+    ref = Vessel.bend(0.02, math.pi / 2, 3e-3, 0.005, 0.03, start=(-1e-3, 0, 0))
     p = np.random.default_rng(0).uniform(-0.01, 0.06, (50, 3))
     np.testing.assert_allclose(vessel.gap(p), ref.gap(p), atol=1e-15)
 
@@ -58,6 +58,9 @@ def test_wall_mesh_and_friction(tmp_path):
     assert isinstance(mesh, MeshVessel)
     assert wall.gap([0.0, 0.0, 0.0])[0] == pytest.approx(8e-3)
     assert mesh.gap([0.02, 0.0, 0.0])[0] == pytest.approx(3e-3 * math.cos(math.pi / 12))
+    assert mesh.friction == 0.3  # obstacles.friction reaches the obstacles
+    if hasattr(wall, "with_friction"):
+        assert wall.friction == 0.3
 
 
 @pytest.mark.parametrize(

@@ -25,7 +25,7 @@ from importlib import resources
 
 import numpy as np
 
-from coils._validate import as_choice, as_count, as_points, nonnegative
+from coils._validate import as_bool, as_choice, as_count, as_points, nonnegative
 
 from .obstacle import Obstacle, _mm
 from .vessel import Vessel
@@ -89,13 +89,16 @@ class MeshVessel(Obstacle):
     _outside = "outside the vessel mesh"
     _immutable = True
 
-    def __init__(self, vertices, faces, *, source: str | None = None, friction=0.0):
+    def __init__(
+        self, vertices, faces, *, source: str | None = None, friction=0.0, smooth: bool = True
+    ):
         import trimesh
         from scipy.spatial import cKDTree
 
         label = "mesh" if source is None else f"mesh {source!r}"
         self.source = source
         self.friction = nonnegative(friction, "friction")
+        self.smooth = as_bool(smooth, "smooth")
         v = as_points(vertices, "vertices")
         f = np.asarray(faces)
         if f.ndim != 2 or f.shape[1] != 3 or not np.issubdtype(f.dtype, np.integer):
@@ -147,6 +150,23 @@ class MeshVessel(Obstacle):
         self._ctree = cKDTree(cen)
         self._vtree = cKDTree(self.vertices)
         self._rmax = float(np.max(np.linalg.norm(tris - cen[:, None], axis=2)))
+        # the smoothed gap's vertex supports: tangential (longest incident edge) and normal
+        # (the inscribed ball's radius, at most 50 supports)
+        edges = mesh.edges_unique
+        elen = np.linalg.norm(np.diff(self.vertices[edges], axis=1)[:, 0], axis=1)
+        longest = np.zeros(len(self.vertices))
+        np.maximum.at(longest, edges[:, 0], elen)
+        np.maximum.at(longest, edges[:, 1], elen)
+        self._support = SUPPORT * longest
+        diag = float(np.linalg.norm(np.ptp(self.vertices, axis=0)))
+        ball = _ball_radii(self.vertices, self._vertex_normals, self._vtree, diag)
+        self._bases = _tangent_bases(self._vertex_normals)
+        self._curv = _curvatures(self.vertices, self._vertex_normals, self._bases, edges)
+        kmax = np.max(np.linalg.eigvalsh(self._curv), axis=1)
+        with np.errstate(divide="ignore"):
+            radius = np.where(kmax > 0, 0.9 / kmax, np.inf)
+        self._depth = np.minimum(np.minimum(ball, radius), 50.0 * self._support)
+        self._reach = float(np.max(np.hypot(self._support, self._depth)))
 
     def _normals(self, mesh) -> None:
         """Angle-weighted pseudo-normals of faces, edges (by face and local index) and vertices."""
@@ -238,6 +258,63 @@ class MeshVessel(Obstacle):
         return cp[first], dist[first], idx[first]
 
     def _evaluate(self, points: np.ndarray, order: int):
+        if not self.smooth:
+            return self._evaluate_exact(points, order)
+        W, A, gW, gA, hW, hA = _smooth_sums(
+            points,
+            self.vertices,
+            self._vertex_normals,
+            self._support,
+            self._depth,
+            self._bases,
+            self._curv,
+            self._vtree,
+            self._reach,
+            order,
+        )
+        full = W >= WEIGHT_FULL
+        Ws = np.where(W > 0, W, 1.0)
+        gap = A / Ws
+        grad = hess = None
+        if order >= 1:
+            grad = (gA - gap[:, None] * gW) / Ws[:, None]
+        if order >= 2:
+            hess = (
+                hA
+                - gap[:, None, None] * hW
+                - grad[:, :, None] * gW[:, None, :]
+                - gW[:, :, None] * grad[:, None, :]
+            ) / Ws[:, None, None]
+        if np.all(full):
+            return gap, grad, hess
+        # near the medial axis: blend into the exact polyhedral gap as W falls to half
+        part = np.flatnonzero(~full)
+        fg, fgrad, fhess = self._evaluate_exact(points[part], order)
+        s, ds, d2s = _smoothstep((WEIGHT_FULL - W[part]) / (0.5 * WEIGHT_FULL))
+        ds, d2s = ds * (-2.0 / WEIGHT_FULL), d2s * (2.0 / WEIGHT_FULL) ** 2
+        sg = gap[part]
+        diff = sg - fg
+        gap = gap.copy()
+        gap[part] = s * sg + (1 - s) * fg
+        if order >= 1:
+            gw = gW[part]
+            sgrad = grad[part]
+            grad = grad.copy()
+            grad[part] = s[:, None] * sgrad + (1 - s)[:, None] * fgrad + (ds * diff)[:, None] * gw
+        if order >= 2:
+            dgrad = sgrad - fgrad
+            hess = hess.copy()
+            hess[part] = (
+                s[:, None, None] * hess[part]
+                + (1 - s)[:, None, None] * fhess
+                + ds[:, None, None]
+                * (dgrad[:, :, None] * gw[:, None, :] + gw[:, :, None] * dgrad[:, None, :])
+                + (d2s * diff)[:, None, None] * gw[:, :, None] * gw[:, None, :]
+                + (ds * diff)[:, None, None] * hW[part]
+            )
+        return gap, grad, hess
+
+    def _evaluate_exact(self, points: np.ndarray, order: int):
         c, d, tri = self._nearest(points)
         diff = points - c
         # closest feature from the barycentric coordinates of c
@@ -302,6 +379,185 @@ class MeshVessel(Obstacle):
         segs = np.full((len(sel), 3, 2), np.nan)
         segs[:, :2] = xy
         ax.plot(segs[:, :, 0].ravel(), segs[:, :, 1].ravel(), **kwargs)
+
+
+# -- the smoothed gap -------------------------------------------------------------------------
+#: Support of a vertex's weight along its tangent plane, in its longest incident edge.
+SUPPORT = 1.5
+#: The normal cut-off keeps a vertex's full weight up to this fraction of its ball radius.
+PLATEAU = 0.7
+#: The smoothed gap is used alone where the weights sum to more than this (the exact
+#: polyhedral gap alone below half of it: near the lumen's medial axis).
+WEIGHT_FULL = 0.3
+
+
+def _smoothstep(t):
+    """C2 step 1 -> 0 on t in [0, 1] and its first two derivatives (quintic)."""
+    t = np.clip(t, 0.0, 1.0)
+    s = 1.0 - t**3 * (10.0 - 15.0 * t + 6.0 * t**2)
+    ds = -30.0 * t**2 * (1.0 - t) ** 2
+    d2s = -60.0 * t * (1.0 - t) * (1.0 - 2.0 * t)
+    return s, ds, d2s
+
+
+def _tangent_bases(normals):
+    """Two unit tangents (n, 3, 2) completing each unit normal (n, 3) to an orthonormal frame."""
+    axis = np.zeros_like(normals)
+    axis[np.arange(len(normals)), np.argmin(np.abs(normals), axis=1)] = 1.0
+    t1 = np.cross(normals, axis)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(normals, t1)
+    return np.stack([t1, t2], axis=2)
+
+
+def _curvatures(vertices, normals, bases, edges):
+    """Curvature tensors (n, 2, 2) in the tangent bases, 1/m, > 0 where the wall curves
+    around the lumen (a tube's circumference: 1/r): least-squares fit of the heights of each
+    vertex's neighbours above its tangent plane, ``z = -a^T K a / 2`` (``a`` their tangent
+    coordinates)."""
+    nv = len(vertices)
+    both = np.concatenate([edges, edges[:, ::-1]])
+    k, j = both[:, 0], both[:, 1]
+    e = vertices[j] - vertices[k]
+    z = np.einsum("ij,ij->i", e, normals[k])
+    a = np.einsum("ij,ijl->il", e, bases[k])
+    rows = np.stack([-0.5 * a[:, 0] ** 2, -a[:, 0] * a[:, 1], -0.5 * a[:, 1] ** 2], axis=1)
+    N = np.zeros((nv, 3, 3))
+    b = np.zeros((nv, 3))
+    np.add.at(N, k, rows[:, :, None] * rows[:, None, :])
+    np.add.at(b, k, rows * z[:, None])
+    ridge = 1e-9 * np.trace(N, axis1=1, axis2=2)[:, None, None] * np.eye(3)
+    c = np.linalg.solve(N + ridge + 1e-300 * np.eye(3), b[:, :, None])[:, :, 0]
+    K = np.empty((nv, 2, 2))
+    K[:, 0, 0], K[:, 0, 1], K[:, 1, 0], K[:, 1, 1] = c[:, 0], c[:, 1], c[:, 1], c[:, 2]
+    return K
+
+
+def _ball_radii(vertices, normals, tree, start):
+    """Radius (n,) of the largest vertex-free ball touching each vertex from inside (centre
+    on the inward normal): the shrinking-ball medial axis estimate (Ma, Bai & Huang 2012)."""
+    t = np.full(len(vertices), start)
+    idx = np.arange(len(vertices))
+    for _ in range(60):
+        c = vertices - t[:, None] * normals
+        dist, near = tree.query(c, k=2)
+        # the nearest vertex that is not the vertex itself
+        j = np.where(near[:, 0] == idx, near[:, 1], near[:, 0])
+        dj = np.where(near[:, 0] == idx, dist[:, 1], dist[:, 0])
+        inside = dj < t * (1.0 - 1e-9)
+        if not np.any(inside):
+            break
+        e = vertices[idx] - vertices[j]
+        den = 2.0 * np.einsum("ij,ij->i", e, normals)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tn = np.einsum("ij,ij->i", e, e) / den
+        tn = np.where(den > 0, tn, t)
+        t = np.where(inside, np.minimum(t, tn), t)
+    return t
+
+
+def _smooth_sums(points, v, n, h, depth, bases, curv, tree, reach, order):
+    """Weighted plane distances of the points (n_p, 3) to the vertices' tangent planes.
+
+    Returns W (n_p,), A = sum w d (n_p,) and, with order >= 1, their gradients (n_p, 3) and
+    with order 2 their hessians (n_p, 3, 3).  Vertex k (position v_k, unit normal n_k, out of
+    the lumen) weighs ``w_k = phi(|P_k (p - v_k)| / h_k) psi(d_k / D_k)`` with ``d_k =
+    (v_k - p) . n_k`` its plane's distance (> 0 inside), ``P_k`` the projection on its tangent
+    plane, ``phi`` Wendland's C2 function of compact support and ``psi`` a C2 step from 1 (at
+    ``|d_k| <= PLATEAU D_k``) to 0 (at ``|d_k| >= D_k``, ``D_k`` the vertex's inscribed ball
+    radius: the opposite wall's vertices do not count).  The plane distance is corrected for
+    the wall's curvature ``K_k`` at the vertex (its distance from the offset of the osculating
+    quadric): ``c_k = d_k - a^T M a / 2``, ``a`` the tangent coordinates of ``p - v_k``,
+    ``M = K_k (I - d_k K_k)^-1``; on a circle of radius r this is exact to O(r theta^4).
+    The gap is ``sum w_k c_k / sum w_k``.
+    """
+    npt = len(points)
+    cand = tree.query_ball_point(points, reach)
+    lens = np.fromiter((len(c) for c in cand), dtype=np.int64, count=npt)
+    k = np.concatenate([np.asarray(c, dtype=np.int64) for c in cand]) if lens.sum() else None
+    out_W, out_A = np.zeros(npt), np.zeros(npt)
+    gW = gA = hW = hA = None
+    if order >= 1:
+        gW, gA = np.zeros((npt, 3)), np.zeros((npt, 3))
+    if order >= 2:
+        hW, hA = np.zeros((npt, 3, 3)), np.zeros((npt, 3, 3))
+    if k is None:
+        return out_W, out_A, gW, gA, hW, hA
+    i = np.repeat(np.arange(npt), lens)
+    e = points[i] - v[k]
+    nk = n[k]
+    d = -np.einsum("ij,ij->i", e, nk)
+    et = e + d[:, None] * nk
+    hk = h[k]
+    rho = np.linalg.norm(et, axis=1) / hk
+    x = np.abs(d) / depth[k]
+    keep = (rho < 1.0) & (x < 1.0)
+    i, k, e, nk, d, et, hk, rho, x = (a[keep] for a in (i, k, e, nk, d, et, hk, rho, x))
+    phi = (1.0 - rho) ** 4 * (4.0 * rho + 1.0)
+    psi, dpsi, d2psi = _smoothstep((x - PLATEAU) / (1.0 - PLATEAU))
+    w = phi * psi
+    # curvature correction f = a^T M a / 2 (M = K (I - d K)^-1, 2 x 2 in the tangent basis)
+    T = bases[k]
+    Kk = curv[k]
+    a = np.einsum("ij,ijl->il", e, T)
+    A = np.eye(2) - d[:, None, None] * Kk
+    det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
+    Ainv = np.empty_like(A)
+    Ainv[:, 0, 0], Ainv[:, 1, 1] = A[:, 1, 1] / det, A[:, 0, 0] / det
+    Ainv[:, 0, 1], Ainv[:, 1, 0] = -A[:, 0, 1] / det, -A[:, 1, 0] / det
+    M = Kk @ Ainv
+    Ma = np.einsum("ilm,im->il", M, a)
+    c = d - 0.5 * np.einsum("il,il->i", a, Ma)
+    np.add.at(out_W, i, w)
+    np.add.at(out_A, i, w * c)
+    if order == 0:
+        return out_W, out_A, gW, gA, hW, hA
+    # phi's gradient -20 (1 - rho)^3 e_t / h^2; psi's along -sign(d) n / D (x = |d| / D)
+    gphi = (-20.0 * (1.0 - rho) ** 3 / hk**2)[:, None] * et
+    sx = np.sign(d) / (depth[k] * (1.0 - PLATEAU))
+    gpsi = (-dpsi * sx)[:, None] * nk
+    gw = psi[:, None] * gphi + phi[:, None] * gpsi
+    M2a = np.einsum("ilm,im->il", M, Ma)
+    aM2a = np.einsum("il,il->i", a, M2a)
+    gc = -nk - np.einsum("ijl,il->ij", T, Ma) + (0.5 * aM2a)[:, None] * nk
+    np.add.at(gW, i, gw)
+    np.add.at(gA, i, gw * c[:, None] + w[:, None] * gc)
+    if order == 1:
+        return out_W, out_A, gW, gA, hW, hA
+    eye = np.eye(3)
+    P = eye - nk[:, :, None] * nk[:, None, :]
+    et_len = rho * hk
+    with np.errstate(divide="ignore", invalid="ignore"):
+        eu = np.where((et_len > 0)[:, None], et / et_len[:, None], 0.0)
+    hphi = (-20.0 / hk**2)[:, None, None] * (
+        ((1.0 - rho) ** 3)[:, None, None] * P
+        - (3.0 * (1.0 - rho) ** 2 * rho)[:, None, None] * eu[:, :, None] * eu[:, None, :]
+    )
+    hpsi = (d2psi * sx**2)[:, None, None] * nk[:, :, None] * nk[:, None, :]
+    hw = (
+        psi[:, None, None] * hphi
+        + gphi[:, :, None] * gpsi[:, None, :]
+        + gpsi[:, :, None] * gphi[:, None, :]
+        + phi[:, None, None] * hpsi
+    )
+    TM2a = np.einsum("ijl,il->ij", T, M2a)
+    aM3a = np.einsum("il,il->i", M2a, Ma)  # a^T M^3 a (M symmetric up to the fit's rounding)
+    hf = (
+        np.einsum("ijl,ilm,ikm->ijk", T, M, T)
+        - TM2a[:, :, None] * nk[:, None, :]
+        - nk[:, :, None] * TM2a[:, None, :]
+        + aM3a[:, None, None] * nk[:, :, None] * nk[:, None, :]
+    )
+    np.add.at(hW, i, hw)
+    np.add.at(
+        hA,
+        i,
+        hw * c[:, None, None]
+        + gw[:, :, None] * gc[:, None, :]
+        + gc[:, :, None] * gw[:, None, :]
+        - w[:, None, None] * hf,
+    )
+    return out_W, out_A, gW, gA, hW, hA
 
 
 def _closest_on_triangles(tri: np.ndarray, p: np.ndarray) -> np.ndarray:

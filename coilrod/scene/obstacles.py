@@ -3,8 +3,7 @@
 .. code-block:: toml
 
     [obstacles]
-    friction = 0.0                       # Coulomb mu >= 0 (validated; contact is frictionless
-                                         # until the contact models read it)
+    friction = 0.0                       # Coulomb mu >= 0 of every obstacle's wall
     [[obstacles.wall]]
     point = ["0 mm", "8 mm", "0 mm"]
     normal = [0, -1, 0]
@@ -16,6 +15,7 @@
     [[obstacles.mesh]]
     file = "lumen.stl"                   # relative to the scene file
     units = "mm"
+    translate = ["-2 mm", "0 mm", "0 mm"]  # optional: moves the mesh (the clamp is the origin)
     [[obstacles.centerline]]
     file = "centerline.csv"              # VMTK: x, y, z, MaximumInscribedSphereRadius
     units = "mm"
@@ -137,24 +137,42 @@ def _vessel(item, key):
         raise SceneError(f"{key}: {exc}") from None
 
 
-def _file_obstacle(item, key, base: Path, kind: str):
+def _file_obstacle(item, key, base: Path, kind: str, friction: float = 0.0):
     from ..contact import MeshVessel, Vessel
 
     item = _table(item, key)
-    _unknown_keys(item, key, {"file", "units"})
+    _unknown_keys(
+        item, key, {"file", "units", "translate"} if kind == "mesh" else {"file", "units"}
+    )
     name = item.get("file")
     if not isinstance(name, str) or not name:
         raise SceneError(f"{key}.file: expected a file name; got {_show(name)}")
     units = item.get("units", "m")
     if units not in ("m", "mm"):
         raise SceneError(f"{key}.units: expected 'm' or 'mm'; got {_show(units)}")
+    shift = None
+    if "translate" in item:
+        shift = _vector(item["translate"], "length", f"{key}.translate", "position")
     path = Path(name) if Path(name).is_absolute() else base / name
     try:
         if kind == "mesh":
-            return MeshVessel.from_file(path, units=units)
+            mesh = MeshVessel.from_file(path, units=units, friction=friction)
+            if shift is None:
+                return mesh
+            return MeshVessel(mesh.vertices + np.asarray(shift), mesh.faces, source=mesh.source,
+                              friction=friction)  # fmt: skip
         return Vessel.from_centerline_file(path, units=units)
     except ValueError as exc:
         raise SceneError(f"{key}.file: {exc}") from None
+
+
+def _with_friction(ob, mu: float):
+    """The obstacle with the wall's Coulomb coefficient ``mu`` (``obstacles.friction``), by
+    its ``with_friction`` (obstacles without it are frictionless)."""
+    if mu == 0.0 or getattr(ob, "friction", 0.0) == mu:
+        return ob
+    with_friction = getattr(ob, "with_friction", None)
+    return ob if with_friction is None else with_friction(mu)
 
 
 def _narrowest(ob) -> float | None:
@@ -212,9 +230,12 @@ def parse_obstacles(data, source: str = "<embedded>", length=None, thickness=Non
             elif kind == "vessel":
                 ob = p.take(_vessel, item, key)
             else:
-                ob = p.take(_file_obstacle, item, key, base, kind)
+                mu = friction if isinstance(friction, float) else 0.0
+                ob = p.take(_file_obstacle, item, key, base, kind, mu)
             if not hasattr(ob, "gap"):  # its problems are recorded
                 continue
+            if isinstance(friction, float):
+                ob = _with_friction(ob, friction)
             narrow = _narrowest(ob)
             if thickness is not None and narrow is not None and narrow <= thickness:
                 p.add(

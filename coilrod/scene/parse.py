@@ -1210,6 +1210,7 @@ def parse_scene(data: dict, source: str = "<embedded>") -> Scene:
             "output",
             "control",
             "obstacles",
+            "insertion",
         },
     )
     name = p.take(_text, data, "name", "", Path(source).stem)
@@ -1241,6 +1242,10 @@ def parse_scene(data: dict, source: str = "<embedded>") -> Scene:
         if [m for m in models if m != "rod"]:
             p.add("obstacles: contact is modelled by the rod only -- run the rod alone")
         length = robot[0].length if _ok(robot) else None
+        if "insertion" in data:  # the robot starts straight at its first free length
+            from .navigation import first_length
+
+            length = first_length(data["insertion"]) or length
         half = None
         if _ok(robot):
             sec = robot[0].section
@@ -1250,6 +1255,10 @@ def parse_scene(data: dict, source: str = "<embedded>") -> Scene:
         found = p.take(parse_obstacles, data["obstacles"], source, length, half)
         if _ok(found):
             rod_options = {**rod_options, "obstacles": found[0]}
+    if "insertion" in data:
+        from .navigation import check_insertion
+
+        rod_options = p.take(check_insertion, data, robot, rod_options, models)
     fem_options = p.take(_parse_fem_options, data.get("fem", {}), p)
     outputs = p.take(_parse_outputs, data.get("output", {}), p)
     control = None

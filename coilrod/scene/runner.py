@@ -357,8 +357,10 @@ def run_scene(
     reached); the other jobs still run.  A control scene (``scene.control``) runs its
     controllers instead and returns a
     :class:`~coilrod.scene.control_runner.ControlSceneResult` (same ``ok``, ``summary`` and
-    ``write``).  ``progress`` shows tqdm bars (default: when stderr is
-    a terminal); ``log`` is a callable for one-line messages (default: none).
+    ``write``), a navigation scene (``[insertion]``) inserts the robot into its vessel and
+    returns a :class:`~coilrod.scene.navigation.NavigationSceneResult`.  ``progress`` shows
+    tqdm bars (default: when stderr is a terminal); ``log`` is a callable for one-line
+    messages (default: none).
     """
     if scene.control is not None:  # a control scene: the currents for its target
         from .control_runner import run_control
@@ -366,6 +368,10 @@ def run_scene(
         return run_control(scene, plan=plan, log=log)
     plan = plan_scene(scene) if plan is None else plan
     progress = sys.stderr.isatty() if progress is None else progress
+    if "insertion" in scene.rod_options:  # a navigation scene: insert the robot
+        from .navigation import run_navigation
+
+        return run_navigation(scene, plan, progress=progress, log=log)
     result = SceneResult(scene, plan)
     cached = _field_cache(scene, plan, result, log)
     for job in plan.jobs:

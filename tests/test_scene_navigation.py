@@ -1,0 +1,152 @@
+"""Navigation scenes: the [insertion] table, `coilrod run` of an insertion (navigation.py)."""
+
+import numpy as np
+import pytest
+
+from coilrod.scene import parse
+from coilrod.scene.parse import SceneError, load_scene, parse_scene
+
+ROBOT = {
+    "length": "40 mm",
+    "diameter": "2 mm",
+    "youngs_modulus": "1 MPa",
+    "magnetization": {"preset": "M1"},
+}
+BEND = {
+    "preset": "bend",
+    "bend_radius": "20 mm",
+    "angle": "90 deg",
+    "radius": "3 mm",
+    "straight_before": "5 mm",
+    "start": ["-1 mm", "0 mm", "0 mm"],
+}
+
+
+def _scene(insertion, obstacles=None, models=("rod",), **extra):
+    data = {
+        "robot": ROBOT,
+        "field": {"type": "uniform", "B": "8 mT", "direction": "y"},
+        "models": {"run": list(models)},
+        "insertion": insertion,
+        **extra,
+    }
+    if obstacles is not None:
+        data["obstacles"] = obstacles
+    return data
+
+
+@pytest.mark.parametrize(
+    ("insertion", "obstacles", "models", "match"),
+    [
+        ({"lengths": ["6 mm", "40 mm"]}, None, ["rod"], r"insertion: needs the lumen"),
+        ({"lengths": ["6 mm"]}, {"vessel": [BEND]}, ["rod"], r"insertion.lengths: expected"),
+        ({"lengths": ["9 mm", "6 mm"]}, {"vessel": [BEND]}, ["rod"], r"0 < first < last"),
+        ({"lengths": ["6 mm", "50 mm"]}, {"vessel": [BEND]}, ["rod"], r"exceeds the robot"),
+        ({"lengths": ["6 mm", "40 mm"], "steps": 1}, {"vessel": [BEND]}, ["rod"], r"steps"),
+        ({"lengths": ["6 mm", "40 mm"], "withdraw": "y"}, {"vessel": [BEND]}, ["rod"], "withdr"),
+        ({"lengths": ["6 mm", "40 mm"], "speed": 1}, {"vessel": [BEND]}, ["rod"], "unknown key"),
+        (
+            {"lengths": ["6 mm", "40 mm"]},
+            {"vessel": [BEND, BEND]},
+            ["rod"],
+            r"exactly one obstacle \(the lumen\); got 2",
+        ),
+        (
+            {"lengths": ["6 mm", "40 mm"]},
+            {"wall": [{"point": ["0 mm", "8 mm", "0 mm"], "normal": "-y"}]},
+            ["rod"],
+            r"must be a lumen",
+        ),
+        ({"lengths": ["6 mm", "40 mm"]}, {"vessel": [BEND]}, ["rod", "fem2d"], "rod alone"),
+    ],
+)
+def test_bad_insertion_tables_are_named(insertion, obstacles, models, match):
+    with pytest.raises(SceneError, match=match):
+        parse_scene(_scene(insertion, obstacles, models))
+
+
+def test_the_straight_start_is_the_first_free_length():
+    # a 5 mm straight part holds the 6 mm robot an insertion starts with, not the 40 mm one
+    scene = parse_scene(_scene({"lengths": ["6 mm", "40 mm"]}, {"vessel": [BEND]}))
+    assert scene.rod_options["insertion"]["lengths"][0] == pytest.approx(6e-3)
+    data = _scene({"lengths": ["6 mm", "40 mm"]}, {"vessel": [BEND]})
+    del data["insertion"]
+    with pytest.raises(SceneError, match="straight robot leaves it"):
+        parse_scene(data)
+
+
+def test_navigation_scene_is_the_insertion_it_describes(tmp_path):
+    # the scene's run equals coilrod.insert called with the scene's robot, lumen, clamp
+    # (origin, +x), field and lengths (insertion and withdrawal by the same steps); its table,
+    # summary and figure are written
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import coilrod
+    import coils
+    from coilrod.scene.navigation import push_force
+    from coilrod.scene.runner import run_scene
+
+    data = _scene(
+        {"lengths": ["10 mm", "30 mm"], "steps": 3, "withdraw": True, "nodes": 12},
+        {"vessel": [BEND]},
+    )
+    scene = parse_scene(data)
+    result = run_scene(scene)
+    assert result.ok
+    (run,) = result.runs
+    lengths = [0.01, 0.02, 0.03, 0.02, 0.01]
+    np.testing.assert_allclose(run.result.lengths, lengths, rtol=1e-12)
+    (vessel,) = scene.rod_options["obstacles"]
+    ref = coilrod.insert(
+        scene.rod,
+        vessel,
+        lengths,
+        coils.UniformField(B=(0.0, 8e-3, 0.0)),
+        clamp_position=(0.0, 0.0, 0.0),
+        clamp_rotation=np.eye(3),
+        nodes=12,
+    )
+    np.testing.assert_allclose(run.result.tip, ref.tip, atol=1e-12)
+    assert ref.wall_force_magnitude.max() > 1e-3  # it presses on the wall
+    # frictionless: insertion and withdrawal pass through the same states
+    np.testing.assert_allclose(ref.tip[[0, 1]], ref.tip[[4, 3]], atol=1e-9)
+    rows = result.table()
+    assert len(rows) == 5
+    push = push_force(ref)
+    assert rows[2]["push_force_mN"] == pytest.approx(1e3 * push[2])
+    assert rows[2]["wall_force_mN"] == pytest.approx(1e3 * ref.wall_force_magnitude[2])
+    assert "push force" in result.summary()
+    names = sorted(p.name for p in result.write(tmp_path / "out"))
+    assert names == ["insertion.csv", "navigation.png", "summary.json"]
+
+
+def test_push_force_is_the_clamp_force_balancing_the_wall():
+    # without friction in a uniform field the clamp's force balances the wall's alone; where
+    # the insertion reports the clamp's axial force from the rod's internal force (friction
+    # models), the two agree
+    import coilrod
+    import coils
+    from coilrod.contact import Vessel
+    from coilrod.scene.navigation import push_force
+
+    rod = coilrod.presets.seed_rod(coilrod.presets.M1())
+    v = Vessel.bend(0.02, np.pi / 2, 3e-3, 0.005, 0.03, start=(-1e-3, 0, 0))
+    ins = coilrod.insert(rod, v, [0.01, 0.025], coils.UniformField(B=(0, 8e-3, 0)), nodes=12,
+                         clamp_position=(0, 0, 0), clamp_rotation=np.eye(3))  # fmt: skip
+    np.testing.assert_allclose(push_force(ins), ins.wall_force[:, 0], atol=0)
+    assert abs(push_force(ins)[-1]) > 1e-4  # the bend's wall has an axial component
+    if not len(getattr(ins, "push_force", ())):
+        pytest.skip("the insertion does not report its push force (friction models)")
+    np.testing.assert_allclose(
+        ins.push_force, ins.wall_force[:, 0], atol=1e-6 * np.abs(ins.wall_force).max()
+    )
+
+
+def test_example_navigation_scenes_load():
+    folder = parse.__file__.replace("parse.py", "examples/")
+    for name in ("navigation_bend", "navigation_phantom"):
+        scene = load_scene(folder + name + ".toml")
+        assert "insertion" in scene.rod_options
+        (lumen,) = scene.rod_options["obstacles"]
+        assert lumen.gap([0.0, 0.0, 0.0])[0] > 1e-3  # the introducer is inside
