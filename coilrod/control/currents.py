@@ -98,6 +98,12 @@ class ControlResult:
         :class:`ControlWarning` (or, for an unreachable position target, said in the error).
     active : list of int
         Channels at their current limit (within 1e-9 of it) in ``currents``.
+    tip_direction : ndarray, shape (3,)
+        Unit tangent at the tip in the real field (the first column of
+        ``result.frames(-1)[-1]``).
+    direction_miss : float or None
+        Angle between the real tip tangent and the target direction, rad (None without a
+        target direction).
     """
 
     currents: np.ndarray
@@ -115,6 +121,8 @@ class ControlResult:
     status: str = "converged"
     optimal: bool = True
     active: list = field(default_factory=list)
+    tip_direction: np.ndarray | None = None
+    direction_miss: float | None = None
 
 
 class ControlWarning(RuntimeWarning):
@@ -263,6 +271,7 @@ class _Problem:
     model: str
     target: np.ndarray  # (2,) tip x, y in the bending plane, or (3,) x, y, z, m
     angle: float | None  # target tip angle, rad
+    direction: np.ndarray | None  # (3,) target unit tip tangent (3D targets)
     limits: np.ndarray  # (m,) current limits, A
     resistance: np.ndarray  # (m,) weights of the power sum R I^2 (ones without resistances)
     steps: int  # load steps of a forward solve
@@ -277,6 +286,31 @@ class _Problem:
     @property
     def with_angle(self) -> bool:
         return self.angle is not None
+
+    @property
+    def oriented(self) -> bool:
+        """A target tip angle (plane) or tip direction (3D) besides the position."""
+        return self.angle is not None or self.direction is not None
+
+    @property
+    def across(self) -> np.ndarray:
+        """(2, 3) orthonormal basis of the plane normal to the target direction d."""
+        d = self.direction
+        e = np.eye(3)[int(np.argmin(np.abs(d)))]
+        e1 = np.cross(d, e)
+        e1 /= np.linalg.norm(e1)
+        return np.array([e1, np.cross(d, e1)])
+
+    def turn(self, res: RodResult):
+        """The direction's misses (2,) and their derivative by the tip tangent t (2, 3): the
+        stereographic projection of t from -d onto the plane normal to d, ``s = 2 E t /
+        (1 + d . t)`` (E = :attr:`across`): zero only on d, ``|s| = 2 tan(alpha / 2)`` for
+        the angle alpha between t and d (the angle to first order), rank 2 on the tangent's
+        own changes (normal to t)."""
+        t = res.frames(len(res) - 1)[-1, :, 0]
+        E, d = self.across, self.direction
+        den = 1.0 + float(d @ t)
+        return 2.0 * (E @ t) / den, 2.0 * E / den - 2.0 * np.outer(E @ t, d) / den**2
 
     @property
     def length(self) -> float:
@@ -301,11 +335,13 @@ class _Problem:
     def goal(self) -> np.ndarray:
         """Targets of the controlled outputs."""
         z = [self.opts["clamp_position"][2]] if self.with_z and not self.spatial else []
-        return np.r_[self.target, z, [self.angle] if self.with_angle else []]
+        d = [0.0, 0.0] if self.direction is not None else []
+        return np.r_[self.target, z, [self.angle] if self.with_angle else [], d]
 
     @property
     def scales(self) -> np.ndarray:
-        return _weights_for(self.with_angle, self.length, self.with_z)
+        w = _weights_for(self.with_angle, self.length, self.with_z)
+        return np.r_[w, 1.0, 1.0] if self.direction is not None else w
 
     def field_of(self, I):
         """The field the model steers with at currents ``I`` (A): the real one, or the linear
@@ -319,18 +355,25 @@ class _Problem:
 
     def residual(self, res: RodResult) -> np.ndarray:
         """Weighted misses r of the last state of ``res``."""
-        return (_outputs(res, self.with_angle, self.with_z) - self.goal) * self.scales
+        out = _outputs(res, self.with_angle, self.with_z)
+        if self.direction is not None:
+            out = np.r_[out, self.turn(res)[0]]
+        return (out - self.goal) * self.scales
 
     def jacobian(self, res: RodResult) -> np.ndarray:
         """dr/dI of the last state of ``res``, shape (outputs, m)."""
         k = len(res) - 1
+        tangent = self.direction is not None
         if self.model == "real":
-            _, _, _, D = tip_derivatives(res, [k], ["currents"], check=False)
+            _, _, _, D = tip_derivatives(res, [k], ["currents"], check=False, tangent=tangent)
             J = D[0]
         else:  # chain rule through the centre field and gradient, linear in I
-            _, _, _, D = tip_derivatives(res, [k], ["B0", "gradient"], check=False)
+            wrt = ["B0", "gradient"]
+            _, _, _, D = tip_derivatives(res, [k], wrt, check=False, tangent=tangent)
             J = D[0, :, :3] @ self.Bu + D[0, :, 3:] @ self.Gu.reshape(9, -1)
         rows = ([0, 1, 2] if self.with_z else [0, 1]) + ([3] if self.with_angle else [])
+        if tangent:  # the direction's misses through the tip tangent
+            return np.vstack([J[rows], self.turn(res)[1] @ J[4:7]]) * self.scales[:, None]
         return J[rows] * self.scales[:, None]
 
     def position_miss(self, r) -> float:
@@ -338,8 +381,11 @@ class _Problem:
         return float(np.linalg.norm(r[: self.npos])) * self.length
 
     def met(self, r) -> bool:
-        """The target met: position (and angle) within the tolerance."""
+        """The target met: position (and angle or direction) within the tolerance (an angle
+        of tol / L, rad)."""
         on_angle = not self.with_angle or abs(r[-1]) <= self.tol / self.length
+        if self.direction is not None:  # |s| = 2 tan(alpha / 2) >= alpha
+            on_angle = float(np.linalg.norm(r[-2:])) <= self.tol / self.length
         return self.position_miss(r) <= self.tol and on_angle
 
 
@@ -509,14 +555,28 @@ def _search(p: _Problem, I, max_iter: int, max_solves: int):
 
 
 def _problem(
-    rod, system, target, max_current, model, angle, steps, clamp_position, clamp_angle, nodes, tol
+    rod,
+    system,
+    target,
+    max_current,
+    model,
+    angle,
+    steps,
+    clamp_position,
+    clamp_angle,
+    nodes,
+    tol,
+    direction=None,
 ) -> _Problem:
     """Validate the arguments of :func:`solve_currents` and set up the problem."""
     if not isinstance(rod, Rod):
         raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
-    if not all(hasattr(system, a) for a in ("unit_fields", "with_currents", "currents_for")):
+    protocol = ("channels", "currents", "max_current", "with_currents", "with_limits")
+    if not all(hasattr(system, a) for a in (*protocol, "unit_fields", "fixed_field", "center")):
         raise ValueError(
-            "system must be a coil system under current control (a coils.CoilSystem); got "
+            "system must be a multi-channel source under current control (a "
+            "coils.CoilSystem or a calibrated coils.MPEM: channels, currents, max_current, "
+            f"with_currents, with_limits, unit_fields, fixed_field, center); got "
             f"{type(system).__name__}"
         )
     if model not in ("real", "ideal"):
@@ -532,8 +592,19 @@ def _problem(
     if spatial and angle is not None:
         raise ValueError(
             "angle: a target tip angle is only for a target (x, y) in the bending plane; got a "
-            "3D target"
+            "3D target (give a tip direction instead)"
         )
+    if direction is not None:
+        if not spatial:
+            raise ValueError(
+                "direction: a target tip direction is only for a 3D target (x, y, z); for a "
+                "target (x, y) in the bending plane give angle"
+            )
+        direction = as_vector(direction, "direction")
+        norm = float(np.linalg.norm(direction))
+        if abs(norm - 1.0) > 1e-6:
+            raise ValueError(f"direction must be a unit vector; got |direction| = {norm:.6g}")
+        direction = direction / norm
     m = system.currents.size
     if max_current is None:
         limits = np.asarray(system.max_current, float)
@@ -567,10 +638,7 @@ def _problem(
             reached=0.0,
             target=1.0,
         )
-    try:
-        resistance = np.asarray(system.resistance, float)
-    except ValueError:
-        resistance = np.ones(m)
+    resistance = _resistances(system, m)
     B_fixed, G_fixed = _fixed(system)
     return _Problem(
         rod=rod,
@@ -578,6 +646,7 @@ def _problem(
         model=model,
         target=goal,
         angle=angle,
+        direction=direction,
         limits=limits,
         resistance=resistance,
         steps=steps,
@@ -608,15 +677,20 @@ def solve_currents(
     max_iter: int = 15,
     initial=None,
     max_solves: int = 40,
+    direction=None,
 ) -> ControlResult:
     """Currents of ``system`` that put the tip of ``rod`` on ``target``.
 
     Parameters
     ----------
     rod : Rod
-    system : coils.CoilSystem
-        A coil system under current control (``unit_fields``, ``with_currents``,
-        ``currents_for``), e.g. ``coils.presets.three_axis_helmholtz()``.
+    system : coils.CoilSystem or coils.MPEM
+        A multi-channel source under current control (``channels``, ``currents``,
+        ``max_current``, ``with_currents``, ``with_limits``, ``unit_fields``,
+        ``fixed_field``, ``center``): air coils, e.g.
+        ``coils.presets.three_axis_helmholtz()``, or a calibrated eMNS model, e.g.
+        ``coils.presets.cardiomag()``.  Minimum power weighs the channels by their
+        resistances, or equally (least ``sum I^2``) for a system without them (an MPEM).
     target : array-like, shape (2,) or (3,)
         Tip position, m: (x, y) in the bending plane, or (x, y, z) for the spatial rod (the
         system's channels must make every field direction at its centre; the start is the
@@ -634,6 +708,15 @@ def solve_currents(
         so).  When the first steps stop improving, the search goes on by Levenberg-Marquardt
         steps within the limits until a local optimum; ``ControlResult.status`` says whether
         one was reached.
+    direction : array-like, shape (3,), optional
+        Target unit tip tangent, for a 3D target only (|direction| = 1 within 1e-6).  A
+        weighted target, not a hard constraint: two more conditions (the tangent's
+        stereographic projection from -direction, ``2 tan(alpha / 2)`` for the angle alpha off
+        it, about alpha in rad, weighed against the position misses in L); with enough
+        independent channels (five conditions: e.g. CardioMag's eight) both are met to
+        ``tol``, with fewer the result is the least-squares compromise within the limits (as
+        for ``angle``; ``direction_miss`` says how far off it is, a ControlWarning if it is not
+        a local optimum).
     steps : int
         Load steps of each forward solve (the currents ramped from zero: the path matters at
         snap-throughs).
@@ -710,6 +793,7 @@ def solve_currents(
         clamp_angle,
         nodes,
         tol,
+        direction,
     )
     max_solves = as_count(max_solves, "max_solves", 1, 10_000)
     max_iter = as_count(max_iter, "max_iter", 1, 10_000)
@@ -734,7 +818,7 @@ def solve_currents(
         search, I, res, status = _search(p, I, max_iter, max_solves)
         solves, history = solves + search.solves, history + search.history
         # a warm start led astray (e.g. across a snap-through): start afresh
-        astray = min(search.history) > p.tol and (not p.with_angle or status != "optimal")
+        astray = min(search.history) > p.tol and (not p.oriented or status != "optimal")
         if not (start == "warm" and p.model == "real" and astray):
             break
     return _finish(p, I, res, solves, start_solves, history, status)
@@ -861,6 +945,19 @@ def _room(I, step, limits) -> float:
     return float(max(0.0, min(1.0, np.min(room))))
 
 
+def _resistances(system, m: int) -> np.ndarray:
+    """The weights (m,) of the power sum: the channels' resistances (ohm), or ones for a
+    system without them (a calibrated :class:`coils.MPEM`, or coils of unknown copper): the
+    least ``sum I^2``."""
+    try:
+        resistance = getattr(system, "resistance", None)
+    except ValueError:  # a CoilSystem with a coil of unknown resistance
+        resistance = None
+    if resistance is None:
+        return np.ones(m)
+    return np.asarray(resistance, float)
+
+
 def _fixed(system):
     """Field and gradient of the system's fixed (current-free) parts at its centre."""
     B, G = system.fixed_field(np.asarray(system.center, float)[None])
@@ -873,10 +970,11 @@ def _finish(p: _Problem, I, res, solves, start_solves, history, status) -> Contr
     not a local optimum (:func:`_report`)."""
     real = res if p.model == "real" else _forward(p.rod, p.system.with_currents(I), p.steps, p.opts)
     tip = real.tip[-1]
+    tangent = real.frames(len(real) - 1)[-1, :, 0].copy()
     goal_pos = p.goal[: p.npos]  # (x, y) or (x, y, z) held, m
     miss = float(np.linalg.norm(tip[: goal_pos.size] - goal_pos))
     try:
-        power = float(p.system.power(I))
+        power = float(p.system.power(I)) if hasattr(p.system, "power") else float("nan")
     except ValueError:
         power = float("nan")
     out = ControlResult(
@@ -895,9 +993,41 @@ def _finish(p: _Problem, I, res, solves, start_solves, history, status) -> Contr
         status=status,
         optimal=status in ("converged", "optimal"),
         active=np.flatnonzero(np.abs(I) >= p.limits - 1e-9).tolist(),
+        tip_direction=tangent,
+        direction_miss=(
+            float(np.arctan2(np.linalg.norm(np.cross(tangent, p.direction)), tangent @ p.direction))
+            if p.direction is not None
+            else None
+        ),
     )
     _report(p, out, history)
     return out
+
+
+#: A closest state whose tip is within this fraction of L of the straight rod's is "nearly
+#: straight" in the report of a stalled search.
+NEAR_STRAIGHT = 0.05
+
+
+def _stalled_where(p: _Problem, out: ControlResult) -> str:
+    """What a stalled search (status "stalled") ran into, for the error: the steps stopped
+    decreasing the miss, no current limit active, and -- when the closest rod is nearly
+    straight -- why (the tip's axial position moves at second order only in the field
+    there: a target the straight rod's tip cannot approach is likely out of reach)."""
+    a = p.opts["clamp_angle"]
+    straight = p.opts["clamp_position"] + p.length * np.array([math.cos(a), math.sin(a), 0.0])
+    off = float(np.linalg.norm(out.tip - straight)) / p.length
+    text = (
+        " (status 'stalled': the Gauss-Newton and damped steps stopped decreasing the miss "
+        "short of a local optimum; no current limit is active)"
+    )
+    if off <= NEAR_STRAIGHT:
+        text += (
+            f"; the closest rod is nearly straight (its tip {off:.3g} L from the straight "
+            "rod's), where the tip moves towards the clamp only at second order in the field: "
+            "the target is probably outside the robot's reachable set"
+        )
+    return text
 
 
 def _report(p: _Problem, out: ControlResult, history) -> None:
@@ -906,7 +1036,7 @@ def _report(p: _Problem, out: ControlResult, history) -> None:
     robot's reachable set -- or warn (ControlWarning) for a result that is not a local
     least-squares optimum."""
     I, tip, miss = out.currents, out.tip, out.miss
-    if p.model == "real" and min(history) > p.tol and not p.with_angle:
+    if p.model == "real" and min(history) > p.tol and not p.oriented:
         if out.active:
             why = (
                 "not reachable within the current limits (channels "
@@ -917,13 +1047,13 @@ def _report(p: _Problem, out: ControlResult, history) -> None:
                 "outside the robot's reachable set (no current limit is active at the closest "
                 "tip, a local optimum of the miss)"
             )
-        else:
-            spent = out.status == "max_solves"
+        elif out.status == "max_solves":
             why = (
-                "not reached: the search stopped "
-                f"({'the solve budget max_solves spent' if spent else 'stalled'})"
-                " before a local optimum of the miss; no current limit is active"
+                "not reached: the search stopped (the solve budget max_solves spent) before a "
+                "local optimum of the miss; no current limit is active"
             )
+        else:
+            why = "not reached: the search stalled" + _stalled_where(p, out)
         closest = (
             "the closest stable tip found"
             if out.result.stable[-1]
@@ -944,6 +1074,7 @@ def _report(p: _Problem, out: ControlResult, history) -> None:
             f"solve_currents: the currents {np.round(I, 4).tolist()} A are not a local "
             f"least-squares optimum of the misses ({out.status}: miss {miss:.4g} m"
             + (f", angle miss {out.angle_miss:.4g} rad" if p.with_angle else "")
+            + (f", direction miss {out.direction_miss:.4g} rad" if p.direction is not None else "")
             + "); ControlResult.optimal is False",
             ControlWarning,
             stacklevel=4,
