@@ -8,6 +8,7 @@ the returned currents; the straight rod's tip in closed form.
 
 from __future__ import annotations
 
+import re
 import warnings
 
 import numpy as np
@@ -117,3 +118,90 @@ def test_stalled_search_says_where_and_how_far():
 def test_bad_direction(kwargs, match):
     with pytest.raises(ValueError, match=match):
         solve_currents(ROD, CARDIOMAG, **({"target": (0.03, 0.02, 0.01)} | kwargs))
+
+
+# -- scenes: an eMNS preset as the system ----------------------------------------------------
+def _scene(field, control=None):
+    import copy
+
+    from _scenes import BASE
+
+    return {
+        "name": "eMNS control",
+        "robot": copy.deepcopy(BASE["robot"]),
+        "field": {"type": "system", **field},
+        "control": {"target": ["20 mm", "25 mm"], **(control or {})},
+        "rod": {"nodes": NODES},
+        "load": {"steps": 4},
+    }
+
+
+PROBES = np.array([[0.01, 0.004, 0.001], [0.03, -0.01, 0.002], [-0.02, 0.015, -0.003]])
+
+
+@pytest.mark.parametrize(
+    ("field", "library"),
+    [
+        ({"preset": "navion", "max_current": "20 A"}, coils.presets.navion(max_current=20.0)),
+        ({"preset": "cardiomag"}, CARDIOMAG),
+        ({"preset": "octomag", "max_current": "15 A"}, coils.presets.octomag(max_current=15.0)),
+    ],
+)
+def test_a_scene_names_an_emns_preset(field, library):
+    """The scene's system is the library's preset built directly (fields per ampere at probe
+    points, limits, names), and its limits are the scene's."""
+    from coilrod.scene import parse_scene
+
+    scene = parse_scene(_scene(field))
+    system = scene.fields["coils"]
+    for a, b in zip(system.unit_fields(PROBES), library.unit_fields(PROBES), strict=True):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(system.max_current, library.max_current)
+    assert system.names == library.names
+    np.testing.assert_array_equal(scene.control.max_current, library.max_current)
+
+
+@pytest.mark.parametrize(
+    ("field", "message"),
+    [
+        ({"preset": "octomag"}, "field.max_current: missing required key"),
+        (
+            {"preset": "cardiomag", "coil": [{"type": "coil", "radius": "50 mm", "turns": 30}]},
+            "field.coil: the preset cardiomag is a calibrated eMNS model",
+        ),
+        ({"preset": "navion", "max_current": ["1 A", "2 A"]}, "a list of 3 (one per coil"),
+        ({"preset": "navion", "radii": "100 mm"}, "field.radii: not a parameter of preset navion"),
+    ],
+)
+def test_emns_scene_problems_name_their_key(field, message):
+    from coilrod.scene import SceneError, parse_scene
+
+    with pytest.raises(SceneError, match=re.escape(message)):
+        parse_scene(_scene(field))
+
+
+def test_an_emns_scene_drives_the_model(monkeypatch):
+    """A control scene with an eMNS preset hands the calibrated model itself (a coils.MPEM,
+    the library's preset) to solve_currents, with the scene's target, limits and mesh (the
+    solve on an MPEM is checked above; here the call is recorded, not run)."""
+    from coilrod import ConvergenceError
+    from coilrod.scene import control_runner, parse_scene
+
+    calls = []
+
+    def record(rod, system, target, **kwargs):
+        calls.append((system, np.asarray(target), kwargs))
+        raise ConvergenceError("recorded", reached=0.0, target=1.0)
+
+    monkeypatch.setattr(control_runner, "solve_currents", record)
+    scene = parse_scene(_scene({"preset": "navion", "max_current": "20 A"}, {"model": "ideal"}))
+    result = control_runner.run_control(scene)
+    assert result.run("ideal").error == "recorded"
+    ((system, target, kwargs),) = calls
+    assert isinstance(system, coils.MPEM)
+    navion = coils.presets.navion(max_current=20.0)
+    for a, b in zip(system.unit_fields(PROBES), navion.unit_fields(PROBES), strict=True):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(target, [0.02, 0.025])
+    np.testing.assert_array_equal(kwargs["max_current"], [20.0] * 3)
+    assert (kwargs["model"], kwargs["nodes"], kwargs["steps"]) == ("ideal", NODES, 4)
