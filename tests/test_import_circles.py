@@ -21,7 +21,6 @@ ROOT = Path(__file__).resolve().parent.parent
 KNOWN = {
     "coilrod.rod": {"out_of_plane", "planar", "spatial"},
     "coilrod.contact": {"network", "presets", "vessel"},
-    "coilrod.scene": {"control", "obstacles", "parse"},
 }
 
 

@@ -42,7 +42,7 @@ import numpy as np
 
 import coils
 
-from .parse import (
+from .tables import (
     _BAD,
     _MISSING,
     SceneError,
