@@ -205,3 +205,21 @@ def test_an_emns_scene_drives_the_model(monkeypatch):
     np.testing.assert_array_equal(target, [0.02, 0.025])
     np.testing.assert_array_equal(kwargs["max_current"], [20.0] * 3)
     assert (kwargs["model"], kwargs["nodes"], kwargs["steps"]) == ("ideal", NODES, 4)
+
+
+def test_the_3d_start_makes_its_field_over_the_offset():
+    """CardioMag's calibration has a current-free (offset) field, 1.5 mT at the centre: the
+    start currents (:func:`coilrod.control.currents._start_3d`) make the turned uniform-field
+    answer in the target's plane through the clamp tangent, the offset included -- the
+    field of the currents and the offset together (evaluated by the model) has no component
+    normal to that plane."""
+    target = np.array([0.7 * L, 0.4 * L, 0.3 * L])
+    p = currents._problem(
+        ROD, CARDIOMAG, target, None, "real", None, 4, (0.0, 0.0, 0.0), 0.0, NODES, None
+    )
+    assert np.linalg.norm(p.B_fixed) > 1e-3  # the offset is there
+    I, _ = currents._start_3d(p)
+    B = CARDIOMAG.with_currents(I).B(np.zeros((1, 3)))[0]
+    normal = np.cross([1.0, 0.0, 0.0], [0.0, target[1], target[2]])
+    normal /= np.linalg.norm(normal)
+    assert abs(B @ normal) <= 1e-9 * np.linalg.norm(B)

@@ -236,9 +236,22 @@ def _uniform_start(rod, goal, with_angle, steps, opts, b_cap):
     return best[1] * b0, len(cache) + 1
 
 
-def _start(rod, goal, with_angle, steps, opts, Bu, weights, limits):
+def _centre_currents(system, B, weights, limits, Bu, B_fixed):
+    """The currents (m,) A that make the field ``B`` (3,) T at the system's centre with least
+    ``sum w I^2`` within the limits: ``system.currents_for`` (the shared
+    :func:`coils.currents.currents_for_target`: the current-free field -- an MPEM's offset --
+    is subtracted first); beyond the limits, the unlimited answer clipped to them."""
+    try:
+        return system.currents_for(B=B, weights=weights)
+    except ValueError:  # beyond the limits: a start all the same
+        sol = minimum_power(Bu, B - B_fixed, weights, limits)
+        return np.clip(sol.unlimited, -limits, limits)
+
+
+def _start(rod, goal, with_angle, steps, opts, Bu, weights, limits, system=None, B_fixed=None):
     """Start currents: the uniform-field answer (within the largest centre field the limits
-    allow in every direction), made at the centre with minimum power; and the solves used."""
+    allow in every direction), made at the centre with minimum power (by ``system``'s
+    ``currents_for`` when given, its current-free field subtracted); and the solves used."""
     from coils.currents import largest_fraction
 
     phis = np.linspace(0.0, 2 * np.pi, 36, endpoint=False)
@@ -249,7 +262,10 @@ def _start(rod, goal, with_angle, steps, opts, Bu, weights, limits):
     ]
     b_cap = b_big * float(min(caps))  # the largest centre field (T) in every direction
     b, solves = _uniform_start(rod, goal, with_angle, steps, opts, b_cap)
-    start = minimum_power(Bu, np.array([b[0], b[1], 0.0]), weights, limits)
+    B = np.array([b[0], b[1], 0.0])
+    if system is not None:
+        return _centre_currents(system, B, weights, limits, Bu, B_fixed), solves
+    start = minimum_power(Bu, B, weights, limits)
     I = start.currents if start.currents is not None else np.clip(start.unlimited, -limits, limits)
     return I, solves
 
@@ -813,7 +829,16 @@ def solve_currents(
             I, start_solves = _start_3d(p)
         else:
             I, start_solves = _start(
-                p.rod, p.planar_goal, p.with_angle, p.steps, p.opts, p.Bu, p.resistance, p.limits
+                p.rod,
+                p.planar_goal,
+                p.with_angle,
+                p.steps,
+                p.opts,
+                p.Bu,
+                p.resistance,
+                p.limits,
+                p.system,
+                p.B_fixed,
             )
         search, I, res, status = _search(p, I, max_iter, max_solves)
         solves, history = solves + search.solves, history + search.history
@@ -929,13 +954,7 @@ def _start_3d(p: _Problem):
     b_cap = b_big * float(min(caps))  # the largest centre field (T) in every direction of it
     b, solves = _uniform_start(p.rod, planar, False, p.steps, p.opts, b_cap)
     B = (b @ t[:2]) * t + (b @ n[:2]) * n_phi
-    start = minimum_power(p.Bu, B, p.resistance, p.limits)
-    I = (
-        start.currents
-        if start.currents is not None
-        else np.clip(start.unlimited, -p.limits, p.limits)
-    )
-    return I, solves
+    return _centre_currents(p.system, B, p.resistance, p.limits, p.Bu, p.B_fixed), solves
 
 
 def _room(I, step, limits) -> float:
