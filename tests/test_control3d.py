@@ -44,24 +44,36 @@ def test_tip_tangent_sensitivities_against_finite_differences():
     """d(tip tangent)/d(currents) of a Richardson-extrapolated spatial state (the frames
     extrapolated on SO(3)) against central differences of full solves, extrapolated in h
     (error O(h^4)): 1e-9 of the largest rate.  The linear combination (4 a_f - a_c) / 3 of
-    the meshes' rotations, the leading order, is off by about 1e-7 here."""
+    the meshes' rotations, the leading order, is off by about 1e-7 here.  The controller's
+    Jacobian of the direction's misses (the stereographic projection, chain rule) against the
+    same differences of its misses."""
     res = _solve(CARDIOMAG, MADE, [1.0])
     _, _, _, D = tip_derivatives(res, [len(res) - 1], ["currents"], tangent=True)
     dt = D[0, 4:7]
     t = res.frames(len(res) - 1)[-1, :, 0]
     assert np.abs(t @ dt).max() <= 1e-14  # a unit vector's rate is normal to it
+    # a target direction 0.2 rad off the tangent: the misses' Jacobian is not the tangent's
+    off = np.cross(t, [0.0, 0.0, 1.0])
+    d = np.cos(0.2) * t + np.sin(0.2) * off / np.linalg.norm(off)
+    p = currents._problem(
+        ROD, CARDIOMAG, res.tip[-1], None, "real", None, 1, (0.0, 0.0, 0.0), 0.0, NODES, None, d
+    )
+    J = p.jacobian(res)[3:]  # the direction's two rows
     for j in (0, 5):
         e = np.eye(8)[j]
-        fd = [
-            (
-                _tip_and_tangent(CARDIOMAG, MADE + h * e, [1.0])[1]
-                - _tip_and_tangent(CARDIOMAG, MADE - h * e, [1.0])[1]
+        fd_t, fd_r = [], []
+        for h in (2e-4, 1e-4):
+            plus, minus = (
+                _solve(CARDIOMAG, MADE + h * e, [1.0]),
+                _solve(CARDIOMAG, MADE - h * e, [1.0]),
             )
-            / (2 * h)
-            for h in (2e-4, 1e-4)
-        ]
-        ref = (4 * fd[1] - fd[0]) / 3
+            tangent = [r.frames(0)[-1, :, 0] for r in (plus, minus)]
+            fd_t.append((tangent[0] - tangent[1]) / (2 * h))
+            fd_r.append((p.residual(plus)[3:] - p.residual(minus)[3:]) / (2 * h))
+        ref = (4 * fd_t[1] - fd_t[0]) / 3
         assert np.abs(dt[:, j] - ref).max() <= 1e-9 * np.abs(dt).max()
+        ref = (4 * fd_r[1] - fd_r[0]) / 3
+        assert np.abs(J[:, j] - ref).max() <= 1e-9 * np.abs(J).max()
     # the position rows are unchanged by asking for the tangent
     _, _, _, D4 = tip_derivatives(res, [len(res) - 1], ["currents"])
     np.testing.assert_array_equal(D4[0], D[0, :4])

@@ -19,7 +19,11 @@ for every current vector, exact in the currents); the currents are then applied 
 field and ``miss`` says how far the tip really lands from the target.
 
 A 3D target (x, y, z) is the same iteration with the tip's z among the controlled outputs
-(the forward solves then run on the spatial rod).
+(the forward solves then run on the spatial rod); a target tip direction d adds the tip
+tangent's two misses off d (its stereographic projection, :meth:`_Problem.turn`) with their
+exact derivatives (:func:`~coilrod.design.sensitivity.tip_derivatives` with ``tangent``).
+The system is any multi-channel source under current control: air coils
+(:class:`coils.CoilSystem`) or a calibrated eMNS model (:class:`coils.MPEM`).
 
 The search, one function per stage: :func:`_problem` validates the input and sets up the
 problem (:class:`_Problem`: the weighted misses r(I) of the controlled outputs and their exact
@@ -276,7 +280,8 @@ class _Problem:
     how its misses are weighed.
 
     The controlled outputs of a state are the tip x, y (and z, held on the rod's plane when a
-    channel can push the rod out of it), and the tip angle with a target angle; ``goal`` holds
+    channel can push the rod out of it), the tip angle with a target angle, and the tip
+    tangent's two misses off a target direction (:meth:`turn`); ``goal`` holds
     their targets and ``scales`` their weights in the least-squares sense (positions in L, the
     angle in rad).  ``residual`` is the weighted miss vector r of a forward solve, ``jacobian``
     its exact derivative dr/dI (adjoint, :func:`coilrod.design.sensitivity.tip_derivatives`).
@@ -502,7 +507,8 @@ def _approach(p: _Problem, search: _Search, I, max_iter: int) -> None:
     2. step control: the step is cut to the current limits (:func:`_within_limits`), a
        minimum-power step to the trust fraction ``trust`` (doubled after a success, set to the
        last fraction tried after a failure), and halved up to three times until the miss
-       decreases (or, near the target, stays within FAR L);
+       decreases (or, near the target, stays within FAR L) -- also when the forward solve at
+       the trial currents fails (a load path that cannot be followed there);
     3. the iteration ends on the target, after ``max_iter`` iterations, or when no step is
        accepted.
     """
@@ -525,7 +531,11 @@ def _approach(p: _Problem, search: _Search, I, max_iter: int) -> None:
                 t = min(t, trust)
             for _trial in range(4):  # backtracking
                 trial = np.clip(I + t * step, -p.limits, p.limits)
-                res_t, r_t, miss_t = search.evaluate(trial)
+                try:
+                    res_t, r_t, miss_t = search.evaluate(trial)
+                except ConvergenceError:  # no equilibrium followed there: a shorter step
+                    t /= 2
+                    continue
                 if miss_t < miss or (near and miss_t <= far):
                     restore_next = restore_next or (least_power and miss_t > miss)
                     if least_power:
