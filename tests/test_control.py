@@ -297,16 +297,19 @@ class TestSpatialTarget:
         assert out.power < EIGHT.power(made)
 
     def test_beyond_the_current_limits_in_3d(self):
-        target = _tip_3d(LARGE, LARGE.currents_for(B=(0.003, 0.005, -0.004)), nodes=16)
+        """A calibrated eMNS model (Navion, coils.MPEM) in place of air coils: a target made
+        with currents beyond the lowered limits is told apart from one out of reach."""
+        navion = coils.presets.navion()
+        target = _tip_3d(navion, navion.currents_for(B=(0.003, 0.005, -0.004)), nodes=16)
         with pytest.raises(
             ConvergenceError, match="not reachable within the current limits"
         ) as info:
-            solve_currents(ROD, LARGE, target, max_current=1.0, nodes=16)
+            solve_currents(ROD, navion, target, max_current=1.0, nodes=16)
         out = info.value.result
         assert out.active
         assert np.all(np.abs(out.currents) <= 1.0 + 1e-9)
         assert "outside the robot's reachable set" not in str(info.value)
-        np.testing.assert_allclose(out.tip, _tip_3d(LARGE, out.currents, 16), atol=1e-8 * L)
+        np.testing.assert_allclose(out.tip, _tip_3d(navion, out.currents, 16), atol=1e-8 * L)
 
     def test_a_3d_target_needs_three_field_directions(self):
         planar = coils.CoilSystem(

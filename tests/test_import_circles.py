@@ -20,7 +20,6 @@ ROOT = Path(__file__).resolve().parent.parent
 #: then also fails if it comes back).
 KNOWN = {
     "coilrod.contact": {"network", "presets", "vessel"},
-    "coilrod.scene": {"control", "obstacles", "parse"},
 }
 
 

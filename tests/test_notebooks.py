@@ -355,6 +355,49 @@ def test_control_notebook():
         rod2, _field_checked(compact.with_currents(r["path_currents"][k]), region), scales
     )
     np.testing.assert_allclose(tip, r["path_targets"][k], atol=1e-6 * L)
+    check_control_emns(r["emns"], rod)
+
+
+def check_control_emns(rows, rod):
+    """Section 4 of control.ipynb: each calibrated model's 3D target is the tip an
+    independent 3D solve_bvp (tests/rod3d_bvp_reference.py) gives with the currents that made
+    it, and the ideal controller's miss is that solve's distance with its currents, in the
+    model's field checked against magpylib's dipoles (moments c d I 4 pi / mu0)."""
+    import magpylib as magpy
+    from rod3d_bvp_reference import spatial_reference
+
+    import coils
+    from coilrod.rod.solve import rod_stiffnesses
+
+    L = rod.length
+    K = rod_stiffnesses(rod) * rod.bending_stiffness
+    library = {
+        "CardioMag (MPEM)": coils.presets.cardiomag(),
+        "Navion (MPEM)": coils.presets.navion(),
+    }
+    probes = np.random.default_rng(4).uniform(-0.01, 0.05, (12, 3))
+    checked = set()
+    for row in rows:
+        if row["system"] not in library or row["system"] in checked:
+            continue
+        checked.add(row["system"])
+        tips = []
+        for key in ("made", "ideal"):
+            field = library[row["system"]].with_currents(row[key])
+            dipoles = magpy.Collection(
+                *[
+                    magpy.misc.Dipole(moment=m * 4 * np.pi / mu_0, position=q)
+                    for q, m in zip(field.positions, field._effective(), strict=True)
+                ]
+            )
+            np.testing.assert_allclose(field.B(probes), dipoles.getB(probes), rtol=1e-9, atol=1e-15)
+            ref = spatial_reference(L, K, rod.area, rod.magnetization.vector3, field, [0.5, 1.0])
+            tips.append(ref[-1]["tip"])
+        np.testing.assert_allclose(tips[0], row["target"], atol=1e-6 * L)
+        miss = np.linalg.norm(tips[1] - np.asarray(row["target"]))
+        assert row["ideal_miss"] == pytest.approx(miss, rel=1e-3)
+        assert miss > 1e-3 * L  # the centre-field model is off in a calibrated field
+    assert checked == set(library)
 
 
 def _zhao_data(case: str):

@@ -19,7 +19,11 @@ for every current vector, exact in the currents); the currents are then applied 
 field and ``miss`` says how far the tip really lands from the target.
 
 A 3D target (x, y, z) is the same iteration with the tip's z among the controlled outputs
-(the forward solves then run on the spatial rod).
+(the forward solves then run on the spatial rod); a target tip direction d adds the tip
+tangent's two misses off d (its stereographic projection, :meth:`_Problem.turn`) with their
+exact derivatives (:func:`~coilrod.design.sensitivity.tip_derivatives` with ``tangent``).
+The system is any multi-channel source under current control: air coils
+(:class:`coils.CoilSystem`) or a calibrated eMNS model (:class:`coils.MPEM`).
 
 The search, one function per stage: :func:`_problem` validates the input and sets up the
 problem (:class:`_Problem`: the weighted misses r(I) of the controlled outputs and their exact
@@ -98,6 +102,12 @@ class ControlResult:
         :class:`ControlWarning` (or, for an unreachable position target, said in the error).
     active : list of int
         Channels at their current limit (within 1e-9 of it) in ``currents``.
+    tip_direction : ndarray, shape (3,)
+        Unit tangent at the tip in the real field (the first column of
+        ``result.frames(-1)[-1]``).
+    direction_miss : float or None
+        Angle between the real tip tangent and the target direction, rad (None without a
+        target direction).
     """
 
     currents: np.ndarray
@@ -115,6 +125,8 @@ class ControlResult:
     status: str = "converged"
     optimal: bool = True
     active: list = field(default_factory=list)
+    tip_direction: np.ndarray | None = None
+    direction_miss: float | None = None
 
 
 class ControlWarning(RuntimeWarning):
@@ -228,9 +240,22 @@ def _uniform_start(rod, goal, with_angle, steps, opts, b_cap):
     return best[1] * b0, len(cache) + 1
 
 
-def _start(rod, goal, with_angle, steps, opts, Bu, weights, limits):
+def _centre_currents(system, B, weights, limits, Bu, B_fixed):
+    """The currents (m,) A that make the field ``B`` (3,) T at the system's centre with least
+    ``sum w I^2`` within the limits: ``system.currents_for`` (the shared
+    :func:`coils.currents.currents_for_target`: the current-free field -- an MPEM's offset --
+    is subtracted first); beyond the limits, the unlimited answer clipped to them."""
+    try:
+        return system.currents_for(B=B, weights=weights)
+    except ValueError:  # beyond the limits: a start all the same
+        sol = minimum_power(Bu, B - B_fixed, weights, limits)
+        return np.clip(sol.unlimited, -limits, limits)
+
+
+def _start(rod, goal, with_angle, steps, opts, Bu, weights, limits, system=None, B_fixed=None):
     """Start currents: the uniform-field answer (within the largest centre field the limits
-    allow in every direction), made at the centre with minimum power; and the solves used."""
+    allow in every direction), made at the centre with minimum power (by ``system``'s
+    ``currents_for`` when given, its current-free field subtracted); and the solves used."""
     from coils.currents import largest_fraction
 
     phis = np.linspace(0.0, 2 * np.pi, 36, endpoint=False)
@@ -241,7 +266,10 @@ def _start(rod, goal, with_angle, steps, opts, Bu, weights, limits):
     ]
     b_cap = b_big * float(min(caps))  # the largest centre field (T) in every direction
     b, solves = _uniform_start(rod, goal, with_angle, steps, opts, b_cap)
-    start = minimum_power(Bu, np.array([b[0], b[1], 0.0]), weights, limits)
+    B = np.array([b[0], b[1], 0.0])
+    if system is not None:
+        return _centre_currents(system, B, weights, limits, Bu, B_fixed), solves
+    start = minimum_power(Bu, B, weights, limits)
     I = start.currents if start.currents is not None else np.clip(start.unlimited, -limits, limits)
     return I, solves
 
@@ -252,7 +280,8 @@ class _Problem:
     how its misses are weighed.
 
     The controlled outputs of a state are the tip x, y (and z, held on the rod's plane when a
-    channel can push the rod out of it), and the tip angle with a target angle; ``goal`` holds
+    channel can push the rod out of it), the tip angle with a target angle, and the tip
+    tangent's two misses off a target direction (:meth:`turn`); ``goal`` holds
     their targets and ``scales`` their weights in the least-squares sense (positions in L, the
     angle in rad).  ``residual`` is the weighted miss vector r of a forward solve, ``jacobian``
     its exact derivative dr/dI (adjoint, :func:`coilrod.design.sensitivity.tip_derivatives`).
@@ -263,6 +292,7 @@ class _Problem:
     model: str
     target: np.ndarray  # (2,) tip x, y in the bending plane, or (3,) x, y, z, m
     angle: float | None  # target tip angle, rad
+    direction: np.ndarray | None  # (3,) target unit tip tangent (3D targets)
     limits: np.ndarray  # (m,) current limits, A
     resistance: np.ndarray  # (m,) weights of the power sum R I^2 (ones without resistances)
     steps: int  # load steps of a forward solve
@@ -277,6 +307,31 @@ class _Problem:
     @property
     def with_angle(self) -> bool:
         return self.angle is not None
+
+    @property
+    def oriented(self) -> bool:
+        """A target tip angle (plane) or tip direction (3D) besides the position."""
+        return self.angle is not None or self.direction is not None
+
+    @property
+    def across(self) -> np.ndarray:
+        """(2, 3) orthonormal basis of the plane normal to the target direction d."""
+        d = self.direction
+        e = np.eye(3)[int(np.argmin(np.abs(d)))]
+        e1 = np.cross(d, e)
+        e1 /= np.linalg.norm(e1)
+        return np.array([e1, np.cross(d, e1)])
+
+    def turn(self, res: RodResult):
+        """The direction's misses (2,) and their derivative by the tip tangent t (2, 3): the
+        stereographic projection of t from -d onto the plane normal to d, ``s = 2 E t /
+        (1 + d . t)`` (E = :attr:`across`): zero only on d, ``|s| = 2 tan(alpha / 2)`` for
+        the angle alpha between t and d (the angle to first order), rank 2 on the tangent's
+        own changes (normal to t)."""
+        t = res.frames(len(res) - 1)[-1, :, 0]
+        E, d = self.across, self.direction
+        den = 1.0 + float(d @ t)
+        return 2.0 * (E @ t) / den, 2.0 * E / den - 2.0 * np.outer(E @ t, d) / den**2
 
     @property
     def length(self) -> float:
@@ -301,11 +356,13 @@ class _Problem:
     def goal(self) -> np.ndarray:
         """Targets of the controlled outputs."""
         z = [self.opts["clamp_position"][2]] if self.with_z and not self.spatial else []
-        return np.r_[self.target, z, [self.angle] if self.with_angle else []]
+        d = [0.0, 0.0] if self.direction is not None else []
+        return np.r_[self.target, z, [self.angle] if self.with_angle else [], d]
 
     @property
     def scales(self) -> np.ndarray:
-        return _weights_for(self.with_angle, self.length, self.with_z)
+        w = _weights_for(self.with_angle, self.length, self.with_z)
+        return np.r_[w, 1.0, 1.0] if self.direction is not None else w
 
     def field_of(self, I):
         """The field the model steers with at currents ``I`` (A): the real one, or the linear
@@ -319,18 +376,25 @@ class _Problem:
 
     def residual(self, res: RodResult) -> np.ndarray:
         """Weighted misses r of the last state of ``res``."""
-        return (_outputs(res, self.with_angle, self.with_z) - self.goal) * self.scales
+        out = _outputs(res, self.with_angle, self.with_z)
+        if self.direction is not None:
+            out = np.r_[out, self.turn(res)[0]]
+        return (out - self.goal) * self.scales
 
     def jacobian(self, res: RodResult) -> np.ndarray:
         """dr/dI of the last state of ``res``, shape (outputs, m)."""
         k = len(res) - 1
+        tangent = self.direction is not None
         if self.model == "real":
-            _, _, _, D = tip_derivatives(res, [k], ["currents"], check=False)
+            _, _, _, D = tip_derivatives(res, [k], ["currents"], check=False, tangent=tangent)
             J = D[0]
         else:  # chain rule through the centre field and gradient, linear in I
-            _, _, _, D = tip_derivatives(res, [k], ["B0", "gradient"], check=False)
+            wrt = ["B0", "gradient"]
+            _, _, _, D = tip_derivatives(res, [k], wrt, check=False, tangent=tangent)
             J = D[0, :, :3] @ self.Bu + D[0, :, 3:] @ self.Gu.reshape(9, -1)
         rows = ([0, 1, 2] if self.with_z else [0, 1]) + ([3] if self.with_angle else [])
+        if tangent:  # the direction's misses through the tip tangent
+            return np.vstack([J[rows], self.turn(res)[1] @ J[4:7]]) * self.scales[:, None]
         return J[rows] * self.scales[:, None]
 
     def position_miss(self, r) -> float:
@@ -338,8 +402,11 @@ class _Problem:
         return float(np.linalg.norm(r[: self.npos])) * self.length
 
     def met(self, r) -> bool:
-        """The target met: position (and angle) within the tolerance."""
+        """The target met: position (and angle or direction) within the tolerance (an angle
+        of tol / L, rad)."""
         on_angle = not self.with_angle or abs(r[-1]) <= self.tol / self.length
+        if self.direction is not None:  # |s| = 2 tan(alpha / 2) >= alpha
+            on_angle = float(np.linalg.norm(r[-2:])) <= self.tol / self.length
         return self.position_miss(r) <= self.tol and on_angle
 
 
@@ -440,7 +507,8 @@ def _approach(p: _Problem, search: _Search, I, max_iter: int) -> None:
     2. step control: the step is cut to the current limits (:func:`_within_limits`), a
        minimum-power step to the trust fraction ``trust`` (doubled after a success, set to the
        last fraction tried after a failure), and halved up to three times until the miss
-       decreases (or, near the target, stays within FAR L);
+       decreases (or, near the target, stays within FAR L) -- also when the forward solve at
+       the trial currents fails (a load path that cannot be followed there);
     3. the iteration ends on the target, after ``max_iter`` iterations, or when no step is
        accepted.
     """
@@ -463,7 +531,11 @@ def _approach(p: _Problem, search: _Search, I, max_iter: int) -> None:
                 t = min(t, trust)
             for _trial in range(4):  # backtracking
                 trial = np.clip(I + t * step, -p.limits, p.limits)
-                res_t, r_t, miss_t = search.evaluate(trial)
+                try:
+                    res_t, r_t, miss_t = search.evaluate(trial)
+                except ConvergenceError:  # no equilibrium followed there: a shorter step
+                    t /= 2
+                    continue
                 if miss_t < miss or (near and miss_t <= far):
                     restore_next = restore_next or (least_power and miss_t > miss)
                     if least_power:
@@ -509,14 +581,28 @@ def _search(p: _Problem, I, max_iter: int, max_solves: int):
 
 
 def _problem(
-    rod, system, target, max_current, model, angle, steps, clamp_position, clamp_angle, nodes, tol
+    rod,
+    system,
+    target,
+    max_current,
+    model,
+    angle,
+    steps,
+    clamp_position,
+    clamp_angle,
+    nodes,
+    tol,
+    direction=None,
 ) -> _Problem:
     """Validate the arguments of :func:`solve_currents` and set up the problem."""
     if not isinstance(rod, Rod):
         raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
-    if not all(hasattr(system, a) for a in ("unit_fields", "with_currents", "currents_for")):
+    protocol = ("channels", "currents", "max_current", "with_currents", "with_limits")
+    if not all(hasattr(system, a) for a in (*protocol, "unit_fields", "fixed_field", "center")):
         raise ValueError(
-            "system must be a coil system under current control (a coils.CoilSystem); got "
+            "system must be a multi-channel source under current control (a "
+            "coils.CoilSystem or a calibrated coils.MPEM: channels, currents, max_current, "
+            f"with_currents, with_limits, unit_fields, fixed_field, center); got "
             f"{type(system).__name__}"
         )
     if model not in ("real", "ideal"):
@@ -532,8 +618,19 @@ def _problem(
     if spatial and angle is not None:
         raise ValueError(
             "angle: a target tip angle is only for a target (x, y) in the bending plane; got a "
-            "3D target"
+            "3D target (give a tip direction instead)"
         )
+    if direction is not None:
+        if not spatial:
+            raise ValueError(
+                "direction: a target tip direction is only for a 3D target (x, y, z); for a "
+                "target (x, y) in the bending plane give angle"
+            )
+        direction = as_vector(direction, "direction")
+        norm = float(np.linalg.norm(direction))
+        if abs(norm - 1.0) > 1e-6:
+            raise ValueError(f"direction must be a unit vector; got |direction| = {norm:.6g}")
+        direction = direction / norm
     m = system.currents.size
     if max_current is None:
         limits = np.asarray(system.max_current, float)
@@ -567,10 +664,7 @@ def _problem(
             reached=0.0,
             target=1.0,
         )
-    try:
-        resistance = np.asarray(system.resistance, float)
-    except ValueError:
-        resistance = np.ones(m)
+    resistance = _resistances(system, m)
     B_fixed, G_fixed = _fixed(system)
     return _Problem(
         rod=rod,
@@ -578,6 +672,7 @@ def _problem(
         model=model,
         target=goal,
         angle=angle,
+        direction=direction,
         limits=limits,
         resistance=resistance,
         steps=steps,
@@ -608,15 +703,20 @@ def solve_currents(
     max_iter: int = 15,
     initial=None,
     max_solves: int = 40,
+    direction=None,
 ) -> ControlResult:
     """Currents of ``system`` that put the tip of ``rod`` on ``target``.
 
     Parameters
     ----------
     rod : Rod
-    system : coils.CoilSystem
-        A coil system under current control (``unit_fields``, ``with_currents``,
-        ``currents_for``), e.g. ``coils.presets.three_axis_helmholtz()``.
+    system : coils.CoilSystem or coils.MPEM
+        A multi-channel source under current control (``channels``, ``currents``,
+        ``max_current``, ``with_currents``, ``with_limits``, ``unit_fields``,
+        ``fixed_field``, ``center``): air coils, e.g.
+        ``coils.presets.three_axis_helmholtz()``, or a calibrated eMNS model, e.g.
+        ``coils.presets.cardiomag()``.  Minimum power weighs the channels by their
+        resistances, or equally (least ``sum I^2``) for a system without them (an MPEM).
     target : array-like, shape (2,) or (3,)
         Tip position, m: (x, y) in the bending plane, or (x, y, z) for the spatial rod (the
         system's channels must make every field direction at its centre; the start is the
@@ -634,6 +734,15 @@ def solve_currents(
         so).  When the first steps stop improving, the search goes on by Levenberg-Marquardt
         steps within the limits until a local optimum; ``ControlResult.status`` says whether
         one was reached.
+    direction : array-like, shape (3,), optional
+        Target unit tip tangent, for a 3D target only (|direction| = 1 within 1e-6).  A
+        weighted target, not a hard constraint: two more conditions (the tangent's
+        stereographic projection from -direction, ``2 tan(alpha / 2)`` for the angle alpha off
+        it, about alpha in rad, weighed against the position misses in L); with enough
+        independent channels (five conditions: e.g. CardioMag's eight) both are met to
+        ``tol``, with fewer the result is the least-squares compromise within the limits (as
+        for ``angle``; ``direction_miss`` says how far off it is, a ControlWarning if it is not
+        a local optimum).
     steps : int
         Load steps of each forward solve (the currents ramped from zero: the path matters at
         snap-throughs).
@@ -710,6 +819,7 @@ def solve_currents(
         clamp_angle,
         nodes,
         tol,
+        direction,
     )
     max_solves = as_count(max_solves, "max_solves", 1, 10_000)
     max_iter = as_count(max_iter, "max_iter", 1, 10_000)
@@ -729,12 +839,21 @@ def solve_currents(
             I, start_solves = _start_3d(p)
         else:
             I, start_solves = _start(
-                p.rod, p.planar_goal, p.with_angle, p.steps, p.opts, p.Bu, p.resistance, p.limits
+                p.rod,
+                p.planar_goal,
+                p.with_angle,
+                p.steps,
+                p.opts,
+                p.Bu,
+                p.resistance,
+                p.limits,
+                p.system,
+                p.B_fixed,
             )
         search, I, res, status = _search(p, I, max_iter, max_solves)
         solves, history = solves + search.solves, history + search.history
         # a warm start led astray (e.g. across a snap-through): start afresh
-        astray = min(search.history) > p.tol and (not p.with_angle or status != "optimal")
+        astray = min(search.history) > p.tol and (not p.oriented or status != "optimal")
         if not (start == "warm" and p.model == "real" and astray):
             break
     return _finish(p, I, res, solves, start_solves, history, status)
@@ -845,13 +964,7 @@ def _start_3d(p: _Problem):
     b_cap = b_big * float(min(caps))  # the largest centre field (T) in every direction of it
     b, solves = _uniform_start(p.rod, planar, False, p.steps, p.opts, b_cap)
     B = (b @ t[:2]) * t + (b @ n[:2]) * n_phi
-    start = minimum_power(p.Bu, B, p.resistance, p.limits)
-    I = (
-        start.currents
-        if start.currents is not None
-        else np.clip(start.unlimited, -p.limits, p.limits)
-    )
-    return I, solves
+    return _centre_currents(p.system, B, p.resistance, p.limits, p.Bu, p.B_fixed), solves
 
 
 def _room(I, step, limits) -> float:
@@ -859,6 +972,19 @@ def _room(I, step, limits) -> float:
     with np.errstate(divide="ignore", invalid="ignore"):
         room = np.where(step != 0, (limits - np.sign(step) * I) / np.abs(step), np.inf)
     return float(max(0.0, min(1.0, np.min(room))))
+
+
+def _resistances(system, m: int) -> np.ndarray:
+    """The weights (m,) of the power sum: the channels' resistances (ohm), or ones for a
+    system without them (a calibrated :class:`coils.MPEM`, or coils of unknown copper): the
+    least ``sum I^2``."""
+    try:
+        resistance = getattr(system, "resistance", None)
+    except ValueError:  # a CoilSystem with a coil of unknown resistance
+        resistance = None
+    if resistance is None:
+        return np.ones(m)
+    return np.asarray(resistance, float)
 
 
 def _fixed(system):
@@ -873,10 +999,11 @@ def _finish(p: _Problem, I, res, solves, start_solves, history, status) -> Contr
     not a local optimum (:func:`_report`)."""
     real = res if p.model == "real" else _forward(p.rod, p.system.with_currents(I), p.steps, p.opts)
     tip = real.tip[-1]
+    tangent = real.frames(len(real) - 1)[-1, :, 0].copy()
     goal_pos = p.goal[: p.npos]  # (x, y) or (x, y, z) held, m
     miss = float(np.linalg.norm(tip[: goal_pos.size] - goal_pos))
     try:
-        power = float(p.system.power(I))
+        power = float(p.system.power(I)) if hasattr(p.system, "power") else float("nan")
     except ValueError:
         power = float("nan")
     out = ControlResult(
@@ -895,9 +1022,41 @@ def _finish(p: _Problem, I, res, solves, start_solves, history, status) -> Contr
         status=status,
         optimal=status in ("converged", "optimal"),
         active=np.flatnonzero(np.abs(I) >= p.limits - 1e-9).tolist(),
+        tip_direction=tangent,
+        direction_miss=(
+            float(np.arctan2(np.linalg.norm(np.cross(tangent, p.direction)), tangent @ p.direction))
+            if p.direction is not None
+            else None
+        ),
     )
     _report(p, out, history)
     return out
+
+
+#: A closest state whose tip is within this fraction of L of the straight rod's is "nearly
+#: straight" in the report of a stalled search.
+NEAR_STRAIGHT = 0.05
+
+
+def _stalled_where(p: _Problem, out: ControlResult) -> str:
+    """What a stalled search (status "stalled") ran into, for the error: the steps stopped
+    decreasing the miss, no current limit active, and -- when the closest rod is nearly
+    straight -- why (the tip's axial position moves at second order only in the field
+    there: a target the straight rod's tip cannot approach is likely out of reach)."""
+    a = p.opts["clamp_angle"]
+    straight = p.opts["clamp_position"] + p.length * np.array([math.cos(a), math.sin(a), 0.0])
+    off = float(np.linalg.norm(out.tip - straight)) / p.length
+    text = (
+        " (status 'stalled': the Gauss-Newton and damped steps stopped decreasing the miss "
+        "short of a local optimum; no current limit is active)"
+    )
+    if off <= NEAR_STRAIGHT:
+        text += (
+            f"; the closest rod is nearly straight (its tip {off:.3g} L from the straight "
+            "rod's), where the tip moves towards the clamp only at second order in the field: "
+            "the target is probably outside the robot's reachable set"
+        )
+    return text
 
 
 def _report(p: _Problem, out: ControlResult, history) -> None:
@@ -906,7 +1065,7 @@ def _report(p: _Problem, out: ControlResult, history) -> None:
     robot's reachable set -- or warn (ControlWarning) for a result that is not a local
     least-squares optimum."""
     I, tip, miss = out.currents, out.tip, out.miss
-    if p.model == "real" and min(history) > p.tol and not p.with_angle:
+    if p.model == "real" and min(history) > p.tol and not p.oriented:
         if out.active:
             why = (
                 "not reachable within the current limits (channels "
@@ -917,13 +1076,13 @@ def _report(p: _Problem, out: ControlResult, history) -> None:
                 "outside the robot's reachable set (no current limit is active at the closest "
                 "tip, a local optimum of the miss)"
             )
-        else:
-            spent = out.status == "max_solves"
+        elif out.status == "max_solves":
             why = (
-                "not reached: the search stopped "
-                f"({'the solve budget max_solves spent' if spent else 'stalled'})"
-                " before a local optimum of the miss; no current limit is active"
+                "not reached: the search stopped (the solve budget max_solves spent) before a "
+                "local optimum of the miss; no current limit is active"
             )
+        else:
+            why = "not reached: the search stalled" + _stalled_where(p, out)
         closest = (
             "the closest stable tip found"
             if out.result.stable[-1]
@@ -944,6 +1103,7 @@ def _report(p: _Problem, out: ControlResult, history) -> None:
             f"solve_currents: the currents {np.round(I, 4).tolist()} A are not a local "
             f"least-squares optimum of the misses ({out.status}: miss {miss:.4g} m"
             + (f", angle miss {out.angle_miss:.4g} rad" if p.with_angle else "")
+            + (f", direction miss {out.direction_miss:.4g} rad" if p.direction is not None else "")
             + "); ControlResult.optimal is False",
             ControlWarning,
             stacklevel=4,

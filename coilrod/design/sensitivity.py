@@ -349,17 +349,19 @@ def _as_spatial(sol, rows, S, mixed=False):
     return tuple(problems), tuple(states)
 
 
-def _spatial_mesh_derivatives(problem, U, S, rod, groups, field_groups):
+def _spatial_mesh_derivatives(problem, U, S, rod, groups, field_groups, rotation=False):
     """d(tip x, y, z [units of L], azimuth [rad])/dp of spatial states U (k, size) on one
-    mesh by the adjoint of the state's Jacobian: shape (k, 4, p)."""
+    mesh by the adjoint of the state's Jacobian: shape (k, 4, p); with ``rotation`` (k, 7, p),
+    rows 4:7 the tip frame's rotation (rad, world axes; see ``SpatialRod.tip_gradients``)."""
     lin = problem.linearize(U, S)
-    lam = lin.tangent.solve_transposed(problem.tip_gradients(U))  # (4, k, size)
+    grads = problem.tip_gradients(U, rotation=True) if rotation else problem.tip_gradients(U)
+    lam = lin.tangent.solve_transposed(grads)  # (4 or 7, k, size)
     if not np.all(np.isfinite(lam)):
         raise SingularStateError(
             "the Jacobian of the state is singular: it is at a bifurcation or limit point, "
             "where the tip is not differentiable"
         )
-    lamR1 = np.einsum("qks,ks->kq", lam, lin.load_rate)  # (k, 4)
+    lamR1 = np.einsum("qks,ks->kq", lam, lin.load_rate)  # (k, 4 or 7)
     k, n = U.shape[0], problem.n
     cols = []
     for group in groups:
@@ -429,10 +431,36 @@ def _parameters(rod, groups, field_groups) -> tuple[list[str], list[str], np.nda
     return labels, units, np.concatenate(values)
 
 
-def tip_derivatives(result, rows, wrt=None, *, check: bool = True):
+def _tip_rotation(problems, states, a):
+    """The tip tangent (k, 3) of the reported frames and its rates (k, 3, p), from the tip
+    frame rotations ``a`` (one (k, 3, p) per mesh, world axes, rad) of the meshes' states.
+
+    One mesh: t = R_N e1, dt = a x t.  Two (Richardson on SO(3), as the solve reports the
+    frames): R = R_f exp(-w / 3) with w = log(R_f^T R_c), whose rotation is exactly
+    ``a = a_f - R_f J_l(-w/3) J_l(w)^-1 R_f^T (a_c - a_f) / 3`` (the first-order change of
+    w is J_l(w)^-1 R_f^T (a_c - a_f)); to leading order the linear (4 a_f - a_c) / 3."""
+    from ..rod.so3 import expm, hat, left_jacobian, logm
+
+    frames = [p.frames(U)[:, -1] for p, U in zip(problems, states, strict=True)]
+    if len(frames) == 1:
+        R, rate = frames[0], a[0]
+    else:
+        Rc, Rf = frames
+        w = logm(np.swapaxes(Rf, -1, -2) @ Rc)  # (k, 3)
+        R = Rf @ expm(-w / 3)
+        P = Rf @ left_jacobian(-w / 3) @ np.linalg.inv(left_jacobian(w)) @ np.swapaxes(Rf, -1, -2)
+        rate = a[1] - P @ (a[0] - a[1]) / 3
+    t = R[:, :, 0]
+    return t, -hat(t) @ rate
+
+
+def tip_derivatives(result, rows, wrt=None, *, check: bool = True, tangent: bool = False):
     """Batched sensitivities of the states ``rows`` of a rod result (see
     :func:`sensitivities`): returns (labels, units, values, D) with D of shape (k, 4, p):
-    d(tip x, y, z [m], tip angle [rad])/dp."""
+    d(tip x, y, z [m], tip angle [rad])/dp; with ``tangent``, shape (k, 7, p): rows 4:7 the
+    derivatives of the unit tip tangent (the first column of ``result.frames(k)[-1]``),
+    1 per parameter unit (planar states whose parameters keep the field in the plane: the
+    tangent (cos theta, sin theta, 0) turned by d(tip angle))."""
     sol = _solution(result)
     groups = _check_wrt(result, wrt)
     rows = np.atleast_1d(np.asarray(rows, dtype=int))
@@ -460,7 +488,9 @@ def tip_derivatives(result, rows, wrt=None, *, check: bool = True):
     for problem, states in zip(problems, all_states, strict=True):
         U = states[rows_in]
         if spatial:
-            per_mesh.append(_spatial_mesh_derivatives(problem, U, S, rod, groups, field_groups))
+            per_mesh.append(
+                _spatial_mesh_derivatives(problem, U, S, rod, groups, field_groups, tangent)
+            )
             continue
         if problem.uniform and "gradient" in groups:
             problem, U = _as_mixed(problem, U)
@@ -469,10 +499,17 @@ def tip_derivatives(result, rows, wrt=None, *, check: bool = True):
     if spatial:
         D = d.copy()
         D[:, 0:3] *= rod.length  # units of L -> m
+        if tangent:  # the tangent of the frames as reported (Richardson on SO(3))
+            states = [U[rows_in] for U in all_states]
+            _, D[:, 4:7] = _tip_rotation(problems, states, [m[:, 4:7] for m in per_mesh])
         return labels, units, values, D
-    D = np.zeros((rows.size, 4, d.shape[2]))
+    D = np.zeros((rows.size, 7 if tangent else 4, d.shape[2]))
     D[:, 0:2] = rod.length * d[:, 0:2]  # units of L -> m
     D[:, 3] = d[:, 2]
+    if tangent:  # t = (cos theta, sin theta, 0)
+        theta = np.asarray(result.tip_angle, float)[rows]
+        D[:, 4] = -np.sin(theta)[:, None] * d[:, 2]
+        D[:, 5] = np.cos(theta)[:, None] * d[:, 2]
     return labels, units, values, D
 
 

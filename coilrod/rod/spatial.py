@@ -486,13 +486,15 @@ class SpatialRod(DiscreteRod):
         return -np.einsum("n,knoi->koi", self._contact_geometry()[1], force)
 
     # -- derivatives of the tip (sensitivities) --------------------------------------------------
-    def tip_gradients(self, U: np.ndarray) -> np.ndarray:
+    def tip_gradients(self, U: np.ndarray, rotation: bool = False) -> np.ndarray:
         """Derivatives of the tip (x_N, y_N, z_N in units of L relative to the clamp; the tip
         azimuth atan2(t_y, t_x) in rad) with respect to the unknowns of each state of a stack
-        (k, size): shape (4, k, size)."""
+        (k, size): shape (4, k, size).  With ``rotation``, shape (7, k, size): rows 4:7 the
+        tip frame's rotation a (rad, world axes: dR_N = hat(a) R_N, a = J_l(phi_N) dphi_N;
+        the tip tangent moves by a x t)."""
         U = np.atleast_2d(U)
         k, n, nv = U.shape[0], self.n, self.nv
-        out = np.zeros((4, k, n, nv))
+        out = np.zeros((7 if rotation else 4, k, n, nv))
         phi = self.rotations(U)
         op = self._slots()[1]
         if self.uniform:  # x_N = sum_j w_j t_j, dt_j = -hat(t_j) J_l(phi_j) dphi_j
@@ -507,7 +509,9 @@ class SpatialRod(DiscreteRod):
         out[3, :, -1, op : op + 3] = (t[:, 0, None] * dt[:, 1] - t[:, 1, None] * dt[:, 0]) / rho2[
             :, None
         ]
-        return out.reshape(4, k, -1)
+        if rotation:
+            out[4:7, :, -1, op : op + 3] = np.moveaxis(left_jacobian(phi[:, -1]), 1, 0)
+        return out.reshape(out.shape[0], k, -1)
 
     def load_rates(self, U: np.ndarray, dmu=None, B=None, G=None) -> np.ndarray:
         """dR/dscale of the states (k, size) for other loads, linear in them: the body

@@ -42,7 +42,7 @@ import numpy as np
 
 import coils
 
-from .parse import (
+from .tables import (
     _BAD,
     _MISSING,
     SceneError,
@@ -96,10 +96,24 @@ SYSTEM_PRESETS = {
         "winding",
         "center",
     ),
+    # calibrated eMNS models (coils.MPEM): their own coils' limits only
+    "cardiomag": ("max_current",),
+    "navion": ("max_current",),
+    "octomag": ("max_current",),
 }
+#: The presets that are calibrated eMNS models (:class:`coils.MPEM`: point-dipole sources, no
+#: windings; no listed coils may join them).
+EMNS_PRESETS = ("cardiomag", "navion", "octomag")
 _PRESET_ARGS = tuple(dict.fromkeys(a for args in SYSTEM_PRESETS.values() for a in args))
 #: Channels of each preset (the length of a per-channel list such as ``max_current``).
-_PRESET_CHANNELS = {"three_axis_helmholtz": 3, "helmholtz_maxwell": 3, "eight_coil_hemisphere": 8}
+_PRESET_CHANNELS = {
+    "three_axis_helmholtz": 3,
+    "helmholtz_maxwell": 3,
+    "eight_coil_hemisphere": 8,
+    "cardiomag": 8,
+    "navion": 3,
+    "octomag": 8,
+}
 #: ``control.model`` -> the controllers run.
 CONTROL_MODELS = {"real": ("real",), "ideal": ("ideal",), "both": ("real", "ideal")}
 
@@ -175,7 +189,8 @@ def _winding(raw, full):
 
 def _preset_argument(name: str, raw, full: str, preset: str):
     n = _PRESET_CHANNELS[preset]
-    per = "x, y, z pairs" if n == 3 else f"one per coil, {n} coils"
+    pairs = preset in ("three_axis_helmholtz", "helmholtz_maxwell")
+    per = "x, y, z pairs" if pairs else f"one per coil, {n} coils"
     if name == "radii":
         return _one_or_list(raw, full, _length, 3, "radius of the x, y, z pairs")
     if name == "turns":
@@ -245,6 +260,36 @@ def _channel_label(i: int, kind: str, coil) -> str:
     return f"coil[{i}] {kind} ({', '.join(f'{v:.3g}' for v in axis)})"
 
 
+def _emns_system(preset: str, args: dict, built: list, p: _Problems):
+    """The _FieldInfo of a calibrated eMNS preset (:class:`coils.MPEM`), or _BAD: no listed
+    coils join it (its channels are a fitted model's, not windings), and a model without a
+    rating of its own (octomag) needs ``max_current``.  No clearance entries: the model has
+    no windings (its sources lie outside the calibrated workspace; a point on one is refused
+    when the field is evaluated)."""
+    if built:
+        p.add(
+            f"field.coil: the preset {preset} is a calibrated eMNS model (coils.MPEM: fitted "
+            "point-dipole sources, no windings); listed coils cannot join its channels -- "
+            "remove the coil list or use an air-coil preset"
+        )
+        return _BAD
+    if preset == "octomag" and "max_current" not in args:
+        p.add(
+            "field.max_current: missing required key: the preset octomag is a model, not a "
+            "built system, and has no current rating; give one for every coil (e.g. '20 A') "
+            "or a list of 8"
+        )
+        return _BAD
+    if isinstance(args.get("max_current"), tuple):
+        args = args | {"max_current": np.asarray(args["max_current"], float)}
+    system = _build_preset(preset, args, p)
+    if system is _BAD:
+        return _BAD
+    info = _FieldInfo({"coils": system}, "system", [], "field.preset")
+    info.label = f"preset {preset} (calibrated eMNS model, {len(system.channels)} coils)"
+    return info
+
+
 def parse_system(data: dict, p: _Problems):
     """The coil system of ``[field] type = "system"`` (a preset and/or a coil list), as the
     _FieldInfo of :func:`coilrod.scene.parse.parse_scene` (``fields = {"coils": system}``, one
@@ -295,6 +340,8 @@ def parse_system(data: dict, p: _Problems):
         ]
     if not _ok(preset, *args.values(), *built):
         return _BAD
+    if preset in EMNS_PRESETS:
+        return _emns_system(preset, args, built, p)
     channels, names, keys, what = [], [], [], []
     system = None
     if preset is not _MISSING:

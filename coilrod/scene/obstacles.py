@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .parse import (
+from .tables import (
     SceneError,
     _axis,
     _plain,
