@@ -193,7 +193,7 @@ def near_pass(pts, center, axis, fil, wind, params, flags, factor, B, G, H) -> b
         inv = [x.reshape(len(fil), -1).sum(axis=0) for x in parts]
         Q, Bz, b1, q1, c1, d1 = inv
         q2 = np.where(u > 1e-200, -(4.0 * q1 + c1) / u, 0.0) if want_H else 0.0
-        v = global_entries(*r.T, *axis, u, Q, Bz, b1, q1, q2, c1, d1, want_B, want_G, want_H)
+        v = global_entries(*r.T, *axis, u, Q, Bz, b1, q1, q2, c1, d1, want_G, want_H)
         out = []
         if want_B:
             out.append((B, fB * np.column_stack(v[0:3])))
