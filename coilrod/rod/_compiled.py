@@ -24,6 +24,7 @@ compiles it.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numba as nb
 import numpy as np
@@ -200,7 +201,16 @@ def _tangent(U, s, j, T, h, w, ab):
         ab[_D - 2, c0 + r + 1] = -sw * T[_D11, i]
 
 
-@nb.njit(cache=True)
+#: Estimated CPU seconds of numpy assemblies after which the compiled kernel is used (ski
+#: rental: about what compiling it costs on a cold cache, README "Cold start"); 0 compiles at
+#: the first call, ``math.inf`` never.
+COMPILE_AFTER = 2.0
+# measured cost of one numpy assembly (with the Jacobian): per call and per node x member
+_NUMPY_CALL_S, _NUMPY_NODE_S = 5e-4, 1e-6
+_rent = 0.0  # estimated seconds spent in numpy assemblies so far in this process
+_compiled_ready = False
+
+
 def mixed_assembly(U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab, finite):
     """Fill R, R1 (k, 5n), the band storage ab (2 KL + KU + 1, 5 n k; zero on entry) and
     finite (k,) for the stack U (k, 5n).
@@ -208,7 +218,35 @@ def mixed_assembly(U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab
     B (k n, 3) T, G (k n, 3, 3) T/m and H (k n, 3, 3, 3) T/m^2 (read only if ``has_h``) are
     the field at scale 1 at the nodes (member-major); only in-plane components act, lengths
     are scaled by L (m).  mu (n, 2), h (n - 1,), w (n,) describe the mesh.
+
+    The vectorised numpy version (:mod:`coilrod.rod._mixed_numpy`, the same arithmetic) runs
+    until its estimated cost reaches :data:`COMPILE_AFTER` or numba's cache holds the
+    compiled kernel; the compiled one from then on.
     """
+    global _rent, _compiled_ready
+    args = (U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab, finite)
+    if not _compiled_ready:
+        cost = _NUMPY_CALL_S + _NUMPY_NODE_S * U.shape[0] * w.shape[0]
+        if _rent + cost <= COMPILE_AFTER and not _on_disk(_mixed_compiled):
+            from ._mixed_numpy import mixed_assembly_numpy
+
+            _rent += cost
+            return mixed_assembly_numpy(*args)
+        _compiled_ready = True
+    return _mixed_compiled(*args)
+
+
+def _on_disk(dispatcher) -> bool:
+    """Whether numba's cache holds compiled code of ``dispatcher`` (loading it costs ~0.1 s)."""
+    try:
+        return Path(dispatcher._cache._cache_file._index_path).exists()
+    except AttributeError:  # numba internals changed: assume not
+        return False
+
+
+@nb.njit(cache=True)
+def _mixed_compiled(U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab, finite):
+    """The compiled :func:`mixed_assembly`."""
     T = np.empty((14, w.shape[0]))
     for j in range(U.shape[0]):
         ok = _node_terms(U, B, G, H, has_h, L, mu, j, T)
