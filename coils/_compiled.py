@@ -51,8 +51,10 @@ ERR_ON_WIRE, ERR_NOT_FINITE, ERR_OVERFLOW, ERR_WINDING = 0, 1, 2, 3
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
-def _global(rx, ry, rz, nx, ny, nz, u, Q, Bz, b1, q1, c1, d1, want_B, want_G, want_H):
-    """The 3 + 6 + 10 distinct entries of B, G, H (module docstring, step 3)."""
+def _global(rx, ry, rz, nx, ny, nz, u, Q, Bz, b1, q1, q2, c1, d1, want_G, want_H):
+    """The 3 + 6 + 10 distinct entries of B, G, H (module docstring, step 3; B always, G and H
+    as asked, else 0); plain arithmetic and flags, so that it runs as Python on arrays too
+    (:mod:`coils._vectorised`)."""
     # B
     B0 = Q * rx + Bz * nx
     B1 = Q * ry + Bz * ny
@@ -73,9 +75,6 @@ def _global(rx, ry, rz, nx, ny, nz, u, Q, Bz, b1, q1, c1, d1, want_B, want_G, wa
         G22 = Q + q1 * rr22 + b1 * rn22 + gn * nn22
     H000 = H001 = H011 = H111 = H002 = H012 = H112 = H022 = H122 = H222 = 0.0
     if want_H:
-        # q2 = (dq1/drho)/rho from Laplace (H traceless to rounding); below u = 1e-200 (units
-        # where r ~ 1) its term q2 r r r is 1e-200 of q1 r and is dropped
-        q2 = -(4.0 * q1 + c1) / u if u > 1e-200 else 0.0
         cp = c1 - q1
         hp = -5.0 * b1 - d1 * u
         a0 = q1 * rx + b1 * nx
@@ -342,7 +341,9 @@ def _make_kernel(digest: int):
                 if not ok:
                     err[ERR_ON_WIRE] = k
                     return 1
-            v = _global(rx, ry, rz, nx, ny, nz, u, Q, Bz, b1, q1, c1, d1, want_B, want_G, want_H)
+            # q2 = (dq1/drho)/rho (Laplace); below u = 1e-200, q2 r r r is 1e-200 of q1 r: 0
+            q2 = -(4.0 * q1 + c1) / u if want_H and u > 1e-200 else 0.0
+            v = _global(rx, ry, rz, nx, ny, nz, u, Q, Bz, b1, q1, q2, c1, d1, want_G, want_H)
             # scale to SI: near, by factor / L^(1, 2, 3); far, by factor 2^(-3e, -4e, -5e) with
             # ldexp (one rounding, correct into the subnormal range)
             if far:

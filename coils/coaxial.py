@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sized
+from pathlib import Path
 
 import numpy as np
 from scipy.constants import mu_0
@@ -29,6 +30,41 @@ _WANT_B, _WANT_G, _WANT_H = 1, 2, 4
 _NO_B = np.empty((0, 3))
 _NO_G = np.empty((0, 9))
 _NO_H = np.empty((0, 27))
+
+
+#: Estimated CPU seconds of numpy passes after which the compiled pass is used (ski rental:
+#: about what compiling it costs in a fresh environment, README "Cold start"); 0 compiles at
+#: the first evaluation, ``math.inf`` never compiles except for points the numpy pass leaves.
+COMPILE_AFTER = 3.0
+# measured cost of one numpy pass: per call and per point x filament (B, gradient, hessian)
+_NUMPY_CALL_S, _NUMPY_POINT_S = 5e-4, 1e-6
+_rent = 0.0  # estimated seconds spent in numpy passes so far in this process
+_compiled_ready = False
+
+
+def _compiled_pays(work: int) -> bool:
+    """True if the compiled pass should evaluate ``work`` = points x filaments: it is compiled
+    (or on disk in numba's cache), or the numpy passes so far plus this one would cost more
+    than :data:`COMPILE_AFTER`."""
+    global _rent, _compiled_ready
+    if _compiled_ready:
+        return True
+    cost = _NUMPY_CALL_S + _NUMPY_POINT_S * work
+    if _rent + cost > COMPILE_AFTER or _kernel_on_disk():
+        _compiled_ready = True
+        return True
+    _rent += cost
+    return False
+
+
+def _kernel_on_disk() -> bool:
+    """Whether numba's cache holds the compiled pass already (loading it takes ~0.1 s)."""
+    from . import _compiled
+
+    try:
+        return Path(_compiled.coaxial_field._cache._cache_file._index_path).exists()
+    except AttributeError:  # numba internals changed: assume not
+        return False
 
 
 def frame_from_axis(axis: np.ndarray) -> np.ndarray:
@@ -166,11 +202,20 @@ class CoaxialCoils(Field):
         return self._kernel_args
 
     def _run(self, pts, flags, factor, B, G, H):
-        """One compiled pass: add ``factor`` times the field to B (n, 3), G (n, 9), H (n, 27);
-        raise ValueError naming the first point on or inside a winding."""
+        """One pass: add ``factor`` times the field to B (n, 3), G (n, 9), H (n, 27); raise
+        ValueError naming the first point on or inside a winding.  The numpy near-zone pass
+        while compiling does not pay yet (:func:`_compiled_pays`), else the compiled one."""
         kernel, args, n_err = self._kernel_args or self._prepare()
-        err = np.empty(n_err, dtype=np.int64)
         pts = np.ascontiguousarray(pts)
+        if not _compiled_pays(pts.shape[0] * self.filaments.shape[0]):
+            from ._vectorised import near_pass
+
+            center, axis, fil, wind, _, _, params = args
+            if near_pass(pts, center, axis, fil, wind, params, flags, factor, B, G, H):
+                return
+        global _compiled_ready
+        _compiled_ready = True  # compiled now anyway: the numpy pass would only cost more
+        err = np.empty(n_err, dtype=np.int64)
         if kernel(pts, *args, flags, factor, B, G, H, err):
             self._raise_point_error(err)
 

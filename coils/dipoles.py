@@ -119,41 +119,25 @@ def _build():
                 G[k, 8] += g22
             if want_H:
                 u = (h000, h001, h002, h011, h012, h022, h111, h112, h122, h222)
-                # flat index 9 i + 3 j + l of every permutation of the sorted triple
-                for i in range(3):
-                    for j in range(3):
-                        for m in range(3):
-                            a0, a1, a2 = i, j, m
-                            if a0 > a1:
-                                a0, a1 = a1, a0
-                            if a1 > a2:
-                                a1, a2 = a2, a1
-                            if a0 > a1:
-                                a0, a1 = a1, a0
-                            idx = _SLOT[a0 * 9 + a1 * 3 + a2]
-                            H[k, 9 * i + 3 * j + m] += u[idx]
+                for f in range(27):  # flat index 9 i + 3 j + l
+                    H[k, f] += u[_SLOT[f]]
         return -1
 
     return kernel
 
 
-# sorted triple (a <= b <= c) -> position in the unique tuple of the kernel
-_SLOT = np.full(27, -1, dtype=np.int64)
-for _q, (_a, _b, _c) in enumerate(
+#: flat index ``9 i + 3 j + l`` of a hessian entry -> position of its sorted index triple in
+#: the kernel's tuple of the ten distinct entries (000 001 002 011 012 022 111 112 122 222)
+_SLOT = np.array(
     [
-        (0, 0, 0),
-        (0, 0, 1),
-        (0, 0, 2),
-        (0, 1, 1),
-        (0, 1, 2),
-        (0, 2, 2),
-        (1, 1, 1),
-        (1, 1, 2),
-        (1, 2, 2),
-        (2, 2, 2),
-    ]
-):
-    _SLOT[_a * 9 + _b * 3 + _c] = _q
+        [(0, 0, 0), (0, 0, 1), (0, 0, 2), (0, 1, 1), (0, 1, 2), (0, 2, 2), (1, 1, 1), (1, 1, 2),
+         (1, 2, 2), (2, 2, 2)].index(tuple(sorted((i, j, m))))
+        for i in range(3)
+        for j in range(3)
+        for m in range(3)
+    ],
+    dtype=np.int64,
+)  # fmt: skip
 
 
 def _build_fast():

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from _magpylib_ref import magpylib_B, magpylib_gradient
 from _mp_loop_ref import loops
+from scipy.constants import mu_0
 
 import coils
 
@@ -168,3 +169,99 @@ def test_numba_is_imported_only_when_a_coil_is_evaluated():
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=600
     )
     assert out.stdout.split() == ["False", "True"]
+
+
+@pytest.fixture
+def force_pass(monkeypatch):
+    """``force_pass("numpy")`` or ``force_pass("compiled")``: which pass evaluates coils from
+    now on (coils.coaxial decides otherwise by the cost of the numpy passes so far)."""
+    import math
+
+    import coils.coaxial as cx
+
+    def force(name):
+        monkeypatch.setattr(cx, "_kernel_on_disk", lambda: False)
+        monkeypatch.setattr(cx, "_rent", 0.0)
+        monkeypatch.setattr(cx, "_compiled_ready", name == "compiled")
+        monkeypatch.setattr(cx, "COMPILE_AFTER", math.inf)
+
+    return force
+
+
+def branch_points(radius):
+    """Points (local frame of a loop of ``radius`` at the origin) in every branch of the
+    kernel: on and near the axis (w = 0, 1e-250 and the series about 0), each series table
+    (w from 2^-8 to 3/4), the closed forms near the wire, and beyond."""
+    w = np.concatenate([[0.0, 1e-250, 1e-30, 1e-6], np.geomspace(2.0**-8, 0.74, 25)])
+    w = np.concatenate([w, [0.76, 0.9, 0.999, 1.0 - 1e-8]])
+    # points with t = 2 a rho / s = sqrt(w) at a few heights z (rho from the quadratic)
+    out = []
+    for z in (0.0, 0.3 * radius, -1.7 * radius):
+        t = np.sqrt(w)
+        c = radius**2 + z**2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rho = np.where(t > 0, (radius - np.sqrt(np.maximum(radius**2 - t * t * c, 0))) / t, 0)
+        rho = np.where(t > 0, rho, 0.0)
+        out.append(np.column_stack([rho, np.zeros_like(rho), np.full_like(rho, z)]))
+    return np.concatenate(out)
+
+
+def test_numpy_and_compiled_passes_agree(force_pass):
+    # the numpy pass (cold start) and the compiled pass give one field to rounding, in every
+    # branch, for B, G, H alone and together, scaled; and both match the mpmath reference
+    pair = coils.HelmholtzPair(0.1, 50, 2.0, axis=(0.3, -0.5, 0.8), center=(0.01, 0, -0.02))
+    field = -1.5 * (pair + coils.Coil(0.04, 20, 1.0, axis="x"))
+    local = branch_points(0.05) + [0, 0, 0.05]  # about the upper loop of the pair
+    pts = local @ pair.rotation.T + pair.center
+    keep = ~coils.coaxial.winding_mask(field, pts, 1e-6)
+    local, pts = local[keep], pts[keep]
+    results = {}
+    for name in ("numpy", "compiled"):
+        force_pass(name)
+        results[name] = [field.B_gradient_hessian(pts), field.B(pts), field.gradient(pts)]
+        results[name].append(field.hessian(pts))
+    (Bn, Gn, Hn), *alone_n = results["numpy"]
+    (Bc, Gc, Hc), *alone_c = results["compiled"]
+    for x, ref in [(Bn, Bc), (Gn, Gc), (Hn, Hc), *zip(alone_n, alone_c, strict=True)]:
+        scale = np.abs(ref).reshape(len(ref), -1).max(axis=1)
+        assert np.all(np.abs(x - ref).reshape(len(ref), -1).max(axis=1) <= 1e-13 * scale)
+    np.testing.assert_array_equal(alone_n[0], Bn)
+    # the pair alone against the mpmath Biot-Savart integral, both passes
+    R = pair.rotation
+    for k in (1, 20, len(local) // 3 - 2):  # near the axis, a series table, near the wire
+        Br, Gr, Hr = loops(local[k], pair.filaments)
+        ref = (R @ Br, R @ Gr @ R.T, np.einsum("Ii,Jj,Ll,ijl->IJL", R, R, R, Hr))
+        for name in ("numpy", "compiled"):
+            force_pass(name)
+            got = pair.B_gradient_hessian(pts[k])
+            for x, r in zip(got, ref, strict=True):
+                assert np.abs(x[0] - r).max() <= 1e-13 * np.abs(r).max(), name
+
+
+def test_compiling_starts_when_it_pays(force_pass, monkeypatch):
+    # numpy passes until their estimated cost reaches COMPILE_AFTER, then the compiled pass;
+    # a point the numpy pass leaves (far zone) goes to the compiled pass at once
+    import coils._vectorised as vec
+    import coils.coaxial as cx
+
+    calls = []
+    near_pass = vec.near_pass
+    monkeypatch.setattr(vec, "near_pass", lambda *a: calls.append(near_pass(*a)) or calls[-1])
+    force_pass("numpy")
+    pair = coils.HelmholtzPair(0.1, 50, 2.0, axis="z")
+    pts = np.zeros((10, 3))
+    monkeypatch.setattr(cx, "COMPILE_AFTER", 2.5 * (cx._NUMPY_CALL_S + cx._NUMPY_POINT_S * 20))
+    B0 = pair.B(pts)
+    pair.B(pts)
+    assert calls == [True, True]
+    assert not cx._compiled_ready
+    np.testing.assert_allclose(pair.B(pts), B0, rtol=1e-14)  # third call: compiled
+    assert calls == [True, True]
+    assert cx._compiled_ready
+    force_pass("numpy")
+    B_far = pair.B([[0.0, 0.0, 1.0]])
+    assert calls[-1] is False  # and from now on the compiled pass, compiled anyway
+    assert cx._compiled_ready
+    z0, a, current = pair.filaments.T  # on the axis: mu0 I a^2 / (2 ((z - z0)^2 + a^2)^1.5)
+    Bz = np.sum(mu_0 * current * a**2 / (2 * ((1.0 - z0) ** 2 + a**2) ** 1.5))
+    np.testing.assert_allclose(B_far[0], [0, 0, Bz], rtol=1e-14, atol=0)

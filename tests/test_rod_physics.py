@@ -287,3 +287,54 @@ def test_helmholtz_pair_differs_from_ideal_and_matches_solve_bvp():
     assert ref.status == 0
     assert np.linalg.norm(res.tip[1, :2] - ref.sol(L)[2:4]) <= 1e-3 * shift
     assert np.linalg.norm(res.tip[1, :2] - ref.sol(L)[2:4]) <= 1e-6 * L
+
+
+@pytest.fixture
+def mixed_pass(monkeypatch):
+    """``mixed_pass("numpy")`` or ``mixed_pass("compiled")``: which mixed kernel assembles from
+    now on (coilrod.rod._compiled decides otherwise by the cost of the numpy calls so far)."""
+    import coilrod.rod._compiled as rc
+
+    def force(name, after=math.inf):
+        monkeypatch.setattr(rc, "_on_disk", lambda dispatcher: False)
+        monkeypatch.setattr(rc, "_rent", 0.0)
+        monkeypatch.setattr(rc, "_compiled_ready", name == "compiled")
+        monkeypatch.setattr(rc, "COMPILE_AFTER", after)
+
+    return force
+
+
+def test_numpy_and_compiled_mixed_kernels_agree(mixed_pass):
+    # the numpy kernel (cold start) and the compiled one: one residual and Jacobian to
+    # rounding, with a real coil pair (hessian terms); the numpy Jacobian against central
+    # finite differences of the numpy residual (as test_jacobian_matches_finite_differences)
+    import coilrod.rod._compiled as rc
+
+    rod = presets.seed_rod(presets.M42())
+    L = rod.length
+    field = coils.HelmholtzPair(1.5 * L, 300, 2.0, axis="y", center=(0.3 * L, 0.1 * L, 0.0))
+    problem = build_problem(rod, field, make_mesh(rod, 10), np.zeros(3), 0.1)
+    rng = np.random.default_rng(3)
+    theta = 0.1 + np.cumsum(rng.normal(scale=0.2, size=problem.n))
+    u = problem.from_theta(theta, 1.3) + rng.normal(scale=1e-3, size=problem.size)
+    out = {}
+    for name in ("compiled", "numpy"):
+        mixed_pass(name)
+        out[name] = (problem.residual(u, 1.3), problem.dense_jacobian(u, 1.3))
+    assert not rc._compiled_ready  # the numpy kernel did run
+    for x, ref in zip(out["numpy"], out["compiled"], strict=True):
+        np.testing.assert_allclose(x, ref, rtol=0, atol=1e-14 * np.abs(ref).max())
+    J = out["numpy"][1]
+    eps = 1e-6
+    for j in range(0, problem.size, 3):
+        e = np.zeros(problem.size)
+        e[j] = eps
+        fd = (problem.residual(u + e, 1.3) - problem.residual(u - e, 1.3)) / (2 * eps)
+        assert np.abs(J[:, j] - fd).max() <= 1e-6 * np.abs(J).max()
+    # compiling starts once the numpy calls' estimated cost passes COMPILE_AFTER
+    mixed_pass("numpy", after=2.5 * (rc._NUMPY_CALL_S + rc._NUMPY_NODE_S * problem.n))
+    problem.residual(u, 1.3)
+    problem.residual(u, 1.3)
+    assert not rc._compiled_ready
+    np.testing.assert_allclose(problem.residual(u, 1.3), out["compiled"][0], rtol=0, atol=0)
+    assert rc._compiled_ready

@@ -24,6 +24,7 @@ compiles it.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numba as nb
 import numpy as np
@@ -37,12 +38,179 @@ KL, KU = 5, 5
 _D = KL + KU  # row of the diagonal in band storage
 
 
+# rows of the per-node terms (_node_terms): cos and sin of theta, m = R(theta) mu, tau = m_perp . b,
+# m . b, f = G^T m and g = G^T m_perp (times L), df/dx = H m (times L^2)
+_CS, _SN, _M0, _M1, _TAU, _MB, _F0, _F1, _G0, _G1, _D00, _D01, _D10, _D11 = range(14)
+
+
 @nb.njit(cache=True)
-def _put(ab, off, r, c, value):
-    ab[_D + r - c, off + c] = value
+def _node_terms(U, B, G, H, has_h, L, mu, j, T):
+    """Fill T (14, n) with the per-node terms of member j (rows ``_CS`` ..); False if one of
+    them or of the unknowns is not finite (the band entries are products of these)."""
+    n = T.shape[1]
+    L2 = L * L
+    ok = True
+    for i in range(n):
+        p = j * n + i
+        th = U[j, 5 * i + 2]
+        c = math.cos(th)
+        si = math.sin(th)
+        a0 = c * mu[i, 0] - si * mu[i, 1]
+        a1 = si * mu[i, 0] + c * mu[i, 1]
+        p0 = -a1  # m_perp
+        p1 = a0
+        T[_CS, i] = c
+        T[_SN, i] = si
+        T[_M0, i] = a0
+        T[_M1, i] = a1
+        T[_TAU, i] = p0 * B[p, 0] + p1 * B[p, 1]
+        T[_MB, i] = a0 * B[p, 0] + a1 * B[p, 1]
+        T[_F0, i] = L * (G[p, 0, 0] * a0 + G[p, 1, 0] * a1)
+        T[_F1, i] = L * (G[p, 0, 1] * a0 + G[p, 1, 1] * a1)
+        T[_G0, i] = L * (G[p, 0, 0] * p0 + G[p, 1, 0] * p1)
+        T[_G1, i] = L * (G[p, 0, 1] * p0 + G[p, 1, 1] * p1)
+        for q in range(4):  # d00, d01, d10, d11: H[., a, b] m with (a, b) = divmod(q, 2)
+            a = q // 2
+            b = q % 2
+            T[_D00 + q, i] = L2 * (H[p, 0, a, b] * a0 + H[p, 1, a, b] * a1) if has_h else 0.0
+        total = 0.0
+        for r in range(_TAU, _D11 + 1):
+            total += T[r, i]
+        for r in (0, 1, 3, 4):
+            total += U[j, 5 * i + r]
+        if not math.isfinite(total):
+            ok = False
+    return ok
 
 
-@nb.njit(cache=True, fastmath=False)
+@nb.njit(cache=True)
+def _residual(U, s, j, T, h, w, theta0, R, R1):
+    """Rows of R and R1 of member j (equations of the module docstring); False if one is
+    not finite."""
+    n = T.shape[1]
+    nm = n - 1
+    for i in range(n):
+        r = 5 * i  # x_i, y_i at r, r + 1; theta_i at r + 2; F_i at r + 3, r + 4
+        th = U[j, r + 2]
+        Fx = U[j, r + 3]
+        Fy = U[j, r + 4]
+        # position equations (rows r, r + 1)
+        if i == 0:
+            R[j, r] = U[j, r]
+            R[j, r + 1] = U[j, r + 1]
+        else:
+            hh = 0.5 * h[i - 1]
+            R[j, r] = U[j, r] - U[j, r - 5] - hh * (T[_CS, i - 1] + T[_CS, i])
+            R[j, r + 1] = U[j, r + 1] - U[j, r - 4] - hh * (T[_SN, i - 1] + T[_SN, i])
+        R1[j, r] = 0.0
+        R1[j, r + 1] = 0.0
+        # moment equation (row r + 2)
+        if i == 0:
+            R[j, r + 2] = th - theta0
+            R1[j, r + 2] = 0.0
+        else:
+            bend = (th - U[j, r - 3]) / h[i - 1]
+            if i < nm:
+                bend -= (U[j, r + 7] - th) / h[i]
+            cw = 0.5 * h[i - 1] * w[i]
+            tp0 = -T[_SN, i]
+            tp1 = T[_CS, i]
+            r1 = -w[i] * T[_TAU, i] - (tp0 * cw * T[_F0, i] + tp1 * cw * T[_F1, i])
+            R1[j, r + 2] = r1
+            R[j, r + 2] = bend + s * r1 - (tp0 * w[i] * Fx + tp1 * w[i] * Fy)
+        # force equations (rows r + 3, r + 4)
+        if i == nm:
+            R[j, r + 3] = Fx
+            R[j, r + 4] = Fy
+            R1[j, r + 3] = 0.0
+            R1[j, r + 4] = 0.0
+        else:
+            r1x = -w[i + 1] * T[_F0, i + 1]
+            r1y = -w[i + 1] * T[_F1, i + 1]
+            R1[j, r + 3] = r1x
+            R1[j, r + 4] = r1y
+            R[j, r + 3] = Fx - U[j, r + 8] + s * r1x
+            R[j, r + 4] = Fy - U[j, r + 9] + s * r1y
+    ok = True
+    for q in range(5 * n):
+        if not math.isfinite(R[j, q]):
+            ok = False
+    return ok
+
+
+@nb.njit(cache=True)
+def _tangent(U, s, j, T, h, w, ab):
+    """Band storage of member j's Jacobian (module docstring): entry (r, c) at
+    ``ab[_D + r - c, 5 n j + c]``."""
+    n = T.shape[1]
+    nm = n - 1
+    off = j * 5 * n - _D  # ab[r - c + _D, off + _D + c]: row index r - c + _D
+    # clamp rows: x_0, theta_0, and the free end's force F_N
+    for q in (0, 1, 2, 5 * nm + 3, 5 * nm + 4):
+        ab[_D, off + _D + q] = 1.0
+    for i in range(1, n):
+        r = 5 * i
+        g = r + 2  # moment row and theta_i column
+        cw = 0.5 * h[i - 1] * w[i]
+        tp0 = -T[_SN, i]
+        tp1 = T[_CS, i]
+        Fx = U[j, r + 3]
+        Fy = U[j, r + 4]
+        # moment row g_i: columns g - 5, g, g + 5, r, r + 1, r + 3, r + 4
+        c0 = off + _D
+        bend = 1.0 / h[i - 1]
+        ab[_D + 5, c0 + g - 5] = -1.0 / h[i - 1]
+        if i < nm:
+            bend += 1.0 / h[i]
+            ab[_D - 5, c0 + g + 5] = -1.0 / h[i]
+        ab[_D, c0 + g] = (
+            bend
+            + s * w[i] * T[_MB, i]
+            + T[_CS, i] * (w[i] * Fx + s * cw * T[_F0, i])
+            + T[_SN, i] * (w[i] * Fy + s * cw * T[_F1, i])
+            - s * cw * (tp0 * T[_G0, i] + tp1 * T[_G1, i])
+        )
+        ab[_D + 2, c0 + r] = -s * (w[i] * T[_G0, i] + cw * (tp0 * T[_D00, i] + tp1 * T[_D10, i]))
+        ab[_D + 1, c0 + r + 1] = -s * (
+            w[i] * T[_G1, i] + cw * (tp0 * T[_D01, i] + tp1 * T[_D11, i])
+        )
+        ab[_D - 1, c0 + r + 3] = -w[i] * tp0
+        ab[_D - 2, c0 + r + 4] = -w[i] * tp1
+        # position rows r, r + 1 of node i
+        hh = 0.5 * h[i - 1]
+        ab[_D, c0 + r] = 1.0
+        ab[_D, c0 + r + 1] = 1.0
+        ab[_D + 5, c0 + r - 5] = -1.0
+        ab[_D + 5, c0 + r - 4] = -1.0
+        ab[_D + 3, c0 + g - 5] = hh * T[_SN, i - 1]  # theta_{i-1}
+        ab[_D + 4, c0 + g - 5] = -hh * T[_CS, i - 1]
+        ab[_D - 2, c0 + g] = hh * T[_SN, i]
+        ab[_D - 1, c0 + g] = -hh * T[_CS, i]
+        # force rows rf, rf + 1 of node i - 1 act on node i
+        rf = r - 2  # 5 (i - 1) + 3
+        sw = s * w[i]
+        ab[_D, c0 + rf] = 1.0
+        ab[_D, c0 + rf + 1] = 1.0
+        ab[_D - 5, c0 + rf + 5] = -1.0
+        ab[_D - 5, c0 + rf + 6] = -1.0
+        ab[_D - 4, c0 + g] = -sw * T[_G0, i]
+        ab[_D - 3, c0 + g] = -sw * T[_G1, i]
+        ab[_D - 2, c0 + r] = -sw * T[_D00, i]
+        ab[_D - 3, c0 + r + 1] = -sw * T[_D01, i]
+        ab[_D - 1, c0 + r] = -sw * T[_D10, i]
+        ab[_D - 2, c0 + r + 1] = -sw * T[_D11, i]
+
+
+#: Estimated CPU seconds of numpy assemblies after which the compiled kernel is used (ski
+#: rental: about what compiling it costs on a cold cache, README "Cold start"); 0 compiles at
+#: the first call, ``math.inf`` never.
+COMPILE_AFTER = 2.0
+# measured cost of one numpy assembly (with the Jacobian): per call and per node x member
+_NUMPY_CALL_S, _NUMPY_NODE_S = 5e-4, 1e-6
+_rent = 0.0  # estimated seconds spent in numpy assemblies so far in this process
+_compiled_ready = False
+
+
 def mixed_assembly(U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab, finite):
     """Fill R, R1 (k, 5n), the band storage ab (2 KL + KU + 1, 5 n k; zero on entry) and
     finite (k,) for the stack U (k, 5n).
@@ -50,172 +218,41 @@ def mixed_assembly(U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab
     B (k n, 3) T, G (k n, 3, 3) T/m and H (k n, 3, 3, 3) T/m^2 (read only if ``has_h``) are
     the field at scale 1 at the nodes (member-major); only in-plane components act, lengths
     are scaled by L (m).  mu (n, 2), h (n - 1,), w (n,) describe the mesh.
+
+    The vectorised numpy version (:mod:`coilrod.rod._mixed_numpy`, the same arithmetic) runs
+    until its estimated cost reaches :data:`COMPILE_AFTER` or numba's cache holds the
+    compiled kernel; the compiled one from then on.
     """
-    k = U.shape[0]
-    n = w.shape[0]
-    size = 5 * n
-    m0 = np.empty(n)
-    m1 = np.empty(n)
-    cs = np.empty(n)
-    sn = np.empty(n)
-    f0 = np.empty(n)
-    f1 = np.empty(n)
-    g0 = np.empty(n)
-    g1 = np.empty(n)
-    d00 = np.empty(n)
-    d01 = np.empty(n)
-    d10 = np.empty(n)
-    d11 = np.empty(n)
-    tau = np.empty(n)
-    mb = np.empty(n)
-    nm = n - 1
-    L2 = L * L
-    for j in range(k):
-        s = S[j]
-        ok = True
-        for i in range(n):
-            p = j * n + i
-            th = U[j, 5 * i + 2]
-            c = math.cos(th)
-            si = math.sin(th)
-            cs[i] = c
-            sn[i] = si
-            a0 = c * mu[i, 0] - si * mu[i, 1]
-            a1 = si * mu[i, 0] + c * mu[i, 1]
-            m0[i] = a0
-            m1[i] = a1
-            p0 = -a1  # m_perp
-            p1 = a0
-            bx = B[p, 0]
-            by = B[p, 1]
-            tau[i] = p0 * bx + p1 * by
-            mb[i] = a0 * bx + a1 * by
-            f0[i] = L * (G[p, 0, 0] * a0 + G[p, 1, 0] * a1)
-            f1[i] = L * (G[p, 0, 1] * a0 + G[p, 1, 1] * a1)
-            g0[i] = L * (G[p, 0, 0] * p0 + G[p, 1, 0] * p1)
-            g1[i] = L * (G[p, 0, 1] * p0 + G[p, 1, 1] * p1)
-            if has_h:
-                d00[i] = L2 * (H[p, 0, 0, 0] * a0 + H[p, 1, 0, 0] * a1)
-                d01[i] = L2 * (H[p, 0, 0, 1] * a0 + H[p, 1, 0, 1] * a1)
-                d10[i] = L2 * (H[p, 0, 1, 0] * a0 + H[p, 1, 1, 0] * a1)
-                d11[i] = L2 * (H[p, 0, 1, 1] * a0 + H[p, 1, 1, 1] * a1)
-            else:
-                d00[i] = 0.0
-                d01[i] = 0.0
-                d10[i] = 0.0
-                d11[i] = 0.0
-            total = tau[i] + mb[i] + f0[i] + f1[i] + g0[i] + g1[i]
-            total += d00[i] + d01[i] + d10[i] + d11[i] + U[j, 5 * i] + U[j, 5 * i + 1]
-            total += U[j, 5 * i + 3] + U[j, 5 * i + 4]
-            if not math.isfinite(total):  # the band entries are products of these
-                ok = False
-        for i in range(n):
-            r = 5 * i  # x_i, y_i at r, r + 1; theta_i at r + 2; F_i at r + 3, r + 4
-            th = U[j, r + 2]
-            Fx = U[j, r + 3]
-            Fy = U[j, r + 4]
-            ci = 0.0 if i == 0 else 0.5 * h[i - 1]
-            tp0 = -sn[i]
-            tp1 = cs[i]
-            # position equations (rows r, r + 1)
-            if i == 0:
-                R[j, r] = U[j, r]
-                R[j, r + 1] = U[j, r + 1]
-            else:
-                hh = 0.5 * h[i - 1]
-                R[j, r] = U[j, r] - U[j, r - 5] - hh * (cs[i - 1] + cs[i])
-                R[j, r + 1] = U[j, r + 1] - U[j, r - 4] - hh * (sn[i - 1] + sn[i])
-            R1[j, r] = 0.0
-            R1[j, r + 1] = 0.0
-            # moment equation (row r + 2)
-            if i == 0:
-                R[j, r + 2] = th - theta0
-                R1[j, r + 2] = 0.0
-            else:
-                bend = (th - U[j, r - 3]) / h[i - 1]
-                if i < nm:
-                    bend -= (U[j, r + 7] - th) / h[i]
-                cw = ci * w[i]
-                r1 = -w[i] * tau[i] - (tp0 * cw * f0[i] + tp1 * cw * f1[i])
-                R1[j, r + 2] = r1
-                R[j, r + 2] = bend + s * r1 - (tp0 * w[i] * Fx + tp1 * w[i] * Fy)
-            # force equations (rows r + 3, r + 4)
-            if i == nm:
-                R[j, r + 3] = Fx
-                R[j, r + 4] = Fy
-                R1[j, r + 3] = 0.0
-                R1[j, r + 4] = 0.0
-            else:
-                r1x = -w[i + 1] * f0[i + 1]
-                r1y = -w[i + 1] * f1[i + 1]
-                R1[j, r + 3] = r1x
-                R1[j, r + 4] = r1y
-                R[j, r + 3] = Fx - U[j, r + 8] + s * r1x
-                R[j, r + 4] = Fy - U[j, r + 9] + s * r1y
-        for q in range(size):
-            if not math.isfinite(R[j, q]):
-                ok = False
+    global _rent, _compiled_ready
+    args = (U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab, finite)
+    if not _compiled_ready:
+        cost = _NUMPY_CALL_S + _NUMPY_NODE_S * U.shape[0] * w.shape[0]
+        if _rent + cost <= COMPILE_AFTER and not _on_disk(_mixed_compiled):
+            from ._mixed_numpy import mixed_assembly_numpy
+
+            _rent += cost
+            return mixed_assembly_numpy(*args)
+        _compiled_ready = True
+    return _mixed_compiled(*args)
+
+
+def _on_disk(dispatcher) -> bool:
+    """Whether numba's cache holds compiled code of ``dispatcher`` (loading it costs ~0.1 s)."""
+    try:
+        return Path(dispatcher._cache._cache_file._index_path).exists()
+    except AttributeError:  # numba internals changed: assume not
+        return False
+
+
+@nb.njit(cache=True)
+def _mixed_compiled(U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab, finite):
+    """The compiled :func:`mixed_assembly`."""
+    T = np.empty((14, w.shape[0]))
+    for j in range(U.shape[0]):
+        ok = _node_terms(U, B, G, H, has_h, L, mu, j, T)
+        ok = _residual(U, S[j], j, T, h, w, theta0, R, R1) and ok
         if tangent:
-            off = j * size
-            # clamp rows: x_0, theta_0, and the free end's force F_N
-            _put(ab, off, 0, 0, 1.0)
-            _put(ab, off, 1, 1, 1.0)
-            _put(ab, off, 2, 2, 1.0)
-            _put(ab, off, 5 * nm + 3, 5 * nm + 3, 1.0)
-            _put(ab, off, 5 * nm + 4, 5 * nm + 4, 1.0)
-            for i in range(1, n):
-                r = 5 * i
-                g = r + 2  # moment row and theta_i column
-                ci = 0.5 * h[i - 1]
-                cw = ci * w[i]
-                tp0 = -sn[i]
-                tp1 = cs[i]
-                Fx = U[j, r + 3]
-                Fy = U[j, r + 4]
-                # moment row g_i
-                bend = 1.0 / h[i - 1]
-                _put(ab, off, g, g - 5, -1.0 / h[i - 1])
-                if i < nm:
-                    bend += 1.0 / h[i]
-                    _put(ab, off, g, g + 5, -1.0 / h[i])
-                _put(
-                    ab,
-                    off,
-                    g,
-                    g,
-                    bend
-                    + s * w[i] * mb[i]
-                    + cs[i] * (w[i] * Fx + s * cw * f0[i])
-                    + sn[i] * (w[i] * Fy + s * cw * f1[i])
-                    - s * cw * (tp0 * g0[i] + tp1 * g1[i]),
-                )
-                _put(ab, off, g, r, -s * (w[i] * g0[i] + cw * (tp0 * d00[i] + tp1 * d10[i])))
-                _put(ab, off, g, r + 1, -s * (w[i] * g1[i] + cw * (tp0 * d01[i] + tp1 * d11[i])))
-                _put(ab, off, g, r + 3, -w[i] * tp0)
-                _put(ab, off, g, r + 4, -w[i] * tp1)
-                # position rows of node i
-                hh = 0.5 * h[i - 1]
-                _put(ab, off, r, r, 1.0)
-                _put(ab, off, r + 1, r + 1, 1.0)
-                _put(ab, off, r, r - 5, -1.0)
-                _put(ab, off, r + 1, r - 4, -1.0)
-                _put(ab, off, r, g - 5, hh * sn[i - 1])  # theta_{i-1}
-                _put(ab, off, r + 1, g - 5, -hh * cs[i - 1])
-                _put(ab, off, r, g, hh * sn[i])
-                _put(ab, off, r + 1, g, -hh * cs[i])
-                # force rows of node i - 1 act on node i
-                rf = r - 2  # 5 (i - 1) + 3
-                sw = s * w[i]
-                _put(ab, off, rf, rf, 1.0)
-                _put(ab, off, rf + 1, rf + 1, 1.0)
-                _put(ab, off, rf, rf + 5, -1.0)
-                _put(ab, off, rf + 1, rf + 6, -1.0)
-                _put(ab, off, rf, g, -sw * g0[i])
-                _put(ab, off, rf + 1, g, -sw * g1[i])
-                _put(ab, off, rf, r, -sw * d00[i])
-                _put(ab, off, rf, r + 1, -sw * d01[i])
-                _put(ab, off, rf + 1, r, -sw * d10[i])
-                _put(ab, off, rf + 1, r + 1, -sw * d11[i])
+            _tangent(U, S[j], j, T, h, w, ab)
         finite[j] = ok
 
 
