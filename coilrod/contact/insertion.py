@@ -49,6 +49,12 @@ class Insertion:
         Positive second variation (active contacts as constraints).
     substeps : ndarray of int, shape (m,)
         Newton solves each step took (1 without step cutting).
+    push_force : ndarray, shape (m,)
+        The push force at the introducer, N: the axial component of the force the clamp
+        exerts on the rod, ``-F_0 . t_0`` (F_0 the rod's internal force at the clamp, t_0
+        the introducer's axis); > 0 pushes the rod in, < 0 pulls it back.  With friction
+        the force depends on the direction of the motion: insertion then withdrawal draws
+        a hysteresis loop (frictionless: one curve).
     """
 
     lengths: np.ndarray
@@ -59,6 +65,7 @@ class Insertion:
     min_gap: np.ndarray
     stable: np.ndarray
     substeps: np.ndarray
+    push_force: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
     _s: list = dataclasses.field(repr=False, default_factory=list)
     _shapes: list = dataclasses.field(repr=False, default_factory=list)
     _frames: list = dataclasses.field(repr=False, default_factory=list)
@@ -264,9 +271,29 @@ def _carry(prev_problem, prev_u, problem, scale_of_state=1.0):
     for i in range(3):
         u[:, 6 + i] = np.interp(s_new, s_old, V[:, 6 + i], right=0.0)
     u[-1, 6:9] = 0.0
-    for o in range(problem.nc):
+    for o in range(problem.nc + problem.nt):  # normal and friction forces per length
         u[:, 9 + o] = np.interp(s_new, s_old, V[:, 9 + o], right=0.0)
     return u.ravel()
+
+
+def _carry_reference(prev_problem, prev_u, problem) -> None:
+    """Give ``problem`` (a free length grown or shortened by d) the friction reference of
+    the solved ``prev_problem``: the material point at arc length s from the clamp was at
+    s - d, so each new contact point's reference is where that material point was (on the
+    old polygon, exact by linear interpolation between its corners; inside the introducer,
+    on its axis behind the clamp)."""
+    if not problem.nt:
+        return
+    c_old, _ = prev_problem._contact_geometry()
+    c_new, _ = problem._contact_geometry()
+    s_old = np.concatenate([[0.0], (prev_problem.mesh.s + c_old) * prev_problem.L])
+    pts = np.concatenate([np.zeros((1, 3)), prev_problem.contact_points(prev_u[None])[0]])
+    pts = pts * prev_problem.L  # m, relative to the clamp
+    s_new = (problem.mesh.s + c_new) * problem.L - (problem.L - prev_problem.L)
+    ref = np.stack([np.interp(s_new, s_old, pts[:, i]) for i in range(3)], axis=1)
+    behind = s_new < 0.0
+    ref[behind] = s_new[behind, None] * problem.R0[:, 0]
+    problem.set_reference(ref / problem.L)
 
 
 def insert(
@@ -288,8 +315,9 @@ def insert(
     Each step starts from the previous shape (follow-the-leader: the rotations and contact
     forces as functions of the arc length from the clamp, extended along the old tip) and is
     solved by the contact Newton method of the spatial rod
-    (:class:`~coilrod.rod.spatial.SpatialRod`; frictionless, contact at the corners of the
-    rod's polygon and its tip); a step
+    (:class:`~coilrod.rod.spatial.SpatialRod`; contact at the corners of the rod's polygon
+    and its tip, Coulomb friction if the vessel's ``friction`` is > 0, stick or slip decided
+    on each material point's motion since the previous step); a step
     that fails is split in halves (free length and field blended linearly), up to
     :data:`MAX_HALVINGS` times.  The first step is loaded from the straight rod by
     :func:`~coilrod.solve_rod`.
@@ -418,6 +446,7 @@ def _step(build, problem, u, prev, target, k):
         length = prev_len + t1 * (target_len - prev_len)
         field = target_field if t1 == 1.0 else prev_field * (1 - t1) + target_field * t1
         trial_free, trial = build(length, field)
+        _carry_reference(cur_problem, cur_u, trial)
         res = newton(trial, _carry(cur_problem, cur_u, trial), 1.0, opts)
         solves += 1
         if res.ok:  # (its linearization carries the state's stability)
@@ -445,7 +474,8 @@ class _Record:
 
     def __init__(self, lengths, vessel):
         self.lengths, self.vessel = lengths, vessel
-        keys = ("tip", "wall", "fmax", "nodes", "gap", "stable", "sub", "s", "x", "R", "f", "p")
+        keys = ("tip", "wall", "fmax", "nodes", "gap", "stable", "sub", "s", "x", "R", "f", "p",
+                "push")  # fmt: skip
         self.out = {key: [] for key in keys}
         self.half_width = 0.0
 
@@ -469,6 +499,7 @@ class _Record:
         out["R"].append(R)
         out["f"].append(per_length)
         out["p"].append(problem.points(problem.contact_points(u[None])[0]))
+        out["push"].append(-float(V[0, 6:9] @ problem.R0[:, 0]) * (EI / L**2))
         self.half_width = float(problem._half[0] * L)  # in-plane (normal) half-extent, m
 
     def result(self) -> Insertion:
@@ -482,6 +513,7 @@ class _Record:
             min_gap=np.array(out["gap"]),
             stable=np.array(out["stable"], dtype=bool),
             substeps=np.array(out["sub"], dtype=int),
+            push_force=np.array(out["push"]),
             _s=out["s"],
             _shapes=out["x"],
             _frames=out["R"],

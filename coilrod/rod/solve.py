@@ -389,10 +389,10 @@ def _refine(problems, states, scales, opts):
     residual norms, convergence measures); ConvergenceError if a state cannot be reached."""
     coarse, fine = problems
     # the interpolated coarse solution is within O(h^2) of the fine one: chord iterations
+    if getattr(fine, "path_dependent", False):  # friction: the path matters
+        return _refine_in_order(fine, scales, opts)
     guess = coarse.interpolate_to(fine, states)
     newton_opts = dataclasses.replace(opts.newton, chord_start=True)
-    if getattr(fine, "path_dependent", False):  # friction: one state after the other, each
-        return _refine_in_order(fine, guess, scales, newton_opts)  # from the one before
     res = newton(fine, guess, scales, newton_opts, tangent_at_end=False)
     if not np.all(res.ok):
         k = int(np.argmin(res.ok))
@@ -406,29 +406,15 @@ def _refine(problems, states, scales, opts):
     return res.u, res.iterations, fine.residual_norm(res.lin.residual), np.asarray(res.error)
 
 
-def _refine_in_order(fine, guess, scales, newton_opts):
-    """:func:`_refine` for a path-dependent model (friction): the states in load order, each
-    solved with the previous one accepted (:meth:`SpatialRod.accept_state`), the first from
-    the straight rod."""
-    fine.accept_state(fine.straight())
-    out = np.empty_like(guess)
-    its = np.zeros(len(scales), dtype=int)
-    res_norm, errors = np.zeros(len(scales)), np.zeros(len(scales))
-    for j in range(len(scales)):
-        res = newton(fine, guess[j][None], scales[j : j + 1], newton_opts, tangent_at_end=False)
-        if not res.ok[0]:
-            raise ConvergenceError(
-                f"solve_rod could not reach scale {scales[j]:g} (index {j}) on the refined "
-                f"mesh from the coarse solution (error {float(res.error[0]):.3g} of tolerance)",
-                reached=float(scales[j - 1]) if j else 0.0,
-                target=float(scales[j]),
-                residual=float(res.error[0]),
-            )
-        out[j], its[j] = res.u[0], res.iterations[0]
-        res_norm[j] = fine.residual_norm(res.lin.residual)[0]
-        errors[j] = float(np.ravel(res.error)[0])
-        fine.accept_state(out[j])
-    return out, its, res_norm, errors
+def _refine_in_order(fine, scales, opts):
+    """:func:`_refine` for a path-dependent model (friction): the refined mesh follows the
+    load path itself from the straight rod (its own sub-steps; a state solved directly from
+    another mesh's would take a different path)."""
+    run = follow_load(fine, fine.straight(), scales, opts, name="solve_rod (refined mesh)")
+    out = np.array([p.u for p in run.points])
+    res_norm = fine.residual_norm(np.array([p.residual for p in run.points]))
+    errors = np.array([p.error for p in run.points], dtype=float)
+    return out, np.asarray(run.iterations), res_norm, errors
 
 
 def _solved_states(problems, points, iterations, opts):

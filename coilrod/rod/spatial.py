@@ -827,14 +827,15 @@ class SpatialRod(DiscreteRod):
         Dp = np.where(
             inside[..., None, None], I3, (rho / safe)[..., None, None] * (I3 - _outer(ahat, ahat))
         )
-        d_tau = I3 - Dp @ (I3 - _outer(normals, normals))
+        P = I3 - _outer(normals, normals)
+        d_tau = I3 - Dp @ P
         slip = (~inside) & (lam > 0)
         d_lam = -(slip * self.mu_f)[..., None] * ahat
         LH = self.L * hess
         LHt = np.einsum("knoij,knoj->knoi", LH, tau)
         LHd = np.einsum("knoij,knoj->knoi", LH, np.broadcast_to(d, tau.shape))
         da_dp = -ntau[..., None, None] * LH - _outer(normals, LHt)
-        da_dp = da_dp - r * (I3 - nd[..., None, None] * LH - _outer(normals, LHd))
+        da_dp = da_dp - r * (P - nd[..., None, None] * LH - _outer(normals, LHd))
         return Phi, tau, (d_tau, d_lam, -Dp @ da_dp)
 
     def _contact_blocks(self, contact, frames, phi, blocks):
