@@ -72,6 +72,7 @@ class Insertion:
     _forces: list = dataclasses.field(repr=False, default_factory=list)
     vessel: object = dataclasses.field(repr=False, default=None)
     _points: list = dataclasses.field(repr=False, default_factory=list)
+    _axial: list = dataclasses.field(repr=False, default_factory=list)
     _half_width: float = dataclasses.field(repr=False, default=0.0)
 
     def __len__(self) -> int:
@@ -102,6 +103,13 @@ class Insertion:
         """Contact force per unit length on the rod at the contact points of step ``k``
         (:meth:`contact_points`), (n_k, 3), N/m."""
         return self._forces[k].copy()
+
+    def axial_force(self, k: int) -> np.ndarray:
+        """Axial internal force of the segments of step ``k``, (n_k - 1,), N: ``F_j . t``
+        with F_j the force the part beyond segment j exerts on the part before it and t
+        the segment's chord direction; > 0 tension, < 0 compression.  Segment 0's is minus
+        :attr:`push_force`'s axial force at the clamp up to the first segment's turning."""
+        return self._axial[k].copy()
 
     def s(self, k: int) -> np.ndarray:
         """Arc length of the nodes of step ``k`` from the clamp, (n_k,), m."""
@@ -293,7 +301,11 @@ def _carry_reference(prev_problem, prev_u, problem) -> None:
     ref = np.stack([np.interp(s_new, s_old, pts[:, i]) for i in range(3)], axis=1)
     behind = s_new < 0.0
     ref[behind] = s_new[behind, None] * problem.R0[:, 0]
-    problem.set_reference(ref / problem.L)
+    # the friction forces per length of the material points (N/m alike: EI / L^3 units)
+    tau = prev_problem.friction_forces(prev_u[None])[0].reshape(prev_problem.n, -1)
+    tau = np.concatenate([np.zeros((1, tau.shape[1])), tau]) * (problem.L / prev_problem.L) ** 3
+    tau = np.stack([np.interp(s_new, s_old, tau[:, i], left=0.0) for i in range(tau.shape[1])], 1)
+    problem.set_reference(ref / problem.L, tau)
 
 
 def insert(
@@ -475,7 +487,7 @@ class _Record:
     def __init__(self, lengths, vessel):
         self.lengths, self.vessel = lengths, vessel
         keys = ("tip", "wall", "fmax", "nodes", "gap", "stable", "sub", "s", "x", "R", "f", "p",
-                "push")  # fmt: skip
+                "push", "axial")  # fmt: skip
         self.out = {key: [] for key in keys}
         self.half_width = 0.0
 
@@ -500,6 +512,9 @@ class _Record:
         out["f"].append(per_length)
         out["p"].append(problem.points(problem.contact_points(u[None])[0]))
         out["push"].append(-float(V[0, 6:9] @ problem.R0[:, 0]) * (EI / L**2))
+        chord = np.diff(V[:, 0:3], axis=0)
+        chord /= np.linalg.norm(chord, axis=1, keepdims=True)
+        out["axial"].append(np.einsum("ji,ji->j", V[:-1, 6:9], chord) * (EI / L**2))
         self.half_width = float(problem._half[0] * L)  # in-plane (normal) half-extent, m
 
     def result(self) -> Insertion:
@@ -520,6 +535,7 @@ class _Record:
             _forces=out["f"],
             vessel=self.vessel,
             _points=out["p"],
+            _axial=out["axial"],
             _half_width=self.half_width,
         )
 

@@ -203,9 +203,10 @@ class SpatialRod(DiscreteRod):
         self.kl, self.ku = int(max(diff.max(), 1)), int(max(-diff.min(), 1))
         kk = self.kl + self.ku
         self._index = {name: (kk + r - c, c) for name, (r, c) in entries.items()}
-        self._p_ref = None
+        self._p_ref = self._tau_ref = None
         if self.nt:  # the reference of the friction: the straight rod until a state is accepted
             self._p_ref = self.contact_points(self.straight()[None])[0]
+            self._tau_ref = np.zeros((self.n, self.nc, 3))
 
     @property
     def path_dependent(self) -> bool:
@@ -218,15 +219,21 @@ class SpatialRod(DiscreteRod):
         reference: stick or slip at the next solve is decided on the tangential
         displacement from them.  No-op without friction."""
         if self.nt:
-            self._p_ref = self.contact_points(np.asarray(u, float)[None])[0].copy()
+            u = np.asarray(u, float)
+            self._p_ref = self.contact_points(u[None])[0].copy()
+            self._tau_ref = self.friction_forces(u[None])[0]
 
-    def set_reference(self, points: np.ndarray) -> None:
-        """Set the friction's reference contact points (n, 3) (units of L relative to the
-        clamp; :func:`~coilrod.contact.insert` carries them along the material)."""
+    def set_reference(self, points: np.ndarray, tau: np.ndarray | None = None) -> None:
+        """Set the friction's reference: contact points (n, 3) (units of L relative to the
+        clamp) and friction forces per length (n, nc, 3) (EI_z / L^3 units; None: zero) of
+        the last accepted state (:func:`~coilrod.contact.insert` carries them along the
+        material)."""
         points = np.asarray(points, float)
         if points.shape != (self.n, 3):
             raise ValueError(f"points must have shape ({self.n}, 3); got {points.shape}")
         self._p_ref = points.copy()
+        shape = (self.n, self.nc, 3)
+        self._tau_ref = np.zeros(shape) if tau is None else np.array(tau, float).reshape(shape)
 
     def friction_forces(self, U: np.ndarray) -> np.ndarray:
         """Tangential (friction) force per length on the rod at the contact points of states
@@ -432,6 +439,9 @@ class SpatialRod(DiscreteRod):
     #: function of (lam, kappa g) (non-dimensional; any positive value has the same solutions;
     #: a contact problem sets 100 / h_min^2).
     kappa = 1.0
+
+    #: Slack of the friction's stick condition (:meth:`_friction_rows`), non-dimensional.
+    stick_slack = 1e-6
 
     #: Complementarity function: "min" (min(lam, kappa g)) or "fb" (Fischer-Burmeister).
     ncp = "fb"
@@ -798,22 +808,28 @@ class SpatialRod(DiscreteRod):
         """Coulomb friction at the contact points: ``(Phi, tau, derivatives)``.
 
         ``tau`` (k, n, nc, 3) is the tangential force per length on the rod at contact point
-        p_j from each obstacle (unknowns, EI_z / L^3 units), ``Phi = tau - proj(P tau - r u)``
+        p_j from each obstacle (unknowns, EI_z / L^3 units), ``Phi = tau - proj(P v - r u)``
         (k, n, nc, 3) its row: ``P = I - n n^T`` the projection on the wall's tangent plane at
         p_j, ``u = P (p_j - p_ref)`` the tangential displacement of the contact point since
-        the last accepted state (:meth:`accept_state`), ``r`` = :attr:`kappa` and ``proj`` the
-        projection on the disk ``|.| <= mu max(lam, 0)``.  Phi = 0 iff n . tau = 0 and either
-        u = 0 (stick, exact) with |tau| <= mu lam, or |tau| = mu lam with tau along -u (slip).
+        the last accepted state (:meth:`accept_state`), ``r`` = :attr:`kappa`, ``proj`` the
+        projection on the disk ``|.| <= mu max(lam, 0)`` and ``v = tau - eps (tau - tau_ref)``
+        with ``tau_ref`` the accepted state's force and eps = :attr:`stick_slack`.  Phi = 0 iff
+        n . tau = 0 and either ``r u = eps P (tau_ref - tau)`` (stick: u = 0 under a held
+        load, exactly; eps |change of tau| / r under a changing one) with |tau| <= mu lam,
+        or |tau| = mu lam with tau along -u (slip, up to eps).  The slack makes the friction
+        of several sticking points of an inextensible rod determinate (the nearest to
+        tau_ref); eps = 0 is exact stick with a singular Jacobian there.
         With ``hess`` (the gap hessians, 1/m) the derivatives ``(d Phi/d tau (k, n, nc, 3,
         3), d Phi/d lam (k, n, nc, 3), d Phi/d p (k, n, nc, 3, 3))``, else None."""
         k, n, nc = V.shape[0], self.n, self.nc
         cc, _ = self._contact_geometry()
         tau = V[:, :, 9 + nc :].reshape(k, n, nc, 3)
-        r = self.kappa
+        r, eps = self.kappa, self.stick_slack
         d = (X + cc[:, None] * frames[..., :, 0] - self._p_ref)[:, :, None, :]  # (k, n, 1, 3)
         nd = np.einsum("knoi,knoi->kno", normals, np.broadcast_to(d, normals.shape))
-        ntau = np.einsum("knoi,knoi->kno", normals, tau)
-        a = tau - normals * ntau[..., None] - r * (d - normals * nd[..., None])
+        v = (1.0 - eps) * tau + eps * self._tau_ref
+        nv_ = np.einsum("knoi,knoi->kno", normals, v)
+        a = v - normals * nv_[..., None] - r * (d - normals * nd[..., None])
         rho = self.mu_f * np.maximum(lam, 0.0)
         na = np.sqrt(np.einsum("knoi,knoi->kno", a, a))
         inside = na < rho  # stick (strict: rho = 0 is a free point, tau = 0)
@@ -828,13 +844,13 @@ class SpatialRod(DiscreteRod):
             inside[..., None, None], I3, (rho / safe)[..., None, None] * (I3 - _outer(ahat, ahat))
         )
         P = I3 - _outer(normals, normals)
-        d_tau = I3 - Dp @ P
+        d_tau = I3 - (1.0 - eps) * Dp @ P
         slip = (~inside) & (lam > 0)
         d_lam = -(slip * self.mu_f)[..., None] * ahat
         LH = self.L * hess
-        LHt = np.einsum("knoij,knoj->knoi", LH, tau)
+        LHv = np.einsum("knoij,knoj->knoi", LH, v)
         LHd = np.einsum("knoij,knoj->knoi", LH, np.broadcast_to(d, tau.shape))
-        da_dp = -ntau[..., None, None] * LH - _outer(normals, LHt)
+        da_dp = -nv_[..., None, None] * LH - _outer(normals, LHv)
         da_dp = da_dp - r * (P - nd[..., None, None] * LH - _outer(normals, LHd))
         return Phi, tau, (d_tau, d_lam, -Dp @ da_dp)
 
