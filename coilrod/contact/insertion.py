@@ -275,12 +275,14 @@ def _carry(prev_problem, prev_u, problem, scale_of_state=1.0):
     V = prev_u.reshape(prev_problem.n, prev_problem.nv)
     phi = np.stack([np.interp(s_new, s_old, V[:, 3 + i]) for i in range(3)], axis=1)
     u = problem.from_rotations(phi, scale_of_state).reshape(problem.n, problem.nv)
-    # internal forces of the segments (at their start nodes) and contact forces per length
+    # internal forces of the segments (at their start nodes, EI / L^2 units) and contact
+    # forces per length (EI / L^3): the same forces in N in the new length's units
+    ratio = problem.L / prev_problem.L
     for i in range(3):
-        u[:, 6 + i] = np.interp(s_new, s_old, V[:, 6 + i], right=0.0)
+        u[:, 6 + i] = np.interp(s_new, s_old, V[:, 6 + i], right=0.0) * ratio**2
     u[-1, 6:9] = 0.0
     for o in range(problem.nc + problem.nt):  # normal and friction forces per length
-        u[:, 9 + o] = np.interp(s_new, s_old, V[:, 9 + o], right=0.0)
+        u[:, 9 + o] = np.interp(s_new, s_old, V[:, 9 + o], right=0.0) * ratio**3
     return u.ravel()
 
 
