@@ -49,6 +49,12 @@ class Insertion:
         Positive second variation (active contacts as constraints).
     substeps : ndarray of int, shape (m,)
         Newton solves each step took (1 without step cutting).
+    push_force : ndarray, shape (m,)
+        The push force at the introducer, N: the axial component of the force the clamp
+        exerts on the rod, ``-F_0 . t_0`` (F_0 the rod's internal force at the clamp, t_0
+        the introducer's axis); > 0 pushes the rod in, < 0 pulls it back.  With friction
+        the force depends on the direction of the motion: insertion then withdrawal draws
+        a hysteresis loop (frictionless: one curve).
     """
 
     lengths: np.ndarray
@@ -59,12 +65,14 @@ class Insertion:
     min_gap: np.ndarray
     stable: np.ndarray
     substeps: np.ndarray
+    push_force: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
     _s: list = dataclasses.field(repr=False, default_factory=list)
     _shapes: list = dataclasses.field(repr=False, default_factory=list)
     _frames: list = dataclasses.field(repr=False, default_factory=list)
     _forces: list = dataclasses.field(repr=False, default_factory=list)
     vessel: object = dataclasses.field(repr=False, default=None)
     _points: list = dataclasses.field(repr=False, default_factory=list)
+    _axial: list = dataclasses.field(repr=False, default_factory=list)
     _half_width: float = dataclasses.field(repr=False, default=0.0)
 
     def __len__(self) -> int:
@@ -95,6 +103,13 @@ class Insertion:
         """Contact force per unit length on the rod at the contact points of step ``k``
         (:meth:`contact_points`), (n_k, 3), N/m."""
         return self._forces[k].copy()
+
+    def axial_force(self, k: int) -> np.ndarray:
+        """Axial internal force of the segments of step ``k``, (n_k - 1,), N: ``F_j . t``
+        with F_j the force the part beyond segment j exerts on the part before it and t
+        the segment's chord direction; > 0 tension, < 0 compression.  Segment 0's is minus
+        :attr:`push_force`'s axial force at the clamp up to the first segment's turning."""
+        return self._axial[k].copy()
 
     def s(self, k: int) -> np.ndarray:
         """Arc length of the nodes of step ``k`` from the clamp, (n_k,), m."""
@@ -260,13 +275,39 @@ def _carry(prev_problem, prev_u, problem, scale_of_state=1.0):
     V = prev_u.reshape(prev_problem.n, prev_problem.nv)
     phi = np.stack([np.interp(s_new, s_old, V[:, 3 + i]) for i in range(3)], axis=1)
     u = problem.from_rotations(phi, scale_of_state).reshape(problem.n, problem.nv)
-    # internal forces of the segments (at their start nodes) and contact forces per length
+    # internal forces of the segments (at their start nodes, EI / L^2 units) and contact
+    # forces per length (EI / L^3): the same forces in N in the new length's units
+    ratio = problem.L / prev_problem.L
     for i in range(3):
-        u[:, 6 + i] = np.interp(s_new, s_old, V[:, 6 + i], right=0.0)
+        u[:, 6 + i] = np.interp(s_new, s_old, V[:, 6 + i], right=0.0) * ratio**2
     u[-1, 6:9] = 0.0
-    for o in range(problem.nc):
-        u[:, 9 + o] = np.interp(s_new, s_old, V[:, 9 + o], right=0.0)
+    for o in range(problem.nc + problem.nt):  # normal and friction forces per length
+        u[:, 9 + o] = np.interp(s_new, s_old, V[:, 9 + o], right=0.0) * ratio**3
     return u.ravel()
+
+
+def _carry_reference(prev_problem, prev_u, problem) -> None:
+    """Give ``problem`` (a free length grown or shortened by d) the friction reference of
+    the solved ``prev_problem``: the material point at arc length s from the clamp was at
+    s - d, so each new contact point's reference is where that material point was (on the
+    old polygon, exact by linear interpolation between its corners; inside the introducer,
+    on its axis behind the clamp)."""
+    if not problem.nt:
+        return
+    c_old, _ = prev_problem._contact_geometry()
+    c_new, _ = problem._contact_geometry()
+    s_old = np.concatenate([[0.0], (prev_problem.mesh.s + c_old) * prev_problem.L])
+    pts = np.concatenate([np.zeros((1, 3)), prev_problem.contact_points(prev_u[None])[0]])
+    pts = pts * prev_problem.L  # m, relative to the clamp
+    s_new = (problem.mesh.s + c_new) * problem.L - (problem.L - prev_problem.L)
+    ref = np.stack([np.interp(s_new, s_old, pts[:, i]) for i in range(3)], axis=1)
+    behind = s_new < 0.0
+    ref[behind] = s_new[behind, None] * problem.R0[:, 0]
+    # the friction forces per length of the material points (N/m alike: EI / L^3 units)
+    tau = prev_problem.friction_forces(prev_u[None])[0].reshape(prev_problem.n, -1)
+    tau = np.concatenate([np.zeros((1, tau.shape[1])), tau]) * (problem.L / prev_problem.L) ** 3
+    tau = np.stack([np.interp(s_new, s_old, tau[:, i], left=0.0) for i in range(tau.shape[1])], 1)
+    problem.set_reference(ref / problem.L, tau)
 
 
 def insert(
@@ -288,8 +329,9 @@ def insert(
     Each step starts from the previous shape (follow-the-leader: the rotations and contact
     forces as functions of the arc length from the clamp, extended along the old tip) and is
     solved by the contact Newton method of the spatial rod
-    (:class:`~coilrod.rod.spatial.SpatialRod`; frictionless, contact at the corners of the
-    rod's polygon and its tip); a step
+    (:class:`~coilrod.rod.spatial.SpatialRod`; contact at the corners of the rod's polygon
+    and its tip, Coulomb friction if the vessel's ``friction`` is > 0, stick or slip decided
+    on each material point's motion since the previous step); a step
     that fails is split in halves (free length and field blended linearly), up to
     :data:`MAX_HALVINGS` times.  The first step is loaded from the straight rod by
     :func:`~coilrod.solve_rod`.
@@ -425,6 +467,7 @@ def _step(build, problem, u, prev, target, k):
         length = prev_len + t1 * (target_len - prev_len)
         field = target_field if t1 == 1.0 else prev_field * (1 - t1) + target_field * t1
         trial_free, trial = build(length, field)
+        _carry_reference(cur_problem, cur_u, trial)
         res = newton(trial, _carry(cur_problem, cur_u, trial), 1.0, opts)
         solves += 1
         if res.ok:  # (its linearization carries the state's stability)
@@ -452,7 +495,8 @@ class _Record:
 
     def __init__(self, lengths, vessel):
         self.lengths, self.vessel = lengths, vessel
-        keys = ("tip", "wall", "fmax", "nodes", "gap", "stable", "sub", "s", "x", "R", "f", "p")
+        keys = ("tip", "wall", "fmax", "nodes", "gap", "stable", "sub", "s", "x", "R", "f", "p",
+                "push", "axial")  # fmt: skip
         self.out = {key: [] for key in keys}
         self.half_width = 0.0
 
@@ -476,6 +520,10 @@ class _Record:
         out["R"].append(R)
         out["f"].append(per_length)
         out["p"].append(problem.points(problem.contact_points(u[None])[0]))
+        out["push"].append(-float(V[0, 6:9] @ problem.R0[:, 0]) * (EI / L**2))
+        chord = np.diff(V[:, 0:3], axis=0)
+        chord /= np.linalg.norm(chord, axis=1, keepdims=True)
+        out["axial"].append(np.einsum("ji,ji->j", V[:-1, 6:9], chord) * (EI / L**2))
         self.half_width = float(problem._half[0] * L)  # in-plane (normal) half-extent, m
 
     def result(self) -> Insertion:
@@ -489,12 +537,14 @@ class _Record:
             min_gap=np.array(out["gap"]),
             stable=np.array(out["stable"], dtype=bool),
             substeps=np.array(out["sub"], dtype=int),
+            push_force=np.array(out["push"]),
             _s=out["s"],
             _shapes=out["x"],
             _frames=out["R"],
             _forces=out["f"],
             vessel=self.vessel,
             _points=out["p"],
+            _axial=out["axial"],
             _half_width=self.half_width,
         )
 

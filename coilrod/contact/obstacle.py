@@ -15,6 +15,8 @@ curvature seen from the point.  A contact model needs nothing else:
 ``check_start(p)``      ValueError if a starting configuration is not admissible
 ``bounds``              (2, 3) box, m
 ``plot(ax)``            the outline in the x-y plane
+``friction``            Coulomb coefficient mu >= 0 of the wall (0: frictionless)
+``with_friction(mu)``   a copy with another friction coefficient (presets, meshes)
 =====================  ====================================================================
 
 Obstacles are immutable (:mod:`coils._immutable`): their attributes cannot be assigned and
@@ -34,6 +36,17 @@ from coils._immutable import Immutable
 from coils._validate import as_count, as_points, nonnegative
 
 __all__ = ["Obstacle", "GapEvaluation"]
+
+
+def as_friction(friction, name: str = "friction") -> float:
+    """A Coulomb friction coefficient: a finite float >= 0 (ValueError naming ``name``)."""
+    try:
+        mu = float(friction)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number >= 0; got {friction!r}") from None
+    if not np.isfinite(mu) or mu < 0:
+        raise ValueError(f"{name} must be a finite Coulomb coefficient >= 0; got {friction!r}")
+    return mu
 
 
 def _mm(x: float) -> str:
@@ -75,6 +88,25 @@ class Obstacle(Immutable, ABC):
 
     #: How a point with a negative gap is described in messages ("outside the vessel").
     _outside = "outside the obstacle"
+    #: Coulomb friction coefficient mu >= 0 of the wall (0: frictionless contact).
+    friction = 0.0
+
+    def with_friction(self, friction):
+        """A copy of this obstacle whose wall has the Coulomb friction coefficient
+        ``friction`` (mu >= 0; ValueError naming ``friction`` otherwise): for presets and
+        meshes, whose constructors do not take it (``Vessel.bend(...).with_friction(0.1)``).
+        """
+        mu = as_friction(friction)
+        if not self.__dict__.get("_frozen", False):
+            import copy
+
+            new = copy.copy(self)
+            new.friction = mu
+            return new
+        params = self.__dict__.get("_params")
+        if params is not None and "friction" in params:
+            params = {**params, "friction": mu}
+        return self._evolve(params, friction=mu)
 
     # -- the gap and its derivatives ------------------------------------------------------------
     def evaluate(self, points, order: int = 2) -> GapEvaluation:

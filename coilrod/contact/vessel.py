@@ -106,7 +106,7 @@ from .centerline import (
     split_lines,
 )
 from .centerline_file import read_table
-from .obstacle import Obstacle, _mm, _point_mm
+from .obstacle import Obstacle, _mm, _point_mm, as_friction
 from .profile import BallProfile, section_from
 
 __all__ = ["Vessel"]
@@ -158,6 +158,9 @@ class Vessel(Obstacle):
     ends : {"extend", "round"} or (str, str)
         How the tube continues beyond its first and last point: straight half-lines
         (``"extend"``, the vessel is infinitely long) or hemispherical caps (``"round"``).
+    friction : float
+        Coulomb friction coefficient mu >= 0 of the wall (0, the default: frictionless;
+        presets: ``Vessel.bend(...).with_friction(mu)``).
 
     Attributes
     ----------
@@ -189,7 +192,8 @@ class Vessel(Obstacle):
     _outside = "outside the vessel"
     _immutable = True
 
-    def __init__(self, centerline, radius, *, smooth: bool = False, ends="extend"):
+    def __init__(self, centerline, radius, *, smooth: bool = False, ends="extend", friction=0.0):
+        self.friction = as_friction(friction)
         pts = as_points(centerline, "centerline")
         if len(pts) < 2:
             raise ValueError(f"centerline must have at least 2 points; got {len(pts)}")

@@ -7,7 +7,7 @@ import numpy as np
 from coils._immutable import sealed
 from coils._validate import as_axis, as_vector
 
-from .obstacle import Obstacle, _point_mm
+from .obstacle import Obstacle, _point_mm, as_friction
 
 __all__ = ["Wall"]
 
@@ -24,9 +24,13 @@ class Wall(Obstacle):
     normal : array-like, shape (3,), or str
         Normal towards the admissible side (normalised here), or an axis name ``"y"``,
         ``"-x"``; a zero, NaN or infinite normal raises ValueError naming ``normal``.
+    friction : float
+        Coulomb friction coefficient mu >= 0 of the wall (0, the default: frictionless; see
+        :class:`~coilrod.rod.spatial.SpatialRod` for the friction law).
 
     Attributes
     ----------
+    friction : float
     point, normal : ndarray, shape (3,)
         Read-only (m; unit vector).  A wall is immutable: ``wall.replace(point=...)`` gives a
         moved copy.
@@ -43,14 +47,16 @@ class Wall(Obstacle):
     _outside = "behind the wall"
     _immutable = True
 
-    def __init__(self, point, normal):
+    def __init__(self, point, normal, friction=0.0):
+        self.friction = as_friction(friction)
         self.point = sealed(as_vector(point, "point"))
         self.normal = sealed(as_axis(normal, "normal"))
         self._offset = float(self.normal @ self.point)
 
     def __repr__(self) -> str:
         n = ", ".join(f"{v:.4g}" for v in self.normal)
-        return f"Wall(point={_point_mm(self.point)}, normal=({n}))"
+        mu = f", friction={self.friction:g}" if self.friction else ""
+        return f"Wall(point={_point_mm(self.point)}, normal=({n}){mu})"
 
     def _evaluate(self, points: np.ndarray, order: int):
         # n.p - n.p0 loses digits for far points; (p - p0).n does not

@@ -347,8 +347,17 @@ class _Tracker:
         return h, s1, guess
 
     def accepted(self, old: PathPoint, new: PathPoint) -> None:
-        """Record the change of an accepted step (for :meth:`change_limit`)."""
+        """Record the change of an accepted step (for :meth:`change_limit`) and tell a
+        path-dependent model (:meth:`commit`)."""
         self.last_change = float(self.P.distance((new.u - old.u)[None])[0])
+        self.commit(new)
+
+    def commit(self, p: PathPoint) -> None:
+        """Tell the model that ``p`` is accepted (its ``accept_state(u)`` hook, if it has one:
+        friction measures slip from the last accepted state)."""
+        hook = getattr(self.model, "accept_state", None)
+        if hook is not None:
+            hook(p.u)
 
     def near_fold(self, cur: PathPoint) -> bool:
         """The model says ``cur`` is close to a limit point (failing steps then mean a fold)."""
@@ -456,6 +465,7 @@ class _Tracker:
                 # else the arclength passed a hard stretch of a monotone path (a vertical
                 # inflection): a continuation on the same branch, not an event
                 prev, cur = None, landed
+                self.commit(landed)
                 self.last_change = None
                 full = h = target - cur.scale
 
@@ -616,13 +626,17 @@ def follow_load(
             residual=float(res.error[0]),
         )
     start = t.point(res.u[0], start_scale, float(res.error[0]), res.lin)
+    t.commit(start)
+    # a path-dependent model (friction) is stepped one scale at a time: a chunk would correct
+    # all its states from one accepted state
+    chunks = opts.chunk > 1 and not getattr(problem, "path_dependent", False)
     cur, prev = start, None
     points: list = []
     iterations = np.zeros(scales.size, dtype=int)
     k = 0
     try:
         while k < scales.size:
-            if t.native and opts.chunk > 1 and prev is not None and scales.size - k > 1:
+            if t.native and chunks and prev is not None and scales.size - k > 1:
                 wanted = scales[k : k + opts.chunk]
                 run = t.chunk(cur, prev, wanted)
                 t.steps += len(run)

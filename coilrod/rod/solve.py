@@ -389,13 +389,11 @@ def _refine(problems, states, scales, opts):
     residual norms, convergence measures); ConvergenceError if a state cannot be reached."""
     coarse, fine = problems
     # the interpolated coarse solution is within O(h^2) of the fine one: chord iterations
-    res = newton(
-        fine,
-        coarse.interpolate_to(fine, states),
-        scales,
-        dataclasses.replace(opts.newton, chord_start=True),
-        tangent_at_end=False,
-    )
+    if getattr(fine, "path_dependent", False):  # friction: the path matters
+        return _refine_in_order(fine, scales, opts)
+    guess = coarse.interpolate_to(fine, states)
+    newton_opts = dataclasses.replace(opts.newton, chord_start=True)
+    res = newton(fine, guess, scales, newton_opts, tangent_at_end=False)
     if not np.all(res.ok):
         k = int(np.argmin(res.ok))
         raise ConvergenceError(
@@ -406,6 +404,17 @@ def _refine(problems, states, scales, opts):
             residual=float(res.error[k]),
         )
     return res.u, res.iterations, fine.residual_norm(res.lin.residual), np.asarray(res.error)
+
+
+def _refine_in_order(fine, scales, opts):
+    """:func:`_refine` for a path-dependent model (friction): the refined mesh follows the
+    load path itself from the straight rod (its own sub-steps; a state solved directly from
+    another mesh's would take a different path)."""
+    run = follow_load(fine, fine.straight(), scales, opts, name="solve_rod (refined mesh)")
+    out = np.array([p.u for p in run.points])
+    res_norm = fine.residual_norm(np.array([p.residual for p in run.points]))
+    errors = np.array([p.error for p in run.points], dtype=float)
+    return out, np.asarray(run.iterations), res_norm, errors
 
 
 def _solved_states(problems, points, iterations, opts):

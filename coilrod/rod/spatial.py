@@ -101,6 +101,23 @@ class SpatialRod(DiscreteRod):
         rectangle's ``(thickness |n . d_2| + width |n . d_3|) / 2`` with d_2, d_3 the
         section's axes), the force applied at the section's touching point.  None: the
         centreline.
+    friction_rows : bool, optional
+        Carry the friction unknowns and rows (:meth:`_friction_rows`); default (None): if an
+        obstacle's ``friction`` is > 0.  True with every ``friction`` 0 gives the frictionless
+        solutions (to round-off; tests).
+
+    Notes
+    -----
+    Coulomb friction (an obstacle's ``friction`` mu > 0) is quasi-static and incremental:
+    each contact point p_j carries a tangential force per length tau_j in the obstacle's
+    tangent plane, stick (``|tau| <= mu lam``) or slip (``|tau| = mu lam`` opposite to the
+    slip) decided on the tangential displacement of p_j since the last accepted state
+    (:meth:`accept_state`; the path engine calls it at each accepted load step, insertion
+    at each insertion step).  Stick is exact (no regularisation: a held load does not
+    creep).  The friction force acts at the centreline's contact point (the rolling of the
+    section on the wall is not resolved).  The solution therefore depends on the load path:
+    the engine does not correct several load scales together for such a model
+    (:attr:`path_dependent`).
     """
 
     batched = True
@@ -125,6 +142,7 @@ class SpatialRod(DiscreteRod):
         mixed=False,
         obstacles=(),
         section=None,
+        friction_rows=None,
     ):
         self.mesh = mesh
         self.mu = np.asarray(mu, float)
@@ -144,6 +162,18 @@ class SpatialRod(DiscreteRod):
                 self._half = 0.5 * np.array([section.thickness, section.width]) / float(length)
                 self._round = False
         self.nc = len(self.obstacles)  # contact multipliers per node, one per obstacle
+        from ..contact.obstacle import as_friction
+
+        self.mu_f = np.array(
+            [
+                as_friction(getattr(ob, "friction", 0.0), f"obstacles[{i}].friction")
+                for i, ob in enumerate(self.obstacles)
+            ]  # fmt: skip
+        ).reshape(-1)
+        if friction_rows is None:
+            friction_rows = bool(np.any(self.mu_f > 0))
+        #: Friction unknowns per node (3 per obstacle: tau in the world frame), 0 without.
+        self.nt = 3 * self.nc if friction_rows else 0
         if self.nc:  # semi-smooth Newton: a step that switches contacts may raise the residual
             self.full_step_growth = 1e3
             # gap scale of the complementarity: a contact force per length lam against the
@@ -154,7 +184,7 @@ class SpatialRod(DiscreteRod):
         self.linear = bool(field.linear or field.uniform)
         self.cheap_tangent = False
         self.n = n = mesh.n
-        self.nv = 3 if self.uniform else 9 + self.nc
+        self.nv = 3 if self.uniform else 9 + self.nc + self.nt
         self.size = self.nv * n
         h, w = mesh.h, mesh.w
         self._inv_h = 1.0 / h
@@ -173,6 +203,48 @@ class SpatialRod(DiscreteRod):
         self.kl, self.ku = int(max(diff.max(), 1)), int(max(-diff.min(), 1))
         kk = self.kl + self.ku
         self._index = {name: (kk + r - c, c) for name, (r, c) in entries.items()}
+        self._p_ref = self._tau_ref = None
+        if self.nt:  # the reference of the friction: the straight rod until a state is accepted
+            self._p_ref = self.contact_points(self.straight()[None])[0]
+            self._tau_ref = np.zeros((self.n, self.nc, 3))
+
+    @property
+    def path_dependent(self) -> bool:
+        """True with friction: a state depends on the load path (the path engine then
+        steps one load scale at a time and calls :meth:`accept_state`)."""
+        return bool(self.nt)
+
+    def accept_state(self, u: np.ndarray) -> None:
+        """Make the contact points of the accepted state ``u`` (size,) the friction's
+        reference: stick or slip at the next solve is decided on the tangential
+        displacement from them.  No-op without friction."""
+        if self.nt:
+            u = np.asarray(u, float)
+            self._p_ref = self.contact_points(u[None])[0].copy()
+            self._tau_ref = self.friction_forces(u[None])[0]
+
+    def set_reference(self, points: np.ndarray, tau: np.ndarray | None = None) -> None:
+        """Set the friction's reference: contact points (n, 3) (units of L relative to the
+        clamp) and friction forces per length (n, nc, 3) (EI_z / L^3 units; None: zero) of
+        the last accepted state (:func:`~coilrod.contact.insert` carries them along the
+        material)."""
+        points = np.asarray(points, float)
+        if points.shape != (self.n, 3):
+            raise ValueError(f"points must have shape ({self.n}, 3); got {points.shape}")
+        self._p_ref = points.copy()
+        shape = (self.n, self.nc, 3)
+        self._tau_ref = np.zeros(shape) if tau is None else np.array(tau, float).reshape(shape)
+
+    def friction_forces(self, U: np.ndarray) -> np.ndarray:
+        """Tangential (friction) force per length on the rod at the contact points of states
+        (k, size), (k, n, nc, 3) in EI_z / L^3 units (zeros without friction)."""
+        U = np.atleast_2d(U)
+        out = np.zeros((U.shape[0], self.n, self.nc, 3))
+        if self.nt:
+            V = U.reshape(U.shape[0], self.n, self.nv)
+            out[:] = V[:, :, 9 + self.nc :].reshape(out.shape)
+            out[:, 0] = 0.0
+        return out
 
     # -- layout -----------------------------------------------------------------------------
     def _slots(self):
@@ -385,6 +457,9 @@ class SpatialRod(DiscreteRod):
     #: a contact problem sets 100 / h_min^2).
     kappa = 1.0
 
+    #: Slack of the friction's stick condition (:meth:`_friction_rows`), non-dimensional.
+    stick_slack = 1e-6
+
     #: Complementarity function: "min" (min(lam, kappa g); the default: a Newton step drops a
     #: point whose multiplier went negative at once, where Fischer-Burmeister mixes the two
     #: rows and releases it over several iterations) or "fb" (Fischer-Burmeister).
@@ -468,12 +543,12 @@ class SpatialRod(DiscreteRod):
     def contact_state(self, U: np.ndarray):
         """Contact of states (k, size) at the contact points (:meth:`contact_points`): force
         per length on the rod (k, n, nc, 3) in EI_z / L^3 units (times the weights omega_j:
-        the point forces), gaps (k, n, nc) in units of L, and the active set (k, n, nc)
-        (points where the gap is closed and the wall pushes)."""
+        the point forces; the normal force plus friction), gaps (k, n, nc) in units of L, and
+        the active set (k, n, nc) (points where the gap is closed and the wall pushes)."""
         U = np.atleast_2d(U)
         V = U.reshape(U.shape[0], self.n, self.nv)
         lam, gaps, normals, _, _ = self._contact_terms(V, V[:, :, 0:3], self.frames(U), False)
-        force = lam[..., None] * normals
+        force = lam[..., None] * normals + self.friction_forces(U)
         force[:, 0] = 0.0
         active = self.kappa * gaps < lam
         active[:, 0] = False
@@ -552,6 +627,7 @@ class SpatialRod(DiscreteRod):
         n, nv, nc = self.n, self.nv, self.nc
         ox, op, of = self._slots()
         ol = 9  # contact multipliers
+        ot, nt = 9 + nc, self.nt  # friction forces
 
         def block(rnodes, roff, cnodes, coff, nr=3, ncol=3):
             ii, jj = np.meshgrid(np.arange(nr), np.arange(ncol), indexing="ij")
@@ -592,6 +668,18 @@ class SpatialRod(DiscreteRod):
                     "c_x": block(j, ol, j, ox, nc, 3),
                     "c_phi": block(j, ol, j, op, nc, 3),
                     "c_lam": block(j, ol, j, ol, nc, nc),
+                }
+            )
+        if nt:
+            idx.update(
+                {
+                    "clamp_tau": block([0], ot, [0], ot, nt, nt),
+                    "f_taunext": block(j - 1, of, j, ot, 3, nt),
+                    "m_tau": block(j, op, j, ot, 3, nt),
+                    "t_x": block(j, ot, j, ox, nt, 3),
+                    "t_phi": block(j, ot, j, op, nt, 3),
+                    "t_lam": block(j, ot, j, ol, nt, nc),
+                    "t_tau": block(j, ot, j, ot, nt, nt),
                 }
             )
         return idx
@@ -637,8 +725,9 @@ class SpatialRod(DiscreteRod):
         """Residual (k, size), load rate (k, size), band storage and symmetric blocks of a
         stack: the per-node algebra by ``core`` (default: the compiled pass of
         :mod:`coilrod.rod._compiled_spatial`; :func:`numpy_core` is the same in numpy), the
-        contact terms and the second variation's blocks added here.  ``band`` False: no
-        band storage (None; the blocks alone, for an inertia count).  ``fields``: (B (k n, 3),
+        contact terms (:meth:`_contact_rows`, :meth:`_contact_blocks`) and the second
+        variation's blocks (:meth:`_second_variation`) added here.  ``band`` False: no band
+        storage (None; the blocks alone, for an inertia count).  ``fields``: (B (k n, 3),
         G (k n, 3, 3), H (k n, 3, 3, 3) or None) at the nodes, already evaluated."""
         if core is None:
             from ._compiled_spatial import spatial_core as core
@@ -672,21 +761,7 @@ class SpatialRod(DiscreteRod):
             Hs if has_h else np.zeros((1, 1, 3, 3, 3)), has_h, self.uniform, tangent,
             self.mu, self.K, h, w, self.R0, L, frames, R, R1, blk, diag, A_ab, m,
         )  # fmt: skip
-        contact = None
-        if self.nc:  # contact at the polygon's corners and the tip (_contact_geometry)
-            cc, om = self._contact_geometry()
-            tt = frames[:, :, :, 0]
-            contact = self._contact_terms(V, X, frames, tangent)
-            lam, gaps, normals, _, arm = contact
-            f_c = np.einsum("kno,knoi->kni", lam, normals)  # (k, n, 3)
-            m_c = -(om * cc)[:, None] * cross(tt, f_c)  # contact moments (world)
-            m_arm = 0.0
-            if arm is not None:  # the force acts at the rectangle's corner, p - arm
-                m_arm = om[:, None] * np.einsum("kno,knoi->kni", lam, cross(arm, normals))
-            R[:, :-1, 6:9] -= om[1:, None] * f_c[:, 1:]
-            R[:, 1:, 3:6] += (m_c + m_arm)[:, 1:]
-            R[:, :, 9:] = self._ncp(lam, gaps)[0]
-            R[:, 0, 9:] = lam[:, 0]
+        contact = self._contact_rows(V, X, frames, R, tangent) if self.nc else None
         R = R.reshape(k, -1)
         R1 = R1.reshape(k, -1)
         if not tangent:
@@ -701,66 +776,6 @@ class SpatialRod(DiscreteRod):
         if self.uniform:
             ab = self._scatter(k, blocks) if band else None
             return R, R1, ab, (diag[:, 1:], A_ab[:, 1:])
-        f_x = blk[:, 1:, 8]
-        f_phi = blk[:, 1:, 9]
-        m_x = blk[:, 1:, 5]
-        if self.nc:
-            lam, gaps, normals, hess, arm = contact
-            oc = (om * cc)[1:, None, None]
-            tt = frames[:, 1:, :, 0]
-            That, Jl = hat(tt), left_jacobian(phi[:, 1:])
-            LH = L * np.einsum("kno,knoij->knij", lam[:, 1:], hess[:, 1:])  # sum lam L H
-            # world-rotation derivatives of the contact point p = x + c t: dp = -c hat(t) d
-            fc_x = -om[1:, None, None] * LH  # force row wrt x_j
-            fc_d = oc * (LH @ That)  # force row wrt the world rotation d_j
-            mc_x = -oc * (That @ LH)  # moment row wrt x_j (the transpose of fc_d)
-            # moment row wrt d_j: the second variation of -om lam g(p) minus hat(m_c) / 2
-            mc_d = -(om * cc)[1:, None, None] * _sym_term(tt, f_c[:, 1:])
-            mc_d = mc_d + (oc * cc[1:, None, None]) * (That @ LH @ That)
-            mc_d_sym = mc_d
-            mc_d = mc_d - 0.5 * hat(m_c[:, 1:])
-            f_x = f_x + fc_x
-            f_phi = f_phi + fc_d @ Jl
-            m_x = m_x + mc_x
-            act = (self.kappa * gaps < lam)[:, 1:]
-            nc = self.nc
-            _, d_lam, d_gap = self._ncp(lam[:, 1:], gaps[:, 1:])
-            c_lam = np.zeros((k, n - 1, nc, nc))
-            c_lam[..., np.arange(nc), np.arange(nc)] = d_lam
-            n_t = np.swapaxes(normals[:, 1:], -1, -2)  # (k, n-1, 3, nc)
-            tn = cross(tt[:, :, None, :], normals[:, 1:])  # (k, n-1, nc, 3): dg/dd / c
-            gx = normals[:, 1:]  # d(surface gap)/dx, (k, n-1, nc, 3)
-            gd = cc[1:, None, None] * tn  # d(surface gap)/dd
-            turn_lam = -oc * np.swapaxes(tn, -1, -2)  # d(moment row)/dlam
-            if arm is not None:  # the corner's gap n . arm turns with the frame and n(p)
-                a1 = arm[:, 1:]
-                w_ = L * np.einsum("knoij,knoj->knoi", hess[:, 1:], a1)  # L H arm
-                an = cross(a1, normals[:, 1:])  # (k, n-1, nc, 3)
-                gx = gx - w_
-                gd = cc[1:, None, None] * cross(tt[:, :, None, :], normals[:, 1:] - w_) - an
-                turn_lam = turn_lam + om[1:, None, None] * np.swapaxes(an, -1, -2)
-                ahat = hat(a1)  # (k, n-1, nc, 3, 3)
-                aLH = np.einsum("kno,knoij,knojl->knil", lam[:, 1:], ahat, L * hess[:, 1:])
-                m_x = m_x + om[1:, None, None] * aLH
-                frame_turn = np.einsum("kno,knoij,knojl->knil", lam[:, 1:], hat(normals[:, 1:]),
-                                       ahat)  # fmt: skip
-                arm_d = om[1:, None, None] * (frame_turn - cc[1:, None, None] * aLH @ That)
-                mc_d = mc_d + arm_d  # (a derivative of the row: no hat(m) / 2 term)
-                # the second variation (stability) takes its symmetric part and the whole
-                # moment's hat(m)/2 (zero at an equilibrium with the core's)
-                mc_d_sym = mc_d_sym + 0.5 * (arm_d + np.swapaxes(arm_d, -1, -2))
-                m_c = m_c + m_arm
-            blocks.update(
-                {
-                    "clamp_lam": np.eye(nc),
-                    "f_lamnext": -om[1:, None, None] * n_t,
-                    "m_lam": turn_lam,
-                    "c_x": (d_gap * self.kappa)[..., None] * gx,
-                    "c_phi": ((d_gap * self.kappa)[..., None] * gd) @ Jl,
-                    "c_lam": c_lam,
-                }
-            )
-            blocks["m_diag"] = blocks["m_diag"] + mc_d @ Jl
         blocks.update(
             {
                 "clamp_x": I3,
@@ -768,17 +783,201 @@ class SpatialRod(DiscreteRod):
                 "p_xprev": -I3,
                 "p_phiprev": blk[:, 1:, 3],
                 "p_phi": blk[:, 1:, 4],
-                "m_x": m_x,
+                "m_x": blk[:, 1:, 5],
                 "m_Fprev": blk[:, 1:, 6],
                 "m_F": blk[:, 1:-1, 7],
                 "f_F": I3,
                 "f_Fnext": -I3,
-                "f_xnext": f_x,
-                "f_phinext": f_phi,
+                "f_xnext": blk[:, 1:, 8],
+                "f_phinext": blk[:, 1:, 9],
             }
         )
-        # the second variation (Lagrangian Hessian) in blocks Z_j = (x_j, F_{j-1}, d_j, lam_j)
-        nf, b = n - 1, 9 + self.nc
+        sym = self._contact_blocks(contact, frames, phi, blocks) if self.nc else None
+        D, E = self._second_variation(S, G, m, frames, blocks["f_xnext"], diag, A_ab, sym)
+        return R, R1, (self._scatter(k, blocks) if band else None), (D, E)
+
+    def _contact_rows(self, V, X, frames, R, tangent):
+        """Add the contact terms to the residual R (k, n, nv) in place: the force and moment
+        of the normal force and friction at the contact points, the complementarity rows of
+        the normal multipliers and the friction rows (:meth:`_friction_rows`).  Returns what
+        :meth:`_contact_blocks` needs (a dict)."""
+        cc, om = self._contact_geometry()
+        tt = frames[:, :, :, 0]
+        lam, gaps, normals, hess, arm = self._contact_terms(V, X, frames, tangent)
+        f_c = np.einsum("kno,knoi->kni", lam, normals)  # (k, n, 3)
+        friction = None
+        if self.nt:  # tangential forces per length tau (k, n, nc, 3), applied at p_j
+            friction = self._friction_rows(V, X, frames, lam, normals, hess)
+            f_c = f_c + friction[1].sum(axis=2)
+        m_c = -(om * cc)[:, None] * cross(tt, f_c)  # contact moments (world)
+        m_arm = 0.0
+        if arm is not None:  # the normal force acts at the rectangle's corner, p - arm
+            m_arm = om[:, None] * np.einsum("kno,knoi->kni", lam, cross(arm, normals))
+        R[:, :-1, 6:9] -= om[1:, None] * f_c[:, 1:]
+        R[:, 1:, 3:6] += (m_c + m_arm)[:, 1:]
+        ol, ot = 9, 9 + self.nc
+        R[:, :, ol:ot] = self._ncp(lam, gaps)[0]
+        R[:, 0, ol:ot] = lam[:, 0]
+        if friction is not None:
+            k, n = V.shape[:2]
+            R[:, :, ot:] = friction[0].reshape(k, n, -1)
+            R[:, 0, ot:] = friction[1][:, 0].reshape(k, -1)
+        return {
+            "lam": lam, "gaps": gaps, "normals": normals, "hess": hess, "arm": arm,
+            "f_c": f_c, "m_c": m_c, "m_arm": m_arm, "friction": friction,
+        }  # fmt: skip
+
+    def _friction_rows(self, V, X, frames, lam, normals, hess):
+        """Coulomb friction at the contact points: ``(Phi, tau, derivatives)``.
+
+        ``tau`` (k, n, nc, 3) is the tangential force per length on the rod at contact point
+        p_j from each obstacle (unknowns, EI_z / L^3 units), ``Phi = tau - proj(P v - r u)``
+        (k, n, nc, 3) its row: ``P = I - n n^T`` the projection on the wall's tangent plane at
+        p_j, ``u = P (p_j - p_ref)`` the tangential displacement of the contact point since
+        the last accepted state (:meth:`accept_state`), ``r`` = :attr:`kappa`, ``proj`` the
+        projection on the disk ``|.| <= mu max(lam, 0)`` and ``v = tau - eps (tau - tau_ref)``
+        with ``tau_ref`` the accepted state's force and eps = :attr:`stick_slack`.  Phi = 0 iff
+        n . tau = 0 and either ``r u = eps P (tau_ref - tau)`` (stick: u = 0 under a held
+        load, exactly; eps |change of tau| / r under a changing one) with |tau| <= mu lam,
+        or |tau| = mu lam with tau along -u (slip, up to eps).  The slack makes the friction
+        of several sticking points of an inextensible rod determinate (the nearest to
+        tau_ref); eps = 0 is exact stick with a singular Jacobian there.
+        With ``hess`` (the gap hessians, 1/m) the derivatives ``(d Phi/d tau (k, n, nc, 3,
+        3), d Phi/d lam (k, n, nc, 3), d Phi/d p (k, n, nc, 3, 3))``, else None."""
+        k, n, nc = V.shape[0], self.n, self.nc
+        cc, _ = self._contact_geometry()
+        tau = V[:, :, 9 + nc :].reshape(k, n, nc, 3)
+        r, eps = self.kappa, self.stick_slack
+        d = (X + cc[:, None] * frames[..., :, 0] - self._p_ref)[:, :, None, :]  # (k, n, 1, 3)
+        nd = np.einsum("knoi,knoi->kno", normals, np.broadcast_to(d, normals.shape))
+        v = (1.0 - eps) * tau + eps * self._tau_ref
+        nv_ = np.einsum("knoi,knoi->kno", normals, v)
+        a = v - normals * nv_[..., None] - r * (d - normals * nd[..., None])
+        rho = self.mu_f * np.maximum(lam, 0.0)
+        na = np.sqrt(np.einsum("knoi,knoi->kno", a, a))
+        inside = na < rho  # stick (strict: rho = 0 is a free point, tau = 0)
+        safe = np.where(na > 0, na, 1.0)
+        ahat = a / safe[..., None]
+        proj = np.where(inside[..., None], a, rho[..., None] * ahat)
+        Phi = tau - proj
+        if hess is None:
+            return Phi, tau, None
+        I3 = np.eye(3)
+        Dp = np.where(
+            inside[..., None, None], I3, (rho / safe)[..., None, None] * (I3 - _outer(ahat, ahat))
+        )
+        P = I3 - _outer(normals, normals)
+        d_tau = I3 - (1.0 - eps) * Dp @ P
+        slip = (~inside) & (lam > 0)
+        d_lam = -(slip * self.mu_f)[..., None] * ahat
+        LH = self.L * hess
+        LHv = np.einsum("knoij,knoj->knoi", LH, v)
+        LHd = np.einsum("knoij,knoj->knoi", LH, np.broadcast_to(d, tau.shape))
+        da_dp = -nv_[..., None, None] * LH - _outer(normals, LHv)
+        da_dp = da_dp - r * (P - nd[..., None, None] * LH - _outer(normals, LHd))
+        return Phi, tau, (d_tau, d_lam, -Dp @ da_dp)
+
+    def _contact_blocks(self, contact, frames, phi, blocks):
+        """Add the contact terms' Jacobian blocks to ``blocks`` (in place: the force and
+        moment rows' blocks of the nodes, the multipliers' and friction rows' own blocks);
+        returns the pieces of the second variation (:meth:`_second_variation`)."""
+        lam, gaps, normals, hess, arm = (contact[key] for key in ("lam", "gaps", "normals",
+                                                                   "hess", "arm"))  # fmt: skip
+        f_c, m_c, L = contact["f_c"], contact["m_c"], self.L
+        k, n, nc = lam.shape[0], self.n, self.nc
+        cc, om = self._contact_geometry()
+        oc = (om * cc)[1:, None, None]
+        tt = frames[:, 1:, :, 0]
+        That, Jl = hat(tt), left_jacobian(phi[:, 1:])
+        LH = L * np.einsum("kno,knoij->knij", lam[:, 1:], hess[:, 1:])  # sum lam L H
+        # world-rotation derivatives of the contact point p = x + c t: dp = -c hat(t) d
+        fc_d = oc * (LH @ That)  # force row wrt the world rotation d_j
+        m_x = blocks["m_x"] - oc * (That @ LH)  # moment row wrt x_j (the transpose of fc_d)
+        # moment row wrt d_j: the second variation of -om lam g(p) minus hat(m_c) / 2
+        mc_d = -(om * cc)[1:, None, None] * _sym_term(tt, f_c[:, 1:])
+        mc_d = mc_d + (oc * cc[1:, None, None]) * (That @ LH @ That)
+        mc_d_sym = mc_d
+        mc_d = mc_d - 0.5 * hat(m_c[:, 1:])
+        _, d_lam, d_gap = self._ncp(lam[:, 1:], gaps[:, 1:])
+        c_lam = np.zeros((k, n - 1, nc, nc))
+        c_lam[..., np.arange(nc), np.arange(nc)] = d_lam
+        n_t = np.swapaxes(normals[:, 1:], -1, -2)  # (k, n-1, 3, nc)
+        tn = cross(tt[:, :, None, :], normals[:, 1:])  # (k, n-1, nc, 3): dg/dd / c
+        gx = normals[:, 1:]  # d(surface gap)/dx, (k, n-1, nc, 3)
+        gd = cc[1:, None, None] * tn  # d(surface gap)/dd
+        turn_lam = -oc * np.swapaxes(tn, -1, -2)  # d(moment row)/dlam
+        if arm is not None:  # the corner's gap n . arm turns with the frame and n(p)
+            a1 = arm[:, 1:]
+            w_ = L * np.einsum("knoij,knoj->knoi", hess[:, 1:], a1)  # L H arm
+            an = cross(a1, normals[:, 1:])  # (k, n-1, nc, 3)
+            gx = gx - w_
+            gd = cc[1:, None, None] * cross(tt[:, :, None, :], normals[:, 1:] - w_) - an
+            turn_lam = turn_lam + om[1:, None, None] * np.swapaxes(an, -1, -2)
+            ahat = hat(a1)  # (k, n-1, nc, 3, 3)
+            aLH = np.einsum("kno,knoij,knojl->knil", lam[:, 1:], ahat, L * hess[:, 1:])
+            m_x = m_x + om[1:, None, None] * aLH
+            frame_turn = np.einsum("kno,knoij,knojl->knil", lam[:, 1:], hat(normals[:, 1:]),
+                                   ahat)  # fmt: skip
+            arm_d = om[1:, None, None] * (frame_turn - cc[1:, None, None] * aLH @ That)
+            mc_d = mc_d + arm_d  # (a derivative of the row: no hat(m) / 2 term)
+            # the second variation (stability) takes its symmetric part and the whole
+            # moment's hat(m)/2 (zero at an equilibrium with the core's)
+            mc_d_sym = mc_d_sym + 0.5 * (arm_d + np.swapaxes(arm_d, -1, -2))
+            m_c = m_c + contact["m_arm"]
+        ck = (d_gap * self.kappa)[..., None]
+        blocks.update(
+            {
+                "m_x": m_x,
+                "m_diag": blocks["m_diag"] + mc_d @ Jl,
+                "f_xnext": blocks["f_xnext"] - om[1:, None, None] * LH,
+                "f_phinext": blocks["f_phinext"] + fc_d @ Jl,
+                "clamp_lam": np.eye(nc),
+                "f_lamnext": -om[1:, None, None] * n_t,
+                "m_lam": turn_lam,
+                "c_x": ck * gx,
+                "c_phi": (ck * gd) @ Jl,
+                "c_lam": c_lam,
+            }
+        )
+        if self.nt:
+            self._friction_blocks(contact["friction"][2], tt, That, Jl, blocks)
+        act = (self.kappa * gaps < lam)[:, 1:]
+        return fc_d, mc_d_sym, m_c, act, n_t, turn_lam
+
+    def _friction_blocks(self, deriv, tt, That, Jl, blocks):
+        """The friction's Jacobian blocks (:meth:`_friction_rows`) into ``blocks``: the force
+        and moment rows wrt tau, the friction rows wrt x, phi, lam and tau (nodes 1..N)."""
+        d_tau, d_lam, d_p = (a[:, 1:] for a in deriv)
+        k, nf, nc = d_lam.shape[:3]
+        cc, om = self._contact_geometry()
+        nt = 3 * nc
+        t_lam = np.zeros((k, nf, nc, 3, nc))
+        t_tau = np.zeros((k, nf, nc, 3, nc, 3))
+        for o in range(nc):
+            t_lam[:, :, o, :, o] = d_lam[:, :, o]
+            t_tau[:, :, o, :, o, :] = d_tau[:, :, o]
+        d_rot = d_p @ (-cc[1:, None, None] * That)[:, :, None]  # wrt the world rotation
+        blocks.update(
+            {
+                "clamp_tau": np.eye(nt),
+                "f_taunext": np.tile(-om[1:, None, None] * np.eye(3), (1, 1, nc)),
+                "m_tau": np.tile(-(om * cc)[1:, None, None] * That, (1, 1, 1, nc)),
+                "t_x": d_p.reshape(k, nf, nt, 3),
+                "t_phi": (d_rot @ Jl[:, :, None]).reshape(k, nf, nt, 3),
+                "t_lam": t_lam.reshape(k, nf, nt, nc),
+                "t_tau": t_tau.reshape(k, nf, nt, nt),
+            }
+        )
+
+    def _second_variation(self, S, G, m, frames, f_x, diag, A_ab, sym):
+        """The second variation (Lagrangian Hessian) of the mixed layout in blocks Z_j =
+        (x_j, F_{j-1}, d_j, lam_j, tau_j) of the free nodes: diagonal D (k, n-1, nv, nv) and
+        upper E (k, n-2, nv, nv) blocks.  Friction is not conservative: its forces enter as
+        dead loads at the state and its unknowns decouple (identity)."""
+        k, n = frames.shape[:2]
+        h, w, L = self.mesh.h, self.mesh.w, self.L
+        I3 = np.eye(3)
+        nf, b = n - 1, self.nv
         D = np.zeros((k, nf, b, b))
         E = np.zeros((k, max(nf - 1, 0), b, b))
         t = frames[:, :, :, 0]
@@ -795,19 +994,24 @@ class SpatialRod(DiscreteRod):
         E[:, :, 0:3, 3:6] = -I3
         E[:, :, 6:9, 3:6] = -0.5 * h[1:, None, None] * hat(t[:, 1:-1])
         E[:, :, 6:9, 6:9] = A_ab[:, 1:]
-        if self.nc:
-            D[:, :, 0:3, 6:9] += fc_d
-            D[:, :, 6:9, 0:3] += np.swapaxes(fc_d, -1, -2)
-            D[:, :, 6:9, 6:9] += mc_d_sym - 0.5 * hat(m_c[:, 1:])
-            coupling = -om[1:, None, None] * n_t
-            coupling = np.where(act[:, :, None, :], coupling, 0.0)
-            D[:, :, 0:3, 9:] = coupling
-            D[:, :, 9:, 0:3] = np.swapaxes(coupling, -1, -2)
-            turn = np.where(act[:, :, None, :], turn_lam, 0.0)
-            D[:, :, 6:9, 9:] = turn
-            D[:, :, 9:, 6:9] = np.swapaxes(turn, -1, -2)
-            D[:, :, 9:, 9:][..., np.arange(nc), np.arange(nc)] = np.where(act, 0.0, 1.0)
-        return R, R1, (self._scatter(k, blocks) if band else None), (D, E)
+        if sym is None:
+            return D, E
+        fc_d, mc_d_sym, m_c, act, n_t, turn_lam = sym
+        nc, ol, ot = self.nc, 9, 9 + self.nc
+        D[:, :, 0:3, 6:9] += fc_d
+        D[:, :, 6:9, 0:3] += np.swapaxes(fc_d, -1, -2)
+        D[:, :, 6:9, 6:9] += mc_d_sym - 0.5 * hat(m_c[:, 1:])
+        coupling = -self._contact_geometry()[1][1:, None, None] * n_t
+        coupling = np.where(act[:, :, None, :], coupling, 0.0)
+        D[:, :, 0:3, ol:ot] = coupling
+        D[:, :, ol:ot, 0:3] = np.swapaxes(coupling, -1, -2)
+        turn = np.where(act[:, :, None, :], turn_lam, 0.0)
+        D[:, :, 6:9, ol:ot] = turn
+        D[:, :, ol:ot, 6:9] = np.swapaxes(turn, -1, -2)
+        D[:, :, ol:ot, ol:ot][..., np.arange(nc), np.arange(nc)] = np.where(act, 0.0, 1.0)
+        if self.nt:
+            D[:, :, ot:, ot:] = np.eye(self.nt)
+        return D, E
 
     # -- stability ------------------------------------------------------------------------------
     def stability(self, lin: Linearization, precise: bool = False) -> np.ndarray:
@@ -840,7 +1044,7 @@ class SpatialRod(DiscreteRod):
         if not self.uniform:  # the Lagrangian's Hessian has one negative per constraint
             constraints = 3 * (self.n - 1)
             if self.nc:  # and one per active contact
-                c_lam = D[:, :, 9:, 9:]
+                c_lam = D[:, :, 9 : 9 + self.nc, 9 : 9 + self.nc]
                 constraints = constraints + np.count_nonzero(
                     np.einsum("knii->kni", c_lam) == 0.0, axis=(1, 2)
                 )

@@ -1,0 +1,93 @@
+"""Friction benchmark: the capstan law as the bending stiffness vanishes, and Coulomb's
+push force on a flat wall.
+
+1. A floppy rod drawn round a 90 degree bend (radius 20 mm, lumen 2 mm) by a magnet ahead
+   of it (a dipole on the exit axis) wraps the bend's inner wall; sliding, its axial force
+   grows across the wrap by exp(mu theta) (theta: the turn of the tangent between points
+   on the free straight spans, s = 10 and 55 mm) against the motion -- toward the tip
+   while it is inserted, toward the clamp while withdrawn.  The rope limit is EI -> 0 at
+   a given tension T, i.e. EI / (T rho^2) -> 0: the pull is raised at fixed EI (E = 1 kPa)
+   for the withdrawal step.  Columns: the relative error of the tension ratio against
+   exp(mu theta), by mesh.
+2. A tip bent onto a flat wall parallel to the introducer slides along it: the push force
+   at the introducer is mu times the wall's normal reaction (insertion) and minus it
+   (withdrawal), exactly.
+
+Run: ``python benchmarks/bench_friction.py`` (prints markdown tables; ~30 s).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+import coils  # noqa: E402
+from coilrod import Circle, Magnetization, Rod, Vessel, Wall, insert  # noqa: E402
+
+MU = 0.2
+
+
+def capstan(nodes: int, pull: float):
+    """Rows (direction, EI/(T rho^2), ratio, exp(mu theta), relative error) of an insertion
+    round the bend (dipole moment 5 A m^2) and one withdrawal step at ``pull`` A m^2."""
+    vessel = Vessel.bend(bend_radius=0.02, angle=np.pi / 2, radius=0.002, straight_before=0.02,
+                         straight_after=0.06).with_friction(MU)  # fmt: skip
+    mag = Magnetization.segments([0.09, 0.01], [0.0, 128e3], [0.0, 0.0])
+    rod = Rod(0.1, 1e3, Circle(1e-3), mag)
+    steps = 2 * nodes // 3
+    lengths = [*np.linspace(0.015, 0.08, steps), 0.079]
+    fields = [coils.Dipole(moment=(0, m, 0), center=(0.04, 0.14, 0))
+              for m in [5.0] * steps + [pull]]  # fmt: skip
+    t0 = time.process_time()
+    ins = insert(rod, vessel, lengths, fields, nodes=nodes)
+    cpu = time.process_time() - t0
+    rows = []
+    for k, sign, name in ((steps - 1, 1.0, "insert"), (steps, -1.0, "withdraw")):
+        s, axial = ins.s(k)[:-1], ins.axial_force(k)
+        chord = np.diff(ins.centerline(k), axis=0)
+        angle = np.arctan2(chord[:, 1], chord[:, 0])
+        t_in, t_out = np.interp([0.01, 0.055], s, axial)
+        theta = float(np.ptp(np.interp([0.01, 0.055], s, angle)))
+        ratio = (t_out / t_in) ** sign
+        ref = np.exp(MU * theta)
+        stiff = rod.bending_stiffness / (max(t_in, t_out) * 0.0185**2)
+        rows.append((name, nodes, stiff, ratio, ref, ratio / ref - 1, cpu))
+    return rows
+
+
+def flat_wall():
+    mag = Magnetization.segments([0.04, 0.01], [0.0, 128e3], [0.0, 0.0])
+    rod = Rod(0.05, 1e6, Circle(1e-3), mag)
+    wall = Wall((0, 0.004, 0), (0, -1, 0), friction=MU)
+    lengths = [0.02, 0.03, 0.035, 0.03]
+    ins = insert(rod, wall, lengths, coils.UniformField(B=(0, 0.01, 0)),
+                 clamp_position=(0, 0, 0), clamp_rotation=np.eye(3), nodes=32)  # fmt: skip
+    return lengths, ins.push_force, ins.wall_force[:, 1]
+
+
+def main():
+    print(f"## Capstan round a bend (mu = {MU})\n")
+    print("| step | segments | EI/(T rho^2) | T ratio | exp(mu theta) | rel. error | CPU s |")
+    print("|---|---|---|---|---|---|---|")
+    for nodes in (16, 32):
+        for pull in (5.0, 50.0):
+            rows = capstan(nodes, pull)
+            for name, n, stiff, ratio, ref, err, cpu in rows[1 if pull != 5.0 else 0 :]:
+                print(f"| {name} | {n} | {stiff:.1e} | {ratio:.5f} | {ref:.5f} | {err:+.1e} "
+                      f"| {cpu:.2f} |")  # fmt: skip
+    print(f"\n## Push force on a flat wall (mu = {MU})\n")
+    print("| free length mm | push mN | normal reaction mN | push / (mu N) |")
+    print("|---|---|---|---|")
+    for length, push, normal in zip(*flat_wall(), strict=True):
+        print(f"| {length * 1e3:.0f} | {push * 1e3:.5f} | {normal * 1e3:.5f} | "
+              f"{push / (MU * normal):+.9f} |")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()

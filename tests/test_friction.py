@@ -1,0 +1,191 @@
+"""Coulomb friction at the contact points of the spatial rod (quasi-static, incremental):
+frictionless limit to round-off, exact stick, slip on the cone (push force = mu times the
+normal reaction, closed form for a tip sliding on a flat wall), hysteresis of insertion and
+withdrawal, the Jacobian of the friction rows, and bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import coilrod
+import coils
+from coilrod import Circle, Magnetization, Rod, Vessel, Wall, solve_rod
+from coilrod.path.stepping import PathOptions, follow_load
+from coilrod.rod.solve import build_spatial_problem, make_mesh
+from coilrod.rod.spatial import SpatialRod
+
+L = 0.04
+
+
+def _rod():
+    return Rod(L, 1e6, Circle(2e-3), Magnetization(128e3, 0.0))
+
+
+def _tip_on_wall(mu, friction_rows=None, nodes=16):
+    """A cantilever along x bent up by a field along +y onto the wall y = 0.2 L (its tip
+    touches): the problem and the field."""
+    rod = _rod()
+    field = coils.UniformField(B=(0, rod.field_for_lambda(1.0), 0))
+    wall = Wall((0, 0.2 * L, 0), (0, -1, 0), friction=mu)
+    P = build_spatial_problem(
+        rod, field, make_mesh(rod, nodes), np.zeros(3), np.eye(3), 1e-10, obstacles=[wall]
+    )
+    if friction_rows is not None:
+        args = (P.mesh, P.mu, P.K, P.field, P.L, P.clamp, P.R0, P.tol)
+        P = SpatialRod(*args, obstacles=[wall], section=rod.section, friction_rows=friction_rows)
+    return P
+
+
+def _follow(P, scales):
+    opts = PathOptions(relative_correction=1.0)
+    run = follow_load(P, P.straight(), scales, opts)
+    return np.array([p.u for p in run.points])
+
+
+def test_zero_friction_is_frictionless_to_round_off():
+    scales = [1.5, 3.0]
+    plain = _tip_on_wall(0.0)
+    rows = _tip_on_wall(0.0, friction_rows=True)  # friction unknowns with mu = 0
+    assert plain.nt == 0
+    assert rows.nt == 3
+    a, b = _follow(plain, scales), _follow(rows, scales)
+    Va, Vb = a.reshape(2, plain.n, plain.nv), b.reshape(2, rows.n, rows.nv)
+    np.testing.assert_allclose(Vb[:, :, : plain.nv], Va, rtol=0, atol=1e-9 * np.abs(Va).max())
+    assert np.abs(Vb[:, :, plain.nv :]).max() == 0.0  # no tangential force at all
+
+
+def test_stick_within_the_cone():
+    # after the tip touches, the frictionless shape no longer changes with the load, so the
+    # tip sticks as the load triples with an unchanged friction force (the wall's extra
+    # reaction is normal): the contact point does not move at all (its slack, r u = eps
+    # (tau_ref - tau), is zero)
+    P = _tip_on_wall(0.3)
+    U = _follow(P, [1.5, 3.0, 4.5])
+    tip = P.contact_points(U)[:, -1]
+    V = U.reshape(3, P.n, P.nv)
+    lam, tau = V[:, -1, 9], V[:, -1, 10:13]
+    assert np.all(lam > 0)
+    assert np.all(np.linalg.norm(tau, axis=1) < 0.3 * lam)  # strictly inside: stick
+    assert np.abs(tau[:, 1:]).max() == 0.0  # tangential: along the wall
+    assert np.abs(tau - tau[0]).max() < 1e-9 * np.abs(tau).max()
+    assert np.abs(tip - tip[0]).max() < 1e-13
+
+
+def test_slip_on_the_cone_push_force_and_hysteresis():
+    # a tip bent onto a flat wall parallel to the introducer's axis slides along it as the
+    # rod is pushed in or pulled back: in a uniform field (no magnetic force) the clamp's
+    # axial force balances the friction alone, push = mu N (closed form, Coulomb), with the
+    # sign of the motion; frictionless, the push force is zero both ways
+    mag = Magnetization.segments([0.04, 0.01], [0.0, 128e3], [0.0, 0.0])
+    rod = Rod(0.05, 1e6, Circle(1e-3), mag)
+    field = coils.UniformField(B=(0, 0.01, 0))
+    lengths = [0.02, 0.03, 0.035, 0.03, 0.03]  # in, in, in, back, held
+    kw = dict(clamp_position=(0, 0, 0), clamp_rotation=np.eye(3), nodes=16)
+    runs = {}
+    for mu in (0.0, 0.3):
+        wall = Wall((0, 0.004, 0), (0, -1, 0), friction=mu)
+        runs[mu] = ins = coilrod.insert(rod, wall, lengths, field, **kw)
+        N = ins.wall_force[:, 1]  # the normal force on the wall (the tip's)
+        assert np.all(N > 0)
+        ratio = ins.push_force / N
+        if mu == 0:
+            assert np.abs(ins.push_force).max() < 1e-12 * N.max()
+        else:  # the first step bends the tip in from the straight rod (it slides back)
+            np.testing.assert_allclose(ratio[:4], [-mu, mu, mu, -mu], rtol=1e-6)
+            # a held step: the previous state is the solution (no creep; its friction stays)
+            assert np.abs(ins.tip[4] - ins.tip[3]).max() < 1e-14
+            assert abs(ratio[4] / ratio[3] - 1) < 1e-9
+    # hysteresis: at 30 mm on the way in and on the way back the tips differ; frictionless
+    # they are the same state
+    free, rough = runs[0.0], runs[0.3]
+    assert abs(free.tip[1, 0] - free.tip[3, 0]) < 1e-12
+    assert rough.tip[3, 0] - rough.tip[1, 0] > 1e-4
+
+
+def test_friction_jacobian_against_finite_differences():
+    # a curved wall (the gap hessian enters) and a flat one, random multipliers, slipping
+    # and sticking points
+    rod = Rod(L, 1e6, Circle(1e-3), Magnetization(128e3, 0.0))
+    vessel = Vessel([[0, 0, 0], [0.02, 0, 0], [0.03, 0.01, 0.003]], 3e-3, smooth=True,
+                    friction=0.3)  # fmt: skip
+    G = 0.4 * np.diag([-0.5, 1.0, -0.5])
+    field = coils.LinearField(B0=(0.0, rod.field_for_lambda(1.0), 0.0), gradient=G)
+    obstacles = [vessel, Wall((0, -0.002, 0), (0, 1, 0.2), friction=0.5)]
+    P = build_spatial_problem(rod, field, make_mesh(rod, 5), np.zeros(3), np.eye(3), 1e-9,
+                              obstacles=obstacles)  # fmt: skip
+    rng = np.random.default_rng(1)
+    phi = 0.2 * rng.standard_normal((P.n, 3))
+    phi[0] = 0
+    u = P.from_rotations(phi, 0.5).reshape(P.n, P.nv)
+    u[:, 9:11] = rng.uniform(-0.5, 2, (P.n, 2))
+    u[:, 11:] = 0.5 * rng.standard_normal((P.n, 6))
+    u[:, 0:3] += 1e-3 * rng.standard_normal((P.n, 3))
+    u = u.ravel()
+    ref = P.contact_points(u[None])[0] + 3e-3 * rng.standard_normal((P.n, 3))
+    P.set_reference(ref, rng.standard_normal((P.n, 2, 3)))
+    J = P.dense_jacobian(u, 0.5)
+    eps = 1e-7
+    E = np.eye(P.size) * eps
+    stack = np.concatenate([u + E, u - E])  # all perturbed states in one batched call
+    R = P.linearize(stack, np.full(2 * P.size, 0.5), tangent=False).residual
+    Jf = (R[: P.size] - R[P.size :]).T / (2 * eps)
+    assert np.abs(J - Jf).max() < 1e-7 * np.abs(J).max()
+
+
+def test_bad_friction():
+    for bad in (-0.1, np.nan, np.inf, "x"):
+        with pytest.raises(ValueError, match="friction"):
+            Wall((0, 0, 0), "y", friction=bad)
+        with pytest.raises(ValueError, match="friction"):
+            Vessel.straight(0.1, 0.002).with_friction(bad)
+    with pytest.raises(ValueError, match="friction"):
+        Vessel([[0, 0, 0], [1, 0, 0]], 0.1, friction=-1)
+    bend = Vessel.bend(bend_radius=0.02, angle=1.0, radius=0.002).with_friction(0.2)
+    assert bend.friction == 0.2
+    assert Wall((0, 0, 0), "y", friction=0.2).replace(point=(0, 1, 0)).friction == 0.2
+
+    class Rough:  # the bare gap interface with a negative coefficient
+        friction = -0.5
+
+        def gap(self, x):
+            return np.asarray(x)[:, 1] + 1.0
+
+        def gap_gradient(self, x):
+            return np.tile([0.0, 1.0, 0.0], (len(x), 1))
+
+        def gap_hessian(self, x):
+            return np.zeros((len(x), 3, 3))
+
+    with pytest.raises(ValueError, match=r"obstacles\[0\].friction"):
+        solve_rod(_rod(), coils.UniformField(B=(0, 1e-3, 0)), [1.0], obstacles=[Rough()])
+
+
+def test_capstan_round_a_bend():
+    # a floppy rod (E = 1 kPa) drawn round a 90 degree bend by a magnet ahead of it wraps
+    # the bend's inner wall like a rope round a post; sliding, its tension grows by the
+    # capstan factor exp(mu theta) across the wrap (theta: the turn of the rod's tangent
+    # between two points on its free straight spans), against the motion: toward the tip
+    # while inserted (the tip pulls), toward the clamp while withdrawn (the clamp pulls).
+    # The limit of vanishing bending stiffness; here EI / (T rho^2) ~ 4e-3 and 3e-4
+    # (benchmarks/bench_friction.py shows the approach)
+    mu = 0.2
+    vessel = Vessel.bend(bend_radius=0.02, angle=np.pi / 2, radius=0.002, straight_before=0.02,
+                         straight_after=0.06).with_friction(mu)  # fmt: skip
+    mag = Magnetization.segments([0.09, 0.01], [0.0, 128e3], [0.0, 0.0])
+    rod = Rod(0.1, 1e3, Circle(1e-3), mag)
+    lengths = [*np.linspace(0.015, 0.08, 10), 0.079]  # in, then back a millimetre
+    moments = [5.0] * 10 + [50.0]  # the magnet's pull (T) raised for the withdrawal
+    fields = [coils.Dipole(moment=(0, m, 0), center=(0.04, 0.14, 0)) for m in moments]
+    ins = coilrod.insert(rod, vessel, lengths, fields, nodes=16)
+    for k, sign in ((9, 1.0), (10, -1.0)):
+        s, axial = ins.s(k)[:-1], ins.axial_force(k)
+        chord = np.diff(ins.centerline(k), axis=0)
+        angle = np.arctan2(chord[:, 1], chord[:, 0])
+        (t_in, t_out), theta = (
+            np.interp([0.01, 0.055], s, axial),
+            np.ptp(np.interp([0.01, 0.055], s, angle)),
+        )
+        assert theta > 1.3  # wrapped (the straight spans are not quite along the walls)
+        assert abs((t_out / t_in) ** sign / np.exp(mu * theta) - 1) < 5e-3
+        assert (t_out / t_in) ** sign > 1.3  # frictionless, it is 1
