@@ -34,11 +34,14 @@ def event_fraction(problem, U: np.ndarray, dU: np.ndarray) -> np.ndarray:
     reaching zero (linear in ``dU``)."""
     U, dU = np.atleast_2d(U), np.atleast_2d(dU)
     k = U.shape[0]
-    if not problem.nc or problem.uniform:
+    if not problem.nc or problem.uniform or problem.nt:
+        # with friction (problem.nt tangential unknowns per point) the stick/slip rows are
+        # measured from the last accepted state: the step is left to the corrector
         return np.ones(k)
     frac = problem.closing_fraction(U, dU)
-    lam = U.reshape(k, problem.n, problem.nv)[:, 1:, 9:]
-    d_lam = dU.reshape(k, problem.n, problem.nv)[:, 1:, 9:]
+    nc = problem.nc
+    lam = U.reshape(k, problem.n, problem.nv)[:, 1:, 9 : 9 + nc]
+    d_lam = dU.reshape(k, problem.n, problem.nv)[:, 1:, 9 : 9 + nc]
     floor = _RELEASE_FLOOR * np.abs(lam).max(axis=(1, 2), keepdims=True)
     releasing = (lam > floor) & (lam + d_lam < 0.0)
     with np.errstate(all="ignore"):
@@ -76,7 +79,7 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
         lin = problem.linearize(u[None], np.array([scale]))
         V = u.reshape(n, nv).copy()
         g = problem.surface_gaps(V[None, :, 0:3], problem.frames(u[None]))[0]
-        V[:, 9:] = np.maximum(V[:, 9:], problem.kappa * np.abs(g) + 1.0)
+        V[:, 9 : 9 + nc] = np.maximum(V[:, 9 : 9 + nc], problem.kappa * np.abs(g) + 1.0)
         every = problem.linearize(V.reshape(1, -1), np.array([scale]))  # all rows active
     finally:
         if old is None:
@@ -103,7 +106,7 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     def gaps(x):
         return problem.surface_gaps(x.reshape(1, n, nv)[:, :, 0:3], problem.frames(x[None]))[0, 1:]
 
-    lam0 = u.reshape(n, nv)[1:, 9:]
+    lam0 = u.reshape(n, nv)[1:, 9 : 9 + nc]
     active = problem.kappa * g[1:] < lam0
     x, left = u.copy(), 1.0
     switched = set()
@@ -114,7 +117,7 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
             return None
         d = left * ds * r
         g1 = gaps(x + d)
-        l0, l1 = x.reshape(n, nv)[1:, 9:], (x + d).reshape(n, nv)[1:, 9:]
+        l0, l1 = x.reshape(n, nv)[1:, 9 : 9 + nc], (x + d).reshape(n, nv)[1:, 9 : 9 + nc]
         with np.errstate(all="ignore"):
             closing = ~active & (g1 < 0.0) & (g1 < g0)
             f_close = np.where(closing, np.clip(g0 / (g0 - g1), 0.0, 1.0), np.inf)
@@ -134,6 +137,6 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
             switched.add(key)
         active = active ^ at
         V = x.reshape(n, nv)
-        V[1:, 9:] = np.where((f_rel <= f), 0.0, V[1:, 9:])
+        V[1:, 9 : 9 + nc] = np.where((f_rel <= f), 0.0, V[1:, 9 : 9 + nc])
         x = V.ravel()
     return None
