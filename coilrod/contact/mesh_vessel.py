@@ -159,7 +159,7 @@ class MeshVessel(Obstacle):
         np.maximum.at(longest, edges[:, 1], elen)
         self._support = SUPPORT * longest
         diag = float(np.linalg.norm(np.ptp(self.vertices, axis=0)))
-        ball = _ball_radii(self.vertices, self._vertex_normals, self._vtree, diag)
+        ball = _ball_radii(self.vertices, self._vertex_normals, self._vtree, diag, edges)
         self._bases = _tangent_bases(self._vertex_normals)
         self._curv = _curvatures(self.vertices, self._vertex_normals, self._bases, edges)
         kmax = np.max(np.linalg.eigvalsh(self._curv), axis=1)
@@ -433,26 +433,31 @@ def _curvatures(vertices, normals, bases, edges):
     return K
 
 
-def _ball_radii(vertices, normals, tree, start):
+def _ball_radii(vertices, normals, tree, start, edges):
     """Radius (n,) of the largest vertex-free ball touching each vertex from inside (centre
-    on the inward normal): the shrinking-ball medial axis estimate (Ma, Bai & Huang 2012)."""
+    on the inward normal): the shrinking-ball medial axis estimate (Ma, Bai & Huang 2012),
+    started from the smallest ball through a neighbour (or ``start``)."""
     t = np.full(len(vertices), start)
-    idx = np.arange(len(vertices))
+    both = np.concatenate([edges, edges[:, ::-1]])
+    e = vertices[both[:, 0]] - vertices[both[:, 1]]
+    den = 2.0 * np.einsum("ij,ij->i", e, normals[both[:, 0]])
+    up = den > 0
+    np.minimum.at(t, both[up, 0], np.einsum("ij,ij->i", e[up], e[up]) / den[up])
+    todo = np.arange(len(vertices))
     for _ in range(60):
-        c = vertices - t[:, None] * normals
+        c = vertices[todo] - t[todo, None] * normals[todo]
         dist, near = tree.query(c, k=2)
         # the nearest vertex that is not the vertex itself
-        j = np.where(near[:, 0] == idx, near[:, 1], near[:, 0])
-        dj = np.where(near[:, 0] == idx, dist[:, 1], dist[:, 0])
-        inside = dj < t * (1.0 - 1e-9)
-        if not np.any(inside):
+        own = near[:, 0] == todo
+        j = np.where(own, near[:, 1], near[:, 0])
+        dj = np.where(own, dist[:, 1], dist[:, 0])
+        inside = dj < t[todo] * (1.0 - 1e-9)
+        todo, j = todo[inside], j[inside]
+        if todo.size == 0:
             break
-        e = vertices[idx] - vertices[j]
-        den = 2.0 * np.einsum("ij,ij->i", e, normals)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tn = np.einsum("ij,ij->i", e, e) / den
-        tn = np.where(den > 0, tn, t)
-        t = np.where(inside, np.minimum(t, tn), t)
+        e = vertices[todo] - vertices[j]
+        # the ball through the vertex and j (j inside the old ball: e . n > 0)
+        t[todo] = np.einsum("ij,ij->i", e, e) / (2.0 * np.einsum("ij,ij->i", e, normals[todo]))
     return t
 
 
