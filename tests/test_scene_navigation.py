@@ -136,3 +136,18 @@ def test_example_navigation_scenes_load():
         assert "insertion" in scene.rod_options
         (lumen,) = scene.rod_options["obstacles"]
         assert lumen.gap([0.0, 0.0, 0.0])[0] > 1e-3  # the introducer is inside
+
+
+def test_navigation_scenes_are_not_swept(tmp_path, capsys):
+    """A sweep row holds a load path's tips, not an insertion: the CLI and the library refuse
+    a navigation scene with one clear line (they wrote a row of AttributeErrors before)."""
+    from coilrod import sweep
+    from coilrod.scene.cli import main, shipped_scenes
+
+    args = ["sweep", "navigation_bend", "--param", "robot.youngs_modulus=1MPa:2MPa:2"]
+    assert main([*args, "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "insertion: a navigation scene ([insertion]) cannot be swept yet" in err
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(SceneError, match=r"navigation scene \(\[insertion\]\) cannot be swept"):
+        sweep(shipped_scenes()["navigation_bend"], {"robot.youngs_modulus": "1 MPa:2 MPa:2"})

@@ -43,6 +43,19 @@ CONTROL_NOT_SWEPT = (
     "control: a control scene ([control]) cannot be swept yet (a sweep row holds tips under a "
     "given field); run it with 'coilrod run'"
 )
+#: Why a navigation scene is not swept (its rows would be insertions, not load paths).
+NAVIGATION_NOT_SWEPT = (
+    "insertion: a navigation scene ([insertion]) cannot be swept yet (a sweep row holds tips "
+    "under a load path, not an insertion); run it with 'coilrod run'"
+)
+
+
+def not_swept(scene) -> list[str]:
+    """Why ``scene`` cannot be swept at all (a control or a navigation scene), [] if it can."""
+    problems = [CONTROL_NOT_SWEPT] if scene.control is not None else []
+    if "insertion" in getattr(scene, "rod_options", {}):
+        problems.append(NAVIGATION_NOT_SWEPT)
+    return problems
 
 
 @dataclass
@@ -249,7 +262,7 @@ def _check_workers(workers, client) -> int | None:
 def _checked(scene, params, workers, client, resume, out):
     """The sweep's parameters and worker count, every problem of the arguments reported at once
     (SceneError)."""
-    problems: list[str] = [CONTROL_NOT_SWEPT] if scene.control is not None else []
+    problems: list[str] = not_swept(scene)
     parameters: list[Parameter] = []
     try:
         parameters = sweep_parameters(params, scene)

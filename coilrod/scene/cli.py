@@ -394,11 +394,13 @@ def _sweep(args) -> int:
         scene = load_scene(_resolve_scene(args.scene))
     except SceneError as exc:
         problems = exc.problems + problems
-    if scene is not None and scene.control is not None:
-        from ..design.sweep import CONTROL_NOT_SWEPT
+    refused = []
+    if scene is not None:
+        from ..design.sweep import not_swept
 
-        problems.append(CONTROL_NOT_SWEPT)
-    elif scene is not None and params:
+        refused = not_swept(scene)
+        problems += refused
+    if scene is not None and params and not refused:
         try:
             sweep_parameters(params, scene)
         except SceneError as exc:
