@@ -245,7 +245,7 @@ def section_full_curve():
         "commit 700f85f): DOLFINx 0.11 takes 3.06 s wall for this curve with 94 Newton "
         "iterations, coilrod then 1.09 s with 104 (86 factorisations, 30 sub-steps): ratio "
         "0.36; on 40x2x2 19.6 s against 7.2 s: 0.37 (CPU time 0.30).  Since then the FEM's "
-        "step cap is 0.3 L (was 0.15 L) and its chord steps start only after a thousandfold "
+        "step cap is 0.2 L (was 0.15 L) and its chord steps start only after a thousandfold "
         "error cut (was 8-fold): the counts above."
     )
     emit()

@@ -566,8 +566,7 @@ class Assembler:
             g = np.matmul(self._dN_a_qJ[sl], wdN)
             for i in range(d):
                 K5[:, :, i, :, i] += g
-                for k in range(d):
-                    K5[:, :, i, :, k] += C5[:, :, k, :, i]
+            K5 += C5.transpose(0, 1, 4, 3, 2)  # [a, k, b, i] added at [a, i, b, k]
             for term in add:
                 term(sl, K)
         return out
