@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConvergenceError
-from .parse import SceneError, _Problems, _table, _unknown_keys, _value
+from .tables import SceneError, _Problems, _table, _unknown_keys, _value
 
 __all__ = ["parse_insertion", "push_force", "run_navigation", "NavigationSceneResult"]
 

@@ -6,7 +6,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from .parse import SceneError
+from .tables import SceneError
 
 __all__ = ["prepare_output_dir"]
 
