@@ -20,21 +20,6 @@ _ALPHA = (1.0 + np.sqrt(17.0)) / 8.0  # Bunch-Kaufman's pivot threshold
 
 
 @nb.njit(cache=True)
-def _swap(W, i, j, m):
-    """Symmetric swap of rows and columns ``i`` and ``j`` of ``W[:m, :m]``."""
-    if i == j:
-        return
-    for r in range(m):
-        t = W[i, r]
-        W[i, r] = W[j, r]
-        W[j, r] = t
-    for r in range(m):
-        t = W[r, i]
-        W[r, i] = W[r, j]
-        W[r, j] = t
-
-
-@nb.njit(cache=True)
 def _eliminate(W, b, m, rtol):
     """Symmetric elimination of the first ``b`` unknowns of ``W[:m, :m]`` (the pivot block
     and, below and right of it, its coupling to the next block) with Bunch-Kaufman 1x1 / 2x2
@@ -59,7 +44,7 @@ def _eliminate(W, b, m, rtol):
                 lam = abs(W[i, k])
                 r = i
         two = False
-        if max(akk, lam) <= tiny and akk == 0.0 and lam == 0.0:
+        if akk == 0.0 and lam == 0.0:
             zero += 1  # an exactly zero row inside the block: left as is (pseudo-inverse)
             k += 1
             continue
@@ -68,13 +53,14 @@ def _eliminate(W, b, m, rtol):
             for j in range(k, b):
                 if j != r and abs(W[j, r]) > sigma:
                     sigma = abs(W[j, r])
-            if akk * sigma >= _ALPHA * lam * lam:
-                pass
-            elif abs(W[r, r]) >= _ALPHA * sigma:
-                _swap(W, k, r, m)
-            else:
-                _swap(W, k + 1, r, m)
-                two = True
+            if akk * sigma < _ALPHA * lam * lam:
+                two = abs(W[r, r]) < _ALPHA * sigma
+                t = k + 1 if two else k
+                if t != r:  # symmetric swap of rows and columns t and r
+                    for i in range(m):
+                        W[t, i], W[r, i] = W[r, i], W[t, i]
+                    for i in range(m):
+                        W[i, t], W[i, r] = W[i, r], W[i, t]
         if not two:
             d = W[k, k]
             if abs(d) <= tiny:
