@@ -168,8 +168,12 @@ def take(problem: PathProblem, lin: Linearization, rows: np.ndarray) -> Lineariz
 def _errors(problem, lin, du) -> np.ndarray:
     """The model's error of each member, inf where inadmissible (called inside
     :func:`newton`'s ``np.errstate(all="ignore")``)."""
-    ok = np.asarray(lin.ok, bool)
-    err = np.asarray(problem.error(lin, du), float)
+    ok = lin.ok
+    if not (isinstance(ok, np.ndarray) and ok.dtype == bool):
+        ok = np.asarray(ok, bool)
+    err = problem.error(lin, du)
+    if not (isinstance(err, np.ndarray) and err.dtype == float):
+        err = np.asarray(err, float)
     return np.where(ok & np.isfinite(err), err, np.inf)
 
 
@@ -206,7 +210,9 @@ def newton(
     single = np.ndim(u0) == 1
     U = np.array(np.atleast_2d(u0), dtype=float)
     k = len(U)
-    S = np.broadcast_to(np.asarray(scale, dtype=float), (k,)).copy()
+    S = np.array(scale, dtype=float)  # a copy
+    if S.shape != (k,):
+        S = np.broadcast_to(S, (k,)).copy()
     with np.errstate(all="ignore"):
         state = _Iteration(P, U, S, opts)
         for _ in range(opts.max_iter):
@@ -280,7 +286,10 @@ class _Iteration:
                 self.T, self.owners = P.linearize(U[moved], S[moved]), moved
                 self._set_last(self.T, moved)
             self.fresh[moved] = True
-        stuck = (self.slow[moved] >= opts.stagnation) & (self.err[moved] > 1.0)
+        if moved is self.everyone:
+            stuck = (self.slow >= opts.stagnation) & (self.err > 1.0)
+        else:
+            stuck = (self.slow[moved] >= opts.stagnation) & (self.err[moved] > 1.0)
         if stuck.any():
             self.alive[moved[stuck]] = False
         return True
@@ -296,21 +305,23 @@ class _Iteration:
         rounds = 0
         for _ in range(self.opts.backtracks + 1):
             rounds += 1
-            if rounds == 1:  # every member of act (pos is all of them)
+            if rounds == 1:  # every member of act (pos is all of them): no index copies
                 members, step = act, alpha[:, None] * dU
-                trial = (U if act is self.everyone else U[act]) + step
+                whole = act is self.everyone
+                trial = (U if whole else U[act]) + step
+                tlin = P.linearize(trial, S if whole else S[act], tangent=not chord)
+                e_new = _errors(P, tlin, step)
+                e_old = self.err if whole else self.err[act]  # (read before _take writes)
+                first = alpha == full
             else:
                 members = act[pos]
                 step = alpha[:, None] * dU[pos]
                 trial = U[members] + step
-            tlin = P.linearize(trial, S[members], tangent=not chord)
-            e_new = _errors(P, tlin, step)
-            e_old = self.err[members]
-            accept = (
-                (e_new < e_old)
-                | (e_new <= 1.0)
-                | ((alpha == full[pos]) & (e_new <= growth * e_old))
-            )
+                tlin = P.linearize(trial, S[members], tangent=not chord)
+                e_new = _errors(P, tlin, step)
+                e_old = self.err[members]
+                first = alpha == full[pos]
+            accept = (e_new < e_old) | (e_new <= 1.0) | (first & (e_new <= growth * e_old))
             accept &= np.isfinite(e_new)
             if accept.all():
                 self._take(members, trial, tlin, e_new, e_old, slice(None))
@@ -339,8 +350,11 @@ class _Iteration:
     def _set_last(self, lin, members):
         """``lin`` is the latest linearization, of ``members`` at their current states."""
         self.last, self.last_members = lin, members
-        self.current[:] = False
-        self.current[members] = True
+        if members is self.everyone:
+            self.current[:] = True
+        else:
+            self.current[:] = False
+            self.current[members] = True
 
     def _take(self, members, trial, tlin, e_new, e_old, rows):
         """Accept the trial states of ``members`` (rows ``rows`` of ``tlin``)."""

@@ -47,6 +47,8 @@ from .arclength import ArcLength
 from .corrector import NewtonOptions, as_batched, newton, take
 from .protocol import Linearization, PathProblem
 
+_EPS = float(np.finfo(float).eps)
+
 __all__ = ["PathOptions", "PathPoint", "PathRun", "follow_load"]
 
 
@@ -220,13 +222,11 @@ class _Tracker:
         """The converged ``u`` continues the path from ``cur``: its distance from the
         prediction ``guess`` is within the model's ``max_correction`` and, where the path
         tangent is known, within ``relative_correction`` of the predicted change."""
-        dist = self.P.distance
-        correction = float(dist((u - guess)[None])[0])
+        if cur.rate is None:
+            return float(self.P.distance((u - guess)[None])[0]) <= self.P.max_correction
+        correction, change = map(float, self.P.distance(np.stack([u - guess, guess - cur.u])))
         if correction > self.P.max_correction:
             return False
-        if cur.rate is None:
-            return True
-        change = float(dist((guess - cur.u)[None])[0])
         return correction <= self.opts.relative_correction * change + self.negligible
 
     def smooth(self, cur: PathPoint, u: np.ndarray, rate, h: float) -> bool:
@@ -238,12 +238,16 @@ class _Tracker:
         to the prediction and is as stable as ``cur``."""
         if cur.rate is None or rate is None or self.crossing is cur:
             return True
-        dist = self.P.distance
         change = u - cur.u
-        gap = float(dist((change - 0.5 * h * (cur.rate + rate))[None])[0])
+        gap, size, moved = map(  # (one call of the model's distance for the three)
+            float,
+            self.P.distance(
+                np.stack([change - 0.5 * h * (cur.rate + rate), np.abs(cur.u) + np.abs(u), change])
+            ),
+        )
         # rounding of the states themselves (a step far below their resolution)
-        rounding = 64 * np.finfo(float).eps * float(dist((np.abs(cur.u) + np.abs(u))[None])[0])
-        tol = self.opts.relative_correction * float(dist(change[None])[0])
+        rounding = 64 * _EPS * size
+        tol = self.opts.relative_correction * moved
         return gap <= tol + self.negligible + rounding
 
     def change_limit(self) -> float:

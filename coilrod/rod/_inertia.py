@@ -16,60 +16,113 @@ import numpy as np
 __all__ = ["block_tridiagonal_inertia"]
 
 
+_ALPHA = (1.0 + np.sqrt(17.0)) / 8.0  # Bunch-Kaufman's pivot threshold
+
+
+@nb.njit(cache=True)
+def _eliminate(W, b, m, rtol):
+    """Symmetric elimination of the first ``b`` unknowns of ``W[:m, :m]`` (the pivot block
+    and, below and right of it, its coupling to the next block) with Bunch-Kaufman 1x1 / 2x2
+    pivots chosen inside the block; ``W[b:m, b:m]`` becomes the Schur complement.  Returns the
+    negative and zero pivot counts, (-1, 0) if a block entry is not finite."""
+    scale = 0.0
+    for i in range(b):
+        for j in range(b):
+            if not np.isfinite(W[i, j]):
+                return -1, 0
+            scale = max(scale, abs(W[i, j]))
+    tiny = rtol * scale
+    neg = 0
+    zero = 0
+    k = 0
+    while k < b:
+        akk = abs(W[k, k])
+        lam = 0.0
+        r = k
+        for i in range(k + 1, b):
+            if abs(W[i, k]) > lam:
+                lam = abs(W[i, k])
+                r = i
+        two = False
+        if akk == 0.0 and lam == 0.0:
+            zero += 1  # an exactly zero row inside the block: left as is (pseudo-inverse)
+            k += 1
+            continue
+        if akk < _ALPHA * lam:
+            sigma = 0.0
+            for j in range(k, b):
+                if j != r and abs(W[j, r]) > sigma:
+                    sigma = abs(W[j, r])
+            if akk * sigma < _ALPHA * lam * lam:
+                two = abs(W[r, r]) < _ALPHA * sigma
+                t = k + 1 if two else k
+                if t != r:  # symmetric swap of rows and columns t and r
+                    for i in range(m):
+                        W[t, i], W[r, i] = W[r, i], W[t, i]
+                    for i in range(m):
+                        W[i, t], W[i, r] = W[i, r], W[i, t]
+        if not two:
+            d = W[k, k]
+            if abs(d) <= tiny:
+                zero += 1
+            elif d < 0.0:
+                neg += 1
+            if d != 0.0:
+                for i in range(k + 1, m):
+                    f = W[i, k] / d
+                    if f != 0.0:
+                        for j in range(k + 1, m):
+                            W[i, j] -= f * W[k, j]
+            k += 1
+            continue
+        a, c, o = W[k, k], W[k + 1, k + 1], W[k, k + 1]
+        det = a * c - o * o
+        if det < 0.0:
+            neg += 1
+        elif det > 0.0:
+            if a + c < 0.0:
+                neg += 2
+        for i in range(k + 2, m):
+            # row i of [W_ik, W_ik1] P^-1
+            u = (c * W[i, k] - o * W[i, k + 1]) / det
+            v = (a * W[i, k + 1] - o * W[i, k]) / det
+            for j in range(k + 2, m):
+                W[i, j] -= u * W[k, j] + v * W[k + 1, j]
+        k += 2
+    return neg, zero
+
+
 @nb.njit(cache=True)
 def _inertia(D, E, out_neg, out_zero, rtol):
     k, n, b = D.shape[0], D.shape[1], D.shape[2]
-    for m in range(k):
-        piv = np.empty((b, b))
+    W = np.empty((2 * b, 2 * b))
+    for mem in range(k):
         for i in range(b):
             for j in range(b):
-                piv[i, j] = 0.5 * (D[m, 0, i, j] + D[m, 0, j, i])
+                W[i, j] = 0.5 * (D[mem, 0, i, j] + D[mem, 0, j, i])
         neg = 0
         zero = 0
         for blk in range(n):
-            finite = True
-            for i in range(b):
-                for j in range(b):
-                    if not np.isfinite(piv[i, j]):
-                        finite = False
-            if not finite:
+            m = b
+            if blk < n - 1:
+                m = 2 * b
+                for i in range(b):
+                    for j in range(b):
+                        W[i, b + j] = E[mem, blk, i, j]
+                        W[b + j, i] = E[mem, blk, i, j]
+                        W[b + i, b + j] = 0.5 * (D[mem, blk + 1, i, j] + D[mem, blk + 1, j, i])
+            ng, zr = _eliminate(W, b, m, rtol)
+            if ng < 0:
                 neg = -1
                 break
-            w, V = np.linalg.eigh(piv)
-            big = 0.0
-            for i in range(b):
-                if abs(w[i]) > big:
-                    big = abs(w[i])
-            for i in range(b):
-                if abs(w[i]) <= rtol * big:
-                    zero += 1
-                elif w[i] < 0.0:
-                    neg += 1
-            if blk == n - 1:
-                break
-            # next pivot: D_{blk+1} - E^T V diag(1/w) V^T E
-            Y = np.empty((b, b))  # V^T E
-            for i in range(b):
-                for j in range(b):
-                    acc = 0.0
-                    for q in range(b):
-                        acc += V[q, i] * E[m, blk, q, j]
-                    Y[i, j] = acc
-            for i in range(b):
-                inv = 1.0 / w[i] if w[i] != 0.0 else 0.0
-                for j in range(b):
-                    Y[i, j] *= np.sqrt(abs(inv)) if inv != 0.0 else 0.0
-            sgn = np.empty(b)
-            for i in range(b):
-                sgn[i] = 1.0 if w[i] > 0.0 else (-1.0 if w[i] < 0.0 else 0.0)
-            for i in range(b):
-                for j in range(b):
-                    acc = 0.0
-                    for q in range(b):
-                        acc += Y[q, i] * sgn[q] * Y[q, j]
-                    piv[i, j] = 0.5 * (D[m, blk + 1, i, j] + D[m, blk + 1, j, i]) - acc
-        out_neg[m] = neg
-        out_zero[m] = zero
+            neg += ng
+            zero += zr
+            if blk < n - 1:  # the Schur complement is the next pivot block
+                for i in range(b):
+                    for j in range(b):
+                        W[i, j] = 0.5 * (W[b + i, b + j] + W[b + j, b + i])
+        out_neg[mem] = neg
+        out_zero[mem] = zero
 
 
 def block_tridiagonal_inertia(D: np.ndarray, E: np.ndarray, rtol: float = 1e-13):

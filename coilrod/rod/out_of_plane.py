@@ -164,19 +164,19 @@ class OutOfPlane:
         dxx = Sw * (my * by) + Ap
         dyy = Sw * (mx * bx) + Am
         dxy = q - 0.5 * Sw * (mx * by + my * bx)
-        Mz = pz - Sw * (mx * by - my * bx)
         dxx[:, :-1] += Ap[:, 1:]
         dyy[:, :-1] += Am[:, 1:]
         dxy[:, :-1] += q[:, 1:]
+        if band and self.uniform:  # symmetric part, LAPACK upper band storage (kd = 3)
+            ab = np.zeros((k, 4, 2 * (n - 1)))  # of (d_x1, d_y1, d_x2, ...)
+            ab[:, 3, 0::2], ab[:, 3, 1::2], ab[:, 2, 1::2] = dxx, dyy, dxy
+            ab[:, 2, 2::2] = (0.5 * pz - q)[:, 1:]  # (y_j, x_j+1)
+            ab[:, 1, 2::2], ab[:, 1, 3::2] = -Ap[:, 1:], -Am[:, 1:]
+            ab[:, 0, 3::2] = (-q - 0.5 * pz)[:, 1:]  # (x_j, y_j+1)
+            return ab
+        Mz = pz - Sw * (mx * by - my * bx)  # (the antisymmetric part: not in the band)
         Mz[:, :-1] -= pz[:, 1:]
         if self.uniform:
-            if band:  # symmetric part, LAPACK upper band storage (kd = 3) of (d_x1, d_y1, ...)
-                ab = np.zeros((k, 4, 2 * (n - 1)))
-                ab[:, 3, 0::2], ab[:, 3, 1::2], ab[:, 2, 1::2] = dxx, dyy, dxy
-                ab[:, 2, 2::2] = (0.5 * pz - q)[:, 1:]  # (y_j, x_j+1)
-                ab[:, 1, 2::2], ab[:, 1, 3::2] = -Ap[:, 1:], -Am[:, 1:]
-                ab[:, 0, 3::2] = (-q - 0.5 * pz)[:, 1:]  # (x_j, y_j+1)
-                return ab
             D = np.stack([dxx, dxy + 0.5 * Mz, dxy - 0.5 * Mz, dyy], axis=-1)
             E = np.stack([-Ap, -q - 0.5 * pz, -q + 0.5 * pz, -Am], axis=-1)[:, 1:]
             return D.reshape(k, n - 1, 2, 2), E.reshape(k, n - 2, 2, 2)
