@@ -15,9 +15,10 @@ compiled code is loaded from disk). CPU time is the children's user + system tim
 Then what each compiled kernel costs to compile (numba's compile events in one process with an
 empty cache, the numpy alternatives switched off), and the steady-state speed of each kernel that
 has a numpy alternative (the coil pass, :mod:`coils._vectorised`; the planar mixed kernel,
-:mod:`coilrod.rod._mixed_numpy`) next to it, with the number of calls after which compiling
-pays: compile cost / (numpy time - compiled time).  The library runs the numpy alternative
-until its estimated cost reaches the compile cost (``COMPILE_AFTER``), then compiles.
+:mod:`coilrod.rod._mixed_numpy`; the inertia count) next to it, with the number of calls after
+which compiling pays: compile cost / (numpy time - compiled time).  The library runs the numpy
+alternative until its estimated cost reaches the compile cost (``COMPILE_AFTER``), then
+compiles.
 
 Run:  python benchmarks/bench_coldstart.py   (writes benchmarks/results/coldstart.md)
 """
@@ -89,6 +90,8 @@ from numba.core import event
 import coils.coaxial, coilrod.rod._compiled
 coils.coaxial.COMPILE_AFTER = 0.0  # compile everything the scenario uses
 coilrod.rod._compiled.COMPILE_AFTER = 0.0
+import coilrod.rod._inertia
+coilrod.rod._inertia.COMPILE_AFTER = 0.0
 starts, out = {}, {}
 class Listener(event.Listener):
     def on_start(self, ev):
@@ -178,7 +181,8 @@ def coil_rows():
 
 
 def rod_rows():
-    """(case, compiled s, numpy s) of the planar mixed kernel (with the Jacobian) at 65 nodes."""
+    """(case, compiled s, numpy s) of the planar mixed kernel (with the Jacobian) at 65 nodes
+    and of the block inertia count."""
     import numpy as np
 
     from coilrod.rod._compiled import _mixed_compiled
@@ -191,13 +195,26 @@ def rod_rows():
     args += [rng.normal(size=(k * n, 3, 3, 3)), True, 0.1, rng.normal(size=(n, 2))]
     args += [np.full(n - 1, 1 / 64), np.full(n, 1 / 64), 0.0, True, np.empty_like(U)]
     args += [np.empty_like(U), np.zeros((21, 5 * n * k), order="F"), np.empty(k, dtype=bool)]
-    return [
+    rows = [
         (
             "planar mixed kernel, 65 nodes, residual + Jacobian",
             best(lambda: _mixed_compiled(*args)),
             best(lambda: mixed_assembly_numpy(*args)),
         )
     ]
+    from coilrod.rod._inertia import _inertia, _inertia_numpy
+
+    for b, what in ((3, "a planar rod's out-of-plane count"), (12, "a spatial rod's count")):
+        D, E = rng.normal(size=(1, 65, b, b)), rng.normal(size=(1, 64, b, b))
+        out = (np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64), 1e-13)
+        rows.append(
+            (
+                f"block inertia, 65 blocks of {b}x{b} ({what})",
+                best(lambda D=D, E=E, o=out: _inertia(D, E, *o)),
+                best(lambda D=D, E=E, o=out: _inertia_numpy(D, E, *o)),
+            )
+        )
+    return rows
 
 
 def kernel_speed(lines, costs):
@@ -211,11 +228,13 @@ def kernel_speed(lines, costs):
     lines += ["|---|---|---|---|"]
     coil_cost = costs.get(names["coil"], float("nan"))
     rod_cost = costs.get(names["planar"] + "_mixed_compiled", float("nan"))
-    for rows, cost in ((coil_rows(), coil_cost), (rod_rows(), rod_cost)):
-        for name, tc, tn in rows:
-            calls = cost / (tn - tc)
-            lines.append(f"| {name} | {1e3 * tc:.3f} | {1e3 * tn:.3f} | {calls:,.0f} calls |")
-            print(lines[-1], flush=True)
+    inertia_cost = costs.get("coilrod.rod._inertia._inertia", float("nan"))
+    rows = [(row, coil_cost) for row in coil_rows()]
+    rows += [(row, inertia_cost if "inertia" in row[0] else rod_cost) for row in rod_rows()]
+    for (name, tc, tn), cost in rows:
+        calls = cost / (tn - tc)
+        lines.append(f"| {name} | {1e3 * tc:.3f} | {1e3 * tn:.3f} | {calls:,.0f} calls |")
+        print(lines[-1], flush=True)
 
 
 def main():
