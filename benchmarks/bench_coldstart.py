@@ -12,9 +12,13 @@ compiled code is loaded from disk). CPU time is the children's user + system tim
 - ``spatial``: one spatial rod state (tilted magnetization, oblique uniform field);
 - ``all three``: the three in one process (goal <= 10 s CPU cold, the issue 19 budget).
 
-Then the steady-state speed of the compiled coil kernel against its alternatives on the same
-points (the vectorised numpy kernel of ``benchmarks/_numpy_kernel.py`` and magpylib), so that the
-cold-start cost can be set against what the kernel saves per evaluation.
+Then what each compiled kernel costs to compile (numba's compile events in one process with an
+empty cache, the numpy alternatives switched off), and the steady-state speed of each kernel that
+has a numpy alternative (the coil pass, :mod:`coils._vectorised`; the planar mixed kernel,
+:mod:`coilrod.rod._mixed_numpy`; the inertia count) next to it, with the number of calls after
+which compiling pays: compile cost / (numpy time - compiled time).  The library runs the numpy
+alternative until its estimated cost reaches the compile cost (``COMPILE_AFTER``), then
+compiles.
 
 Run:  python benchmarks/bench_coldstart.py   (writes benchmarks/results/coldstart.md)
 """
@@ -80,46 +84,157 @@ def cold_and_warm(args):
     return cold, warm
 
 
-def kernel_speed(lines):
-    """Steady state: the compiled kernel against numpy and magpylib on the same points."""
+COMPILE_EVENTS = """
+import json, sys, time
+from numba.core import event
+import coils.coaxial, coilrod.rod._compiled
+coils.coaxial.COMPILE_AFTER = 0.0  # compile everything the scenario uses
+coilrod.rod._compiled.COMPILE_AFTER = 0.0
+import coilrod.rod._inertia
+coilrod.rod._inertia.COMPILE_AFTER = 0.0
+starts, out = {}, {}
+class Listener(event.Listener):
+    def on_start(self, ev):
+        starts[id(ev.data["dispatcher"])] = time.process_time()
+    def on_end(self, ev):
+        d = ev.data["dispatcher"]
+        out[d.py_func.__module__ + "." + d.py_func.__name__] = time.process_time() - starts[id(d)]
+event.register("numba:compile", Listener())
+exec(sys.argv[1])
+print(json.dumps(out))
+"""
+#: the kernels a scenario may compile (callees' compile time is inside their caller's)
+KERNELS = {
+    "coils._compiled.coaxial_field": "coil pass",
+    "coilrod.rod._compiled._mixed_compiled": "planar mixed kernel",
+    "coilrod.rod._compiled.band_lu": "band LU",
+    "coilrod.rod._compiled.band_solve": "band solve",
+    "coilrod.rod._compiled.mixed_error": "planar error measure",
+    "coilrod.rod._inertia._inertia": "block inertia",
+    "coilrod.rod._compiled_spatial.spatial_core": "spatial per-node pass",
+}
+
+
+def compile_costs():
+    """CPU seconds each kernel takes to compile on an empty cache (all three scenarios, the
+    numpy alternatives switched off)."""
+    import json
+
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=str(ROOT))
+        code = COIL + ROD + SPATIAL
+        res = subprocess.run(
+            [sys.executable, "-c", COMPILE_EVENTS, code], env=env, check=True, capture_output=True
+        )
+    return json.loads(res.stdout.decode().splitlines()[-1])
+
+
+def best(f, n=5):
+    """Least CPU seconds of one call of f over n repetitions of enough calls for 20 ms."""
+    f()
+    reps = 1
+    while True:
+        t0 = time.process_time()
+        for _ in range(reps):
+            f()
+        if time.process_time() - t0 > 0.02:
+            break
+        reps *= 4
+    ts = []
+    for _ in range(n):
+        t0 = time.process_time()
+        for _ in range(reps):
+            f()
+        ts.append((time.process_time() - t0) / reps)
+    return min(ts)
+
+
+def coil_rows():
+    """(case, compiled s, numpy s) of the coil pass at the sizes a rod solve, the coil-field
+    scenario and a field map use."""
+    import math
+
     import numpy as np
 
     import coils
+    import coils.coaxial as cx
 
-    sys.path.insert(0, str(HERE))
-    import _numpy_kernel as numpy_kernel
-
-    coil = coils.Coil(0.05, 100, 1.0)
-    pts = np.random.default_rng(1).uniform(-0.03, 0.03, (10_000, 3))
-
-    def best(f, n=5):
-        f()
-        ts = []
-        for _ in range(n):
-            t0 = time.perf_counter()
-            f()
-            ts.append(time.perf_counter() - t0)
-        return min(ts)
-
-    rows = [
-        ("compiled (coils): B + grad B", best(lambda: coil.B_and_gradient(pts))),
-        (
-            "numpy kernel (9501399): B + grad B",
-            best(lambda: numpy_kernel.B_and_gradient(coil, pts)),
-        ),
-        ("compiled (coils): hessian", best(lambda: coil.hessian(pts))),
-        ("numpy kernel (9501399): hessian", best(lambda: numpy_kernel.hessian(coil, pts))),
+    cx._kernel_on_disk = lambda: False
+    pair = coils.HelmholtzPair(0.08, 100, 2.0, axis="y")
+    wound = coils.HelmholtzPair(0.08, 100, 2.0, axis="y", winding=(0.01, 0.01), filaments=(3, 3))
+    rng = np.random.default_rng(1)
+    cases = [
+        ("pair, 65 nodes (a rod solve), B + grad B + hessian", pair, 65),
+        ("pair 3x3 filaments, 200 points, B + grad B + hessian", wound, 200),
+        ("pair, 10^4 points (a field map), B + grad B + hessian", pair, 10_000),
     ]
-    try:
-        import magpylib
+    rows = []
+    for name, field, n in cases:
+        pts = rng.uniform(-0.02, 0.02, (n, 3))
+        times = []
+        for ready, after in ((True, 0.0), (False, math.inf)):
+            cx._compiled_ready, cx.COMPILE_AFTER = ready, after
+            times.append(best(lambda f=field, p=pts: f.B_gradient_hessian(p)))
+        rows.append((name, *times))
+    cx._compiled_ready, cx.COMPILE_AFTER = False, 3.0
+    return rows
 
-        loop = magpylib.current.Circle(current=100.0, diameter=0.1)
-        rows.append(("magpylib Circle: B only", best(lambda: loop.getB(pts))))
-    except ImportError:  # pragma: no cover - magpylib is a dependency, but be tolerant
-        pass
-    lines += ["", "## Steady state: one loop, 10^4 points (best of 5)", ""]
-    lines += ["| kernel | time (ms) |", "|---|---|"]
-    lines += [f"| {name} | {1e3 * t:.2f} |" for name, t in rows]
+
+def rod_rows():
+    """(case, compiled s, numpy s) of the planar mixed kernel (with the Jacobian) at 65 nodes
+    and of the block inertia count."""
+    import numpy as np
+
+    from coilrod.rod._compiled import _mixed_compiled
+    from coilrod.rod._mixed_numpy import mixed_assembly_numpy
+
+    rng = np.random.default_rng(2)
+    k, n = 1, 65
+    U = rng.normal(size=(k, 5 * n))
+    args = [U, np.ones(k), rng.normal(size=(k * n, 3)), rng.normal(size=(k * n, 3, 3))]
+    args += [rng.normal(size=(k * n, 3, 3, 3)), True, 0.1, rng.normal(size=(n, 2))]
+    args += [np.full(n - 1, 1 / 64), np.full(n, 1 / 64), 0.0, True, np.empty_like(U)]
+    args += [np.empty_like(U), np.zeros((21, 5 * n * k), order="F"), np.empty(k, dtype=bool)]
+    rows = [
+        (
+            "planar mixed kernel, 65 nodes, residual + Jacobian",
+            best(lambda: _mixed_compiled(*args)),
+            best(lambda: mixed_assembly_numpy(*args)),
+        )
+    ]
+    from coilrod.rod._inertia import _inertia, _inertia_numpy
+
+    for b, what in ((3, "a planar rod's out-of-plane count"), (12, "a spatial rod's count")):
+        D, E = rng.normal(size=(1, 65, b, b)), rng.normal(size=(1, 64, b, b))
+        out = (np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64), 1e-13)
+        rows.append(
+            (
+                f"block inertia, 65 blocks of {b}x{b} ({what})",
+                best(lambda D=D, E=E, o=out: _inertia(D, E, *o)),
+                best(lambda D=D, E=E, o=out: _inertia_numpy(D, E, *o)),
+            )
+        )
+    return rows
+
+
+def kernel_speed(lines, costs):
+    """Steady state of each kernel with a numpy alternative, and where compiling pays."""
+    names = {"coil": "coils._compiled.coaxial_field", "planar": "coilrod.rod._compiled."}
+    lines += ["", "## Compile cost of each kernel (empty cache, CPU s, callees included)", ""]
+    lines += ["| kernel | compile CPU (s) |", "|---|---|"]
+    lines += [f"| {KERNELS[k]} (`{k}`) | {costs[k]:.2f} |" for k in KERNELS if k in costs]
+    lines += ["", "## Steady state: compiled against the numpy alternative (best of 5, CPU)", ""]
+    lines += ["| kernel and size | compiled (ms) | numpy (ms) | compiling pays after |"]
+    lines += ["|---|---|---|---|"]
+    coil_cost = costs.get(names["coil"], float("nan"))
+    rod_cost = costs.get(names["planar"] + "_mixed_compiled", float("nan"))
+    inertia_cost = costs.get("coilrod.rod._inertia._inertia", float("nan"))
+    rows = [(row, coil_cost) for row in coil_rows()]
+    rows += [(row, inertia_cost if "inertia" in row[0] else rod_cost) for row in rod_rows()]
+    for (name, tc, tn), cost in rows:
+        calls = cost / (tn - tc)
+        lines.append(f"| {name} | {1e3 * tc:.3f} | {1e3 * tn:.3f} | {calls:,.0f} calls |")
+        print(lines[-1], flush=True)
 
 
 def main():
@@ -132,7 +247,8 @@ def main():
         (c_cpu, c_wall), (w_cpu, w_wall) = cold_and_warm(args)
         lines.append(f"| {name} | {c_cpu:.2f} | {c_wall:.2f} | {w_cpu:.2f} | {w_wall:.2f} |")
         print(lines[-1], flush=True)
-    kernel_speed(lines)
+    costs = compile_costs()
+    kernel_speed(lines, costs)
     text = "\n".join(lines) + "\n"
     print(text)
     OUT.write_text(text)

@@ -50,7 +50,7 @@ WANT_B, WANT_G, WANT_H = 1, 2, 4
 ERR_ON_WIRE, ERR_NOT_FINITE, ERR_OVERFLOW, ERR_WINDING = 0, 1, 2, 3
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"})
+@njit(cache=True, error_model="numpy")
 def _global(rx, ry, rz, nx, ny, nz, u, Q, Bz, b1, q1, q2, c1, d1, want_G, want_H):
     """The 3 + 6 + 10 distinct entries of B, G, H (module docstring, step 3; B always, G and H
     as asked, else 0); plain arithmetic and flags, so that it runs as Python on arrays too
@@ -108,7 +108,7 @@ def _global(rx, ry, rz, nx, ny, nz, u, Q, Bz, b1, q1, q2, c1, d1, want_G, want_H
     )  # fmt: skip
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _near(fil, u, rho, zl, tol2, want_B, want_G, want_H):
     """Sum of the filaments' invariants at one point (units of L); ``ok`` is False (and the
     sum incomplete) if the point is within ``sqrt(tol2)`` radius of a filament."""
@@ -263,7 +263,7 @@ def _make_kernel(digest: int):
         an offending point (the pass stops at the first point on a filament).
     """
 
-    @njit(cache=True, error_model="numpy", fastmath={"contract"})
+    @njit(cache=True, error_model="numpy")
     def coaxial_field(
         pts, center, axis, fil, wind, beta, n0, params, flags, factor, Bout, Gout, Hout, err
     ):

@@ -6,8 +6,10 @@ at once, for the points of a call that all lie in the near zone of their group a
 every filament and winding cross-section.  It serves the first evaluations of a process: the
 compiled pass costs about 3 s of compilation in a fresh environment, which pays only after
 thousands of evaluations of the size a rod solve makes (:mod:`coils.coaxial` decides which pass
-runs; the measured figures are in the README's cold-start section).  Results agree with the
-compiled pass to rounding (it contracts products into fused multiply-adds; numpy does not).
+runs; the measured figures are in the README's cold-start section).  Results are bitwise those
+of the compiled pass: the same IEEE operations in the same order (the compiled near zone does
+not contract products into fused multiply-adds, so that this holds), so that a process gives
+the same numbers before and after it compiles, and so do the workers of a distributed sweep.
 """
 
 from __future__ import annotations
@@ -33,10 +35,9 @@ _H_SLOTS = np.array(
 
 
 def _padded_tables():
-    """``coils.loop.SERIES`` with every table's coefficients beyond its length set to 0 (so a
-    Horner pass over all columns gives the compiled sums exactly), except the series about 0,
-    whose term count depends on w: all its terms are used (more than the compiled pass uses;
-    the difference is below its truncation error, 2^-60)."""
+    """``coils.loop.SERIES`` with every table's coefficients beyond its length set to 0, so
+    that a Horner pass over all columns gives the compiled sums exactly (the series about 0,
+    whose length depends on w, is cut per point in :func:`_series_phi`)."""
     tab = loop.SERIES.copy()
     cols = np.arange(tab.shape[1])
     tab[:48][cols[None, :] >= loop.SERIES_LENGTHS[:48, None]] = 0.0
@@ -65,6 +66,11 @@ def _series_phi(w, want_H):
     idx = _series_rows(w)
     delta = (w - loop.SERIES_CENTRES[idx])[:, None]
     coef = _SERIES[idx]  # (m, terms, 4)
+    about0 = idx == 48  # the series about 0: as many terms as the compiled pass takes
+    if about0.any():
+        E = w[about0].view(np.int64) >> 52
+        n = loop.SERIES_TERMS[np.minimum(1022 - E, 64)]
+        coef[about0] *= (np.arange(coef.shape[1]) < n[:, None])[:, :, None]
     F = np.zeros((w.size, 4))
     for j in range(coef.shape[1] - 1, -1, -1):
         F = F * delta + coef[:, j]
@@ -173,12 +179,14 @@ def near_pass(pts, center, axis, fil, wind, params, flags, factor, B, G, H) -> b
     inv_L, fB, fG, fH = params[0], factor * params[1], factor * params[2], factor * params[3]
     with np.errstate(all="ignore"):
         d = pts - center
-        if not np.all(np.einsum("ij,ij->i", d, d) <= params[4]):  # far, or not finite
+        dx, dy, dz = d.T
+        if not np.all(dx * dx + dy * dy + dz * dz <= params[4]):  # far, or not finite
             return False
-        d = d * inv_L
-        zl = d @ axis
-        r = d - zl[:, None] * axis
-        u = np.einsum("ij,ij->i", r, r)
+        dx, dy, dz = dx * inv_L, dy * inv_L, dz * inv_L
+        nx, ny, nz = axis
+        zl = dx * nx + dy * ny + dz * nz
+        r = (dx - zl * nx, dy - zl * ny, dz - zl * nz)
+        u = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
         rho = np.sqrt(u)
         for z0, a, hw, hh in wind:
             if np.any((np.abs(zl - z0) < hw) & (np.abs(rho - a) < hh)):
@@ -190,10 +198,15 @@ def near_pass(pts, center, axis, fil, wind, params, flags, factor, B, G, H) -> b
         if not np.all(((rho_f - a) * (rho_f - a) + zi * zi) * inv_a2 >= params[7]):
             return False
         parts = loop_arrays(a, A, C2, np.tile(u, len(fil)), rho_f, zi, want_B, want_G, want_H)
-        inv = [x.reshape(len(fil), -1).sum(axis=0) for x in parts]
+        inv = []
+        for x in parts:  # summed filament by filament, as the compiled pass does
+            acc = np.zeros(len(pts))
+            for row in x.reshape(len(fil), -1):
+                acc += row
+            inv.append(acc)
         Q, Bz, b1, q1, c1, d1 = inv
         q2 = np.where(u > 1e-200, -(4.0 * q1 + c1) / u, 0.0) if want_H else 0.0
-        v = global_entries(*r.T, *axis, u, Q, Bz, b1, q1, q2, c1, d1, want_G, want_H)
+        v = global_entries(*r, nx, ny, nz, u, Q, Bz, b1, q1, q2, c1, d1, want_G, want_H)
         out = []
         if want_B:
             out.append((B, fB * np.column_stack(v[0:3])))

@@ -211,7 +211,7 @@ def _series_table(w):
     return 48, SERIES_TERMS[min(1022 - E, 64)]
 
 
-@njit(cache=True, error_model="numpy", fastmath={"contract"})
+@njit(cache=True, error_model="numpy")
 def loop_point(a, A, C2, u, rho, z, want_B, want_G, want_H):
     """Invariants of one filament at one point (scalar; compiled, no checks).
 

@@ -207,8 +207,9 @@ def branch_points(radius):
 
 
 def test_numpy_and_compiled_passes_agree(force_pass):
-    # the numpy pass (cold start) and the compiled pass give one field to rounding, in every
-    # branch, for B, G, H alone and together, scaled; and both match the mpmath reference
+    # the numpy pass (cold start) and the compiled pass give the same field to the last bit
+    # (a process's numbers do not change when it compiles), in every branch, for B, G, H
+    # alone and together, scaled; and both match the mpmath reference
     pair = coils.HelmholtzPair(0.1, 50, 2.0, axis=(0.3, -0.5, 0.8), center=(0.01, 0, -0.02))
     field = -1.5 * (pair + coils.Coil(0.04, 20, 1.0, axis="x"))
     local = branch_points(0.05) + [0, 0, 0.05]  # about the upper loop of the pair
@@ -223,12 +224,11 @@ def test_numpy_and_compiled_passes_agree(force_pass):
     (Bn, Gn, Hn), *alone_n = results["numpy"]
     (Bc, Gc, Hc), *alone_c = results["compiled"]
     for x, ref in [(Bn, Bc), (Gn, Gc), (Hn, Hc), *zip(alone_n, alone_c, strict=True)]:
-        scale = np.abs(ref).reshape(len(ref), -1).max(axis=1)
-        assert np.all(np.abs(x - ref).reshape(len(ref), -1).max(axis=1) <= 1e-13 * scale)
-    np.testing.assert_array_equal(alone_n[0], Bn)
-    # the pair alone against the mpmath Biot-Savart integral, both passes
+        np.testing.assert_array_equal(x, ref)
+    # the pair alone against the mpmath Biot-Savart integral, both passes, near the wire (the
+    # other branches are checked against it in test_coils_stability)
     R = pair.rotation
-    for k in (1, 20, len(local) // 3 - 2):  # near the axis, a series table, near the wire
+    for k in (len(local) // 3 - 2,):
         Br, Gr, Hr = loops(local[k], pair.filaments)
         ref = (R @ Br, R @ Gr @ R.T, np.einsum("Ii,Jj,Ll,ijl->IJL", R, R, R, Hr))
         for name in ("numpy", "compiled"):

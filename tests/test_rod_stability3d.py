@@ -330,3 +330,47 @@ def test_large_out_of_plane_blocks_take_the_sparse_eigenvalue(monkeypatch):
         np.testing.assert_array_equal(counts, [0, 1])
         assert dense[0] > 0 > dense[1]
         np.testing.assert_allclose(sparse, dense, rtol=1e-8)
+
+
+def test_inertia_count_numpy_and_compiled_agree_with_dense_eigenvalues(monkeypatch):
+    # the block LDL^T count (coilrod.rod._inertia) by its numpy version (cold start) and its
+    # compiled version: the same counts, and the negative eigenvalues of the dense matrix
+    # (numpy eigvalsh, independent), also with double eigenvalues (two identical halves: the
+    # sign of the determinant does not change); compiling starts when COMPILE_AFTER says so
+    import coilrod.rod._compiled as rc
+    import coilrod.rod._inertia as inertia
+
+    rng = np.random.default_rng(5)
+    cases = []
+    for trial in range(12):
+        b, n = 2 * int(rng.integers(1, 5)), int(rng.integers(1, 8))
+        D = rng.normal(size=(2, n, b, b)) + rng.normal() * 3 * np.eye(b)
+        E = rng.normal(size=(2, max(n - 1, 0), b, b))
+        if trial % 2:  # double eigenvalues
+            h = b // 2
+            D[:, :, h:, h:], D[:, :, :h, h:], D[:, :, h:, :h] = D[:, :, :h, :h], 0.0, 0.0
+            E[:, :, h:, h:], E[:, :, :h, h:], E[:, :, h:, :h] = E[:, :, :h, :h], 0.0, 0.0
+        cases.append((D, E))
+    monkeypatch.setattr(rc, "_on_disk", lambda dispatcher: False)
+    for name in ("numpy", "compiled"):
+        monkeypatch.setattr(inertia, "_rent", 0.0)
+        monkeypatch.setattr(inertia, "_compiled_ready", name == "compiled")
+        monkeypatch.setattr(inertia, "COMPILE_AFTER", np.inf)
+        for D, E in cases:
+            neg, _ = inertia.block_tridiagonal_inertia(D, E)
+            k, n, b = D.shape[:3]
+            for m in range(k):
+                A = np.zeros((n * b, n * b))
+                for i in range(n):
+                    A[i * b : (i + 1) * b, i * b : (i + 1) * b] = 0.5 * (D[m, i] + D[m, i].T)
+                    if i < n - 1:
+                        A[i * b : (i + 1) * b, (i + 1) * b : (i + 2) * b] = E[m, i]
+                        A[(i + 1) * b : (i + 2) * b, i * b : (i + 1) * b] = E[m, i].T
+                ev = np.linalg.eigvalsh(A)
+                assert np.abs(ev).min() > 1e-9 * np.abs(ev).max()  # no count at a threshold
+                assert neg[m] == np.count_nonzero(ev < 0), name
+        assert inertia._compiled_ready == (name == "compiled")
+    monkeypatch.setattr(inertia, "_compiled_ready", False)
+    monkeypatch.setattr(inertia, "COMPILE_AFTER", 0.0)
+    inertia.block_tridiagonal_inertia(*cases[0])
+    assert inertia._compiled_ready

@@ -1,12 +1,15 @@
 """The mixed kernel of :mod:`coilrod.rod._compiled` in vectorised numpy (nothing to compile).
 
-The same equations with the same arithmetic in the same order, over all members and nodes at
-once: :func:`coilrod.rod._compiled.mixed_assembly` runs this until compiling pays (about 2 s
-of compilation on a cold cache against ~0.1 ms per call here; README, "Cold start").
+The same equations with the same IEEE operations in the same order, over all members and nodes
+at once, so that the results are bitwise those of the compiled kernel (a process's numbers do
+not change when it compiles).  :func:`coilrod.rod._compiled.mixed_assembly` runs this until
+compiling pays (about 2 s of compilation on a cold cache against ~0.5 ms per call here;
+README, "Cold start").
 """
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 
 import numpy as np
@@ -40,8 +43,10 @@ def _pattern(k: int, n: int):
 def _node_terms(U, B, G, H, has_h, L, mu, k, n):
     """cos, sin, tau, m.b, f, g (times L) and df/dx (times L^2) at every node (k, n) each."""
     th = U[:, 2::5]
-    c = np.cos(th)
-    si = np.sin(th)
+    # libm's cos and sin, as the compiled kernel calls them (numpy's own may differ in the last
+    # bit on some CPUs, and the two kernels must agree bitwise)
+    c = np.array([math.cos(x) for x in th.ravel()]).reshape(th.shape)
+    si = np.array([math.sin(x) for x in th.ravel()]).reshape(th.shape)
     a0 = c * mu[:, 0] - si * mu[:, 1]
     a1 = si * mu[:, 0] + c * mu[:, 1]
     p0 = -a1
