@@ -314,6 +314,18 @@ class _Problem:
             out[2] = self.clamp[2] + t * v[2]
         return out
 
+    def reach_normal(self, q, sc):
+        """d(clear)/d(scaled q) where the magnet's body touches the reach (within 1e-6 L),
+        else None: the outward normal of the reach in the scaled pose space."""
+        if self.clear(q) > 1e-6 * self.rod.length:
+            return None
+        g = np.empty(q.size)
+        for k in range(q.size):
+            e = np.zeros(q.size)
+            e[k] = 1e-6 * sc[k]
+            g[k] = (self.clear(q + e) - self.clear(q - e)) / 2e-6
+        return g
+
     def forward(self, magnet, q) -> RodResult:
         placed = _PoseField(self.place(magnet, q), q, self.planar)
         with warnings.catch_warnings():
@@ -484,12 +496,18 @@ def _search(p: _Problem, q0, max_solves: int):
             if np.linalg.norm(r) * p.rod.length <= p.tol:
                 status = "converged"
                 break
-            free = _free(q, J, r, p)
-            if not np.any(free) or _gain(J[:, free], r) <= GAIN_TOL:
+            # the steps allowed: the pose components not at a bound pushed against, and on
+            # the reach's boundary those along it (N: a basis of them, scaled units)
+            N = np.eye(q.size)[:, _free(q, J, r, p)]
+            g = p.reach_normal(q, sc)
+            if g is not None and N.shape[1] and float(_tr_step(J @ N, r, radius) @ (N.T @ g)) < 0:
+                from scipy.linalg import null_space
+
+                N = N @ null_space((N.T @ g)[None, :])
+            if not N.shape[1] or _gain(J @ N, r) <= GAIN_TOL:
                 status = "optimal"
                 break
-            step = np.zeros(q.size)
-            step[free] = _tr_step(J[:, free], r, radius)
+            step = N @ _tr_step(J @ N, r, radius)
             size = float(np.linalg.norm(step))
             pred = float(r @ r) - float((r + J @ step) @ (r + J @ step))
             if pred <= 0.0:
