@@ -525,8 +525,10 @@ def _search(p: _Problem, q0, max_solves: int):
                 if crawl >= 3:
                     break
                 J = p.jacobian(res) * sc
-                if rho > 0.25:
+                if rho > 0.75:
                     radius = min(max(radius, 2.0 * size), RADIUS_MAX)
+                elif rho < 0.25:  # a poor model of the miss: a shorter step next
+                    radius = 0.5 * min(radius, size)
             else:
                 radius = 0.25 * min(radius, size)
                 if radius < 1e-10:
