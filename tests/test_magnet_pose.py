@@ -72,9 +72,7 @@ def test_dipole_pose_derivatives_are_exact_against_finite_differences():
         m = coils.Dipole(_rotation(q[3:]) @ d.moment, q[:3])
         return m.B_and_gradient(pts)
 
-    dB, dG = _PoseField(coils.Dipole(_rotation(q[3:]) @ d.moment, q[:3]), q, False).unit_fields(
-        pts
-    )
+    dB, dG = _PoseField(coils.Dipole(_rotation(q[3:]) @ d.moment, q[:3]), q, False).unit_fields(pts)
     for k in range(6):
         h = 1e-6 if k < 3 else 1e-5
         e = np.zeros(6)
