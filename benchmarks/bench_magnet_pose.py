@@ -3,9 +3,9 @@
 Prints (and writes to benchmarks/results/magnet_pose.md): for targets made by the magnet at
 known poses (planar and 3D), ``coilrod.solve_magnet_pose`` from the same start pose -- forward
 solves, CPU time in forward-solve equivalents (the pose solve's CPU time over that of one
-forward solve at the target's pose, default discretisation), the final miss checked by an independent
-forward solve at the magnet returned -- and the dipole controller's miss (the pose found with
-the magnet's point dipole, the finite magnet placed there).  Goal (issue 21): a pose solve
+forward solve at the target's pose, default discretisation), the final miss checked by an
+independent forward solve at the magnet returned -- and the dipole controller's miss (the pose
+found with the magnet's point dipole, the finite magnet placed there).  Goal (issue 21): a pose solve
 <= 20 forward-solve equivalents.
 
 Run:  python benchmarks/bench_magnet_pose.py
@@ -95,8 +95,9 @@ def main():
         print(out[-1], flush=True)
     out.append("")
     out.append(
-        f"One forward solve (at the target's pose): {np.median(t_all) * 1e3:.0f} ms CPU.  Forward-solve equivalents: median "
-        f"{np.median(eqs):.1f}, max {np.max(eqs):.1f} (goal <= 20)."
+        f"One forward solve (at the target's pose): {np.median(t_all) * 1e3:.0f} ms CPU.  "
+        f"Forward-solve equivalents: median {np.median(eqs):.1f}, max {np.max(eqs):.1f} "
+        "(goal <= 20)."
     )
     text = "\n".join(out) + "\n"
     print(text)

@@ -31,7 +31,7 @@ def tip_at(magnet, planar=True):
 
 
 @pytest.mark.parametrize(
-    "magnet, target, pose",
+    ("magnet", "target", "pose"),
     [
         # planar: (c_x, c_y, psi) of an axially magnetised cylinder lying in the plane
         (cylinder(), (0.0375, 0.0128), np.array([0.004, -0.061, 0.15])),
@@ -92,7 +92,8 @@ def reachable_goal():
 def test_planar_pose_puts_the_tip_on_a_reachable_target():
     goal = reachable_goal()
     out = solve_magnet_pose(ROD, cylinder(), goal, **FAST)
-    assert out.status == "converged" and out.miss <= 1e-7 * L
+    assert out.status == "converged"
+    assert out.miss <= 1e-7 * L
     assert out.solves <= 20
     # an independent forward solve at the magnet returned lands on the target
     assert np.linalg.norm(tip_at(out.magnet) - goal) <= 1e-7 * L
@@ -124,8 +125,10 @@ def test_bounds_hold_and_an_unreachable_target_is_told():
     with pytest.raises(ConvergenceError, match="bounds") as info:
         solve_magnet_pose(ROD, cylinder(), goal, bounds=box, **FAST)
     out = info.value.result
-    assert np.all(out.pose >= box[0]) and np.all(out.pose <= box[1])
-    assert out.active and out.miss > 1e-4 * L
+    assert np.all(out.pose >= box[0])
+    assert np.all(out.pose <= box[1])
+    assert out.active
+    assert out.miss > 1e-4 * L
 
 
 def test_reach_distance_against_brute_force():
@@ -149,7 +152,7 @@ def test_reach_distance_against_brute_force():
 
 
 @pytest.mark.parametrize(
-    "kwargs, match",
+    ("kwargs", "match"),
     [
         (dict(target=(np.nan, 0.01)), "target"),
         (dict(target=(0.01, 0.01, 0.0, 0.0)), "target must have shape"),
