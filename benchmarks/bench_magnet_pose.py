@@ -5,8 +5,8 @@ known poses (planar and 3D), ``coilrod.solve_magnet_pose`` from the same start p
 solves, CPU time in forward-solve equivalents (the pose solve's CPU time over that of one
 forward solve at the target's pose, default discretisation), the final miss checked by an
 independent forward solve at the magnet returned -- and the dipole controller's miss (the pose
-found with the magnet's point dipole, the finite magnet placed there).  Goal (issue 21): a pose solve
-<= 20 forward-solve equivalents.
+found with the magnet's point dipole, the finite magnet placed there).  Goal (issue 21): a pose
+solve <= 20 forward-solve equivalents.
 
 Run:  python benchmarks/bench_magnet_pose.py
 """
