@@ -659,15 +659,20 @@ def solve_magnet_pose(
     Notes
     -----
     The pose vector, the exact pose derivatives and the search are in the module docstring
-    (:mod:`coilrod.control.magnet_pose`).  A typical solve takes 4-8 forward solves.
+    (:mod:`coilrod.control.magnet_pose`).  A typical solve takes 4-20 forward solves; a target
+    off the thin band of tips the magnet can reach ends at the solve budget a few um away.
 
     Examples
     --------
+    >>> import numpy as np
     >>> import coils
-    >>> from coilrod import presets, solve_magnet_pose
+    >>> from coilrod import presets, solve_magnet_pose, solve_rod
     >>> rod = presets.seed_rod(presets.M1())
     >>> magnet = coils.CylinderMagnet(20e-3, 20e-3, 1e6, center=(0.0, -0.06, 0.0), axis="y")
-    >>> out = solve_magnet_pose(rod, magnet, target=(0.0375, 0.0128))
+    >>> axis = (-np.sin(0.2), np.cos(0.2), 0.0)  # a known pose makes a reachable target
+    >>> known = coils.CylinderMagnet(20e-3, 20e-3, 1e6, (0.01, -0.058, 0.0), axis)
+    >>> target = solve_rod(rod, known, np.arange(1, 11) / 10).tip[-1, :2]
+    >>> out = solve_magnet_pose(rod, magnet, target)
     >>> bool(out.miss < 1e-6 * rod.length)
     True
     """
