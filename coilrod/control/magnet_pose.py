@@ -671,8 +671,9 @@ def solve_magnet_pose(
     >>> magnet = coils.CylinderMagnet(20e-3, 20e-3, 1e6, center=(0.0, -0.06, 0.0), axis="y")
     >>> axis = (-np.sin(0.2), np.cos(0.2), 0.0)  # a known pose makes a reachable target
     >>> known = coils.CylinderMagnet(20e-3, 20e-3, 1e6, (0.01, -0.058, 0.0), axis)
-    >>> target = solve_rod(rod, known, np.arange(1, 11) / 10).tip[-1, :2]
-    >>> out = solve_magnet_pose(rod, magnet, target)
+    >>> coarse = dict(nodes=8)  # a quick example; the default discretisation works alike
+    >>> target = solve_rod(rod, known, np.arange(1, 11) / 10, **coarse).tip[-1, :2]
+    >>> out = solve_magnet_pose(rod, magnet, target, **coarse)
     >>> bool(out.miss < 1e-6 * rod.length)
     True
     """
