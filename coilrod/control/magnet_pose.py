@@ -29,9 +29,10 @@ distance from the clamp (centre) and 0.2 rad (turn): the least-norm Gauss-Newton
 Levenberg-Marquardt step on the trust radius (the tip's map is ill-conditioned -- its
 sensitivity to the field is nearly singular in one direction -- so full Gauss-Newton steps far
 from the target overshoot); steps are clipped to the box ``bounds``, a pose whose body enters
-the robot's reach is moved radially out of it, and a step whose forward solve fails or raises
-the miss shrinks the radius.  The reachable tips of one magnet form a thin band about the
-curve of a rod bent by a uniform field; a target off it ends at the closest pose found
+the robot's reach is moved radially out of it (on the reach's boundary the steps run along
+it), and a step whose forward solve fails or raises the miss shrinks the radius.  The tips one
+magnet can reach form a thin band (an inextensible rod's tip moves along its arc far more
+easily than across it, whatever bends it); a target off it ends at the closest pose found
 (status "max_solves" or "stalled").
 
 **The robot's reach** is the ball of radius L (the rod's length) about the clamp: every point
@@ -101,7 +102,8 @@ class MagnetPoseResult:
     status : str
         "converged" (within ``tol``), "optimal" (not met, but no step within the bounds and
         the reach predicts a relative decrease of the squared miss above 1e-6: the closest
-        pose), "max_solves" or "stalled" (the damping grew beyond any useful step).
+        pose), "max_solves" or "stalled" (the trust radius shrank to nothing, or three accepted
+        steps in a row each gained under 1e-6 of the squared miss).
     active : list of int
         Pose components at a bound (within 1e-9 of its span).
     """
