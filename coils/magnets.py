@@ -74,10 +74,11 @@ def _cel(kc, p, c, s):
     ss = np.where(pos, s / np.where(pos, pp, 1.0), s)
     cc = c.copy()
     if not np.all(pos):  # p <= 0 (here p = 0: on the cylinder's side surface)
+        p0 = np.where(pos, 0.0, p)  # the entries p > 0 take the other branch: no 0/0 here
         f = kc * kc
-        q = (1.0 - f) * (s - c * p)
-        g = 1.0 - p
-        f2 = f - p
+        q = (1.0 - f) * (s - c * p0)
+        g = 1.0 - p0
+        f2 = f - p0
         pn = np.sqrt(f2 / g)
         cn = (c - s) / g
         sn = -q / (g * g * pn) + cn * pn

@@ -532,3 +532,74 @@ def test_navigation_notebook():
     np.testing.assert_allclose(
         ph["wall_force"], an["wall_force"], atol=0.05 * max(an["wall_force"])
     )
+
+
+def test_magnet_notebook():
+    """A permanent magnet's pose as the control input: the cylinder's field and gradient
+    against magpylib's Cylinder (B) and central differences of it (gradient), the dipole's by
+    its closed form written here, the misses by solve_bvp forward solves."""
+    import magpylib
+    from scipy.spatial.transform import Rotation
+
+    import coils
+    from coilrod import presets
+
+    r = execute("magnet.ipynb")
+    m = r["magnet"]
+    D, M, center = m["diameter"], m["magnetization"], np.array(m["center"])
+    L = presets.SEED_LENGTH
+    turn_y = Rotation.from_rotvec([-np.pi / 2, 0.0, 0.0])  # the magnet's z onto +y
+
+    def cyl(c=center, rot=turn_y):
+        return magpylib.magnet.Cylinder(
+            polarization=(0.0, 0.0, mu_0 * M), dimension=(D, D), position=c, orientation=rot
+        )
+
+    ref = cyl()
+    probe = np.array(r["probe"])
+    np.testing.assert_allclose(r["probe_B"], ref.getB(probe), rtol=1e-10, atol=1e-14)
+    G = np.empty((len(probe), 3, 3))
+    for j in range(3):
+        d = np.zeros(3)
+        d[j] = 1e-6
+        G[:, :, j] = (ref.getB(probe + d) - ref.getB(probe - d)) / 2e-6
+    np.testing.assert_allclose(r["probe_G"], G, rtol=0, atol=1e-6 * np.abs(G).max())
+
+    def dipole_B(points, moment, c):  # mu0/4pi (3 r (m.r) - m r^2) / r^5
+        rr = np.asarray(points) - c
+        n = np.linalg.norm(rr, axis=1)[:, None]
+        return 1e-7 * (3 * rr * (rr @ moment)[:, None] / n**5 - moment / n**3)
+
+    moment = np.array([0.0, M * np.pi * D**2 / 4 * D, 0.0])
+    far = np.array(r["far"])
+    Bf = ref.getB(far)
+    rel = np.max(
+        np.linalg.norm(Bf - dipole_B(far, moment, center), axis=1) / np.linalg.norm(Bf, axis=1)
+    )
+    assert r["far_rel"] == pytest.approx(rel, rel=1e-6)
+    assert r["far_rel"] <= (D / np.linalg.norm(far - center, axis=1).min()) ** 2  # -> dipole
+    # the torque difference over the reach at the closest gap, from magpylib and the closed form
+    rr, aa = np.linspace(0.0, L, 9)[1:], np.linspace(0.0, 2 * np.pi, 24, endpoint=False)
+    disc = np.array([(a * np.cos(b), a * np.sin(b), 0.0) for a in rr for b in aa])
+    row = r["rows"][0]
+    c0 = np.array([0.0, -(L + row["gap"] + D / 2), 0.0])
+    tq = np.cross([128e3, 0.0, 0.0], cyl(c0).getB(disc))
+    tqd = np.cross([128e3, 0.0, 0.0], dipole_B(disc, moment, c0))
+    expect = np.max(np.linalg.norm(tq - tqd, axis=1)) / np.max(np.linalg.norm(tq, axis=1))
+    assert row["torque"] == pytest.approx(expect, rel=1e-8)
+    # the poses: the real inverse lands, the dipole controller misses by what it says
+    rod = presets.seed_rod(presets.M1())
+    scales = np.array([0.5, 1.0])  # a regular branch (no snap): two continuation steps reach it
+    for case in r["control"]:
+        for kind in ("real", "dipole"):
+            axis = np.array(case[f"{kind}_axis"])
+            magnet = coils.CylinderMagnet(D, D, M, case[f"{kind}_position"], axis)
+            tip = bvp_tip_continued(rod, magnet, scales)
+            miss = np.linalg.norm(tip - case["target"])
+            if kind == "real":
+                assert case["real_status"] == "converged"
+                assert miss <= 1e-6 * L
+            else:
+                assert case["dipole_status"] == "converged"
+                assert miss == pytest.approx(case["dipole_miss"], rel=1e-3)
+                assert case["dipole_miss_pct"] == pytest.approx(100 * miss / L, rel=1e-3)

@@ -1,0 +1,108 @@
+"""Magnet pose benchmark: the pose of a permanent magnet that puts the tip on a target.
+
+Prints (and writes to benchmarks/results/magnet_pose.md): for targets made by the magnet at
+known poses (planar and 3D), ``coilrod.solve_magnet_pose`` from the same start pose -- forward
+solves, CPU time in forward-solve equivalents (the pose solve's CPU time over that of one
+forward solve at the target's pose, default discretisation), the final miss checked by an
+independent forward solve at the magnet returned -- and the dipole controller's miss (the pose
+found with the magnet's point dipole, the finite magnet placed there).  Goal (issue 21): a pose
+solve <= 20 forward-solve equivalents.
+
+Run:  python benchmarks/bench_magnet_pose.py
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+import coils
+from coilrod import presets, solve_magnet_pose, solve_rod
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _machine import machine_info  # noqa: E402
+
+warnings.simplefilter("ignore")
+ROD = presets.seed_rod(presets.M1())
+L = ROD.length
+SCALES = np.arange(1, 11) / 10
+
+
+def magnet(center=(0.0, -0.06, 0.0), rotvec=(0.0, 0.0, 0.0)):
+    """A 20 mm x 20 mm N45-like cylinder (M = 1e6 A/m) magnetised along y, turned by rotvec."""
+    R = Rotation.from_rotvec(rotvec).as_matrix() @ START.rotation
+    return coils.CylinderMagnet(0.02, 0.02, 1e6, center, orientation=R)
+
+
+START = coils.CylinderMagnet(0.02, 0.02, 1e6, (0.0, -0.06, 0.0), "y")
+CASES = [
+    ("planar", (0.01, -0.058, 0.0), (0.0, 0.0, 0.2)),
+    ("planar", (-0.008, -0.063, 0.0), (0.0, 0.0, -0.15)),
+    ("planar", (0.012, -0.065, 0.0), (0.0, 0.0, 0.35)),
+    ("3D", (0.006, -0.06, 0.008), (0.15, 0.0, 0.1)),
+    ("3D", (-0.004, -0.062, -0.006), (-0.1, 0.05, -0.1)),
+]
+
+
+def tip(m, planar):
+    t = solve_rod(ROD, m, SCALES).tip[-1]
+    return t[:2] if planar else t
+
+
+def main():
+    out = ["# Magnet pose benchmark\n", machine_info(), ""]
+    out.append(
+        "| case | target (mm) | forward solves | forward-solve equivalents (time) | CPU (s) | "
+        "miss (L) | dipole controller's miss (mm, % L) |"
+    )
+    out.append("|---|---|---|---|---|---|---|")
+    tip(START, True)  # compile
+    eqs, t_all = [], []
+    for kind, c, rv in CASES:
+        planar = kind == "planar"
+        goal = tip(magnet(c, rv), planar)
+        t0 = time.process_time()
+        for _ in range(3):
+            tip(magnet(c, rv), planar)
+        t_forward = (time.process_time() - t0) / 3  # one forward solve at the target's pose
+        t_all.append(t_forward)
+        t0 = time.process_time()
+        try:
+            res = solve_magnet_pose(ROD, START, goal)
+            status, solves, m_at = res.status, res.solves, res.magnet
+        except Exception as err:  # report, do not hide
+            res = getattr(err, "result", None)
+            status = f"error: {type(err).__name__}"
+            solves, m_at = (res.solves, res.magnet) if res is not None else (0, None)
+        t = time.process_time() - t0
+        eq = t / t_forward
+        eqs.append(eq)
+        miss = np.linalg.norm(tip(m_at, planar) - goal) / L if m_at is not None else np.nan
+        try:
+            d = solve_magnet_pose(ROD, START, goal, model="dipole")
+            dip = f"{d.miss * 1e3:.3f} mm, {d.miss_percent:.2f} %"
+        except Exception as err:
+            dip = f"error: {type(err).__name__}"
+        out.append(
+            f"| {kind} ({status}) | {np.round(np.asarray(goal) * 1e3, 2).tolist()} | {solves} | "
+            f"{eq:.1f} | {t:.2f} | {miss:.1e} | {dip} |"
+        )
+        print(out[-1], flush=True)
+    out.append("")
+    out.append(
+        f"One forward solve (at the target's pose): {np.median(t_all) * 1e3:.0f} ms CPU.  "
+        f"Forward-solve equivalents: median {np.median(eqs):.1f}, max {np.max(eqs):.1f} "
+        "(goal <= 20)."
+    )
+    text = "\n".join(out) + "\n"
+    print(text)
+    (Path(__file__).parent / "results" / "magnet_pose.md").write_text(text)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,733 @@
+"""The pose of a permanent magnet that puts the rod's tip on a target.
+
+The control input is the magnet's pose: its centre ``c`` and its orientation.  The pose
+vector ``q`` holds
+
+* for a target (x, y) in the bending plane: ``(c_x, c_y, psi)``, the centre in the rod's
+  plane and the turn ``psi`` (rad) about the plane's normal (z) of the magnet's own
+  orientation -- poses that keep a magnet lying symmetric about the plane there, so the rod
+  stays planar;
+* for a target (x, y, z): ``(c_x, c_y, c_z, r_x, r_y, r_z)``, the centre and the rotation
+  vector ``r`` (rad) of the turn ``exp([r]) `` applied to the magnet's own orientation.
+
+Each evaluation is one forward solve of the rod in the magnet's field at that pose, followed
+along the load path from the straight rod (:func:`coilrod.solve_rod`, as
+:func:`coilrod.solve_currents` does), and the exact derivatives of the tip with respect to
+the pose by the adjoint (:func:`coilrod.design.sensitivity.tip_derivatives`): the magnetic
+load is linear in the field and its gradient at the nodes, so the tip's derivative chains the
+adjoint loads with ``d(B, grad B)/dq`` at the nodes, which the magnet gives exactly --
+
+* a translation ``dc``: ``dB = -G dc``, ``dG = -H dc`` (``H`` the magnet's hessian);
+* a turn ``omega`` about the magnet's centre (``d = x - c``): ``dB = omega x B - G (omega x
+  d)``, ``dG = [omega] G - G [omega] - H (omega x d)``; a rotation vector's change ``dr`` is
+  the turn ``omega = J_l(r) dr`` (``J_l`` the left Jacobian of SO(3)).
+
+The hessian is exact for :class:`coils.Dipole`; for the finite magnets it is the central
+difference of their exact gradient (about 1e-8 relative), so the pose derivatives are exact to
+that.  The search is trust-region Gauss-Newton in the pose scaled by a tenth of the magnet's
+distance from the clamp (centre) and 0.2 rad (turn): the least-norm Gauss-Newton step, or the
+Levenberg-Marquardt step on the trust radius (the tip's map is ill-conditioned -- its
+sensitivity to the field is nearly singular in one direction -- so full Gauss-Newton steps far
+from the target overshoot); steps are clipped to the box ``bounds``, a pose whose body enters
+the robot's reach is moved radially out of it (on the reach's boundary the steps run along
+it), and a step whose forward solve fails or raises the miss shrinks the radius.  The tips one
+magnet can reach form a thin band (an inextensible rod's tip moves along its arc far more
+easily than across it, whatever bends it); a target off it ends at the closest pose found
+(status "max_solves" or "stalled").
+
+**The robot's reach** is the ball of radius L (the rod's length) about the clamp: every point
+of the rod lies in it whatever the load.  A pose is refused if any point of the magnet's body
+(a :class:`coils.Dipole`: its centre; a :class:`coils.CylinderMagnet`: the solid cylinder of
+its outer diameter; a :class:`coils.CuboidMagnet`: the box) is closer than
+``L + clearance`` to the clamp (:func:`reach_distance`).
+
+``model="dipole"``: the usual controller's model -- the pose is found in the field of the
+magnet's point dipole (``magnet.dipole()``), and the finite magnet is then placed at that pose:
+``miss`` says how far its tip really lands from the target.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+import coils
+from coils._validate import as_array, as_count, as_vector, finite_scalar, positive
+
+from ..design.sensitivity import tip_derivatives
+from ..errors import ConvergenceError
+from ..path.events import StabilityWarning
+from ..robot.rod import Rod
+from ..rod.result import RodResult
+from ..rod.solve import solve_rod
+
+__all__ = ["solve_magnet_pose", "MagnetPoseResult", "reach_distance"]
+
+
+@dataclass
+class MagnetPoseResult:
+    """A magnet pose for a target tip position and where the tip lands at it.
+
+    Attributes
+    ----------
+    pose : ndarray, shape (3,) or (6,)
+        The pose vector: (c_x, c_y, psi) for a planar target, (c_x, c_y, c_z, r_x, r_y, r_z)
+        for a 3D one (m, rad; see the module docstring).
+    position : ndarray, shape (3,)
+        The magnet's centre, m.
+    orientation : ndarray, shape (3, 3)
+        The magnet's orientation (local -> global rotation), the turn of the pose applied to
+        the given magnet's.
+    magnet : coils.Field
+        The (finite) magnet placed at the pose.
+    tip : ndarray, shape (3,)
+        Tip position in the magnet's field at the pose, m.
+    miss : float
+        Distance of that tip from the target, m (for ``model="dipole"``: of the finite
+        magnet's tip from the target, the dipole controller's miss).
+    target : ndarray, shape (2,) or (3,)
+        Target, m.
+    result : RodResult
+        The forward solve of the finite magnet at the pose.
+    model : str
+        "real" or "dipole".
+    solves : int
+        Forward solves of the search (in the model's field; each Jacobian costs a fraction of
+        one: a factorisation and a few transposed solves).
+    history : list of float
+        Position miss of every forward solve of the search, m (in the model's field).
+    status : str
+        "converged" (within ``tol``), "optimal" (not met, but no step within the bounds and
+        the reach predicts a relative decrease of the squared miss above 1e-6: the closest
+        pose), "max_solves" or "stalled" (the trust radius shrank to nothing, or three accepted
+        steps in a row each gained under 1e-6 of the squared miss).
+    active : list of int
+        Pose components at a bound (within 1e-9 of its span).
+    """
+
+    pose: np.ndarray
+    position: np.ndarray
+    orientation: np.ndarray
+    magnet: object
+    tip: np.ndarray
+    miss: float
+    target: np.ndarray
+    result: RodResult
+    model: str
+    solves: int
+    history: list = field(default_factory=list)
+    status: str = "converged"
+    active: list = field(default_factory=list)
+
+    @property
+    def miss_percent(self) -> float:
+        """``miss`` in % of the rod's length."""
+        return 100.0 * self.miss / self.result._solution.rod.length
+
+
+# -- poses ----------------------------------------------------------------------------------
+_MAGNETS = (coils.Dipole, coils.CylinderMagnet, coils.CuboidMagnet)
+
+
+def _skew(v) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _rotation(r) -> np.ndarray:
+    """exp([r]) (Rodrigues)."""
+    th = float(np.linalg.norm(r))
+    K = _skew(r)
+    if th < 1e-8:
+        return np.eye(3) + K + 0.5 * K @ K
+    return np.eye(3) + math.sin(th) / th * K + (1.0 - math.cos(th)) / th**2 * K @ K
+
+
+def _left_jacobian(r) -> np.ndarray:
+    """J_l(r): the turn omega = J_l(r) dr of exp([r + dr]) exp([r])^T."""
+    th = float(np.linalg.norm(r))
+    K = _skew(r)
+    if th < 1e-6:
+        return np.eye(3) + 0.5 * K + K @ K / 6.0
+    return np.eye(3) + (1.0 - math.cos(th)) / th**2 * K + (th - math.sin(th)) / th**3 * K @ K
+
+
+def _orientation(magnet) -> np.ndarray:
+    if isinstance(magnet, coils.Dipole):
+        return np.eye(3)
+    return np.asarray(magnet.rotation, float)
+
+
+def _place(magnet, center, turn):
+    """``magnet`` moved to ``center`` (m) and turned by ``turn`` (3, 3) about its centre."""
+    if isinstance(magnet, coils.Dipole):
+        return coils.Dipole(turn @ magnet.moment, center)
+    if isinstance(magnet, coils.CylinderMagnet):
+        return coils.CylinderMagnet(
+            magnet.diameter,
+            magnet.length,
+            magnet.magnetization,
+            center,
+            inner_diameter=magnet.inner_diameter,
+            orientation=turn @ magnet.rotation,
+        )
+    return coils.CuboidMagnet(
+        magnet.size, magnet.magnetization, center, orientation=turn @ magnet.rotation
+    )
+
+
+def reach_distance(magnet, clamp) -> float:
+    """Distance (m) from ``clamp`` (3,) to the closest point of the magnet's body: the point
+    of a :class:`coils.Dipole`, the solid cylinder (its bore included) of a
+    :class:`coils.CylinderMagnet`, the box of a :class:`coils.CuboidMagnet`; 0 inside it."""
+    clamp = np.asarray(clamp, float)
+    if isinstance(magnet, coils.Dipole):
+        return float(np.linalg.norm(clamp - magnet.center))
+    local = (clamp - magnet.center) @ magnet.rotation
+    if isinstance(magnet, coils.CylinderMagnet):
+        dr = max(math.hypot(local[0], local[1]) - magnet.radius, 0.0)
+        dz = max(abs(local[2]) - 0.5 * magnet.length, 0.0)
+        return math.hypot(dr, dz)
+    return float(np.linalg.norm(np.maximum(np.abs(local) - 0.5 * magnet.size, 0.0)))
+
+
+class _PoseField(coils.Field):
+    """The field of a posed magnet with the pose as its parameter channels: ``currents`` is
+    the pose vector and ``unit_fields(points)`` its exact d(B, G)/dq, the interface by which
+    :func:`coilrod.design.sensitivity.tip_derivatives` chains field parameters (the group
+    "currents") with the adjoint loads."""
+
+    def __init__(self, magnet, pose, planar: bool):
+        self.magnet = magnet
+        self.currents = np.asarray(pose, float)
+        self.planar = planar
+
+    @property
+    def length_scale(self) -> float:
+        return self.magnet.length_scale
+
+    def _B(self, pts):
+        return self.magnet.B(pts)
+
+    def _B_and_gradient(self, pts):
+        return self.magnet.B_and_gradient(pts)
+
+    def _gradient(self, pts):
+        return self.magnet.gradient(pts)
+
+    def _hessian(self, pts):
+        return self.magnet.hessian(pts)
+
+    def _B_gradient_hessian(self, pts):
+        return self.magnet.B_gradient_hessian(pts)
+
+    def unit_fields(self, points):
+        """d(B, G)/dq at ``points`` (n, 3): shapes (n, 3, p) T and (n, 3, 3, p) T/m per unit
+        of the pose (m, rad)."""
+        pts = np.asarray(points, float)
+        B, G, H = self.magnet.B_gradient_hessian(pts)
+        d = pts - self.magnet.center
+        dB_rot = np.empty(B.shape + (3,))
+        dG_rot = np.empty(G.shape + (3,))
+        for k in range(3):
+            e = np.eye(3)[k]
+            K = _skew(e)
+            w = np.cross(e, d)  # the points' velocity relative to the turning magnet, sign -
+            dB_rot[..., k] = np.cross(e, B) - np.einsum("nij,nj->ni", G, w)
+            dG_rot[..., k] = K @ G - G @ K - np.einsum("nijl,nl->nij", H, w)
+        dB_tr = -G  # (n, 3, 3): [i, k] = -dB_i/dx_k
+        dG_tr = -H
+        if self.planar:
+            dB = np.concatenate([dB_tr[..., :2], dB_rot[..., 2:]], axis=-1)
+            dG = np.concatenate([dG_tr[..., :2], dG_rot[..., 2:]], axis=-1)
+            return dB, dG
+        Jl = _left_jacobian(self.currents[3:])
+        dB = np.concatenate([dB_tr, dB_rot @ Jl], axis=-1)
+        dG = np.concatenate([dG_tr, dG_rot @ Jl], axis=-1)
+        return dB, dG
+
+
+# -- the problem ----------------------------------------------------------------------------
+@dataclass
+class _Problem:
+    rod: Rod
+    magnet: object  # the magnet of the model (the dipole of the finite one for "dipole")
+    real: object  # the finite magnet
+    target: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    steps: int
+    opts: dict
+    tol: float
+    clearance: float
+
+    @property
+    def planar(self) -> bool:
+        return self.target.size == 2
+
+    @property
+    def clamp(self) -> np.ndarray:
+        return self.opts["clamp_position"]
+
+    def turn(self, q) -> np.ndarray:
+        if self.planar:
+            c, s = math.cos(q[2]), math.sin(q[2])
+            return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        return _rotation(q[3:])
+
+    def center(self, q) -> np.ndarray:
+        if self.planar:
+            return np.array([q[0], q[1], self.magnet.center[2]])
+        return np.asarray(q[:3], float)
+
+    def place(self, magnet, q):
+        return _place(magnet, self.center(q), self.turn(q))
+
+    def clear(self, q) -> float:
+        """Distance of the finite magnet's body at pose q beyond the reach, m (< 0: inside)."""
+        return reach_distance(self.place(self.real, q), self.clamp) - (
+            self.rod.length + self.clearance
+        )
+
+    def off_reach(self, q) -> np.ndarray:
+        """q with the magnet's centre moved radially away from the clamp (in the plane for a
+        planar pose) until its body is just off the reach (q itself if it is)."""
+        if self.clear(q) >= 0.0:
+            return q
+        c = self.center(q)
+        v = c - self.clamp
+        if self.planar:
+            v[2] = 0.0
+        lo_t, hi_t = 1.0, 2.0
+        while self.clear(self._scaled(q, v, hi_t)) < 0.0:
+            hi_t *= 2.0
+        for _ in range(60):  # bisection to round-off: the body just off the reach
+            mid = 0.5 * (lo_t + hi_t)
+            lo_t, hi_t = (mid, hi_t) if self.clear(self._scaled(q, v, mid)) < 0.0 else (lo_t, mid)
+        return self._scaled(q, v, hi_t)
+
+    def _scaled(self, q, v, t) -> np.ndarray:
+        out = q.copy()
+        c = self.clamp + t * v
+        out[:2] = c[:2]
+        if not self.planar:
+            out[2] = self.clamp[2] + t * v[2]
+        return out
+
+    def reach_normal(self, q, sc):
+        """d(clear)/d(scaled q) where the magnet's body touches the reach (within 1e-6 L),
+        else None: the outward normal of the reach in the scaled pose space."""
+        if self.clear(q) > 1e-6 * self.rod.length:
+            return None
+        g = np.empty(q.size)
+        for k in range(q.size):
+            e = np.zeros(q.size)
+            e[k] = 1e-6 * sc[k]
+            g[k] = (self.clear(q + e) - self.clear(q - e)) / 2e-6
+        return g
+
+    def forward(self, magnet, q) -> RodResult:
+        placed = _PoseField(self.place(magnet, q), q, self.planar)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", StabilityWarning)
+            return solve_rod(
+                self.rod,
+                placed,
+                np.arange(1, self.steps + 1) / self.steps,
+                model="auto",
+                **self.opts,
+            )
+
+    def residual(self, res: RodResult) -> np.ndarray:
+        """Tip minus target, in units of L."""
+        return (res.tip[-1, : self.target.size] - self.target) / self.rod.length
+
+    def jacobian(self, res: RodResult) -> np.ndarray:
+        _, _, _, D = tip_derivatives(res, [len(res) - 1], ["currents"], check=False)
+        return D[0, : self.target.size] / self.rod.length
+
+
+def _pose0(magnet, planar: bool) -> np.ndarray:
+    c = np.asarray(magnet.center, float)
+    return np.r_[c[:2], 0.0] if planar else np.r_[c, 0.0, 0.0, 0.0]
+
+
+def _bounds(bounds, q0, planar: bool):
+    p = q0.size
+    names = "(c_x, c_y, psi)" if planar else "(c_x, c_y, c_z, r_x, r_y, r_z)"
+    if bounds is None:
+        return np.full(p, -np.inf), np.full(p, np.inf)
+    try:
+        arr = np.asarray(bounds, dtype=float)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"bounds must be (lower, upper), each of shape ({p},) {names}") from err
+    if arr.shape != (2, p):
+        raise ValueError(
+            f"bounds must be (lower, upper), each of shape ({p},) {names} in m and rad; got an "
+            f"array of shape {arr.shape}"
+        )
+    lo, hi = arr
+    if np.isnan(arr).any():
+        raise ValueError(f"bounds must not hold NaN; got {arr.tolist()}")
+    if np.any(lo >= hi):
+        j = int(np.flatnonzero(lo >= hi)[0])
+        raise ValueError(
+            f"bounds: lower[{j}] = {lo[j]} must be below upper[{j}] = {hi[j]} (pose {names})"
+        )
+    if np.any(q0 < lo) or np.any(q0 > hi):
+        j = int(np.flatnonzero((q0 < lo) | (q0 > hi))[0])
+        raise ValueError(
+            f"bounds: the start pose {q0.tolist()} {names} (the magnet as given) is outside "
+            f"them at component {j}: [{lo[j]}, {hi[j]}]"
+        )
+    return lo.copy(), hi.copy()
+
+
+def _problem(rod, magnet, target, bounds, model, steps, clamp_position, clamp_angle, nodes, tol,
+             clearance):  # fmt: skip
+    if not isinstance(rod, Rod):
+        raise ValueError(f"rod must be a coilrod.Rod; got {type(rod).__name__}")
+    if not isinstance(magnet, _MAGNETS):
+        raise ValueError(
+            "magnet must be a coils.Dipole, coils.CylinderMagnet or coils.CuboidMagnet; got "
+            f"{type(magnet).__name__}"
+        )
+    if model not in ("real", "dipole"):
+        raise ValueError(f"model must be 'real' or 'dipole'; got {model!r}")
+    goal = as_array(target, "target")
+    if goal.shape not in ((2,), (3,)):
+        raise ValueError(
+            "target must have shape (2,) (x, y in the bending plane) or (3,) (x, y, z); got "
+            f"{goal.shape}"
+        )
+    L = rod.length
+    clamp = as_vector(clamp_position, "clamp_position")
+    angle = finite_scalar(clamp_angle, "clamp_angle")
+    far = float(np.linalg.norm(goal - clamp[: goal.size]))
+    if far > L:
+        raise ValueError(
+            f"target {goal.tolist()} m is {far:.4g} m from the clamp, beyond the rod's length "
+            f"L = {L} m: no pose reaches it"
+        )
+    steps = as_count(steps, "steps", 1, 10_000)
+    tol = 1e-7 * L if tol is None else positive(tol, "tol")
+    clearance = finite_scalar(clearance, "clearance")
+    if clearance < 0:
+        raise ValueError(f"clearance must be >= 0 m; got {clearance}")
+    planar = goal.size == 2
+    if planar:
+        mz = magnet.center[2] - clamp[2]
+        leak = _out_of_plane(magnet)
+        if abs(mz) > 1e-12 * L or leak:
+            raise ValueError(
+                "magnet: a target (x, y) in the bending plane needs a magnet lying symmetric "
+                "about the rod's plane z = clamp_position[2] (its centre on the plane and its "
+                "magnetisation in it, a cuboid with an edge along z), so the rod stays planar"
+                f"; got centre z - clamp z = {mz:.4g} m{leak} -- give a 3D target (x, y, z) "
+                "for the spatial rod"
+            )
+    q0 = _pose0(magnet, planar)
+    lo, hi = _bounds(bounds, q0, planar)
+    p = _Problem(
+        rod=rod,
+        magnet=magnet.dipole() if model == "dipole" and hasattr(magnet, "dipole") else magnet,
+        real=magnet,
+        target=goal,
+        lo=lo,
+        hi=hi,
+        steps=steps,
+        opts=dict(clamp_position=clamp, clamp_angle=angle, nodes=nodes),
+        tol=tol,
+        clearance=clearance,
+    )
+    gap = p.clear(q0)
+    if gap < 0:
+        raise ValueError(
+            f"magnet: its body comes within {reach_distance(magnet, clamp):.4g} m of the clamp "
+            f"{clamp.tolist()} m, inside the robot's reach (the ball of radius L + clearance = "
+            f"{L + clearance:.4g} m about the clamp that the rod can sweep): place it farther"
+        )
+    return p, q0
+
+
+def _out_of_plane(magnet) -> str:
+    """Why the magnet (its centre on the plane) is not symmetric about the plane z = const
+    ("" if it is)."""
+    if isinstance(magnet, coils.Dipole):
+        m = magnet.moment
+        return f", moment z {m[2]:.4g} A m^2" if abs(m[2]) > 1e-12 * np.linalg.norm(m) else ""
+    R = magnet.rotation
+    if isinstance(magnet, coils.CylinderMagnet):
+        return f", axis {R[:, 2].round(12).tolist()}" if abs(R[2, 2]) > 1e-12 else ""
+    M = R @ magnet.magnetization
+    if abs(M[2]) > 1e-12 * np.linalg.norm(M):
+        return f", magnetization z {M[2]:.4g} A/m"
+    if np.max(np.abs(R[2])) < 1.0 - 1e-12:  # no box edge along z: not mirror symmetric
+        return ", no edge of the box along z"
+    return ""
+
+
+# -- the search -----------------------------------------------------------------------------
+class _Spent(Exception):
+    pass
+
+
+def _search(p: _Problem, q0, max_solves: int):
+    """Trust-region Gauss-Newton on the tip miss with the exact Jacobian, in the pose scaled
+    by :func:`_scales` (see the module docstring).  Returns (q, result, status, solves,
+    history)."""
+    history = []
+
+    def evaluate(q):
+        if len(history) >= max_solves:
+            raise _Spent
+        res = p.forward(p.magnet, q)
+        r = p.residual(res)
+        history.append(float(np.linalg.norm(r)) * p.rod.length)
+        return res, r
+
+    sc = _scales(p, q0)
+    q = q0.copy()
+    res, r = evaluate(q)
+    J = p.jacobian(res) * sc  # per scaled pose unit
+    radius, status, crawl = 1.0, "stalled", 0
+    try:
+        while True:
+            if np.linalg.norm(r) * p.rod.length <= p.tol:
+                status = "converged"
+                break
+            # the steps allowed: the pose components not at a bound pushed against, and on
+            # the reach's boundary those along it (N: a basis of them, scaled units)
+            N = np.eye(q.size)[:, _free(q, J, r, p)]
+            g = p.reach_normal(q, sc)
+            if g is not None and N.shape[1] and float(_tr_step(J @ N, r, radius) @ (N.T @ g)) < 0:
+                from scipy.linalg import null_space
+
+                N = N @ null_space((N.T @ g)[None, :])
+            if not N.shape[1] or _gain(J @ N, r) <= GAIN_TOL:
+                status = "optimal"
+                break
+            step = N @ _tr_step(J @ N, r, radius)
+            size = float(np.linalg.norm(step))
+            pred = float(r @ r) - float((r + J @ step) @ (r + J @ step))
+            if pred <= 0.0:
+                break
+            trial = p.off_reach(np.clip(q + step * sc, p.lo, p.hi))
+            try:
+                res_t, r_t = evaluate(trial)
+                rho = (float(r @ r) - float(r_t @ r_t)) / pred
+            except ConvergenceError:
+                rho = -1.0
+            if rho > 1e-4:
+                # accepted steps that each gain < 1e-6 of |r|^2: creeping, not converging
+                crawl = crawl + 1 if float(r @ r) - float(r_t @ r_t) < 1e-6 * float(r @ r) else 0
+                q, res, r = trial, res_t, r_t
+                if crawl >= 3:
+                    break
+                J = p.jacobian(res) * sc
+                if rho > 0.75:
+                    radius = min(max(radius, 2.0 * size), RADIUS_MAX)
+                elif rho < 0.25:  # a poor model of the miss: a shorter step next
+                    radius = 0.5 * min(radius, size)
+            else:
+                radius = 0.25 * min(radius, size)
+                if radius < 1e-10:
+                    break
+    except _Spent:
+        status = "max_solves"
+    return q, res, status, len(history), history
+
+
+#: Relative decrease of the squared miss that the best step must predict to go on.
+GAIN_TOL = 1e-6
+#: Largest step, in scaled pose units (:func:`_scales`).
+RADIUS_MAX = 5.0
+
+
+def _free(q, J, r, p: _Problem) -> np.ndarray:
+    """Pose components free to move: not at a bound that the steepest descent pushes against."""
+    down = -(J.T @ r)  # descent direction (scaled)
+    at_lo = (q <= p.lo) & (down < 0)
+    at_hi = (q >= p.hi) & (down > 0)
+    return ~(at_lo | at_hi)
+
+
+def _gain(J, r) -> float:
+    """Relative decrease of |r|^2 of the least-squares step of the linearisation."""
+    rr = float(r @ r)
+    if rr == 0.0:
+        return 0.0
+    s = np.linalg.lstsq(J, -r, rcond=None)[0]
+    after = r + J @ s
+    return max(0.0, (rr - float(after @ after)) / rr)
+
+
+def _tr_step(J, r, radius: float) -> np.ndarray:
+    """argmin |r + J s| over |s| <= radius (the least-norm one if several): the Gauss-Newton
+    step, or the Levenberg-Marquardt step whose damping puts it on the radius."""
+    U, sv, Vt = np.linalg.svd(J, full_matrices=False)
+    b = -(U.T @ r)
+    keep = sv > 1e-12 * sv[0]
+    U, sv, Vt, b = U[:, keep], sv[keep], Vt[keep], b[keep]
+
+    def step(mu):
+        return Vt.T @ (sv * b / (sv**2 + mu))
+
+    s = step(0.0)
+    if np.linalg.norm(s) <= radius:
+        return s
+    lo, hi = 0.0, float(sv[0] ** 2) * max(1.0, float(np.linalg.norm(b)) / radius / sv[0])
+    while np.linalg.norm(step(hi)) > radius:
+        hi *= 4.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if np.linalg.norm(step(mid)) > radius else (lo, mid)
+    return step(hi)
+
+
+def _scales(p: _Problem, q0) -> np.ndarray:
+    """Scales of the pose components for the trust region: a tenth of the magnet's distance
+    from the clamp for the centre, 0.2 rad for the turn."""
+    n = 2 if p.planar else 3
+    dist = float(np.linalg.norm(p.center(q0) - p.clamp))
+    return np.r_[np.full(n, 0.1 * dist), np.full(q0.size - n, 0.2)]
+
+
+def solve_magnet_pose(
+    rod: Rod,
+    magnet,
+    target,
+    bounds=None,
+    model: str = "real",
+    *,
+    steps: int = 10,
+    clamp_position=(0.0, 0.0, 0.0),
+    clamp_angle: float = 0.0,
+    nodes: int | None = None,
+    tol: float | None = None,
+    clearance: float = 0.0,
+    max_solves: int = 40,
+) -> MagnetPoseResult:
+    """The pose of a permanent magnet that puts the tip of ``rod`` on ``target``.
+
+    Parameters
+    ----------
+    rod : Rod
+    magnet : coils.Dipole, coils.CylinderMagnet or coils.CuboidMagnet
+        The magnet at its start pose (its centre and orientation); the pose found turns its
+        orientation and moves its centre.  For a target (x, y) it must lie symmetric about
+        the rod's plane (centre on the plane, magnetisation in it, a cuboid with an edge
+        along z).
+    target : array-like, shape (2,) or (3,)
+        Tip position, m: (x, y) in the bending plane (planar rod; pose (c_x, c_y, psi)) or
+        (x, y, z) (pose (c_x, c_y, c_z, r_x, r_y, r_z); the spatial rod where the field
+        leaves the plane).
+    bounds : (lower, upper), each array-like of shape (3,) or (6,), optional
+        Box on the pose vector (m for the centre, absolute; rad for the turn, relative to the
+        magnet's own orientation); +-inf for no bound.  The start pose must lie in it.
+    model : {"real", "dipole"}
+        "real": the pose is found in the finite magnet's field; "dipole": in the field of its
+        point dipole (``magnet.dipole()``), and the finite magnet then placed at that pose
+        (``miss`` is the dipole controller's miss).
+    steps : int
+        Load steps of each forward solve (the field ramped from zero).
+    clamp_position, clamp_angle, nodes
+        As in :func:`coilrod.solve_rod` (m, rad).
+    tol : float, optional
+        Position tolerance, m (default 1e-7 L).
+    clearance : float
+        Extra distance (m, >= 0) the magnet's body keeps beyond the robot's reach.
+    max_solves : int
+        Most forward solves of the search.
+
+    Returns
+    -------
+    MagnetPoseResult
+
+    Raises
+    ------
+    ValueError
+        Bad input (naming the argument): NaN, wrong shapes, bounds with lower >= upper or not
+        holding the start pose, a target farther than L from the clamp, a start pose that puts
+        the magnet within the robot's reach (:func:`reach_distance` <= L + clearance), a
+        magnet not symmetric about the plane for a planar target.
+    coilrod.ConvergenceError
+        ``model="real"`` and the target not met: the message gives the closest tip, its miss
+        and why the search stopped ("optimal": the closest pose within the bounds and off the
+        reach); ``err.result`` is the MagnetPoseResult there.
+
+    Notes
+    -----
+    The pose vector, the exact pose derivatives and the search are in the module docstring
+    (:mod:`coilrod.control.magnet_pose`).  A typical solve takes 4-20 forward solves; a target
+    off the thin band of tips the magnet can reach ends at the solve budget a few um away.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import coils
+    >>> from coilrod import presets, solve_magnet_pose, solve_rod
+    >>> rod = presets.seed_rod(presets.M1())
+    >>> magnet = coils.CylinderMagnet(20e-3, 20e-3, 1e6, center=(0.0, -0.06, 0.0), axis="y")
+    >>> axis = (-np.sin(0.2), np.cos(0.2), 0.0)  # a known pose makes a reachable target
+    >>> known = coils.CylinderMagnet(20e-3, 20e-3, 1e6, (0.01, -0.058, 0.0), axis)
+    >>> coarse = dict(nodes=8)  # a quick example; the default discretisation works alike
+    >>> target = solve_rod(rod, known, np.arange(1, 11) / 10, **coarse).tip[-1, :2]
+    >>> out = solve_magnet_pose(rod, magnet, target, **coarse)
+    >>> bool(out.miss < 1e-6 * rod.length)
+    True
+    """
+    p, q0 = _problem(
+        rod, magnet, target, bounds, model, steps, clamp_position, clamp_angle, nodes, tol,
+        clearance,
+    )  # fmt: skip
+    max_solves = as_count(max_solves, "max_solves", 1, 10_000)
+    try:
+        q, res, status, solves, history = _search(p, q0, max_solves)
+    except ConvergenceError as err:
+        raise ConvergenceError(
+            f"solve_magnet_pose: the forward solve at the start pose failed ({err})",
+            reached=err.reached,
+            target=err.target,
+        ) from err
+    if model == "dipole":
+        res = p.forward(p.real, q)
+    tip = res.tip[-1]
+    miss = float(np.linalg.norm(tip[: p.target.size] - p.target))
+    span = np.where(np.isfinite(p.hi - p.lo), p.hi - p.lo, 1.0)
+    active = np.flatnonzero((q - p.lo <= 1e-9 * span) | (p.hi - q <= 1e-9 * span)).tolist()
+    out = MagnetPoseResult(
+        pose=q.copy(),
+        position=p.center(q),
+        orientation=p.turn(q) @ _orientation(magnet),
+        magnet=p.place(p.real, q),
+        tip=tip.copy(),
+        miss=miss,
+        target=p.target.copy(),
+        result=res,
+        model=model,
+        solves=solves,
+        history=history,
+        status=status,
+        active=active,
+    )
+    if model == "real" and status != "converged":
+        why = {
+            "optimal": "the closest pose within the bounds and off the robot's reach",
+            "max_solves": "the solve budget max_solves spent",
+            "stalled": "the search stalled",
+        }[status]
+        err = ConvergenceError(
+            f"solve_magnet_pose: the target {p.target.tolist()} m is not reached ({why}"
+            + (f"; pose components {active} at their bounds" if active else "")
+            + f"); the closest tip is {tip[: p.target.size].tolist()} m, {miss:.4g} m "
+            f"({miss / p.rod.length:.3g} L) away, at pose {np.round(q, 6).tolist()}",
+            reached=0.0,
+            target=1.0,
+            residual=miss,
+        )
+        err.result = out
+        raise err
+    return out
