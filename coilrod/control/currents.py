@@ -580,6 +580,36 @@ def _search(p: _Problem, I, max_iter: int, max_solves: int):
     return search, I, res, status
 
 
+def _target(target, angle, direction):
+    """The validated target (2,) or (3,) in m, tip angle (rad or None) and unit tip direction
+    ((3,) or None) of :func:`solve_currents`."""
+    goal = as_array(target, "target")
+    if goal.shape not in ((2,), (3,)):
+        raise ValueError(
+            "target must have shape (2,) (x, y in the bending plane) or (3,) (x, y, z); got "
+            f"{goal.shape}"
+        )
+    spatial = goal.size == 3
+    angle = None if angle is None else finite_scalar(angle, "angle")
+    if spatial and angle is not None:
+        raise ValueError(
+            "angle: a target tip angle is only for a target (x, y) in the bending plane; got a "
+            "3D target (give a tip direction instead)"
+        )
+    if direction is not None:
+        if not spatial:
+            raise ValueError(
+                "direction: a target tip direction is only for a 3D target (x, y, z); for a "
+                "target (x, y) in the bending plane give angle"
+            )
+        direction = as_vector(direction, "direction")
+        norm = float(np.linalg.norm(direction))
+        if abs(norm - 1.0) > 1e-6:
+            raise ValueError(f"direction must be a unit vector; got |direction| = {norm:.6g}")
+        direction = direction / norm
+    return goal, angle, direction
+
+
 def _problem(
     rod,
     system,
@@ -607,30 +637,8 @@ def _problem(
         )
     if model not in ("real", "ideal"):
         raise ValueError(f"model must be 'real' or 'ideal'; got {model!r}")
-    goal = as_array(target, "target")
-    if goal.shape not in ((2,), (3,)):
-        raise ValueError(
-            "target must have shape (2,) (x, y in the bending plane) or (3,) (x, y, z); got "
-            f"{goal.shape}"
-        )
+    goal, angle, direction = _target(target, angle, direction)
     spatial = goal.size == 3
-    angle = None if angle is None else finite_scalar(angle, "angle")
-    if spatial and angle is not None:
-        raise ValueError(
-            "angle: a target tip angle is only for a target (x, y) in the bending plane; got a "
-            "3D target (give a tip direction instead)"
-        )
-    if direction is not None:
-        if not spatial:
-            raise ValueError(
-                "direction: a target tip direction is only for a 3D target (x, y, z); for a "
-                "target (x, y) in the bending plane give angle"
-            )
-        direction = as_vector(direction, "direction")
-        norm = float(np.linalg.norm(direction))
-        if abs(norm - 1.0) > 1e-6:
-            raise ValueError(f"direction must be a unit vector; got |direction| = {norm:.6g}")
-        direction = direction / norm
     m = system.currents.size
     if max_current is None:
         limits = np.asarray(system.max_current, float)
