@@ -39,8 +39,12 @@ __all__ = [
 
 #: A point within this fraction of the radius of an edge circle is "on the edge".
 ON_EDGE = 1e-9
-#: Below this fraction of the radius from the axis, B_rho / rho takes its axis limit.
-NEAR_AXIS = 1e-5
+#: Below this fraction of the radius from the axis, B_rho / rho takes its axis limit (whose
+#: error is O(rho^2) relative: the kernel keeps B_rho's relative precision down to the axis).
+NEAR_AXIS = 1e-8
+#: Below this fraction of the radius from the axis, the hessian's radial term takes its axis
+#: limit (error O(rho^3), against the cancellation eps radius / rho of the general form).
+HESSIAN_NEAR_AXIS = 1e-4
 
 
 def as_rotation(orientation, name: str = "orientation") -> np.ndarray:
@@ -63,9 +67,13 @@ def as_rotation(orientation, name: str = "orientation") -> np.ndarray:
 
 
 # -- tier 1: kernels -------------------------------------------------------------------------------
-def _cel(kc, p, c, s):
+def _cel(kc, p, c, s, one_minus_kc=None):
     """Bulirsch's generalised complete elliptic integral, vectorised (kc != 0, p >= 0):
-    integral_0^{pi/2} (c cos^2 + s sin^2) / ((cos^2 + p sin^2) sqrt(cos^2 + kc^2 sin^2))."""
+    integral_0^{pi/2} (c cos^2 + s sin^2) / ((cos^2 + p sin^2) sqrt(cos^2 + kc^2 sin^2)).
+
+    ``one_minus_kc`` (only with ``p = c = 1, s = -1``, kc > 0): ``1 - kc`` computed without
+    cancellation; the integral is then O(1 - kc) and keeps its relative precision as
+    ``kc -> 1`` (its first step's ``2 (kc - 1)`` is the one cancellation of the recursion)."""
     kc, p, c, s = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (kc, p, c, s)))
     k = np.abs(kc)
     em = np.ones_like(k)
@@ -88,7 +96,7 @@ def _cel(kc, p, c, s):
     f = cc
     cc = cc + ss / pp
     g = k / pp
-    ss = 2.0 * (ss + f * g)
+    ss = 2.0 * (ss + f * g) if one_minus_kc is None else -2.0 * one_minus_kc
     pp = g + pp
     g = em
     em = k + em
@@ -138,7 +146,8 @@ def solenoid_field(rho, z, radius: float, half_height: float, K: float):
         alpha = a / root
         beta = zz / root
         kc = np.sqrt((zz * zz + (a - rho) ** 2) / (zz * zz + ap * ap))
-        out_r += sign * alpha * _cel(kc, 1.0, 1.0, -1.0)
+        one_minus = 4.0 * a * rho / ((zz * zz + ap * ap) * (1.0 + kc))  # (1 - kc^2) / (1 + kc)
+        out_r += sign * alpha * _cel(kc, 1.0, 1.0, -1.0, one_minus)
         out_z += sign * beta * _cel(kc, gamma * gamma, 1.0, gamma)
     return B0 * out_r, B0 * a / ap * out_z
 
@@ -447,17 +456,36 @@ class CylinderMagnet(Field):
         Bl = np.column_stack([Br * local[:, 0] / safe, Br * local[:, 1] / safe, Bz])
         return Bl @ self.rotation.T
 
-    def _B_and_gradient(self, pts):
+    def _fields(self, pts, want_H: bool):
+        """B (n, 3) T, gradient (n, 3, 3) T/m and, if ``want_H``, hessian (n, 3, 3, 3) T/m^2
+        (else None), global frame.
+
+        In the magnet's frame (axis z, ``n = (x, y) / rho``): the end loops' field is d/dz of
+        B, so every hessian entry with a z index is an entry of the loops' gradient ``L``
+        (``H_ijz = dL_i/dx_j``, H symmetric in all three indices).  Axisymmetry leaves the
+        in-plane entries ``H_abc = p (d_ab n_c + d_ac n_b + d_bc n_a - 4 n_a n_b n_c)
+        - e n_a n_b n_c`` with ``e = L_az n_a`` (tracelessness) and ``p = rho q1``,
+        ``q1 = (dQ/drho) / rho`` of ``Q = B_rho / rho``: from div B = 0,
+        ``p = -(2 Q + dBz/dz) / rho``, and below ``HESSIAN_NEAR_AXIS`` radius its axis limit
+        ``rho d3Bz/dz3 / 8`` (the loops' hessian).
+        """
         local, rho = self._local(pts)
         Br, Bz = self._B_local(local, rho)
+        loops = self._end_loops()
+        R = self.rotation
+        if want_H:
+            dz, GL, HL = loops.B_gradient_hessian(pts)
+        else:
+            dz, GL = loops.B_and_gradient(pts)
         # d/dz of the local field: the end loops (exact), in the magnet's frame
-        dz = self._end_loops().B(pts) @ self.rotation
+        dz = dz @ R
         w = dz[:, 2]  # dBz/dz
+        zero = rho == 0.0
         near = rho < NEAR_AXIS * self.radius
-        safe = np.where(near, 1.0, rho)
+        safe = np.where(zero, 1.0, rho)
         u = np.where(near, -0.5 * w, Br / safe)  # B_rho / rho (its axis limit -w/2)
-        c = np.where(near, 1.0, local[:, 0] / safe)
-        s = np.where(near, 0.0, local[:, 1] / safe)
+        c = np.where(zero, 1.0, local[:, 0] / safe)
+        s = np.where(zero, 0.0, local[:, 1] / safe)
         n = pts.shape[0]
         G = np.empty((n, 3, 3))
         drr = -w - u  # dB_rho/drho (div B = 0)
@@ -467,11 +495,52 @@ class CylinderMagnet(Field):
         G[:, :, 2] = dz
         G[:, 2, :2] = dz[:, :2]  # curl B = 0
         Bl = np.column_stack([Br * c, Br * s, Bz])
-        R = self.rotation
-        return Bl @ R.T, np.einsum("ia,kab,jb->kij", R, G, R)
+        B = Bl @ R.T
+        G = np.einsum("ia,kab,jb->kij", R, G, R)
+        if not want_H:
+            return B, G, None
+        L = np.einsum("ai,kab,bj->kij", R, GL, R)  # the loops' gradient, magnet frame
+        L = 0.5 * (L + L.transpose(0, 2, 1))
+        Hl = np.empty((n, 3, 3, 3))
+        Hl[:, 2, :, :] = L
+        Hl[:, :, 2, :] = L
+        Hl[:, :, :, 2] = L
+        e = L[:, 0, 2] * c + L[:, 1, 2] * s
+        p = -(2.0 * Br / safe + w) / safe
+        close = rho < HESSIAN_NEAR_AXIS * self.radius
+        if close.any():
+            ax = self.axis
+            d3 = np.einsum("kabc,a,b,c->k", HL[close], ax, ax, ax)  # d3Bz/dz3 on the axis
+            p[close] = rho[close] * d3 / 8.0
+        nv = (c, s)
+        for a in range(2):
+            for b in range(a, 2):
+                for k in range(b, 2):
+                    val = p * ((a == b) * nv[k] + (a == k) * nv[b] + (b == k) * nv[a])
+                    val = val - (4.0 * p + e) * nv[a] * nv[b] * nv[k]
+                    for i, j, m in {
+                        (a, b, k),
+                        (a, k, b),
+                        (b, a, k),
+                        (b, k, a),
+                        (k, a, b),
+                        (k, b, a),
+                    }:
+                        Hl[:, i, j, m] = val
+        Hg = np.einsum("kabc,ia,jb,lc->kijl", Hl, R, R, R, optimize=True)
+        return B, G, Hg
+
+    def _B_and_gradient(self, pts):
+        return self._fields(pts, False)[:2]
 
     def _gradient(self, pts):
-        return self._B_and_gradient(pts)[1]
+        return self._fields(pts, False)[1]
+
+    def _hessian(self, pts):
+        return self._fields(pts, True)[2]
+
+    def _B_gradient_hessian(self, pts):
+        return self._fields(pts, True)
 
     def __repr__(self):
         ring = f", inner_diameter={self.inner_diameter!r}" if self.inner_diameter else ""
