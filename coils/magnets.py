@@ -12,7 +12,9 @@ generalised complete elliptic integral ``cel``.  Its derivative along the axis i
 without a new closed form: moving the sheet along its axis only moves its end rings, so
 ``dB/dz`` is the field of two circular loops of current ``+K`` at the bottom and ``-K`` at the
 top (:class:`coils.CoaxialCoils`), and curl B = div B = 0 give the radial derivatives from it
-and from B.  A ring (hollow cylinder) is two sheets of opposite currents.
+and from B.  So the hessian: its entries with an axial index are the end loops' gradient,
+the rest follow from axisymmetry, div B = 0 and its symmetry in all three indices
+(``CylinderMagnet._fields``).  A ring (hollow cylinder) is two sheets of opposite currents.
 """
 
 from __future__ import annotations
@@ -324,8 +326,8 @@ class CylinderMagnet(Field):
     Notes
     -----
     B is the Derby & Olbert closed form of the side sheets (:func:`solenoid_field`); the
-    gradient is exact from it and the end loops (:mod:`coils.magnets`); the hessian is the
-    default central difference of the exact gradient (about 1e-8 relative).  Inside the
+    gradient and the hessian are exact from it and the end loops (:mod:`coils.magnets`),
+    symmetric and traceless to rounding.  Inside the
     material B includes the polarization (``B = mu0 (H + M)``), as magpylib's.  Points on an
     edge circle are refused; on the side surface B is discontinuous and the value returned
     is one of its sides.  Far away the field is that of :meth:`dipole`.

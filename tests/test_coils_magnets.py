@@ -4,8 +4,9 @@ Cross-checks:
 
 * B against magpylib (Dipole, Cylinder, CylinderSegment of 360 deg for a ring), posed
   (position and rotation), inside and outside the material and near the axis: 1e-12;
-* the gradient against 4th-order central differences of magpylib's B: 1e-8; the dipole's
-  hessian against differences of its exact gradient;
+* the gradient against 4th-order central differences of magpylib's B: 1e-8; the hessians
+  (dipole, cylinder, ring) against 4th-order differences of the exact gradient (1e-10 for
+  the magnets, on and near the axis too) and of magpylib's B twice (1e-8);
 * the dipole on its axis against 2 mu0 m / (4 pi z^3); a ring is a cylinder less its bore;
 * the far field of a magnet tends to its dipole as (size / distance)^2.
 """
@@ -91,6 +92,31 @@ def test_cylinder_and_ring_gradient_match_differences_of_magpylib(inner):
     assert np.abs(np.trace(G, axis1=1, axis2=2)).max() <= 1e-12 * np.abs(G).max()
 
 
+@pytest.mark.parametrize("inner", [0.0, BORE])
+def test_cylinder_and_ring_hessian_is_exact(inner):
+    """Exact, not a difference of the gradient (that was 1e-7 off): against 4th-order
+    differences of the exact gradient at 1e-10, off the axis and at rho / R = 0 .. 1e-3 (on
+    both sides of the switch to the axis limit at 1e-4), inside and outside; against
+    differences of magpylib's B twice; symmetric and traceless to rounding."""
+    ours, ref = _pair(inner)
+    X = _points(ours, 12, 1e-3)
+    f = np.array([0.0, 1e-9, 1e-6, 9.9e-5, 1.01e-4, 1e-3])[:, None]
+    for z in (2e-3, -6e-3):  # inside, outside (above the end)
+        axial = np.column_stack([f * R * np.cos(1.0), f * R * np.sin(1.0), np.full_like(f, z)])
+        X = np.vstack([X, CENTER + axial @ ours.rotation.T])
+    B, G, Hs = ours.B_gradient_hessian(X)
+    scale = np.abs(Hs).max()
+    assert np.abs(Hs - _fd(ours.gradient, X, 2e-6)).max() <= 1e-10 * scale
+    np.testing.assert_array_equal(ours.hessian(X), Hs)
+    np.testing.assert_array_equal(G, ours.gradient(X))
+    for perm in ((0, 2, 1, 3), (0, 1, 3, 2), (0, 3, 2, 1)):  # H_ijk symmetric in all three
+        assert np.abs(Hs - Hs.transpose(perm)).max() <= 1e-15 * scale
+    assert np.abs(np.einsum("kiij->kj", Hs)).max() <= 1e-14 * scale  # div B = 0
+    Xm = X[:8]  # magpylib's B_rho loses precision within 1e-6 R of the axis: off it
+    H_mp = _fd(lambda x: _fd(ref.getB, x, 1e-5), Xm, 1e-5)
+    assert np.abs(Hs[:8] - H_mp).max() <= 1e-8 * scale
+
+
 def test_ring_is_a_cylinder_less_its_bore():
     X = _points(_pair(BORE)[0], 10, 1e-4)
     ring = CylinderMagnet(2 * R, H, M, CENTER, inner_diameter=2 * BORE, orientation=ROT)
@@ -125,15 +151,19 @@ def test_far_field_tends_to_the_dipole():
         dipole.moment, M * np.pi * (R**2 - BORE**2) * H * magnet.axis, rtol=1e-15
     )
     direction = np.array([0.3, -0.4, 0.866])
-    errors = []
+    errors, errors_H = [], []
     for dist in (0.1, 0.2):
         X = CENTER + dist * direction[None, :]
         B, G = magnet.B_and_gradient(X)
         Bd, Gd = dipole.B_and_gradient(X)
         errors.append(np.abs(B - Bd).max() / np.abs(Bd).max())
         assert np.abs(G - Gd).max() <= 1e-2 * np.abs(Gd).max()
+        Hm, Hd = magnet.hessian(X), dipole.hessian(X)
+        errors_H.append(np.abs(Hm - Hd).max() / np.abs(Hd).max())
     assert errors[0] < 1e-2
     assert errors[0] / errors[1] == pytest.approx(4.0, rel=0.05)  # O((size/distance)^2)
+    assert errors_H[0] < 2e-2
+    assert errors_H[0] / errors_H[1] == pytest.approx(4.0, rel=0.05)
 
 
 def test_orientation_turns_the_magnetisation():

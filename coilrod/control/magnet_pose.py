@@ -22,9 +22,11 @@ adjoint loads with ``d(B, grad B)/dq`` at the nodes, which the magnet gives exac
   d)``, ``dG = [omega] G - G [omega] - H (omega x d)``; a rotation vector's change ``dr`` is
   the turn ``omega = J_l(r) dr`` (``J_l`` the left Jacobian of SO(3)).
 
-The hessian is exact for :class:`coils.Dipole`; for the finite magnets it is the central
-difference of their exact gradient (about 1e-8 relative), so the pose derivatives are exact to
-that.  The search is trust-region Gauss-Newton in the pose scaled by a tenth of the magnet's
+The hessian is exact for :class:`coils.Dipole` and :class:`coils.CylinderMagnet` (cylinder
+and ring); for :class:`coils.CuboidMagnet` it is the central difference of its exact gradient
+(about 1e-8 relative), so its pose derivatives are exact to that.
+
+The search is trust-region Gauss-Newton in the pose scaled by a tenth of the magnet's
 distance from the clamp (centre) and 0.2 rad (turn): the least-norm Gauss-Newton step, or the
 Levenberg-Marquardt step on the trust radius (the tip's map is ill-conditioned -- its
 sensitivity to the field is nearly singular in one direction -- so full Gauss-Newton steps far
