@@ -163,6 +163,23 @@ def _edge_ratio(t1, t2, rho2, r1, r2):
     return np.where(same, stable, direct)
 
 
+def _edge_ratio_slope(t1, t2, rho2, r1, r2):
+    """d/d(rho2) of :func:`_edge_ratio` (t1 < t2), stable: with both ends on one side
+    ``D = g(t2) - g(t1)``, ``g = 1 / (r (r + t))`` (``-1 / (r (r - t))`` below zero), whose
+    slope ``-(2 r + t) / (2 r^3 (r + t)^2)`` has no cancellation near the edge's line."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pos = _ratio_end_slope(t2, r2) - _ratio_end_slope(t1, r1)
+        neg = _ratio_end_slope(-t1, r1) - _ratio_end_slope(-t2, r2)
+        direct = (
+            t2 * (rho2 + 2 * r2 * r2) / (2 * r2**3) - t1 * (rho2 + 2 * r1 * r1) / (2 * r1**3)
+        ) / (rho2 * rho2)
+    return np.where(t1 > 0, pos, np.where(t2 < 0, neg, direct))
+
+
+def _ratio_end_slope(t, r):
+    return -(2 * r + t) / (2 * r**3 * (r + t) ** 2)
+
+
 def _edge_log(t1, t2, rho2, r1, r2):
     """ln(t2 + r2) - ln(t1 + r1), stable (t1 < t2)."""
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -172,8 +189,9 @@ def _edge_log(t1, t2, rho2, r1, r2):
     return np.where(t1 >= 0, pos, np.where(t2 <= 0, neg, mid))
 
 
-def cuboid_field(p, h):
-    """B and gradient of a box magnetised along its z axis with unit polarization (tier 1).
+def cuboid_field(p, h, hessian: bool = False):
+    """B, gradient (and hessian) of a box magnetised along its z axis with unit
+    polarization (tier 1).
 
     Parameters
     ----------
@@ -181,6 +199,8 @@ def cuboid_field(p, h):
         Points in the box's frame (centre at the origin, edges along the axes), m.
     h : ndarray, shape (3,)
         Half side lengths, m.
+    hessian : bool
+        Also return the hessian.
 
     Returns
     -------
@@ -188,6 +208,8 @@ def cuboid_field(p, h):
         T per tesla of polarization (``mu0 H``, plus the polarization inside).
     G : ndarray, shape (n, 3, 3)
         ``dB_i/dx_j``, T/m per tesla.
+    H : ndarray, shape (n, 3, 3, 3)
+        ``d2B_i/(dx_j dx_l)``, T/m^2 per tesla (only if ``hessian``).
 
     Notes
     -----
@@ -195,24 +217,30 @@ def cuboid_field(p, h):
     ``(U, V, W)`` (point minus corner) ``B_x ~ -ln(V + r)``, ``B_y ~ -ln(U + r)``,
     ``B_z ~ atan(U V / (W r))``, summed with the corners' signs; the gradient differentiates
     them in closed form (rational in U, V, W, r) and takes the normal derivatives from
-    curl B = div B = 0.  Differences of logarithms and of ``t / r`` along an edge are written
-    without cancellation near the edges' lines.  A point on an edge gives non-finite values.
+    curl B = div B = 0.  The hessian differentiates the gradient's terms once more
+    (``d(1/r) = -(U, V, W) / r^3`` for the mixed entries, the slope of the edge ratio for the
+    others) and takes the entries with two normal indices from its trace.  Differences of
+    logarithms, of ``t / r`` and of its slope along an edge are written without cancellation
+    near the edges' lines.  A point on an edge gives non-finite values.
     """
     with np.errstate(divide="ignore", invalid="ignore"):
-        return _cuboid_terms(p, h)
+        return _cuboid_terms(p, h, hessian)
 
 
-def _cuboid_terms(p, h):
+def _cuboid_terms(p, h, want_H=False):
     x, y, z = p[:, 0], p[:, 1], p[:, 2]
     n = p.shape[0]
     U1, U2 = x - h[0], x + h[0]
     V1, V2 = y - h[1], y + h[1]
     B = np.zeros((n, 3))
     G = np.zeros((n, 3, 3))
+    # the hessian's entries xxx, xxy, xxz, xyy, xyz, yyy, yyz (the rest: symmetry and trace)
+    Hc = np.zeros((7, n)) if want_H else None
     for sig, f in ((1.0, h[2]), (-1.0, -h[2])):
         W = z - f
         W2 = W * W
         bx = by = bz = gxx = gyy = gxy = gxz = gyz = 0.0
+        hxxx = hxxy = hxxz = hxyy = hxyz = hyyy = hyyz = 0.0
         for sU, U in ((-1.0, U1), (1.0, U2)):
             rho2 = U * U + W2
             r1 = np.sqrt(rho2 + V1 * V1)
@@ -221,11 +249,20 @@ def _cuboid_terms(p, h):
             bx = bx - sU * _edge_log(V1, V2, rho2, r1, r2)
             gxx = gxx - sU * U * D
             gxz = gxz - sU * W * D
+            if want_H:
+                D2 = 2.0 * _edge_ratio_slope(V1, V2, rho2, r1, r2)  # d D / d(U or W) / (U or W)
+                hxxx = hxxx - sU * (D + U * U * D2)
+                hxxz = hxxz - sU * U * W * D2
             for sV, V, r in ((-1.0, V1, r1), (1.0, V2, r2)):
                 with np.errstate(divide="ignore", invalid="ignore"):
                     t = np.where(W == 0, 0.0, np.arctan(U * V / (W * r)))
                 bz = bz + sU * sV * t
                 gxy = gxy - sU * sV / r
+                if want_H:
+                    r3 = sU * sV / (r * r * r)
+                    hxxy = hxxy + U * r3
+                    hxyy = hxyy + V * r3
+                    hxyz = hxyz + W * r3
         for sV, V in ((-1.0, V1), (1.0, V2)):
             rho2 = V * V + W2
             r1 = np.sqrt(rho2 + U1 * U1)
@@ -234,6 +271,10 @@ def _cuboid_terms(p, h):
             by = by - sV * _edge_log(U1, U2, rho2, r1, r2)
             gyy = gyy - sV * V * D
             gyz = gyz - sV * W * D
+            if want_H:
+                D2 = 2.0 * _edge_ratio_slope(U1, U2, rho2, r1, r2)
+                hyyy = hyyy - sV * (D + V * V * D2)
+                hyyz = hyyz - sV * V * W * D2
         B[:, 0] += sig * bx
         B[:, 1] += sig * by
         B[:, 2] += sig * bz
@@ -245,12 +286,35 @@ def _cuboid_terms(p, h):
         G[:, 2, 0] += sig * gxz
         G[:, 1, 2] += sig * gyz
         G[:, 2, 1] += sig * gyz
+        if want_H:
+            Hc += sig * np.array(
+                np.broadcast_arrays(hxxx, hxxy, hxxz, hxyy, hxyz, hyyy, hyyz), dtype=float
+            )
     B /= 4 * math.pi
     G /= 4 * math.pi
     G[:, 2, 2] = -G[:, 0, 0] - G[:, 1, 1]
     inside = np.all(np.abs(p) < h, axis=1)
     B[:, 2] += inside
-    return B, G
+    if not want_H:
+        return B, G
+    xxx, xxy, xxz, xyy, xyz, yyy, yyz = Hc / (4 * math.pi)
+    comps = {
+        (0, 0, 0): xxx,
+        (0, 0, 1): xxy,
+        (0, 0, 2): xxz,
+        (0, 1, 1): xyy,
+        (0, 1, 2): xyz,
+        (1, 1, 1): yyy,
+        (1, 1, 2): yyz,
+        (0, 2, 2): -xxx - xyy,  # H_iik = 0
+        (1, 2, 2): -xxy - yyy,
+        (2, 2, 2): -xxz - yyz,
+    }
+    H = np.empty((n, 3, 3, 3))
+    for (a, b, c), val in comps.items():
+        for idx in {(a, b, c), (a, c, b), (b, a, c), (b, c, a), (c, a, b), (c, b, a)}:
+            H[:, idx[0], idx[1], idx[2]] = val
+    return B, G, H
 
 
 # -- public sources -------------------------------------------------------------------------------
@@ -574,8 +638,8 @@ class CuboidMagnet(Field):
     Notes
     -----
     B and the gradient are exact closed forms (:func:`cuboid_field`, one per magnetisation
-    component), inside the material as well (``B = mu0 (H + M)``, as magpylib's); the hessian
-    is the default central difference of the exact gradient.  A point on an edge of a charged
+    component), inside the material as well (``B = mu0 (H + M)``, as magpylib's), and so is
+    the hessian (symmetric and traceless to rounding).  A point on an edge of a charged
     face (one not parallel to M) is refused; on a face B is discontinuous and one side's value
     is returned.
 
@@ -611,21 +675,28 @@ class CuboidMagnet(Field):
         """The point dipole of moment ``M V`` (global frame, A m^2) at the centre."""
         return Dipole(self.rotation @ self.magnetization * self.volume, self.center)
 
-    def _B_and_gradient(self, pts):
+    def _fields(self, pts, want_H: bool):
+        """B (n, 3) T, gradient (n, 3, 3) T/m and hessian (n, 3, 3, 3) T/m^2 (None unless
+        ``want_H``), global frame."""
         local = (pts - self.center) @ self.rotation
         h = 0.5 * self.size
         n = pts.shape[0]
         B = np.zeros((n, 3))
         G = np.zeros((n, 3, 3))
+        H = np.zeros((n, 3, 3, 3)) if want_H else None
         for k in range(3):
             if self.magnetization[k] == 0.0:
                 continue
             perm = _CYCLIC[k]
-            b, g = cuboid_field(local[:, perm], h[perm])
+            out = cuboid_field(local[:, perm], h[perm], want_H)
             J = mu_0 * self.magnetization[k]
-            B[:, perm] += J * b
-            G[:, perm[:, None], perm[None, :]] += J * g
+            B[:, perm] += J * out[0]
+            G[:, perm[:, None], perm[None, :]] += J * out[1]
+            if want_H:
+                H[:, perm[:, None, None], perm[None, :, None], perm[None, None, :]] += J * out[2]
         bad = ~(np.isfinite(B).all(axis=1) & np.isfinite(G).all(axis=(1, 2)))
+        if want_H:
+            bad |= ~np.isfinite(H).all(axis=(1, 2, 3))
         if bad.any():
             k = int(np.nonzero(bad)[0][0])
             raise ValueError(
@@ -633,13 +704,26 @@ class CuboidMagnet(Field):
                 f"field is singular there"
             )
         R = self.rotation
-        return B @ R.T, np.einsum("ia,kab,jb->kij", R, G, R)
+        B = B @ R.T
+        G = np.einsum("ia,kab,jb->kij", R, G, R)
+        if want_H:
+            H = np.einsum("kabc,ia,jb,lc->kijl", H, R, R, R, optimize=True)
+        return B, G, H
+
+    def _B_and_gradient(self, pts):
+        return self._fields(pts, False)[:2]
 
     def _B(self, pts):
-        return self._B_and_gradient(pts)[0]
+        return self._fields(pts, False)[0]
 
     def _gradient(self, pts):
-        return self._B_and_gradient(pts)[1]
+        return self._fields(pts, False)[1]
+
+    def _hessian(self, pts):
+        return self._fields(pts, True)[2]
+
+    def _B_gradient_hessian(self, pts):
+        return self._fields(pts, True)
 
     def __repr__(self):
         return (
