@@ -59,9 +59,9 @@ def test_pose_derivatives_match_finite_differences_of_full_solves(magnet, target
     assert np.abs(J - fd).max() <= 1e-6 * np.abs(J).max()
 
 
-@pytest.mark.parametrize("kind", ["dipole", "ring"])
+@pytest.mark.parametrize("kind", ["dipole", "ring", "cuboid"])
 def test_pose_derivatives_of_the_field_are_exact(kind):
-    """The dipole's and the cylinder's (here a ring's) hessians are exact: d(B, G)/d(pose)
+    """The magnets' hessians are exact (the cylinder's here a ring's): d(B, G)/d(pose)
     against 4th-order differences of B and G over the pose at 1e-10 (a difference hessian,
     1e-8 off here, fails), turned and translated, checked directly (no solve)."""
     from coilrod.control.magnet_pose import _PoseField, _rotation
@@ -72,6 +72,8 @@ def test_pose_derivatives_of_the_field_are_exact(kind):
         turn = _rotation(q[3:])
         if kind == "dipole":
             return coils.Dipole(turn @ R0 @ [0.3, 0.5, -0.2], q[:3])
+        if kind == "cuboid":
+            return coils.CuboidMagnet((15e-3, 20e-3, 10e-3), (2e5, 1e6, -3e5), q[:3], turn @ R0)
         return coils.CylinderMagnet(
             20e-3, 20e-3, 1e6, q[:3], inner_diameter=8e-3, orientation=turn @ R0
         )

@@ -22,9 +22,8 @@ adjoint loads with ``d(B, grad B)/dq`` at the nodes, which the magnet gives exac
   d)``, ``dG = [omega] G - G [omega] - H (omega x d)``; a rotation vector's change ``dr`` is
   the turn ``omega = J_l(r) dr`` (``J_l`` the left Jacobian of SO(3)).
 
-The hessian is exact for :class:`coils.Dipole` and :class:`coils.CylinderMagnet` (cylinder
-and ring); for :class:`coils.CuboidMagnet` it is the central difference of its exact gradient
-(about 1e-8 relative), so its pose derivatives are exact to that.
+The hessian is exact (closed forms) for :class:`coils.Dipole`, :class:`coils.CylinderMagnet`
+(cylinder and ring) and :class:`coils.CuboidMagnet`, so the pose derivatives are exact.
 
 The search is trust-region Gauss-Newton in the pose scaled by a tenth of the magnet's
 distance from the clamp (centre) and 0.2 rad (turn): the least-norm Gauss-Newton step, or the
