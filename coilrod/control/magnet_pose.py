@@ -26,14 +26,22 @@ The hessian is exact for :class:`coils.Dipole`; for the finite magnets it is the
 difference of their exact gradient (about 1e-8 relative), so the pose derivatives are exact to
 that.  The search is trust-region Gauss-Newton in the pose scaled by a tenth of the magnet's
 distance from the clamp (centre) and 0.2 rad (turn): the least-norm Gauss-Newton step, or the
-Levenberg-Marquardt step on the trust radius (the tip's map is ill-conditioned -- its
-sensitivity to the field is nearly singular in one direction -- so full Gauss-Newton steps far
-from the target overshoot); steps are clipped to the box ``bounds``, a pose whose body enters
-the robot's reach is moved radially out of it (on the reach's boundary the steps run along
-it), and a step whose forward solve fails or raises the miss shrinks the radius.  The tips one
-magnet can reach form a thin band (an inextensible rod's tip moves along its arc far more
-easily than across it, whatever bends it); a target off it ends at the closest pose found
-(status "max_solves" or "stalled").
+Levenberg-Marquardt step on the trust radius, each followed where needed by a corrector.  The
+tip's map is ill-conditioned (singular values ~500-1000 apart: an inextensible rod's tip
+moves along its arc far more easily than across it, whatever bends it), so the step that
+closes the miss across the arc moves the pose far, and there the linearisation's error --
+second order in the step, and along the arc, where the tip is sensitive -- outgrows the gain.
+The trust region alone then shrank to steps that each gained little (a target rounded to
+10 um ended at the budget).  Instead, when a step's forward solve gains less than a quarter of
+the predicted decrease, one least-norm Newton step with the Jacobian there moves the tip back
+onto the linearisation's prediction (the target carried along the step: continuation); that
+costs little pose, as the error lies where the tip is sensitive, and keeps the gain across
+the arc.  Steps are clipped to the box ``bounds``, a pose whose body enters the robot's reach
+is moved radially out of it (on the reach's boundary the steps run along it), and a step whose
+corrected solve fails or does not gain a tenth of the prediction shrinks the radius.  The band
+of tips one magnet reaches is thin where it must stay off the reach: some targets (two of the
+benchmark's planar targets rounded to 0.1 mm) lie off it, and the search ends with the magnet
+on the reach's boundary at the closest pose found (status "max_solves" or "stalled").
 
 **The robot's reach** is the ball of radius L (the rod's length) about the clamp: every point
 of the rod lies in it whatever the load.  A pose is refused if any point of the magnet's body
@@ -475,8 +483,8 @@ class _Spent(Exception):
 
 
 def _search(p: _Problem, q0, max_solves: int):
-    """Gauss-Newton on the tip miss with the exact Jacobian, in the pose scaled by
-    :func:`_scales`, each step a predictor-corrector (see the module docstring).  Returns
+    """Trust-region Gauss-Newton on the tip miss with the exact Jacobian and a corrector
+    after a mispredicted step, in the pose scaled by :func:`_scales` (module docstring).  Returns
     (q, result, status, solves, history)."""
     history = []
 
@@ -692,7 +700,8 @@ def solve_magnet_pose(
     -----
     The pose vector, the exact pose derivatives and the search are in the module docstring
     (:mod:`coilrod.control.magnet_pose`).  A typical solve takes 4-20 forward solves; a target
-    off the thin band of tips the magnet can reach ends at the solve budget a few um away.
+    off the thin band of tips the magnet can reach from off the robot's reach ends at the solve
+    budget, the magnet on the reach's boundary, a few um away.
 
     Examples
     --------
