@@ -1,7 +1,8 @@
 """Magnet pose benchmark: the pose of a permanent magnet that puts the tip on a target.
 
 Prints (and writes to benchmarks/results/magnet_pose.md): for targets made by the magnet at
-known poses (planar and 3D), ``coilrod.solve_magnet_pose`` from the same start pose -- forward
+known poses (planar and 3D), and the same targets rounded to 0.1 mm,
+``coilrod.solve_magnet_pose`` from the same start pose -- forward
 solves, CPU time in forward-solve equivalents (the pose solve's CPU time over that of one
 forward solve at the target's pose, default discretisation), the final miss checked by an
 independent forward solve at the magnet returned -- and the dipole controller's miss (the pose
@@ -63,9 +64,12 @@ def main():
     out.append("|---|---|---|---|---|---|---|")
     tip(START, True)  # compile
     eqs, t_all = [], []
-    for kind, c, rv in CASES:
+    for kind, c, rv, rounded in [case + (r,) for case in CASES for r in (False, True)]:
         planar = kind == "planar"
         goal = tip(magnet(c, rv), planar)
+        if rounded:  # the target as a user types it: to 0.1 mm, off the poses tried
+            goal = np.round(goal, 4)
+            kind += ", 0.1 mm"
         t0 = time.process_time()
         for _ in range(3):
             tip(magnet(c, rv), planar)
