@@ -23,6 +23,18 @@ matplotlib.use("Agg")
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
+import coilrod.rod._compiled  # noqa: E402
+import coilrod.rod._inertia  # noqa: E402
+import coils.coaxial  # noqa: E402
+
+# The suite compiles every kernel anyway (far-field, error and large-grid tests need them), so
+# the numpy passes that run in a fresh process until compiling pays (the ski-rental rule,
+# README "Cold start") would only add their budgets to a cold run: compile at the first call.
+# The tests of that rule set these themselves; CLI subprocesses and the notebook kernel keep
+# the defaults.
+for _module in (coils.coaxial, coilrod.rod._compiled, coilrod.rod._inertia):
+    _module.COMPILE_AFTER = 0.0
+
 
 @pytest.fixture
 def rng():
