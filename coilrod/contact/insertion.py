@@ -330,14 +330,14 @@ def insert(
     The clamp is an introducer at the vessel's entry; at step k the distal ``lengths[k]`` of
     the rod are out of it (:func:`free_part`) and the field is ``field_schedule`` of step k.
     Each step starts from the previous shape (follow-the-leader: the rotations and contact
-    forces as functions of the arc length from the clamp, extended along the old tip) and is
-    solved by the contact Newton method of the spatial rod
-    (:class:`~coilrod.rod.spatial.SpatialRod`; contact at the corners of the rod's polygon
-    and its tip, Coulomb friction if the vessel's ``friction`` is > 0, stick or slip decided
-    on each material point's motion since the previous step); a step
-    that fails is split in halves (free length and field blended linearly), up to
-    :data:`MAX_HALVINGS` times.  The first step is loaded from the straight rod by
-    :func:`~coilrod.solve_rod`.
+    forces as functions of the arc length from the clamp, extended along the old tip; from
+    the third step on, the secant through the last two such shapes) and is solved by the
+    contact Newton method of the spatial rod (:class:`~coilrod.rod.spatial.SpatialRod`;
+    contact at the corners of the rod's polygon and its tip, Coulomb friction if the
+    vessel's ``friction`` is > 0, stick or slip decided on each material point's motion
+    since the previous step); a step that fails is split in halves (free length and field
+    blended linearly), up to :data:`MAX_HALVINGS` times.  The first step is loaded from the
+    straight rod by :func:`~coilrod.solve_rod`.
 
     Parameters
     ----------
