@@ -263,6 +263,29 @@ class TestClosedForms:
         behind = np.array([[0.02, -1.9e-3, 0.0], [0.02, -2.1e-3, 0.0]])
         np.testing.assert_allclose(net.gap(behind), main.gap(behind))
 
+    @pytest.mark.parametrize("which", ["bend", "tapered"])
+    def test_all_pairs_closed_form_is_the_generic_search(self, rng, which):
+        # few pieces, all in closed form (lines with linear ball radii, constant-radius
+        # arcs): gap, piece, parameter and the centreline's derivatives there (what the
+        # gradient and hessian are made of) from the all-pairs pass equal, bit for bit, those
+        # of the generic candidate search (_locate, then the curve at the chosen pieces)
+        if which == "bend":
+            v = Vessel.bend(bend_radius=0.02, angle=np.pi / 2, radius=R,
+                            straight_before=0.01, straight_after=0.01)  # fmt: skip
+        else:  # a tapered polyline with round ends (no extension half-lines)
+            v = Vessel([[0, 0, 0], [0.01, 0, 0], [0.02, 0.005, 0.002]], [R, 0.8 * R, 1.2 * R],
+                       ends="round")  # fmt: skip
+        assert v._tree is None
+        assert not v._needs_newton.any()
+        s = rng.uniform(-0.01, v.length + 0.01, 400)
+        p = v.position(np.clip(s, 0, v.length)) + rng.normal(size=(400, 3)) * 2e-3
+        p[:3] = v.position(np.array([0.0, 0.5 * v.length, v.length]))  # on the centreline
+        g, j, u = v._locate(p)
+        x, xu, xuu = v._pieces.curve(j, u, 2)
+        fast = v._locate_closed_form(p)
+        for a, b in zip((g, j, u, x, xu, xuu), fast, strict=True):
+            np.testing.assert_array_equal(b, a)
+
 
 # -- continuity ---------------------------------------------------------------------------------
 class TestContinuity:

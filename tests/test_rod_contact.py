@@ -199,6 +199,30 @@ class TestInsertion:
         assert_readable(fig)
         plt.close(fig)
 
+    def test_carried_start_keeps_the_tip_contact_force(self):
+        # a tip pressed on a wall, carried to a free length longer by 1e-9 L: the start of the
+        # insertion step is the solved state (continuity in the length), the tip's contact
+        # force included (it was dropped: the tip lay beyond the old arc lengths)
+        from coilrod.contact.insertion import _carry
+        from coilrod.rod.solve import build_spatial_problem, make_mesh
+
+        rod = _rod()
+        field = coils.UniformField(B=(0, rod.field_for_lambda(6.0), 0))
+        wall = Wall((0, 0.2 * L, 0), (0, -1, 0))
+        res = solve_rod(rod, field, [1.0], nodes=16, richardson=False, obstacles=[wall],
+                        stability=False, model="spatial")  # fmt: skip
+        old, u = res._solution.problems[0], res._solution.states[0][0]
+        longer = Rod(L * (1 + 1e-9), 1e6, Circle(2e-3), Magnetization(128e3, 0.0))
+        new = build_spatial_problem(longer, field, make_mesh(longer, 16), np.zeros(3),
+                                    np.eye(3), obstacles=[wall], mixed=True)  # fmt: skip
+        tip_old = u.reshape(old.n, old.nv)[-1, 9]
+        assert tip_old > 0  # the tip touches
+        start = _carry(old, u, new)
+        np.testing.assert_allclose(start.reshape(new.n, new.nv)[-1, 9], tip_old, rtol=1e-6)
+        # its error: the tip pushed 1e-9 L into the wall, kappa g ~ 3e-5 against the 1e-9
+        # tolerance (without the tip's force: ~2e11)
+        assert new.error(new.linearize(start[None], np.array([1.0])), None)[0] < 1e5
+
     def test_zero_field_in_a_straight_tube(self):
         vessel = Vessel.straight(0.1, 0.002, start=(0.0, 0.0, 0.0))
         ins = coilrod.insert(

@@ -283,6 +283,9 @@ def _carry(prev_problem, prev_u, problem, scale_of_state=1.0):
     u[-1, 6:9] = 0.0
     for o in range(problem.nc + problem.nt):  # normal and friction forces per length
         u[:, 9 + o] = np.interp(s_new, s_old, V[:, 9 + o], right=0.0) * ratio**3
+    # the tip's contact point follows the tip (beyond the old length the interpolation
+    # would drop its force, and a shorter rod's tip would take an inner corner's)
+    u[-1, 9 : 9 + problem.nc + problem.nt] = V[-1, 9 : 9 + problem.nc + problem.nt] * ratio**3
     return u.ravel()
 
 
@@ -327,14 +330,14 @@ def insert(
     The clamp is an introducer at the vessel's entry; at step k the distal ``lengths[k]`` of
     the rod are out of it (:func:`free_part`) and the field is ``field_schedule`` of step k.
     Each step starts from the previous shape (follow-the-leader: the rotations and contact
-    forces as functions of the arc length from the clamp, extended along the old tip) and is
-    solved by the contact Newton method of the spatial rod
-    (:class:`~coilrod.rod.spatial.SpatialRod`; contact at the corners of the rod's polygon
-    and its tip, Coulomb friction if the vessel's ``friction`` is > 0, stick or slip decided
-    on each material point's motion since the previous step); a step
-    that fails is split in halves (free length and field blended linearly), up to
-    :data:`MAX_HALVINGS` times.  The first step is loaded from the straight rod by
-    :func:`~coilrod.solve_rod`.
+    forces as functions of the arc length from the clamp, extended along the old tip; from
+    the third step on, the secant through the last two such shapes) and is solved by the
+    contact Newton method of the spatial rod (:class:`~coilrod.rod.spatial.SpatialRod`;
+    contact at the corners of the rod's polygon and its tip, Coulomb friction if the
+    vessel's ``friction`` is > 0, stick or slip decided on each material point's motion
+    since the previous step); a step that fails is split in halves (free length and field
+    blended linearly), up to :data:`MAX_HALVINGS` times.  The first step is loaded from the
+    straight rod by :func:`~coilrod.solve_rod`.
 
     Parameters
     ----------
@@ -391,6 +394,7 @@ def insert(
             bar.update(1)
         prev = (float(lengths[0]), field0)
         layout, band_cache = (problem.size, problem.nc), problem._band_cache
+        before = None  # the solved step before the previous one: (problem, state, length)
         for k in range(1, lengths.size):
             target = (float(lengths[k]), schedule(k, float(lengths[k])))
 
@@ -406,9 +410,10 @@ def insert(
                     trial._band_cache = band_cache  # the same layout's templates
                 return free, trial
 
-            problem, u, free, stable, solves = _step(build, problem, u, prev, target, k)
+            last = (problem, u, prev[0])
+            problem, u, free, stable, solves = _step(build, problem, u, prev, target, k, before)
             rec.add(problem, u, free, stable, solves)
-            prev = target
+            before, prev = last, target
             if bar is not None:
                 bar.update(1)
     except ConvergenceError as err:
@@ -453,9 +458,14 @@ def _first_step(free, field, nodes, clamp, R0, vessel, tol):
     return first._solution.problems[0], first._solution.states[0][0], bool(first.stable[0])
 
 
-def _step(build, problem, u, prev, target, k):
+def _step(build, problem, u, prev, target, k, before=None):
     """One insertion step from the solved (problem, u) at (length, field) ``prev`` to
-    ``target``, halving the step on failure: (problem, state, free rod, stable, solves)."""
+    ``target``, halving the step on failure: (problem, state, free rod, stable, solves).
+
+    ``before`` (problem, state, length) is the step solved before ``prev``: the first try
+    then starts from the secant through the two states (each carried to the new length,
+    extrapolated linearly in the free length); a halved step starts from the carried
+    state alone."""
     # semi-smooth Newton: the error may stall for a few iterations while the contact set
     # settles (then it converges quadratically)
     opts = NewtonOptions(max_iter=40, stagnation=12)
@@ -468,7 +478,11 @@ def _step(build, problem, u, prev, target, k):
         field = target_field if t1 == 1.0 else prev_field * (1 - t1) + target_field * t1
         trial_free, trial = build(length, field)
         _carry_reference(cur_problem, cur_u, trial)
-        res = newton(trial, _carry(cur_problem, cur_u, trial), 1.0, opts)
+        start = _carry(cur_problem, cur_u, trial)
+        if before is not None and t == 0.0 and t1 == 1.0 and before[2] != prev_len:
+            w = (target_len - prev_len) / (prev_len - before[2])
+            start = start + w * (start - _carry(before[0], before[1], trial))
+        res = newton(trial, start, 1.0, opts)
         solves += 1
         if res.ok:  # (its linearization carries the state's stability)
             t, cur_problem, cur_u, cur_lin, free = t1, trial, res.u, res.lin, trial_free

@@ -97,6 +97,7 @@ from .centerline import (
     ARC,
     CUBIC,
     LINE,
+    TWO_PI,
     Pieces,
     fit_spline,
     line_pieces,
@@ -554,11 +555,94 @@ class Vessel(Obstacle):
             k = min(4 * k, m)
         return g, j, u
 
+    def _closed_form_groups(self):
+        """The candidate pieces of every point when all are in closed form and few (no
+        KD-tree): their columns and pieces by kind, cached (state-independent)."""
+        groups = self.__dict__.get("_groups_cache")
+        if groups is None:
+            pcs = self._pieces
+            everything = np.concatenate([np.arange(self._m), self._extra])
+            groups = []
+            for kind in (LINE, ARC):
+                col = np.flatnonzero(pcs.kind[everything] == kind)
+                jj = everything[col]
+                fields = (pcs.lo, pcs.hi, pcs.ref, pcs.a, pcs.b, pcs.c, pcs.rho, self._cone_slope)
+                groups.append((kind, col, *(f[jj] for f in fields)))
+            groups = (everything, groups)
+            self.__dict__["_groups_cache"] = groups
+        return groups
+
+    def _locate_closed_form(self, p: np.ndarray):
+        """:meth:`_locate` and the centreline's point and derivatives at the best pieces, all
+        pairs at once when every candidate piece is a line or an arc in closed form (the
+        formulas of :meth:`Pieces.start_guess` and :meth:`Pieces.curve`): (gap, piece,
+        parameter, c, c_u, c_uu)."""
+        everything, groups = self._closed_form_groups()
+        n, K = len(p), len(everything)
+        U = np.empty((n, K))
+        X = np.empty((n, K, 3))
+        XU = np.empty((n, K, 3))
+        XUU = np.zeros((n, K, 3))
+        for kind, col, lo, hi, ref, a, b, c, rho, slope in groups:
+            if col.size == 0:
+                continue
+            q = p[:, None, :] - a  # (n, k, 3)
+            if kind == LINE:
+                along = np.einsum("nkj,kj->nk", q, b)
+                if np.any(slope):
+                    across = np.linalg.norm(q - along[..., None] * b, axis=2)
+                    along = along + slope * across / np.sqrt(1.0 - slope * slope)
+                u = np.clip(ref + along, lo, hi)
+                X[:, col] = a + b * (u - ref)[..., None]
+                XU[:, col] = b
+            else:
+                x1_ = np.einsum("nkj,kj->nk", q, b)
+                x2_ = np.einsum("nkj,kj->nk", q, c)
+                phi = np.mod(np.arctan2(x2_, x1_), TWO_PI)
+                span = (hi - lo) / rho
+                beyond = phi > span
+                to_start = TWO_PI - phi < phi - span
+                phi = np.where(beyond, np.where(to_start, 0.0, span), phi)
+                u = np.clip(lo + rho * phi, lo, hi)
+                ang = ((u - ref) / rho)[..., None]
+                cos, sin = np.cos(ang), np.sin(ang)
+                radial = cos * b + sin * c
+                X[:, col] = a + rho[:, None] * radial
+                XU[:, col] = cos * c - sin * b
+                XUU[:, col] = -radial / rho[:, None]
+            U[:, col] = u
+        J = np.broadcast_to(everything, (n, K))
+        G = self._ball(J, U, 0)[0] - np.linalg.norm(p[:, None, :] - X, axis=-1)
+        # the choice of _best: a piece whose maximiser is interior, within rounding
+        pcs = self._pieces
+        best = G.max(axis=1)
+        inside = (U > pcs.lo[everything]) & (U < pcs.hi[everything])
+        tol = 64 * EPS * (np.abs(best) + self._rho_scale + np.abs(p).max(axis=1))
+        tie = inside & (G >= (best - tol)[:, None])
+        col = np.where(
+            tie.any(axis=1), np.argmax(np.where(tie, G, -np.inf), axis=1), np.argmax(G, axis=1)
+        )
+        rows = np.arange(n)
+        return (
+            G[rows, col],
+            everything[col],
+            U[rows, col],
+            X[rows, col],
+            XU[rows, col],
+            XUU[rows, col],
+        )
+
     def _evaluate(self, points: np.ndarray, order: int):
-        g, j, u = self._locate(points)
+        K = self._m + len(self._extra)
+        if self._tree is None and not self._needs_newton.any() and len(points) * K <= PAIR_CHUNK:
+            g, j, u, x, xu, xuu = self._locate_closed_form(points)
+        else:
+            g, j, u = self._locate(points)
+            x = xu = xuu = None
         if order == 0:
             return g, None, None
-        x, xu, xuu = self._pieces.curve(j, u, 2)
+        if x is None:
+            x, xu, xuu = self._pieces.curve(j, u, 2)
         r = points - x
         d = np.linalg.norm(r, axis=1)
         zero = d < ON_LINE

@@ -51,6 +51,9 @@ _FLOOR = 32.0
 #: Free rotational unknowns up to which the second variation is formed densely.
 _DENSE_STABILITY = 600
 
+#: Band layouts of recent problems (SpatialRod._band_layout), by their sizes and slots.
+_LAYOUTS: dict = {}
+
 
 def _matvec(A, v):
     return np.einsum("...ij,...j->...i", A, v)
@@ -198,11 +201,7 @@ class SpatialRod(DiscreteRod):
         self.last_failure = ""
         if self.uniform:
             self._b_uniform = np.asarray(field.B(self.clamp)[0], float)
-        entries = self._block_entries()
-        diff = np.concatenate([(r - c).ravel() for r, c in entries.values()])
-        self.kl, self.ku = int(max(diff.max(), 1)), int(max(-diff.min(), 1))
-        kk = self.kl + self.ku
-        self._index = {name: (kk + r - c, c) for name, (r, c) in entries.items()}
+        self.kl, self.ku, self._index = self._band_layout()
         self._p_ref = self._tau_ref = None
         if self.nt:  # the reference of the friction: the straight rod until a state is accepted
             self._p_ref = self.contact_points(self.straight()[None])[0]
@@ -621,6 +620,24 @@ class SpatialRod(DiscreteRod):
         return out.reshape(k, -1, p)
 
     # -- assembly -----------------------------------------------------------------------------
+    def _band_layout(self):
+        """(kl, ku, index): the band widths and every block's (band row, column) entries,
+        state-independent: shared by the problems of one layout (an insertion builds one per
+        step), the last few layouts cached (read-only arrays)."""
+        key = (self.n, self.nv, self.nc, self.nt, self.uniform, self._slots())
+        out = _LAYOUTS.get(key)
+        if out is None:
+            entries = self._block_entries()
+            diff = np.concatenate([(r - c).ravel() for r, c in entries.values()])
+            kl, ku = int(max(diff.max(), 1)), int(max(-diff.min(), 1))
+            index = {name: (kl + ku + r - c, c) for name, (r, c) in entries.items()}
+            for rows, cols in index.values():
+                rows.flags.writeable = cols.flags.writeable = False
+            if len(_LAYOUTS) >= 8:
+                _LAYOUTS.pop(next(iter(_LAYOUTS)))
+            out = _LAYOUTS[key] = (kl, ku, index)
+        return out
+
     def _block_entries(self):
         """Rows and columns (member 0) of every Jacobian block's entries, by block kind:
         arrays (nblocks, rows, cols)."""
