@@ -41,8 +41,12 @@ the arc.  Steps are clipped to the box ``bounds``, a pose whose body enters the 
 is moved radially out of it (on the reach's boundary the steps run along it), and a step whose
 corrected solve fails or does not gain a tenth of the prediction shrinks the radius.  The band
 of tips one magnet reaches is thin where it must stay off the reach: some targets (two of the
-benchmark's planar targets rounded to 0.1 mm) lie off it, and the search ends with the magnet
-on the reach's boundary at the closest pose found (status "max_solves" or "stalled").
+benchmark's planar targets rounded to 0.1 mm) lie off it: the search then creeps along the
+reach's boundary, and it stops when the last two accepted steps together decreased the miss by
+less than 20 % with the magnet's body within 0.05 L of the reach (or a pose component at a
+bound) -- Gauss-Newton converging gains far more -- at the closest pose found, status
+"optimal" if the linearisation within the bounds and the reach predicts under 1e-3 relative
+gain there, else "stalled".
 
 **The robot's reach** is the ball of radius L (the rod's length) about the clamp: every point
 of the rod lies in it whatever the load.  A pose is refused if any point of the magnet's body
@@ -111,8 +115,9 @@ class MagnetPoseResult:
     status : str
         "converged" (within ``tol``), "optimal" (not met, but no step within the bounds and
         the reach predicts a relative decrease of the squared miss above 1e-6: the closest
-        pose), "max_solves" or "stalled" (the trust radius shrank to nothing, or three accepted
-        steps in a row each gained under 1e-6 of the squared miss).
+        pose), "max_solves" or "stalled" (the trust radius shrank to nothing, three accepted
+        steps in a row each gained under 1e-6 of the squared miss, or the search crept along
+        the reach or a bound: see the module docstring).
     active : list of int
         Pose components at a bound (within 1e-9 of its span).
     reach_gap : float
@@ -734,8 +739,9 @@ def solve_magnet_pose(
     -----
     The pose vector, the exact pose derivatives and the search are in the module docstring
     (:mod:`coilrod.control.magnet_pose`).  A typical solve takes 4-20 forward solves; a target
-    off the thin band of tips the magnet can reach from off the robot's reach ends at the solve
-    budget, the magnet on the reach's boundary, a few um away.
+    off the thin band of tips the magnet can reach from off the robot's reach ends early
+    (status "optimal" or "stalled"), the magnet pressed against the reach (``reach_gap``), a
+    few um away.
 
     Examples
     --------
