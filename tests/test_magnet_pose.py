@@ -207,3 +207,23 @@ def test_spatial_pose_puts_the_tip_on_a_rounded_target():
     assert out.solves <= 20
     # an independent forward solve (spatial rod) at the magnet returned lands on the target
     assert np.linalg.norm(tip_at(out.magnet, planar=False) - goal) <= 1e-7 * L
+
+
+def test_a_target_off_the_band_stops_early_with_the_reach_reported():
+    """A target no pose off the robot's reach meets (the benchmark's planar target rounded to
+    0.1 mm): the search crept along the reach's boundary until the 40-solve budget before; it
+    now stops when the steps no longer gain, and tells the reach as the active constraint."""
+    goal = np.array([38.7e-3, 9.4e-3])  # m
+    with pytest.raises(ConvergenceError, match="reach") as info:
+        solve_magnet_pose(ROD, cylinder(), goal, **FAST)
+    out = info.value.result
+    assert out.status in ("optimal", "stalled")
+    assert out.status in str(info.value)
+    assert out.solves <= 25  # was 40 (max_solves)
+    assert 0.0 <= out.reach_gap <= 0.05 * L
+    assert reach_distance(out.magnet, np.zeros(3)) >= L
+    # the closest tip reported is that of an independent forward solve at the magnet returned
+    tip = tip_at(out.magnet)
+    assert np.linalg.norm(tip - out.tip[:2]) <= 1e-9 * L
+    assert out.miss == pytest.approx(np.linalg.norm(tip - goal), rel=1e-9)
+    assert out.miss > 1e-4 * L  # not met: the reach keeps the magnet off

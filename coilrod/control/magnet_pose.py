@@ -41,8 +41,12 @@ the arc.  Steps are clipped to the box ``bounds``, a pose whose body enters the 
 is moved radially out of it (on the reach's boundary the steps run along it), and a step whose
 corrected solve fails or does not gain a tenth of the prediction shrinks the radius.  The band
 of tips one magnet reaches is thin where it must stay off the reach: some targets (two of the
-benchmark's planar targets rounded to 0.1 mm) lie off it, and the search ends with the magnet
-on the reach's boundary at the closest pose found (status "max_solves" or "stalled").
+benchmark's planar targets rounded to 0.1 mm) lie off it: the search then creeps along the
+reach's boundary, and it stops when the last two accepted steps together decreased the miss by
+less than 20 % with the magnet's body within 0.05 L of the reach (or a pose component at a
+bound) -- Gauss-Newton converging gains far more -- at the closest pose found, status
+"optimal" if the linearisation within the bounds and the reach predicts under 1e-3 relative
+gain there, else "stalled".
 
 **The robot's reach** is the ball of radius L (the rod's length) about the clamp: every point
 of the rod lies in it whatever the load.  A pose is refused if any point of the magnet's body
@@ -111,10 +115,14 @@ class MagnetPoseResult:
     status : str
         "converged" (within ``tol``), "optimal" (not met, but no step within the bounds and
         the reach predicts a relative decrease of the squared miss above 1e-6: the closest
-        pose), "max_solves" or "stalled" (the trust radius shrank to nothing, or three accepted
-        steps in a row each gained under 1e-6 of the squared miss).
+        pose), "max_solves" or "stalled" (the trust radius shrank to nothing, three accepted
+        steps in a row each gained under 1e-6 of the squared miss, or the search crept along
+        the reach or a bound: see the module docstring).
     active : list of int
         Pose components at a bound (within 1e-9 of its span).
+    reach_gap : float
+        Distance of the magnet's body beyond the robot's reach (and ``clearance``) at the
+        pose, m: ~0 where the reach is the active constraint.
     """
 
     pose: np.ndarray
@@ -130,6 +138,7 @@ class MagnetPoseResult:
     history: list = field(default_factory=list)
     status: str = "converged"
     active: list = field(default_factory=list)
+    reach_gap: float = float("nan")
 
     @property
     def miss_percent(self) -> float:
@@ -511,6 +520,7 @@ def _search(p: _Problem, q0, max_solves: int):
     res, r = evaluate(q)
     J = p.jacobian(res) * sc  # per scaled pose unit
     radius, status, crawl = 1.0, "stalled", 0
+    accepted = [float(np.linalg.norm(r))]  # the miss after each accepted step (units of L)
     try:
         while True:
             if np.linalg.norm(r) * p.rod.length <= p.tol:
@@ -557,6 +567,11 @@ def _search(p: _Problem, q0, max_solves: int):
             if crawl >= 3:
                 break
             J = p.jacobian(res) * sc
+            accepted.append(float(np.linalg.norm(r)))
+            if _creeping(p, q, accepted):
+                N = _directions(p, q, J, r, sc)
+                status = "optimal" if not N.shape[1] or _gain(J @ N, r) <= CREEP_GAIN else status
+                break
             if grow:
                 radius = min(max(radius, 2.0 * size), RADIUS_MAX)
     except _Spent:
@@ -568,6 +583,29 @@ def _search(p: _Problem, q0, max_solves: int):
 GAIN_TOL = 1e-6
 #: Largest step, in scaled pose units (:func:`_scales`).
 RADIUS_MAX = 5.0
+#: A search pressed against a constraint stops when its last two accepted steps together
+#: decreased the miss by less than this fraction (Gauss-Newton converging gains far more) ...
+CREEP_DECREASE = 0.2
+#: ... with the magnet's body within this fraction of L of the reach, or a pose bound active.
+CREEP_NEAR = 0.05
+#: Relative decrease of the squared miss the constrained linearisation may still predict at a
+#: search stopped so for it to be reported "optimal" (else "stalled").
+CREEP_GAIN = 1e-3
+
+
+def _creeping(p: _Problem, q, accepted) -> bool:
+    """Whether the search creeps along a constraint: the last two accepted steps decreased
+    the miss by less than :data:`CREEP_DECREASE` in all, the magnet's body within
+    :data:`CREEP_NEAR` L of the robot's reach or a pose component at a bound."""
+    if len(accepted) < 3 or accepted[-1] < (1.0 - CREEP_DECREASE) * accepted[-3]:
+        return False
+    return p.clear(q) <= CREEP_NEAR * p.rod.length or bool(_at_bounds(p, q))
+
+
+def _at_bounds(p: _Problem, q) -> list:
+    """Pose components at a bound (within 1e-9 of its span)."""
+    span = np.where(np.isfinite(p.hi - p.lo), p.hi - p.lo, 1.0)
+    return np.flatnonzero((q - p.lo <= 1e-9 * span) | (p.hi - q <= 1e-9 * span)).tolist()
 
 
 def _directions(p: _Problem, q, J, r, sc) -> np.ndarray:
@@ -701,8 +739,9 @@ def solve_magnet_pose(
     -----
     The pose vector, the exact pose derivatives and the search are in the module docstring
     (:mod:`coilrod.control.magnet_pose`).  A typical solve takes 4-20 forward solves; a target
-    off the thin band of tips the magnet can reach from off the robot's reach ends at the solve
-    budget, the magnet on the reach's boundary, a few um away.
+    off the thin band of tips the magnet can reach from off the robot's reach ends early
+    (status "optimal" or "stalled"), the magnet pressed against the reach (``reach_gap``), a
+    few um away.
 
     Examples
     --------
@@ -736,8 +775,7 @@ def solve_magnet_pose(
         res = p.forward(p.real, q)
     tip = res.tip[-1]
     miss = float(np.linalg.norm(tip[: p.target.size] - p.target))
-    span = np.where(np.isfinite(p.hi - p.lo), p.hi - p.lo, 1.0)
-    active = np.flatnonzero((q - p.lo <= 1e-9 * span) | (p.hi - q <= 1e-9 * span)).tolist()
+    active = _at_bounds(p, q)
     out = MagnetPoseResult(
         pose=q.copy(),
         position=p.center(q),
@@ -752,16 +790,31 @@ def solve_magnet_pose(
         history=history,
         status=status,
         active=active,
+        reach_gap=p.clear(q),
     )
     if model == "real" and status != "converged":
         why = {
-            "optimal": "the closest pose within the bounds and off the robot's reach",
-            "max_solves": "the solve budget max_solves spent",
-            "stalled": "the search stalled",
+            "optimal": "status 'optimal': the closest pose within the bounds and off the "
+            "robot's reach",
+            "max_solves": "status 'max_solves': the solve budget max_solves spent",
+            "stalled": "status 'stalled': the steps stopped decreasing the miss",
         }[status]
+        names = ["c_x", "c_y", "psi"] if p.planar else ["c_x", "c_y", "c_z", "r_x", "r_y", "r_z"]
+        near = out.reach_gap <= CREEP_NEAR * p.rod.length
         err = ConvergenceError(
             f"solve_magnet_pose: the target {p.target.tolist()} m is not reached ({why}"
-            + (f"; pose components {active} at their bounds" if active else "")
+            + (
+                f"; pressed against the robot's reach: the magnet's body {out.reach_gap:.3g} m "
+                "off it"
+                if near
+                else ""
+            )
+            + (
+                f"; pose components {active} ({', '.join(names[k] for k in active)}) at "
+                "their bounds"
+                if active
+                else ""
+            )
             + f"); the closest tip is {tip[: p.target.size].tolist()} m, {miss:.4g} m "
             f"({miss / p.rod.length:.3g} L) away, at pose {np.round(q, 6).tolist()}",
             reached=0.0,
