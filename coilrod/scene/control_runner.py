@@ -14,7 +14,6 @@ reach).
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import time
@@ -23,7 +22,7 @@ from pathlib import Path
 
 from ..control import ControlResult, solve_currents
 from ..errors import ConvergenceError
-from .outputs import prepare_output_dir
+from .outputs import prepare_output_dir, write_rows
 from .parse import Scene
 from .planner import Plan, plan_scene
 
@@ -205,12 +204,7 @@ class ControlSceneResult:
         written = []
         if self.scene.outputs.get("tables", True):
             rows = self.table()
-            path = out / "control.csv"
-            with path.open("w", newline="") as fh:
-                writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
-                writer.writeheader()
-                writer.writerows(rows)
-            written.append(path)
+            written.append(write_rows(out / "control.csv", rows))
             path = out / "control.json"
             path.write_text(json.dumps(_finite(self._json()), indent=2, allow_nan=False))
             written.append(path)

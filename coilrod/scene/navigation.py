@@ -21,7 +21,6 @@ push and wall forces against the inserted length).
 
 from __future__ import annotations
 
-import csv
 import json
 import time
 from dataclasses import dataclass, field
@@ -185,19 +184,13 @@ class NavigationSceneResult:
     def write(self, out_dir) -> list:
         """Write ``insertion.csv``, ``summary.json`` and ``navigation.png`` (as the scene's
         outputs ask) to ``out_dir``; returns the paths."""
-        from .outputs import prepare_output_dir
+        from .outputs import prepare_output_dir, write_rows
 
         out = prepare_output_dir(out_dir, key="output folder")
         written = []
         if self.scene.outputs.get("tables", True):
             rows = self.table()
-            path = out / "insertion.csv"
-            with path.open("w", newline="") as fh:
-                if rows:
-                    writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
-                    writer.writeheader()
-                    writer.writerows(rows)
-            written.append(path)
+            written.append(write_rows(out / "insertion.csv", rows))
             path = out / "summary.json"
             runs = []
             for r in self.runs:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import os
 import tempfile
 from pathlib import Path
@@ -76,4 +77,15 @@ def prepare_output_dir(path: str | Path, *, create: bool = True, key: str = "--o
         raise SceneError(
             f"{key}: cannot write in {path} ({exc.strerror or type(exc).__name__})"
         ) from None
+    return path
+
+
+def write_rows(path: Path, rows: list[dict]) -> Path:
+    """Write ``rows`` (dicts with the same keys, in order) to the CSV file ``path`` with a
+    header line from the first row's keys; no rows give an empty file.  Returns ``path``."""
+    with path.open("w", newline="") as fh:
+        if rows:
+            writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+            writer.writeheader()
+            writer.writerows(rows)
     return path

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import json
 import sys
 import time
@@ -13,7 +12,7 @@ import numpy as np
 
 from ..errors import ConvergenceError
 from .figures import leaves_plane, plot_scene_shapes, plot_scene_shapes_3d, plot_tip_vs_field
-from .outputs import prepare_output_dir
+from .outputs import prepare_output_dir, write_rows
 from .parse import Scene
 from .planner import Plan, plan_scene
 from .strength import field_strength
@@ -189,13 +188,7 @@ class SceneResult:
         written = []
         if self.scene.outputs.get("tables", True):
             rows = self.table()
-            path = out / "tip_path.csv"
-            with path.open("w", newline="") as fh:
-                if rows:
-                    writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
-                    writer.writeheader()
-                    writer.writerows(rows)
-            written.append(path)
+            written.append(write_rows(out / "tip_path.csv", rows))
             path = out / "summary.json"
             value, kind, number = field_strength(self.scene)
             path.write_text(
