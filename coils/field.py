@@ -234,6 +234,32 @@ class AccumulatedField(Field):
         return self._sum(pts, True, True, True)
 
 
+class OnePassField(Field):
+    """A field whose B, gradient and hessian come from one pass, :meth:`_fields` (finite
+    magnets: the hessian reuses the pass's intermediate terms); subclasses define ``_fields``
+    and may override ``_B`` with a cheaper pass."""
+
+    @abstractmethod
+    def _fields(self, pts: np.ndarray, want_H: bool):
+        """B (n, 3) T, gradient (n, 3, 3) T/m and, if ``want_H``, the hessian (n, 3, 3, 3)
+        T/m^2 (else None) at validated points (n, 3) in m."""
+
+    def _B(self, pts):
+        return self._fields(pts, False)[0]
+
+    def _gradient(self, pts):
+        return self._fields(pts, False)[1]
+
+    def _B_and_gradient(self, pts):
+        return self._fields(pts, False)[:2]
+
+    def _hessian(self, pts):
+        return self._fields(pts, True)[2]
+
+    def _B_gradient_hessian(self, pts):
+        return self._fields(pts, True)
+
+
 class FieldSum(AccumulatedField):
     """Superposition of fields: B and its derivatives add.
 

@@ -28,7 +28,7 @@ from ._immutable import sealed
 from ._validate import _show, as_array, as_axis, as_vector, finite_scalar, positive
 from .coaxial import CoaxialCoils, frame_from_axis
 from .dipoles import dipole_sum
-from .field import AccumulatedField, Field
+from .field import AccumulatedField, OnePassField
 
 __all__ = [
     "Dipole",
@@ -365,7 +365,7 @@ class Dipole(AccumulatedField):
         return f"Dipole(moment={self.moment.tolist()}, center={self.center.tolist()})"
 
 
-class CylinderMagnet(Field):
+class CylinderMagnet(OnePassField):
     """An axially magnetised cylinder or ring (hollow cylinder) permanent magnet.
 
     Parameters
@@ -596,18 +596,6 @@ class CylinderMagnet(Field):
         Hg = np.einsum("kabc,ia,jb,lc->kijl", Hl, R, R, R, optimize=True)
         return B, G, Hg
 
-    def _B_and_gradient(self, pts):
-        return self._fields(pts, False)[:2]
-
-    def _gradient(self, pts):
-        return self._fields(pts, False)[1]
-
-    def _hessian(self, pts):
-        return self._fields(pts, True)[2]
-
-    def _B_gradient_hessian(self, pts):
-        return self._fields(pts, True)
-
     def __repr__(self):
         ring = f", inner_diameter={self.inner_diameter!r}" if self.inner_diameter else ""
         return (
@@ -621,7 +609,7 @@ class CylinderMagnet(Field):
 _CYCLIC = (np.array([1, 2, 0]), np.array([2, 0, 1]), np.array([0, 1, 2]))
 
 
-class CuboidMagnet(Field):
+class CuboidMagnet(OnePassField):
     """A uniformly magnetised rectangular block (cuboid) permanent magnet.
 
     Parameters
@@ -709,21 +697,6 @@ class CuboidMagnet(Field):
         if want_H:
             H = np.einsum("kabc,ia,jb,lc->kijl", H, R, R, R, optimize=True)
         return B, G, H
-
-    def _B_and_gradient(self, pts):
-        return self._fields(pts, False)[:2]
-
-    def _B(self, pts):
-        return self._fields(pts, False)[0]
-
-    def _gradient(self, pts):
-        return self._fields(pts, False)[1]
-
-    def _hessian(self, pts):
-        return self._fields(pts, True)[2]
-
-    def _B_gradient_hessian(self, pts):
-        return self._fields(pts, True)
 
     def __repr__(self):
         return (
