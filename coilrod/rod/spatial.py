@@ -196,7 +196,17 @@ class SpatialRod(DiscreteRod):
         bend[1:] += self._inv_h
         bend[:-1] += self._inv_h
         self._bend_scale = bend * self._inv_w * float(np.max(self.K))
+        # multipliers of the scaled residual (_scaled): moments and forces per length,
+        # position mismatch per length (the clamp rows and the tip force row zeroed there)
+        self._row_scale = np.ones((n, 3 if self.uniform else self.nv))
+        if self.uniform:
+            self._row_scale[:] = self._inv_w[:, None]
+        else:
+            self._row_scale[:, 3:6] = self._inv_w[:, None]
+            self._row_scale[1:, 0:3] = self._inv_h[:, None]
+            self._row_scale[:-1, 6:9] = self._inv_w[1:, None]
         self._band_cache: dict = {}
+        self._work: dict = {}  # per-call arrays of _assemble (_workspace)
         self._mu0 = None
         self.last_failure = ""
         if self.uniform:
@@ -329,15 +339,19 @@ class SpatialRod(DiscreteRod):
         U, S = self._stack(u, scale)
         with np.errstate(all="ignore"):
             R, R1, ab, sym = self._assemble(U, S, tangent)
-            ok = np.all(np.isfinite(R), axis=1)
-            turned = np.sqrt(np.einsum("kni,kni->kn", *(2 * (self.rotations(U),)))).max(axis=1)
-            bad_turn = turned > self.max_turn
-            if bad_turn.any():
-                ok &= ~bad_turn
-                self.last_failure = (
-                    f"a node turned {float(turned.max()):.3g} rad relative to the clamp (the "
-                    f"rotation chart of the spatial rod is limited to {self.max_turn:.3g} rad)"
-                )
+            ok = np.isfinite(R).all(axis=1)
+            phi = self.rotations(U)
+            # |phi| <= sqrt(3) max|phi_a|: the norms only where that bound exceeds the limit
+            if not np.abs(phi).max() <= self._turn_bound:
+                turned = np.sqrt(np.einsum("kni,kni->kn", phi, phi)).max(axis=1)
+                bad_turn = turned > self.max_turn
+                if bad_turn.any():
+                    ok &= ~bad_turn
+                    self.last_failure = (
+                        f"a node turned {float(turned.max()):.3g} rad relative to the clamp "
+                        f"(the rotation chart of the spatial rod is limited to "
+                        f"{self.max_turn:.3g} rad)"
+                    )
         tan = None
         if tangent:
             tan = RodTangent(U.shape[0], self.size, False, ab, R1, self.kl, self.ku)
@@ -346,6 +360,12 @@ class SpatialRod(DiscreteRod):
         lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
         lin.load_rate = R1
         return lin
+
+    @property
+    def _turn_bound(self) -> float:
+        """A bound on the largest rotation-vector component below which no node has turned
+        more than :attr:`max_turn` (0.999 max_turn / sqrt(3): clear of round-off)."""
+        return 0.999 * self.max_turn / np.sqrt(3.0)
 
     def dense_jacobian(self, u: np.ndarray, scale: float) -> np.ndarray:
         """The Jacobian of one state as a dense (size, size) array (tests, small problems)."""
@@ -358,32 +378,33 @@ class SpatialRod(DiscreteRod):
 
     def _scaled(self, R: np.ndarray) -> np.ndarray:
         """Residuals scaled to point values (k, n, nv): moments per length, position mismatch
-        per length, forces per length."""
+        per length, forces per length (zero: the clamp's rows and the tip's force row)."""
         v = R.reshape(R.shape[0], self.n, self.nv)
-        out = np.empty_like(v)
-        if self.uniform:
-            out[:] = v * self._inv_w[:, None]
-            out[:, 0] = 0.0
-            return out
-        if self.nc:
-            out[:, :, 9:] = v[:, :, 9:]
-        out[:, :, 3:6] = v[:, :, 3:6] * self._inv_w[:, None]
-        out[:, 0, 3:6] = 0.0
-        out[:, 1:, 0:3] = v[:, 1:, 0:3] * self._inv_h[:, None]
-        out[:, 0, 0:3] = 0.0
-        out[:, :-1, 6:9] = v[:, :-1, 6:9] * self._inv_w[1:, None]
-        out[:, -1, 6:9] = 0.0
+        out = v * self._row_scale
+        out[:, 0, : 3 if self.uniform else 6] = 0.0
+        if not self.uniform:
+            out[:, -1, 6:9] = 0.0
+        return out
+
+    def _scaled_max(self, R: np.ndarray) -> np.ndarray:
+        """max over each node's equations of |scaled residual| (k, n) (:meth:`_scaled`; in
+        the uniform layout each node's rows share one scale: the maximum first)."""
+        if not self.uniform:
+            return np.abs(self._scaled(R)).max(axis=2)
+        out = np.abs(R.reshape(R.shape[0], self.n, 3)).max(axis=2)
+        out *= self._inv_w
+        out[:, 0] = 0.0
         return out
 
     def error(self, lin: Linearization, du) -> np.ndarray:
         """max over equations of |scaled residual| / (tol + its round-off floor), shape (k,)."""
         # the largest |scaled residual| of each node, divided by the node's tolerance (the
         # same maximum as dividing every equation: a positive divisor keeps the order)
-        scaled = np.abs(self._scaled(lin.residual)).max(axis=2)  # (k, n)
+        scaled = self._scaled_max(lin.residual)  # (k, n)
         eps = np.finfo(float).eps
         with np.errstate(all="ignore"):
             size = 1.0 + np.abs(lin.u).max(axis=1)  # rotations, positions, forces
-            load = np.abs(self._scaled(lin.load_rate)).max(axis=(1, 2)) * np.abs(lin.scale)
+            load = self._scaled_max(lin.load_rate).max(axis=1) * np.abs(lin.scale)
             floor = _FLOOR * eps * (size[:, None] * self._bend_scale + load[:, None])
             out = (scaled / (self.tol + floor)).max(axis=1)
         out[~np.isfinite(out)] = np.inf
@@ -396,10 +417,10 @@ class SpatialRod(DiscreteRod):
 
     def step_limit(self, u, du):
         """No node rotates by more than :attr:`max_rotation` in one Newton step."""
-        d = self.rotations(np.atleast_2d(du))
-        rot = np.sqrt(np.einsum("kni,kni->kn", d, d).max(axis=1))
-        with np.errstate(divide="ignore"):
-            lim = np.where(rot > 0, np.minimum(1.0, self.max_rotation / rot), 1.0)
+        rot = self.distance(du)
+        lim = np.ones(rot.shape)
+        np.divide(self.max_rotation, rot, out=lim, where=rot > 0)
+        np.minimum(lim, 1.0, out=lim)
         if self.nc and not self.uniform and self.close_first:
             lim = np.minimum(lim, self.closing_fraction(np.atleast_2d(u), np.atleast_2d(du)))
         return lim
@@ -443,7 +464,8 @@ class SpatialRod(DiscreteRod):
 
     def distance(self, du):
         """Largest change of a node rotation vector, rad, shape (k,)."""
-        d = self.rotations(np.atleast_2d(du))
+        du = np.asarray(du, float)
+        d = self.rotations(du if du.ndim == 2 else np.atleast_2d(du))
         return np.sqrt(np.einsum("kni,kni->kn", d, d).max(axis=1))
 
     def arclength_weights(self) -> np.ndarray:
@@ -701,6 +723,77 @@ class SpatialRod(DiscreteRod):
             )
         return idx
 
+    #: Jacobian blocks taken from the compiled pass's ``blk`` (:meth:`_band_from_blk`):
+    #: block name -> (slot in blk, nodes from 1 to n - 1 or to n - 2).
+    _BLK_SLOTS = {
+        "m_prev": (0, False), "m_diag": (1, False), "m_next": (2, True),
+        "p_phiprev": (3, False), "p_phi": (4, False), "m_x": (5, False),
+        "m_Fprev": (6, False), "m_F": (7, True), "f_xnext": (8, False),
+        "f_phinext": (9, False),
+    }  # fmt: skip
+
+    def _workspace(self, k: int, tangent: bool) -> dict:
+        """Arrays of :meth:`_assemble` that do not leave it, reused from call to call (by the
+        stack size and ``tangent``): frames, magnetization, the compiled pass's Jacobian
+        blocks (the same entries written every call), placeholders, and in a uniform field
+        the field, zero gradient and zero positions and forces."""
+        key = (k, tangent)
+        ws = self._work.get(key)
+        if ws is None:
+            n = self.n
+            if len(self._work) >= 8:
+                self._work.clear()
+            ws = {
+                "frames": np.empty((k, n, 3, 3)),
+                "m": np.empty((k, n, 3)),
+                "blk": np.zeros(((k, n) if tangent else (1, 1)) + (10, 3, 3)),
+                "diag": np.zeros((1, 1, 3, 3)),
+                "H": np.zeros((1, 1, 3, 3, 3)),
+            }
+            if self.uniform:
+                ws["B"] = np.ascontiguousarray(np.broadcast_to(self._b_uniform, (k, n, 3)))
+                ws["G"] = np.zeros((k, n, 3, 3))
+                ws["X"] = np.zeros((k, n, 3))
+            self._work[key] = ws
+        return ws
+
+    def _band_from_blk(self, k: int, blk: np.ndarray) -> np.ndarray:
+        """LAPACK band storage (as :meth:`_scatter`) of a stack without contact: a template
+        with the constant blocks and one gather of the varying entries from the compiled
+        pass's ``blk`` (k, n, 10, 3, 3) through precomputed flat indices (cached per k)."""
+        key = ("blk", k)
+        cached = self._band_cache.get(key)
+        if cached is None:
+            n, rows = self.n, 2 * self.kl + self.ku + 1
+            template = np.zeros((rows, k * self.size), order="F")
+            flat = template.ravel(order="K")
+            member = (np.arange(k) * self.size * rows)[:, None]
+            I3 = np.eye(3)
+            consts = {"clamp_phi": I3}
+            if not self.uniform:
+                consts.update({"clamp_x": I3, "p_x": I3, "p_xprev": -I3, "f_F": I3, "f_Fnext": -I3})
+            for name, value in consts.items():
+                r, c = self._index[name]
+                flat[(r + c * rows).reshape(1, -1) + member] = np.broadcast_to(
+                    value, r.shape
+                ).reshape(1, -1)
+            dst, src = [], []
+            ab3 = np.arange(9).reshape(3, 3)
+            for name, (slot, short) in self._BLK_SLOTS.items():
+                if name not in self._index:
+                    continue
+                r, c = self._index[name]
+                nodes = np.arange(1, n - 1 if short else n)
+                dst.append((r + c * rows).reshape(-1))
+                src.append(((nodes[:, None, None] * 10 + slot) * 9 + ab3).reshape(-1))
+            dst = (np.concatenate(dst)[None] + member).ravel()
+            src = (np.concatenate(src)[None] + (np.arange(k) * n * 90)[:, None]).ravel()
+            cached = self._band_cache[key] = (template, dst, src)
+        template, dst, src = cached
+        ab = template.copy(order="F")
+        ab.ravel(order="K")[dst] = blk.ravel()[src]
+        return ab
+
     def _scatter(self, k: int, blocks: dict) -> np.ndarray:
         """LAPACK band storage (2 kl + ku + 1, k size) of the stacked Jacobians: a template
         holding the constant blocks (cached per k), the state-dependent ones written through
@@ -750,39 +843,43 @@ class SpatialRod(DiscreteRod):
             from ._compiled_spatial import spatial_core as core
 
         k, n, nv = U.shape[0], self.n, self.nv
-        h, w, L = self.mesh.h, self.mesh.w, self.L
+        ws = self._workspace(k, tangent)
         V = U.reshape(k, n, nv)
         phi = np.ascontiguousarray(self.rotations(U))
         if self.uniform:
-            B = np.broadcast_to(self._b_uniform, (k, n, 3))
-            G = np.zeros((k, n, 3, 3))
-            Hs = None
-            X = F = np.zeros((k, n, 3))
+            B, G, Hs, X = ws["B"], ws["G"], None, ws["X"]
+            F = X
         else:
             X = np.ascontiguousarray(V[:, :, 0:3])
             F = np.ascontiguousarray(V[:, :, 6:9])
             B, G, Hs = self._field_by_member(X, tangent) if fields is None else fields
-            B, G = B.reshape(k, n, 3), G.reshape(k, n, 3, 3)
+            B, G = np.ascontiguousarray(B.reshape(k, n, 3)), G.reshape(k, n, 3, 3)
             if Hs is not None:
                 Hs = Hs.reshape(k, n, 3, 3, 3)
-        frames = np.empty((k, n, 3, 3))
+        frames, blk, m = ws["frames"], ws["blk"], ws["m"]
         R = np.zeros((k, n, nv))
         R1 = np.zeros((k, n, nv))
-        blk = np.zeros((k, n, 10, 3, 3)) if tangent else np.zeros((1, 1, 10, 3, 3))
-        diag = np.zeros((k, n, 3, 3)) if tangent else np.zeros((1, 1, 3, 3))
-        A_ab = np.zeros((k, n - 1, 3, 3)) if tangent else np.zeros((1, 1, 3, 3))
-        m = np.empty((k, n, 3))
+        # (diag and A_ab travel with the tangent: new arrays, every entry written by core)
+        diag = np.empty((k, n, 3, 3)) if tangent else ws["diag"]
+        A_ab = np.empty((k, n - 1, 3, 3)) if tangent else ws["diag"]
         has_h = Hs is not None
+        S = S if S.dtype == float else np.asarray(S, float)
         core(
-            phi, X, F, np.asarray(S, float), np.ascontiguousarray(B), G,
-            Hs if has_h else np.zeros((1, 1, 3, 3, 3)), has_h, self.uniform, tangent,
-            self.mu, self.K, h, w, self.R0, L, frames, R, R1, blk, diag, A_ab, m,
+            phi, X, F, S, B, G, Hs if has_h else ws["H"], has_h, self.uniform, tangent,
+            self.mu, self.K, self.mesh.h, self.mesh.w, self.R0, self.L, frames, R, R1, blk,
+            diag, A_ab, m,
         )  # fmt: skip
         contact = self._contact_rows(V, X, frames, R, tangent) if self.nc else None
         R = R.reshape(k, -1)
         R1 = R1.reshape(k, -1)
         if not tangent:
             return R, R1, None, None
+        if not self.nc:  # every varying block is an entry of blk: one gather into the band
+            ab = self._band_from_blk(k, blk) if band else None
+            if self.uniform:
+                return R, R1, ab, (diag[:, 1:], A_ab[:, 1:])
+            D, E = self._second_variation(S, G, m, frames, blk[:, 1:, 8], diag, A_ab, None)
+            return R, R1, ab, (D, E)
         I3 = np.eye(3)
         blocks = {
             "clamp_phi": I3,
@@ -790,9 +887,6 @@ class SpatialRod(DiscreteRod):
             "m_diag": blk[:, 1:, 1],
             "m_next": blk[:, 1:-1, 2],
         }
-        if self.uniform:
-            ab = self._scatter(k, blocks) if band else None
-            return R, R1, ab, (diag[:, 1:], A_ab[:, 1:])
         blocks.update(
             {
                 "clamp_x": I3,
@@ -809,7 +903,7 @@ class SpatialRod(DiscreteRod):
                 "f_phinext": blk[:, 1:, 9],
             }
         )
-        sym = self._contact_blocks(contact, frames, phi, blocks) if self.nc else None
+        sym = self._contact_blocks(contact, frames, phi, blocks)
         D, E = self._second_variation(S, G, m, frames, blocks["f_xnext"], diag, A_ab, sym)
         return R, R1, (self._scatter(k, blocks) if band else None), (D, E)
 
@@ -1197,6 +1291,7 @@ def numpy_core(
     blk[:, 1:, 5] = (-cwL * (mhat @ G))[:, 1:]
     blk[:, 1:, 6] = -half * That[:, 1:]
     blk[:, 1:-1, 7] = -half[1:] * That[:, 1:-1]
+    blk[:, 1:, 8] = 0.0
     if has_h:
         blk[:, 1:, 8] = (-cwL * L * np.einsum("kni,kniac->knac", m, H))[:, 1:]
     blk[:, 1:, 9] = (cwL * (np.swapaxes(G, -1, -2) @ mhat))[:, 1:] @ Jl[:, 1:]
