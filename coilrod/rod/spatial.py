@@ -417,7 +417,7 @@ class SpatialRod(DiscreteRod):
 
     def step_limit(self, u, du):
         """No node rotates by more than :attr:`max_rotation` in one Newton step."""
-        rot = self.distance(du)
+        rot = self._largest_rotation(du)
         lim = np.ones(rot.shape)
         np.divide(self.max_rotation, rot, out=lim, where=rot > 0)
         np.minimum(lim, 1.0, out=lim)
@@ -450,6 +450,8 @@ class SpatialRod(DiscreteRod):
         contact set first changes (a point closes or an active one releases), 1 if it does
         not: the path engine ends a load step's prediction there
         (:mod:`coilrod.rod.contact_predictor`)."""
+        if not self.nc or self.uniform or self.nt:  # no contact events to find (as there)
+            return np.ones(np.shape(U)[0] if np.ndim(U) == 2 else 1)
         from .contact_predictor import event_fraction
 
         return event_fraction(self, U, dU)
@@ -464,6 +466,9 @@ class SpatialRod(DiscreteRod):
 
     def distance(self, du):
         """Largest change of a node rotation vector, rad, shape (k,)."""
+        return self._largest_rotation(du)
+
+    def _largest_rotation(self, du):
         du = np.asarray(du, float)
         d = self.rotations(du if du.ndim == 2 else np.atleast_2d(du))
         return np.sqrt(np.einsum("kni,kni->kn", d, d).max(axis=1))
@@ -878,8 +883,10 @@ class SpatialRod(DiscreteRod):
             ab = self._band_from_blk(k, blk) if band else None
             if self.uniform:
                 return R, R1, ab, (diag[:, 1:], A_ab[:, 1:])
-            D, E = self._second_variation(S, G, m, frames, blk[:, 1:, 8], diag, A_ab, None)
-            return R, R1, ab, (D, E)
+            # the second variation only where a stability count asks for it (lazily; the
+            # arrays of the workspace copied, the others are this call's own)
+            args = (S, G, m.copy(), frames.copy(), blk[:, 1:, 8].copy(), diag, A_ab, None)
+            return R, R1, ab, _Deferred(self._second_variation, args)
         I3 = np.eye(3)
         blocks = {
             "clamp_phi": I3,
@@ -1192,6 +1199,31 @@ class SpatialRod(DiscreteRod):
                 return float("nan")
             return _lowest_from_inverse(Sm)
         return closest_to_zero(lambda v: apply(np.ravel(v)[None])[0], nf, sign)
+
+
+class _Deferred:
+    """The pair ``fn(*args)`` (the second variation's (D, E) blocks), computed on first use:
+    unpacks, indexes and iterates like the tuple it stands for."""
+
+    __slots__ = ("_fn", "_args", "_value")
+
+    def __init__(self, fn, args):
+        self._fn, self._args, self._value = fn, args, None
+
+    def _get(self) -> tuple:
+        if self._value is None:
+            self._value = tuple(self._fn(*self._args))
+            self._fn = self._args = None
+        return self._value
+
+    def __iter__(self):
+        return iter(self._get())
+
+    def __getitem__(self, i):
+        return self._get()[i]
+
+    def __len__(self) -> int:
+        return 2
 
 
 def _solve_many(tan: RodTangent, rhs: np.ndarray) -> np.ndarray:
