@@ -5,11 +5,12 @@ Prints (and writes to benchmarks/results/rod3d_profile.md), one BLAS thread, pro
 time, best of several runs, the two versions' subprocesses alternating over three rounds:
 
 1. one state of the 3D case of ``bench_rod3d.py`` (oblique uniform field, magnetization with
-   an elevation; one mesh, no Richardson) at 4, 16 and 64 segments: the whole ``solve_rod``
-   call per Newton iteration, and the model's share of one iteration (``linearize`` with
-   the tangent, band LU + solve, ``error``, ``step_limit``, ``distance``, and a chord
-   trial's ``linearize`` without the tangent) at the converged state; 4 segments is the
-   fixed (size-independent) part;
+   an elevation; one mesh, no Richardson) at 4, 16 and 64 segments, and of the same case
+   with a field gradient (the mixed layout: positions and forces as unknowns) at 4 and 64:
+   the whole ``solve_rod`` call per Newton iteration, and the model's share of one
+   iteration (``linearize`` with the tangent, band LU + solve, ``error``, ``step_limit``,
+   ``distance``, and a chord trial's ``linearize`` without the tangent) at the converged
+   state; 4 segments is the fixed (size-independent) part;
 2. a per-phase timer of this checkout (each model method wrapped by a process-time
    accumulator, no profiler), per state, at 4 segments.
 
@@ -53,11 +54,15 @@ def best(fn, repeat, number):
             fn()
         out = min(out, (time.process_time() - t0) / number)
     return out
+# the mixed layout (positions and forces as unknowns) of a field with a gradient
+grad = coils.LinearField(B0=field.B0, gradient=np.diag([-0.5, 1.0, -0.5]) * 1e-2)
 out = {}
-for n in SEGMENTS:
-    res = solve_rod(rod, field, [1.0], nodes=n, richardson=False)
+for n in SEGMENTS + tuple(f"mixed {m}" for m in (4, 64)):
+    fld, n = (grad, int(n.split()[1])) if isinstance(n, str) else (field, n)
+    key = str(n) if fld is field else f"mixed {n}"
+    res = solve_rod(rod, fld, [1.0], nodes=n, richardson=False)
     its = int(res.iterations[0])
-    state = best(lambda: solve_rod(rod, field, [1.0], nodes=n, richardson=False), 7, 10)
+    state = best(lambda: solve_rod(rod, fld, [1.0], nodes=n, richardson=False), 7, 10)
     P, U = res._solution.problems[0], np.atleast_2d(res._solution.states[0])
     S = np.array([1.0])
     du = 1e-3 * np.ones_like(U)
@@ -69,7 +74,7 @@ for n in SEGMENTS:
         P.distance(du)
         P.error(P.linearize(U + du, S, tangent=False), du)
     parts = best(model, 7, 100)
-    out[n] = {"state": state, "its": its, "per_it": state / its, "model": parts,
+    out[key] = {"state": state, "its": its, "per_it": state / its, "model": parts,
               "tip": res.tip[0].tolist()}
 print(json.dumps(out))
 """.replace("SEGMENTS", repr(SEGMENTS))
@@ -110,7 +115,7 @@ def phase_timer(states: int = 200, segments: int = 4):
         ("  follow_load (path engine)", solve_module, "follow_load"),
         ("    newton (corrector)", stepping, "newton"),
         ("      line search", corrector._Iteration, "_line_search"),
-        ("    stability (inertia count)", SpatialRod, "stability"),
+        ("model stability (inertia count)", SpatialRod, "stability"),
         ("  build_spatial_problem", solve_module, "build_spatial_problem"),
         ("model linearize (all)", SpatialRod, "linearize"),
         ("model solve (all)", SpatialRod, "solve"),
@@ -148,7 +153,12 @@ def phase_timer(states: int = 200, segments: int = 4):
     finally:
         for owner, name, fn in saved:
             setattr(owner, name, fn)
-    return [(label, n / states, 1e3 * t / states) for label, (n, t) in acc.items()]
+    rows = [(label, n / states, 1e3 * t / states) for label, (n, t) in acc.items()]
+    model = sum(ms for label, _, ms in rows if label.startswith("model"))
+    whole = rows[0][2]
+    rows.append(("model methods (sum of the above)", float("nan"), model))
+    rows.append(("the rest: path engine, setup, result", float("nan"), whole - model))
+    return rows
 
 
 def main(base: str) -> str:
@@ -181,7 +191,7 @@ def main(base: str) -> str:
     out()
     out("| segments | version | Newton its | state (ms) | state / it (ms) | model / it (ms) |")
     out("|---|---|---|---|---|---|")
-    for n in map(str, SEGMENTS):
+    for n in [str(m) for m in SEGMENTS] + ["mixed 4", "mixed 64"]:
         for name, r in (("this", new), ("base", old)):
             if r is None:
                 continue
@@ -203,7 +213,8 @@ def main(base: str) -> str:
     out("|---|---|---|")
     for label, calls, ms in phase_timer():
         depth = (len(label) - len(label.lstrip())) // 2
-        out(f"| {'. ' * depth}{label.strip()} | {calls:.1f} | {ms:.3f} |")
+        shown = "" if calls != calls else f"{calls:.1f}"
+        out(f"| {'. ' * depth}{label.strip()} | {shown} | {ms:.3f} |")
     out()
     return "\n".join(lines) + "\n"
 

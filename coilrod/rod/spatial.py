@@ -48,6 +48,7 @@ from .so3 import cross, expm, hat, inv_right_jacobian_coefficients, left_jacobia
 __all__ = ["SpatialRod"]
 
 _FLOOR = 32.0
+_EPS = float(np.finfo(float).eps)
 #: Free rotational unknowns up to which the second variation is formed densely.
 _DENSE_STABILITY = 600
 
@@ -401,13 +402,18 @@ class SpatialRod(DiscreteRod):
         # the largest |scaled residual| of each node, divided by the node's tolerance (the
         # same maximum as dividing every equation: a positive divisor keeps the order)
         scaled = self._scaled_max(lin.residual)  # (k, n)
-        eps = np.finfo(float).eps
         with np.errstate(all="ignore"):
             size = 1.0 + np.abs(lin.u).max(axis=1)  # rotations, positions, forces
             load = self._scaled_max(lin.load_rate).max(axis=1) * np.abs(lin.scale)
-            floor = _FLOOR * eps * (size[:, None] * self._bend_scale + load[:, None])
-            out = (scaled / (self.tol + floor)).max(axis=1)
-        out[~np.isfinite(out)] = np.inf
+            # tol + _FLOOR eps (size bend_scale + load), in place
+            div = np.multiply.outer(size, self._bend_scale)
+            div += load[:, None]
+            div *= _FLOOR * _EPS
+            div += self.tol
+            np.divide(scaled, div, out=div)
+            out = div.max(axis=1)
+        if not np.isfinite(out).all():
+            out[~np.isfinite(out)] = np.inf
         return out
 
     def residual_norm(self, residual) -> np.ndarray:
