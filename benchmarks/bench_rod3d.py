@@ -17,7 +17,8 @@ Prints (and writes to benchmarks/results/rod3d.md):
    per iteration at 4 and 64 segments (the part that does not scale with the mesh is the
    fixed cost) and the model's parts at the converged state (evaluation with and without the
    tangent, the compiled per-node pass alone, band solve, convergence measure), and a 50-step
-   sweep to the same load.
+   sweep to the same load.  ``profile_rod3d.py`` breaks the per-iteration cost down further
+   (side by side with another checkout; results/rod3d_profile.md).
 
 Run:  python benchmarks/bench_rod3d.py
 """

@@ -207,6 +207,8 @@ def main(base: str) -> str:
         out()
         out(f"Largest tip difference this / base: {diff:.1e} m.")
     out()
+    out("Goal (issue 19): <= 0.2 ms per iteration (state / it) at 4-64 segments.")
+    out()
     out("## 2. Per-phase timer, this checkout, 200 states at 4 segments (CPU ms per state)")
     out()
     out("| phase | calls / state | CPU ms / state |")
