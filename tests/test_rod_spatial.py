@@ -117,6 +117,25 @@ class TestDiscreteProblem:
         fd = (P.residual(u, c + eps) - P.residual(u, c - eps)) / (2 * eps)
         assert np.abs(rate - fd).max() < 1e-7 * max(np.abs(fd).max(), 1.0)
 
+    def test_turn_limit_of_the_rotation_chart(self):
+        """A node turned beyond max_turn relative to the clamp is inadmissible (along an axis
+        or along the diagonal, where each component is below the limit), one just within
+        it is not."""
+        P = SpatialRod(RodMesh(4), np.zeros((5, 3)), [0.6, 4.0, 1.0], FIELDS["uniform"], L,
+                       np.zeros(3), np.eye(3))  # fmt: skip
+        cases = {
+            (1.01, "axis"): False, (1.01, "diagonal"): False, (0.99, "axis"): True,
+            (0.99, "diagonal"): True,
+        }  # fmt: skip
+        for (factor, direction), admissible in cases.items():
+            d = _unit([1, 0, 0] if direction == "axis" else [1, 1, 1])
+            phi = np.zeros((5, 3))
+            phi[3] = factor * P.max_turn * d
+            P.last_failure = ""
+            lin = P.linearize(P.from_rotations(phi), 0.5)
+            assert bool(lin.ok[0]) is admissible
+            assert ("rotation chart" in P.last_failure) is not admissible
+
     @pytest.mark.parametrize("name", ["uniform", "helmholtz"])
     def test_band_gather_and_reused_arrays(self, name):
         """The band gathered from the compiled blocks equals the general scatter of the

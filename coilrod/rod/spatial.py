@@ -366,7 +366,7 @@ class SpatialRod(DiscreteRod):
     def _turn_bound(self) -> float:
         """A bound on the largest rotation-vector component below which no node has turned
         more than :attr:`max_turn` (0.999 max_turn / sqrt(3): clear of round-off)."""
-        return 0.999 * self.max_turn / np.sqrt(3.0)
+        return 0.999 * self.max_turn / 1.7320508075688772  # sqrt(3)
 
     def dense_jacobian(self, u: np.ndarray, scale: float) -> np.ndarray:
         """The Jacobian of one state as a dense (size, size) array (tests, small problems)."""
