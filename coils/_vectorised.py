@@ -72,8 +72,9 @@ def _series_phi(w, want_H):
         n = loop.SERIES_TERMS[np.minimum(1022 - E, 64)]
         coef[about0] *= (np.arange(coef.shape[1]) < n[:, None])[:, :, None]
     F = np.zeros((w.size, 4))
-    for j in range(coef.shape[1] - 1, -1, -1):
-        F = F * delta + coef[:, j]
+    for j in range(coef.shape[1] - 1, -1, -1):  # F = F delta + c_j, in place (same roundings)
+        F *= delta
+        F += coef[:, j]
     if not want_H:
         F[:, 3] = 0.0
     F0, F1, F2, F3 = F.T
@@ -113,7 +114,9 @@ def loop_arrays(a, A, C2, u, rho, z, want_B, want_G, want_H):
     f0, f1, f2, Bz = (np.empty_like(w) for _ in range(4))
     ser = w < loop.W_SERIES
     ell = ~ser
-    if ser.any():
+    if ser.all():  # the common case (clear of the wires): views instead of masked copies
+        ser = slice(None)
+    if isinstance(ser, slice) or ser.any():
         ws = w[ser]
         f0[ser], f1[ser], f2[ser], F0, F1 = _series_phi(ws, want_H)
         if want_B:

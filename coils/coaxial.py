@@ -40,17 +40,22 @@ COMPILE_AFTER = 3.0
 _NUMPY_CALL_S, _NUMPY_POINT_S = 5e-4, 1e-6
 _rent = 0.0  # estimated seconds spent in numpy passes so far in this process
 _compiled_ready = False
+_disk_checked = False  # numba's cache was looked at (once per process: a stat per call costs)
 
 
 def _compiled_pays(work: int) -> bool:
     """True if the compiled pass should evaluate ``work`` = points x filaments: it is compiled
-    (or on disk in numba's cache), or the numpy passes so far plus this one would cost more
-    than :data:`COMPILE_AFTER`."""
-    global _rent, _compiled_ready
+    (or on disk in numba's cache at the first evaluation of the process), or the numpy passes
+    so far plus this one would cost more than :data:`COMPILE_AFTER`."""
+    global _rent, _compiled_ready, _disk_checked
     if _compiled_ready:
         return True
     cost = _NUMPY_CALL_S + _NUMPY_POINT_S * work
-    if _rent + cost > COMPILE_AFTER or _kernel_on_disk():
+    on_disk = False
+    if not _disk_checked:
+        _disk_checked = True
+        on_disk = _kernel_on_disk()
+    if _rent + cost > COMPILE_AFTER or on_disk:
         _compiled_ready = True
         return True
     _rent += cost

