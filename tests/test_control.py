@@ -123,7 +123,7 @@ class TestUnreachable:
     def test_beyond_the_current_limits(self):
         target, _ = _target(COMPACT, (0.004, 0.012, 0.0))
         with pytest.raises(
-            ConvergenceError, match="not reachable within the current limits"
+            ConvergenceError, match="beyond the current limits: not reachable within them"
         ) as info:
             solve_currents(ROD, COMPACT, target, max_current=0.5)
         out = info.value.result
@@ -305,7 +305,7 @@ class TestSpatialTarget:
         navion = coils.presets.navion()
         target = _tip_3d(navion, navion.currents_for(B=(0.003, 0.005, -0.004)), nodes=8)
         with pytest.raises(
-            ConvergenceError, match="not reachable within the current limits"
+            ConvergenceError, match="beyond the current limits: not reachable within them"
         ) as info:
             solve_currents(ROD, navion, target, max_current=1.0, nodes=8)
         out = info.value.result
@@ -313,6 +313,19 @@ class TestSpatialTarget:
         assert np.all(np.abs(out.currents) <= 1.0 + 1e-9)
         assert "outside the robot's reachable set" not in str(info.value)
         np.testing.assert_allclose(out.tip, _tip_3d(navion, out.currents, 8), atol=1e-8 * L)
+
+    def test_a_branch_bound_is_no_limit(self):
+        """Navion at 10 A, tip to (20, 30) mm: the damped search once kept channels on their
+        side of zero (bounds narrowed after a step to another branch), stopped against such
+        a bound (no limit active) and called the target outside the reachable set.  It is
+        reachable within the limits: the currents returned put the tip on it in an
+        independent forward solve."""
+        navion = coils.presets.navion()
+        out = solve_currents(ROD, navion, (0.020, 0.030), max_current=10.0, nodes=8, steps=3)
+        assert out.status == "converged"
+        assert np.all(np.abs(out.currents) <= 10.0)
+        tip = _tip_3d(navion, out.currents, nodes=8)
+        np.testing.assert_allclose(tip, (0.020, 0.030, 0.0), atol=1e-6 * L)
 
     def test_a_3d_target_needs_three_field_directions(self):
         planar = coils.CoilSystem(

@@ -573,7 +573,7 @@ def _search(p: _Problem, I, max_iter: int, max_solves: int):
     _, I, res, r = search.best
     if p.met(r):
         status = "converged"
-    elif _gain(p.jacobian(res), r, I, _within(bounds, I)) <= GAIN_TOL:
+    elif _optimal(p.jacobian(res), r, I, _within(bounds, I), (-p.limits, p.limits)):
         status = "optimal"
     else:
         status = stopped
@@ -894,6 +894,16 @@ def _gain(J, r, I, bounds) -> float:
     return max(0.0, (rr - float(after @ after)) / rr)
 
 
+def _optimal(J, r, I, bounds, limits) -> bool:
+    """(I, r) is a local least-squares optimum: no step within ``bounds`` (the limits as
+    narrowed by :func:`_damped`) gains, and -- where a channel is on a narrowed bound
+    (:func:`_pinned`) -- no step within the ``limits`` either (that bound is no limit: a
+    state held against it is not an optimum within the limits)."""
+    if _gain(J, r, I, bounds) > GAIN_TOL:
+        return False
+    return not _pinned(I, bounds, limits).any() or _gain(J, r, I, limits) <= GAIN_TOL
+
+
 def _damped(I, res, r, jacobian, evaluate, met, bounds):
     """Levenberg-Marquardt within the current limits from the state (I, res, r): steps
     ``argmin |r + J s|^2 + mu |D s|^2`` over ``|I + s| <= limits`` (D the column norms of J),
@@ -907,14 +917,24 @@ def _damped(I, res, r, jacobian, evaluate, met, bounds):
     misses, e.g. the small current that decides to which side a rod in a nearly antiparallel
     field buckles) is kept on its side of zero, at least as far from it as now: the bounds
     (lo, hi) of the currents are narrowed so, and returned (the optimum is sought, and
-    checked, within them)."""
+    checked, within them).  Such a bound holds where it was set: when the iteration ends
+    with a channel on one (not on its limit) and a step within the limits still promises a
+    gain, the bounds are widened back to the limits and the iteration goes on (up to
+    ``RELAX`` times) -- the optimum met against such a bound is an artefact of the
+    narrowing, not of the rod or the limits."""
     from scipy.optimize import lsq_linear
 
     lo, hi = (np.array(b, float) for b in bounds)
     J = jacobian(res)
     d = np.linalg.norm(J, axis=0)
-    mu, crawl = 1e-3, 0
-    while not met(r) and _gain(J, r, I, (lo, hi)) > GAIN_TOL and mu < 1e10 and crawl < 3:
+    mu, crawl, relaxed = 1e-3, 0, 0
+    while not met(r):
+        if not (_gain(J, r, I, (lo, hi)) > GAIN_TOL and mu < 1e10 and crawl < 3):
+            held = relaxed < RELAX and _pinned(I, (lo, hi), bounds).any()
+            if not held or _gain(J, r, I, bounds) <= GAIN_TOL:
+                break
+            lo, hi = (np.array(b, float) for b in bounds)  # widened back to the limits
+            mu, crawl, relaxed = 1e-3, 0, relaxed + 1
         d = np.maximum(d, 1e-6 * max(d.max(), 1e-300))
         A = np.vstack([J, np.sqrt(mu) * np.diag(d)])
         b = np.r_[-r, np.zeros(I.size)]
@@ -947,6 +967,20 @@ def _damped(I, res, r, jacobian, evaluate, met, bounds):
         else:
             mu *= 4.0
     return lo, hi
+
+
+#: How often :func:`_damped` widens bounds it narrowed back to the limits.
+RELAX = 2
+
+
+def _pinned(I, bounds, limits) -> np.ndarray:
+    """Channels (bool, (m,)) on a bound of ``bounds`` (lo, hi) that is narrower than
+    ``limits`` (lo, hi): kept on their side of zero by :func:`_damped`, not at a limit."""
+    (lo, hi), (lo0, hi0) = bounds, limits
+    scale = np.maximum(np.maximum(np.abs(lo0), np.abs(hi0)), 1e-300)
+    low = (lo > lo0) & (I <= lo + 1e-9 * scale)
+    high = (hi < hi0) & (I >= hi - 1e-9 * scale)
+    return low | high
 
 
 def _start_3d(p: _Problem):
@@ -1076,7 +1110,7 @@ def _report(p: _Problem, out: ControlResult, history) -> None:
     if p.model == "real" and min(history) > p.tol and not p.oriented:
         if out.active:
             why = (
-                "not reachable within the current limits (channels "
+                "beyond the current limits: not reachable within them (channels "
                 f"{', '.join(map(str, out.active))} at their limit)"
             )
         elif out.optimal:
