@@ -988,7 +988,11 @@ def _start_3d(p: _Problem):
     the angle phi that brings it through the target, the in-plane uniform-field answer
     (:func:`_uniform_start`) for the target turned into the plane, and that field turned back
     (exact for a rod symmetric about its axis, e.g. an axial magnetization on a round section;
-    a start otherwise), made at the centre with minimum power.  Returns (currents, solves)."""
+    a start otherwise), made at the centre with minimum power.  With a target direction d,
+    the planar answer fits the tip angle of d's projection on the turned plane too (the
+    least-squares blend of the position's and the direction's bending, positions in L, the
+    angle in rad; the angle taken on the branch nearest twice the chord's, the tip angle of a
+    uniformly bent rod).  Returns (currents, solves)."""
     from coils.currents import largest_fraction
 
     clamp, a = p.opts["clamp_position"], p.opts["clamp_angle"]
@@ -998,13 +1002,20 @@ def _start_3d(p: _Problem):
     phi = math.atan2(v[2], v @ n)
     n_phi = math.cos(phi) * n + math.sin(phi) * np.array([0.0, 0.0, 1.0])
     planar = clamp[:2] + (v @ t) * t[:2] + math.hypot(v @ n, v[2]) * n[:2]
+    d = p.direction
+    with_angle = d is not None and math.hypot(d @ t, d @ n_phi) > 1e-6  # d not across the plane
+    if with_angle:  # d's tip angle in the turned plane, relative to the clamp tangent
+        turn = math.atan2(d @ n_phi, d @ t)
+        bent = 2.0 * math.atan2(math.hypot(v @ n, v[2]), v @ t)  # uniform bending's
+        turn += 2 * math.pi * round((bent - turn) / (2 * math.pi))
+        planar = np.r_[planar, a + turn]
     b_big = p.rod.field_for_lambda(30.0)  # beyond any useful field: lambda = 30
     caps = [
         largest_fraction(p.Bu, b_big * (math.cos(al) * t + math.sin(al) * n_phi), p.limits)[0]
         for al in np.linspace(0.0, 2 * np.pi, 36, endpoint=False)
     ]
     b_cap = b_big * float(min(caps))  # the largest centre field (T) in every direction of it
-    b, solves = _uniform_start(p.rod, planar, False, p.steps, p.opts, b_cap)
+    b, solves = _uniform_start(p.rod, planar, with_angle, p.steps, p.opts, b_cap)
     B = (b @ t[:2]) * t + (b @ n[:2]) * n_phi
     return _centre_currents(p.system, B, p.resistance, p.limits, p.Bu, p.B_fixed), solves
 
