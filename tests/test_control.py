@@ -375,3 +375,24 @@ class TestBadInput:
     def test_not_a_system(self):
         with pytest.raises(ValueError, match="current control"):
             solve_currents(ROD, coils.UniformField(B=(0, 0.01, 0)), (0.03, 0.02))
+
+
+def test_a_failed_least_distance_program_falls_back(monkeypatch):
+    """coils.currents.minimum_power raises RuntimeError when its NNLS solver fails (met on
+    CardioMag with a position and direction target): the minimum-power step then falls back to
+    the least-squares step within the limits, which here meets the linearised target exactly
+    (a consistent system, checked by its residual) within the limits."""
+    from types import SimpleNamespace
+
+    from coilrod.control import currents
+
+    def failing(*args):
+        raise RuntimeError("the least-distance program failed on a feasible current target")
+
+    monkeypatch.setattr(currents, "minimum_power", failing)
+    rng = np.random.default_rng(3)
+    J, I, r = rng.normal(size=(5, 8)), rng.uniform(-1, 1, 8), 0.1 * rng.normal(size=5)
+    p = SimpleNamespace(resistance=np.ones(8), limits=np.full(8, 20.0))
+    step = currents._least_power_step(J, r, I, p)
+    np.testing.assert_allclose(J @ step, -r, atol=1e-12)
+    assert np.all(np.abs(I + step) <= 20.0)

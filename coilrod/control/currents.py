@@ -468,9 +468,14 @@ def _restoring_step(J, r, I, p: _Problem):
 def _least_power_step(J, r, I, p: _Problem):
     """The step to the minimum-power currents of the linearised target:
     ``argmin sum R I_new^2`` subject to ``J (I_new - I) = -r`` and the limits (or, out of
-    reach within the limits, the least-squares currents within them)."""
-    sol = minimum_power(J, J @ I - r, p.resistance, p.limits)
-    if sol.currents is not None:
+    reach within the limits, the least-squares currents within them; also where the
+    least-distance program of :func:`coils.currents.minimum_power` fails, as its NNLS solver
+    can on an ill-conditioned J)."""
+    try:
+        sol = minimum_power(J, J @ I - r, p.resistance, p.limits)
+    except RuntimeError:  # the NNLS failure: the least-squares step within the limits
+        sol = None
+    if sol is not None and sol.currents is not None:
         return sol.currents - I
     from scipy.optimize import lsq_linear
 

@@ -544,9 +544,9 @@ def parse_control(data, robot, info, steps, p: _Problems):
             if rank < 3:
                 p.add(
                     f"{key}.target: a 3D target (x, y, z) needs a system whose channels make "
-                    f"every field direction at its centre; {info.label} makes fields of rank "
-                    f"{rank} there (no B_z: a planar-only system) -- give the target (x, y) in "
-                    "the bending plane, or a system such as three_axis_helmholtz"
+                    f"every field direction at its centre; the centre field per ampere of "
+                    f"{info.label} has rank {rank} (a planar-only system) -- give the target "
+                    "(x, y) in the bending plane, or a system such as three_axis_helmholtz"
                 )
                 target = _BAD
     if _ok(target, robot):
