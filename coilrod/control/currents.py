@@ -733,8 +733,8 @@ def solve_currents(
     target : array-like, shape (2,) or (3,)
         Tip position, m: (x, y) in the bending plane, or (x, y, z) for the spatial rod (the
         system's channels must make every field direction at its centre; the start is the
-        planar answer turned about the clamp tangent into the target's plane, see
-        :func:`_start_3d`).
+        planar answer turned about the clamp tangent into the target's plane, fitted to a
+        target direction's tip angle in that plane too, see :func:`_start_3d`).
     max_current : float or array-like, shape (m,), optional
         Current limits, A (> 0); default the system's own (``system.max_current``).
     model : {"real", "ideal"}
