@@ -248,9 +248,9 @@ class TestSpatialTarget:
     """3D targets (x, y, z) on the spatial rod, made reachable by construction: the tip of an
     independent forward solve with currents that make a field with a B_z component."""
 
-    @pytest.mark.parametrize("B", [(0.003, 0.005, -0.004), (-0.002, -0.006, 0.004)])
-    def test_lands_on_reachable_3d_targets(self, B):
-        made = LARGE.currents_for(B=B)
+    def test_lands_on_reachable_3d_targets(self):
+        # one field out of the plane (the 3D scene test lands on another, in CardioMag)
+        made = LARGE.currents_for(B=(0.003, 0.005, -0.004))
         target = _tip_3d(LARGE, made)
         assert abs(target[2]) > 0.2 * L  # well out of the plane
         out = solve_currents(ROD, LARGE, target)
