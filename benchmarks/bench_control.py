@@ -11,7 +11,10 @@ forward solve).  The ideal-field controller's miss is listed too.
 (x, y, z) made by known currents (a field, and a field with a gradient, at the centre),
 ``solve_currents`` from its own start; forward-solve equivalents (its CPU time over one
 real-field forward solve at the answer, the best of three), against the issue's budget of 15;
-the miss by an independent forward solve.
+the miss by an independent forward solve.  The same targets with the tip direction of the
+made state too (five conditions on eight coils): solves of the search and of the start, with
+the start using the direction (``solve_currents``) and ignoring it (the position-only start,
+``--3d`` compares the two in one run).
 
 Run:  python benchmarks/bench_control.py            (both parts)
       python benchmarks/bench_control.py --3d       (the CardioMag part only)
@@ -88,6 +91,44 @@ def cardiomag_3d() -> list[str]:
         out.append(
             f"| {label} | {how} | {ours.solves} ({ours.start_solves}) | {eq:.1f} | "
             f"{t_ours:.2f} | {miss:.1e} | {'yes' if eq <= BUDGET_3D else 'NO'} |"
+        )
+    out += [
+        "\n### with the made state's tip direction (start with / without the direction)\n",
+        "| target (mm) | made by | solves + start, direction start | solves + start, "
+        "position-only start | CPU (s) with / without | miss (L) | direction miss (rad) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    from coilrod.control import currents
+
+    for made in TARGETS_3D:
+        res = solve_rod(
+            ROD, CARDIOMAG.with_currents(CARDIOMAG.currents_for(**made)), SCALES, tol=1e-12
+        )
+        target, direction = res.tip[-1], res.frames(len(res) - 1)[-1, :, 0]
+        rows = []
+        for use in (True, False):
+            start = currents._start_3d
+            if not use:  # the position-only start: the direction hidden from _start_3d
+
+                def start(p, _orig=currents._start_3d):
+                    from dataclasses import replace
+
+                    return _orig(replace(p, direction=None))
+
+            saved, currents._start_3d = currents._start_3d, start
+            try:
+                t0 = time.process_time()
+                o = solve_currents(ROD, CARDIOMAG, target, direction=direction)
+                rows.append((o, time.process_time() - t0))
+            finally:
+                currents._start_3d = saved
+        (o1, t1), (o2, t2) = rows
+        label = "(" + ", ".join(f"{1e3 * v:.1f}" for v in target) + ")"
+        how = "B" + (" + gradient" if "gradient" in made else "")
+        out.append(
+            f"| {label} | {how} | {o1.solves} + {o1.start_solves} ({o1.status}) | "
+            f"{o2.solves} + {o2.start_solves} ({o2.status}) | {t1:.2f} / {t2:.2f} | "
+            f"{o1.miss / L:.1e} | {o1.direction_miss:.1e} |"
         )
     return out
 

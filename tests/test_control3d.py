@@ -237,3 +237,37 @@ def test_the_3d_start_makes_its_field_over_the_offset(monkeypatch):
     phi = np.arctan2(target[2], target[1])  # the target's plane about x
     expected = np.array([b[0], b[1] * np.cos(phi), b[1] * np.sin(phi)])
     np.testing.assert_allclose(B, expected, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("direction", "angle"),
+    [
+        ((np.cos(1.2), 0.0, np.sin(1.2)), 1.2),  # in the target's plane (x-z): its angle
+        ((np.cos(2.5), 0.0, -np.sin(2.5)), -2.5 + 2 * np.pi),  # the branch near the chord's
+        ((0.0, 1.0, 0.0), None),  # across the plane: no angle to fit
+    ],
+)
+def test_the_3d_start_fits_the_direction(monkeypatch, direction, angle):
+    """The target direction enters the start: the planar uniform-field fit gets the tip angle
+    of its projection on the target's plane (here the x-z plane, a target with y = 0: the
+    angle from x towards +z, by hand), on the branch nearest twice the chord's angle (the
+    tip angle of a uniformly bent rod), unless the direction lies across that plane."""
+    seen = {}
+
+    def fit(rod, goal, with_angle, *args):
+        seen.update(goal=goal, with_angle=with_angle)
+        return np.array([0.004, 0.003]), 0
+
+    monkeypatch.setattr(currents, "_uniform_start", fit)
+    target = np.array([0.6 * L, 0.0, 0.5 * L])
+    p = currents._problem(
+        ROD, CARDIOMAG, target, None, "real", None, 4, (0.0, 0.0, 0.0), 0.0, NODES, None,
+        np.array(direction),
+    )  # fmt: skip
+    currents._start_3d(p)
+    np.testing.assert_allclose(seen["goal"][:2], [0.6 * L, 0.5 * L], atol=1e-15)
+    assert seen["with_angle"] == (angle is not None)
+    if angle is not None:
+        assert seen["goal"][2] == pytest.approx(angle, abs=1e-12)
+    else:
+        assert seen["goal"].size == 2

@@ -567,7 +567,7 @@ def test_unreachable_target_gives_the_closest_tip_and_exit_1(tmp_path):
     assert lines["real"].startswith(
         "real: FAILED (* the closest found): solve_currents: the target"
     )
-    assert "is not reachable within the current limits (channels " in lines["real"]
+    assert "is beyond the current limits: not reachable within them (channels " in lines["real"]
     assert " at their limit); the closest stable tip found is" in lines["real"]
     # the ideal controller is stopped by the limits in its own model too: also a failure
     assert lines["ideal"].startswith(

@@ -468,9 +468,14 @@ def _restoring_step(J, r, I, p: _Problem):
 def _least_power_step(J, r, I, p: _Problem):
     """The step to the minimum-power currents of the linearised target:
     ``argmin sum R I_new^2`` subject to ``J (I_new - I) = -r`` and the limits (or, out of
-    reach within the limits, the least-squares currents within them)."""
-    sol = minimum_power(J, J @ I - r, p.resistance, p.limits)
-    if sol.currents is not None:
+    reach within the limits, the least-squares currents within them; also where the
+    least-distance program of :func:`coils.currents.minimum_power` fails, as its NNLS solver
+    can on an ill-conditioned J)."""
+    try:
+        sol = minimum_power(J, J @ I - r, p.resistance, p.limits)
+    except RuntimeError:  # the NNLS failure: the least-squares step within the limits
+        sol = None
+    if sol is not None and sol.currents is not None:
         return sol.currents - I
     from scipy.optimize import lsq_linear
 
@@ -573,7 +578,7 @@ def _search(p: _Problem, I, max_iter: int, max_solves: int):
     _, I, res, r = search.best
     if p.met(r):
         status = "converged"
-    elif _gain(p.jacobian(res), r, I, _within(bounds, I)) <= GAIN_TOL:
+    elif _optimal(p.jacobian(res), r, I, _within(bounds, I), (-p.limits, p.limits)):
         status = "optimal"
     else:
         status = stopped
@@ -728,8 +733,8 @@ def solve_currents(
     target : array-like, shape (2,) or (3,)
         Tip position, m: (x, y) in the bending plane, or (x, y, z) for the spatial rod (the
         system's channels must make every field direction at its centre; the start is the
-        planar answer turned about the clamp tangent into the target's plane, see
-        :func:`_start_3d`).
+        planar answer turned about the clamp tangent into the target's plane, fitted to a
+        target direction's tip angle in that plane too, see :func:`_start_3d`).
     max_current : float or array-like, shape (m,), optional
         Current limits, A (> 0); default the system's own (``system.max_current``).
     model : {"real", "ideal"}
@@ -894,6 +899,16 @@ def _gain(J, r, I, bounds) -> float:
     return max(0.0, (rr - float(after @ after)) / rr)
 
 
+def _optimal(J, r, I, bounds, limits) -> bool:
+    """(I, r) is a local least-squares optimum: no step within ``bounds`` (the limits as
+    narrowed by :func:`_damped`) gains, and -- where a channel is on a narrowed bound
+    (:func:`_pinned`) -- no step within the ``limits`` either (that bound is no limit: a
+    state held against it is not an optimum within the limits)."""
+    if _gain(J, r, I, bounds) > GAIN_TOL:
+        return False
+    return not _pinned(I, bounds, limits).any() or _gain(J, r, I, limits) <= GAIN_TOL
+
+
 def _damped(I, res, r, jacobian, evaluate, met, bounds):
     """Levenberg-Marquardt within the current limits from the state (I, res, r): steps
     ``argmin |r + J s|^2 + mu |D s|^2`` over ``|I + s| <= limits`` (D the column norms of J),
@@ -907,14 +922,24 @@ def _damped(I, res, r, jacobian, evaluate, met, bounds):
     misses, e.g. the small current that decides to which side a rod in a nearly antiparallel
     field buckles) is kept on its side of zero, at least as far from it as now: the bounds
     (lo, hi) of the currents are narrowed so, and returned (the optimum is sought, and
-    checked, within them)."""
+    checked, within them).  Such a bound holds where it was set: when the iteration ends
+    with a channel on one (not on its limit) and a step within the limits still promises a
+    gain, the bounds are widened back to the limits and the iteration goes on (up to
+    ``RELAX`` times) -- the optimum met against such a bound is an artefact of the
+    narrowing, not of the rod or the limits."""
     from scipy.optimize import lsq_linear
 
     lo, hi = (np.array(b, float) for b in bounds)
     J = jacobian(res)
     d = np.linalg.norm(J, axis=0)
-    mu, crawl = 1e-3, 0
-    while not met(r) and _gain(J, r, I, (lo, hi)) > GAIN_TOL and mu < 1e10 and crawl < 3:
+    mu, crawl, relaxed = 1e-3, 0, 0
+    while not met(r):
+        if not (_gain(J, r, I, (lo, hi)) > GAIN_TOL and mu < 1e10 and crawl < 3):
+            held = relaxed < RELAX and _pinned(I, (lo, hi), bounds).any()
+            if not held or _gain(J, r, I, bounds) <= GAIN_TOL:
+                break
+            lo, hi = (np.array(b, float) for b in bounds)  # widened back to the limits
+            mu, crawl, relaxed = 1e-3, 0, relaxed + 1
         d = np.maximum(d, 1e-6 * max(d.max(), 1e-300))
         A = np.vstack([J, np.sqrt(mu) * np.diag(d)])
         b = np.r_[-r, np.zeros(I.size)]
@@ -949,12 +974,30 @@ def _damped(I, res, r, jacobian, evaluate, met, bounds):
     return lo, hi
 
 
+#: How often :func:`_damped` widens bounds it narrowed back to the limits.
+RELAX = 2
+
+
+def _pinned(I, bounds, limits) -> np.ndarray:
+    """Channels (bool, (m,)) on a bound of ``bounds`` (lo, hi) that is narrower than
+    ``limits`` (lo, hi): kept on their side of zero by :func:`_damped`, not at a limit."""
+    (lo, hi), (lo0, hi0) = bounds, limits
+    scale = np.maximum(np.maximum(np.abs(lo0), np.abs(hi0)), 1e-300)
+    low = (lo > lo0) & (I <= lo + 1e-9 * scale)
+    high = (hi < hi0) & (I >= hi - 1e-9 * scale)
+    return low | high
+
+
 def _start_3d(p: _Problem):
     """Start currents for a 3D target: the bending plane turned about the clamp tangent t by
     the angle phi that brings it through the target, the in-plane uniform-field answer
     (:func:`_uniform_start`) for the target turned into the plane, and that field turned back
     (exact for a rod symmetric about its axis, e.g. an axial magnetization on a round section;
-    a start otherwise), made at the centre with minimum power.  Returns (currents, solves)."""
+    a start otherwise), made at the centre with minimum power.  With a target direction d,
+    the planar answer fits the tip angle of d's projection on the turned plane too (the
+    least-squares blend of the position's and the direction's bending, positions in L, the
+    angle in rad; the angle taken on the branch nearest twice the chord's, the tip angle of a
+    uniformly bent rod).  Returns (currents, solves)."""
     from coils.currents import largest_fraction
 
     clamp, a = p.opts["clamp_position"], p.opts["clamp_angle"]
@@ -964,13 +1007,20 @@ def _start_3d(p: _Problem):
     phi = math.atan2(v[2], v @ n)
     n_phi = math.cos(phi) * n + math.sin(phi) * np.array([0.0, 0.0, 1.0])
     planar = clamp[:2] + (v @ t) * t[:2] + math.hypot(v @ n, v[2]) * n[:2]
+    d = p.direction
+    with_angle = d is not None and math.hypot(d @ t, d @ n_phi) > 1e-6  # d not across the plane
+    if with_angle:  # d's tip angle in the turned plane, relative to the clamp tangent
+        turn = math.atan2(d @ n_phi, d @ t)
+        bent = 2.0 * math.atan2(math.hypot(v @ n, v[2]), v @ t)  # uniform bending's
+        turn += 2 * math.pi * round((bent - turn) / (2 * math.pi))
+        planar = np.r_[planar, a + turn]
     b_big = p.rod.field_for_lambda(30.0)  # beyond any useful field: lambda = 30
     caps = [
         largest_fraction(p.Bu, b_big * (math.cos(al) * t + math.sin(al) * n_phi), p.limits)[0]
         for al in np.linspace(0.0, 2 * np.pi, 36, endpoint=False)
     ]
     b_cap = b_big * float(min(caps))  # the largest centre field (T) in every direction of it
-    b, solves = _uniform_start(p.rod, planar, False, p.steps, p.opts, b_cap)
+    b, solves = _uniform_start(p.rod, planar, with_angle, p.steps, p.opts, b_cap)
     B = (b @ t[:2]) * t + (b @ n[:2]) * n_phi
     return _centre_currents(p.system, B, p.resistance, p.limits, p.Bu, p.B_fixed), solves
 
@@ -1076,7 +1126,7 @@ def _report(p: _Problem, out: ControlResult, history) -> None:
     if p.model == "real" and min(history) > p.tol and not p.oriented:
         if out.active:
             why = (
-                "not reachable within the current limits (channels "
+                "beyond the current limits: not reachable within them (channels "
                 f"{', '.join(map(str, out.active))} at their limit)"
             )
         elif out.optimal:

@@ -9,8 +9,9 @@ should go (``[control]``)::
     coil = [ { type = "maxwell", radius = "240 mm", turns = 500, axis = "y" } ]
 
     [control]
-    target = ["20 mm", "30 mm"]          # tip (x, y) in the bending plane
-    angle = "60 deg"                     # optional: the tip angle too
+    target = ["20 mm", "30 mm"]          # tip (x, y) in the bending plane, or (x, y, z)
+    angle = "60 deg"                     # optional: the tip angle too (a target (x, y))
+    direction = [0, 0.6, 0.8]            # optional: the tip direction (a target (x, y, z))
     model = "both"                       # "real", "ideal" or "both" (default)
     max_current = "5 A"                  # optional: one limit, or one per channel
 
@@ -22,6 +23,14 @@ power).  The preset's own arguments (``radii``, ``turns``, ``max_current``, ...)
 preset, with units, as they follow a magnetization preset.  Limits: a preset's channels are
 rated (its ``max_current``); ``control.max_current`` may lower them, not raise them, and is
 required when listed coils (which have no rating) are driven.
+
+A 3D target (x, y, z) -- for a system whose channels make every field direction at its
+centre (three-axis Helmholtz, the eight-coil hemisphere, the eMNS presets) -- is steered on
+the spatial rod; ``direction`` (three plain numbers: a vector along the wanted tip tangent,
+normalised, so ``[0, 1, 1]`` is fine) adds the tip direction to it.  A 3D target with a
+system that makes no B_z at its centre (e.g. helmholtz_maxwell), a direction with a target
+(x, y), an angle with a target (x, y, z), or a direction that is not three finite numbers
+with a non-zero length is an error naming the key.
 
 ``model = "real"`` finds the currents in the real (Biot-Savart) field; ``"ideal"`` is the usual
 controller, which takes the system's field and gradient at its centre for the field over the
@@ -124,10 +133,10 @@ class ControlSpec:
 
     Attributes
     ----------
-    target : ndarray, shape (2,)
-        Target tip position (x, y) in the bending plane, m.
+    target : ndarray, shape (2,) or (3,)
+        Target tip position (x, y) in the bending plane, or (x, y, z), m.
     angle : float or None
-        Target tip angle, rad (None: the position only).
+        Target tip angle, rad (None: the position only; a target (x, y) only).
     models : tuple of str
         The controllers to run, from ("real", "ideal").
     max_current : ndarray, shape (m,)
@@ -136,6 +145,8 @@ class ControlSpec:
         Load steps of each forward solve (the currents ramped from zero).
     system : str
         What the coil system is, in words (for the plan and the summary).
+    direction : ndarray, shape (3,), or None
+        Target unit tip tangent (a target (x, y, z) only; None: the position only).
     """
 
     target: np.ndarray
@@ -144,6 +155,12 @@ class ControlSpec:
     max_current: np.ndarray
     steps: int
     system: str
+    direction: np.ndarray | None = None
+
+    @property
+    def spatial(self) -> bool:
+        """A 3D target (x, y, z): the spatial rod."""
+        return self.target.size == 3
 
 
 # -- the coil system ([field] type = "system") ---------------------------------------------------
@@ -378,16 +395,48 @@ def parse_system(data: dict, p: _Problems):
 
 # -- the [control] table ----------------------------------------------------------------------
 def _target(raw, full: str) -> np.ndarray:
-    if not isinstance(raw, list) or len(raw) != 2:
+    if not isinstance(raw, list) or len(raw) not in (2, 3):
         raise SceneError(
             f"{full}: expected a list of 2 lengths (the tip's x and y in the bending plane), "
-            f"e.g. ['20 mm', '30 mm']; got {_show(raw)}"
+            f"e.g. ['20 mm', '30 mm'], or of 3 (x, y, z), e.g. ['20 mm', '25 mm', '10 mm']; "
+            f"got {_show(raw)}"
         )
     p = _Problems()
     out = [p.take(_value, v, "length", f"{full}[{i}]", kind="position") for i, v in enumerate(raw)]
     if p.lines:
         raise SceneError(p.lines)
     return np.array(out, dtype=float)
+
+
+def _direction(raw, full: str) -> np.ndarray:
+    """control.direction: three plain numbers along the tip tangent, normalised (not zero)."""
+    if not isinstance(raw, list) or len(raw) != 3:
+        raise SceneError(
+            f"{full}: expected a list of 3 numbers (a vector along the tip tangent, x, y, z; "
+            f"normalised), e.g. [0, 0.6, 0.8]; got {_show(raw)}"
+        )
+    p = _Problems()
+    out = [p.take(_plain, v, f"{full}[{i}]") for i, v in enumerate(raw)]
+    if p.lines:
+        raise SceneError(p.lines)
+    v = np.array(out, dtype=float)
+    norm = float(np.linalg.norm(v))
+    if not norm > 0.0 or not math.isfinite(norm):
+        raise SceneError(f"{full}: must have a non-zero length (a direction); got {_show(raw)}")
+    return v / norm
+
+
+def _makes_3d(system) -> int | None:
+    """Rank of the system's centre field per ampere (3: every field direction), or None if
+    it cannot be evaluated there (the checks report a centre on a winding)."""
+    try:
+        B, _ = system.unit_fields(np.asarray(system.center, float)[None])
+    except ValueError:
+        return None
+    B = B[0]
+    if not np.all(np.isfinite(B)):
+        return None
+    return int(np.linalg.matrix_rank(B, tol=1e-12 * max(float(np.abs(B).max()), 1e-300)))
 
 
 def _limits(raw, info, m: int):
@@ -437,18 +486,34 @@ def parse_control(data, robot, info, steps, p: _Problems):
     """
     key = "control"
     data = _table(data, key)
-    p.take(_unknown_keys, data, key, {"target", "angle", "model", "max_current"})
+    p.take(_unknown_keys, data, key, {"target", "angle", "direction", "model", "max_current"})
     if "target" in data:
         target = p.take(_target, data["target"], f"{key}.target")
     else:
         p.add(
             f"{key}.target: missing required key (the tip's x and y in the bending plane, e.g. "
-            "['20 mm', '30 mm'])"
+            "['20 mm', '30 mm'], or x, y, z)"
         )
         target = _BAD
     angle = None
     if "angle" in data:
         angle = p.take(_value, data["angle"], "angle", f"{key}.angle", kind="angle")
+    direction = None
+    if "direction" in data:
+        direction = p.take(_direction, data["direction"], f"{key}.direction")
+    if _ok(target):
+        if target.size == 3 and "angle" in data:
+            p.add(
+                f"{key}.angle: a tip angle is for a target (x, y) in the bending plane; the "
+                "target is (x, y, z): give direction (the tip tangent) instead"
+            )
+            angle = _BAD
+        if target.size == 2 and "direction" in data:
+            p.add(
+                f"{key}.direction: a tip direction is for a target (x, y, z); the target is "
+                "(x, y) in the bending plane: give angle instead, or the target's z"
+            )
+            direction = _BAD
     model = data.get("model", "both")
     if not isinstance(model, str) or model not in CONTROL_MODELS:
         p.add(f"{key}.model: expected 'real', 'ideal' or 'both'; got {_show(model)}")
@@ -475,16 +540,25 @@ def parse_control(data, robot, info, steps, p: _Problems):
             )
         else:
             limit = system.max_current
+        if _ok(target) and target.size == 3 and (rank := _makes_3d(system)) is not None:
+            if rank < 3:
+                p.add(
+                    f"{key}.target: a 3D target (x, y, z) needs a system whose channels make "
+                    f"every field direction at its centre; the centre field per ampere of "
+                    f"{info.label} has rank {rank} (a planar-only system) -- give the target "
+                    "(x, y) in the bending plane, or a system such as three_axis_helmholtz"
+                )
+                target = _BAD
     if _ok(target, robot):
         L = robot[0].length
         d = math.hypot(*target)
         if d > L * (1 + 1e-12):
             p.add(
-                f"{key}.target: ({_mm(target[0])}, {_mm(target[1])}) is {_mm(d)} from the clamp, "
-                f"beyond the robot's length ({_mm(L)}, robot.length): no tip reaches it"
+                f"{key}.target: ({', '.join(_mm(v) for v in target)}) is {_mm(d)} from the "
+                f"clamp, beyond the robot's length ({_mm(L)}, robot.length): no tip reaches it"
             )
             target = _BAD
-    if not _ok(target, angle, model, limit, steps) or not system_ok:
+    if not _ok(target, angle, direction, model, limit, steps) or not system_ok:
         return _BAD
     return ControlSpec(
         target=target,
@@ -493,4 +567,5 @@ def parse_control(data, robot, info, steps, p: _Problems):
         max_current=np.asarray(limit, dtype=float),
         steps=int(steps),
         system=info.label,
+        direction=direction,
     )

@@ -4,8 +4,10 @@ and the tip they reach in the real field, the files and the figure.
 Each controller is one call of :func:`coilrod.solve_currents` with the scene's rod, coil
 system, target, limits, load steps and rod mesh.  A controller meets the target when, in its
 own model (the real field for "real", the centre field for "ideal"), the tip lands within
-``MET * L`` of it (and, with a target angle, the real controller's tip angle within ``MET``
-rad).  One that does not -- the solver's ConvergenceError for an unreachable target, a
+``MET * L`` of it (and, with a target angle or direction, the real controller's tip angle or
+tip tangent within ``MET`` rad of it).  A 3D target (x, y, z) runs the spatial rod; the table,
+summary, JSON and figure then carry z (and, with a target direction, the direction miss).
+One that does not -- the solver's ConvergenceError for an unreachable target, a
 least-squares compromise for a pose the channels cannot make, an ideal controller stopped by
 the limits -- is recorded with the message and the closest currents found; the other controller
 still runs, and ``ok`` is False (``coilrod run`` exits 1, as for any load a solver cannot
@@ -88,7 +90,8 @@ class ControlSceneResult:
 
     def table(self) -> list[dict]:
         """One row per controller: the currents (A), power (W), the tip in the real field (mm,
-        deg), the miss (mm, % of L), the solves and the error ("" if it met the target).
+        deg; z for a 3D target), the miss (mm, % of L; the direction miss in deg with a target
+        direction), the solves and the error ("" if it met the target).
 
         The current columns are ``current_<channel>_A`` (spaces in the channel name as ``_``);
         the values are None where a controller left no result.
@@ -107,22 +110,32 @@ class ControlSceneResult:
                 row.update(
                     tip_x_mm=1e3 * float(out.tip[0]),
                     tip_y_mm=1e3 * float(out.tip[1]),
+                    tip_z_mm=1e3 * float(out.tip[2]),
                     tip_angle_deg=math.degrees(out.tip_angle),
                     miss_mm=1e3 * out.miss,
                     miss_percent_L=100 * out.miss / L,
                     angle_miss_deg=(
                         None if out.angle_miss is None else math.degrees(out.angle_miss)
                     ),
+                    direction_miss_deg=(
+                        None if out.direction_miss is None else math.degrees(out.direction_miss)
+                    ),
                     own_miss_mm=1e3 * r.own_miss,
                     solves=out.solves,
                     start_solves=out.start_solves,
                 )
             else:
-                for k in ("tip_x_mm", "tip_y_mm", "tip_angle_deg", "miss_mm", "miss_percent_L"):
+                for k in ("tip_x_mm", "tip_y_mm", "tip_z_mm", "tip_angle_deg"):
                     row[k] = None
-                row.update(angle_miss_deg=None, own_miss_mm=None, solves=None, start_solves=None)
+                row.update(miss_mm=None, miss_percent_L=None, angle_miss_deg=None)
+                row.update(direction_miss_deg=None, own_miss_mm=None)
+                row.update(solves=None, start_solves=None)
             if spec.angle is None:
                 row.pop("angle_miss_deg")
+            if spec.direction is None:
+                row.pop("direction_miss_deg")
+            if not spec.spatial:
+                row.pop("tip_z_mm")
             row["seconds"] = r.seconds
             row["error"] = r.error
             rows.append(row)
@@ -134,9 +147,11 @@ class ControlSceneResult:
         scene, spec = self.scene, self.scene.control
         L = scene.rod.length
         names = self.channels
-        target = f"({_num(1e3 * spec.target[0])}, {_num(1e3 * spec.target[1])}) mm"
+        target = f"({', '.join(_num(1e3 * v) for v in spec.target)}) mm"
         if spec.angle is not None:
             target += f", tip angle {_num(math.degrees(spec.angle))} deg"
+        if spec.direction is not None:
+            target += f", tip direction ({', '.join(f'{v:.4g}' for v in spec.direction)})"
         lines = [
             f"scene: {scene.name}",
             f"robot: L = {1e3 * L:g} mm, {scene.rod.magnetization!r}",
@@ -158,11 +173,16 @@ class ControlSceneResult:
         add("power", lambda o, r: "n/a" if not math.isfinite(o.power) else f"{o.power:.4g}", "W")
         add("real-field tip x", lambda o, r: f"{1e3 * o.tip[0]:.4f}", "mm")
         add("real-field tip y", lambda o, r: f"{1e3 * o.tip[1]:.4f}", "mm")
-        add("tip angle", lambda o, r: f"{math.degrees(o.tip_angle):.3f}", "deg")
+        if spec.spatial:
+            add("real-field tip z", lambda o, r: f"{1e3 * o.tip[2]:.4f}", "mm")
+        else:
+            add("tip angle", lambda o, r: f"{math.degrees(o.tip_angle):.3f}", "deg")
         add("miss", lambda o, r: f"{1e3 * o.miss:.4g}", "mm")
         add("miss", lambda o, r: f"{100 * o.miss / L:.3g}", "% of L")
         if spec.angle is not None:
             add("angle miss", lambda o, r: f"{math.degrees(o.angle_miss):.3g}", "deg")
+        if spec.direction is not None:
+            add("direction miss", lambda o, r: f"{math.degrees(o.direction_miss):.3g}", "deg")
         add("solves (+ start)", lambda o, r: f"{o.solves} + {o.start_solves}")
         width = max(len(label) for label, _, _ in rows)
         cols = [max(10, len(h), *(len(c[k]) for _, c, _ in rows)) for k, h in enumerate(heads)]
@@ -213,7 +233,7 @@ class ControlSceneResult:
 
             from .figures import plot_control_shapes
 
-            ax = plot_control_shapes(self)
+            ax = _plot_3d(self) if self.scene.control.spatial else plot_control_shapes(self)
             path = out / "control.png"
             ax.figure.savefig(path, dpi=120, bbox_inches="tight")
             plt.close(ax.figure)
@@ -244,6 +264,7 @@ class ControlSceneResult:
             "length_mm": 1e3 * self.scene.rod.length,
             "target_mm": (1e3 * spec.target).tolist(),
             "target_angle_deg": None if spec.angle is None else math.degrees(spec.angle),
+            "target_direction": None if spec.direction is None else spec.direction.tolist(),
             "load_steps": spec.steps,
             "plan": list(self.plan.decisions),
             "runs": runs,
@@ -261,20 +282,68 @@ def _unmet(out: ControlResult, spec, rod) -> str:
             "the ideal controller cannot put the tip on the target even in its own model (the "
             f"centre field) within the current limits: the closest it finds there is "
             f"{1e3 * own:.4g} mm away; in the real field its currents put the tip at "
-            f"({1e3 * out.tip[0]:.4g}, {1e3 * out.tip[1]:.4g}) mm, {1e3 * out.miss:.4g} mm "
+            f"({', '.join(f'{1e3 * v:.4g}' for v in out.tip[: spec.target.size])}) mm, "
+            f"{1e3 * out.miss:.4g} mm "
             f"({100 * out.miss / L:.3g} % of L) from the target"
         )
     angle_off = out.angle_miss is not None and out.angle_miss > MET
-    if out.miss <= MET * L and not angle_off:
+    direction_off = out.direction_miss is not None and out.direction_miss > MET
+    if out.miss <= MET * L and not angle_off and not direction_off:
         return ""
+    tip = out.tip[: spec.target.size]
     text = (
         f"the target pose is not reachable: the closest the currents make puts the tip at "
-        f"({1e3 * out.tip[0]:.4g}, {1e3 * out.tip[1]:.4g}) mm, {1e3 * out.miss:.4g} mm "
+        f"({', '.join(f'{1e3 * v:.4g}' for v in tip)}) mm, {1e3 * out.miss:.4g} mm "
         f"({100 * out.miss / L:.3g} % of L) from the target position"
     )
     if out.angle_miss is not None:
         text += f" and {math.degrees(out.angle_miss):.3g} deg from the target angle"
+    if out.direction_miss is not None:
+        text += f" and {math.degrees(out.direction_miss):.3g} deg from the target direction"
     return text + " (the least-squares compromise within the current limits)"
+
+
+def _plot_3d(result):
+    """A 3D-target control scene's shapes in the real field, one per controller (solid: the
+    real-field controller; dashed: the ideal one), in two views -- x-y (top) and x-z (side) --
+    with the target and its tip direction marked.  Returns the x-y Axes (both on its figure)."""
+    import matplotlib.pyplot as plt
+
+    from .figures import _CONTROL_STYLE
+
+    scene, spec = result.scene, result.scene.control
+    L = scene.rod.length
+    fig, axes = plt.subplots(1, 2, figsize=(10, 5))
+    target = 1e3 * spec.target
+    for ax, (i, j), name in zip(axes, ((0, 1), (0, 2)), ("x-y (top)", "x-z (side)"), strict=True):
+        for r in result.runs:
+            if r.result is None:
+                continue
+            c = 1e3 * r.result.result.centerline(-1)
+            style, color = _CONTROL_STYLE.get(r.model, (":", "k"))
+            state = " (closest found)" if r.error else ""
+            miss = f"miss {1e3 * r.result.miss:.3g} mm"
+            if r.result.direction_miss is not None:
+                miss += f", {math.degrees(r.result.direction_miss):.3g} deg"
+            ax.plot(c[:, i], c[:, j], style, color=color, lw=2, label=f"{r.model}{state}, {miss}")
+        ax.plot([0, 1e3 * L], [0, 0], color="0.6", lw=1, label="undeformed")
+        ax.plot(0, 0, "ks", ms=6)
+        ax.plot(target[i], target[j], "kx", ms=10, mew=2, label="target")
+        if spec.direction is not None:
+            d = 0.15 * 1e3 * L * spec.direction
+            ax.annotate(
+                "",
+                xy=(target[i] + d[i], target[j] + d[j]),
+                xytext=(target[i], target[j]),
+                arrowprops={"arrowstyle": "->", "color": "k"},
+            )
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel(f"{'xyz'[i]} (mm)")
+        ax.set_ylabel(f"{'xyz'[j]} (mm)")
+        ax.set_title(name, fontsize=9)
+    axes[0].legend(fontsize=7, loc="best")
+    fig.suptitle(scene.name, fontsize=10)
+    return axes[0]
 
 
 def _finite(obj):
@@ -328,6 +397,7 @@ def run_control(scene: Scene, *, plan: Plan | None = None, log=None) -> ControlS
                 max_current=spec.max_current,
                 model=model,
                 angle=spec.angle,
+                direction=spec.direction,
                 steps=spec.steps,
                 nodes=scene.rod_options.get("nodes"),
             )
