@@ -26,27 +26,30 @@ The hessian is exact (closed forms) for :class:`coils.Dipole`, :class:`coils.Cyl
 (cylinder and ring) and :class:`coils.CuboidMagnet`, so the pose derivatives are exact.
 
 The search is trust-region Gauss-Newton in the pose scaled by a tenth of the magnet's
-distance from the clamp (centre) and 0.2 rad (turn): the least-norm Gauss-Newton step, or the
-Levenberg-Marquardt step on the trust radius, each followed where needed by a corrector.  The
-tip's map is ill-conditioned (singular values ~500-1000 apart: an inextensible rod's tip
-moves along its arc far more easily than across it, whatever bends it), so the step that
-closes the miss across the arc moves the pose far, and there the linearisation's error --
-second order in the step, and along the arc, where the tip is sensitive -- outgrows the gain.
-The trust region alone then shrank to steps that each gained little (a target rounded to
-10 um ended at the budget).  Instead, when a step's forward solve gains less than a quarter of
-the predicted decrease, one least-norm Newton step with the Jacobian there moves the tip back
+distance from the clamp (centre) and 0.2 rad (turn).  Each step is a constrained one: the box
+``bounds`` and the robot's reach (the distance of the magnet's body from the clamp >=
+L + clearance, linearised at the pose from the body's geometry) are linear inequalities of
+the trust-region Gauss-Newton subproblem, solved exactly over the faces of the few
+constraints that can bind within the radius (:func:`_constrained_step`); a step whose face
+holds the reach ends on its curved boundary (a radial move), so a search pressed against the
+reach runs along it.  The search stops at a KKT point of the miss -- "optimal", the closest
+pose within the bounds and off the reach, named as active -- when the constrained Gauss-Newton
+step (no trust region) predicts under 1e-10 relative decrease of the squared miss.  The tip's
+map is ill-conditioned (singular values ~500-1000 apart: an inextensible rod's tip moves along
+its arc far more easily than across it, whatever bends it), so the step that closes the miss
+across the arc moves the pose far, and there the linearisation's error -- second order in the
+step, and along the arc, where the tip is sensitive -- outgrows the gain.  The trust region
+alone then shrank to steps that each gained little (a target rounded to 10 um ended at the
+budget).  Instead, when a step's forward solve gains less than a quarter of the predicted
+decrease, one constrained least-norm Newton step with the Jacobian there moves the tip back
 onto the linearisation's prediction (the target carried along the step: continuation); that
 costs little pose, as the error lies where the tip is sensitive, and keeps the gain across
-the arc.  Steps are clipped to the box ``bounds``, a pose whose body enters the robot's reach
-is moved radially out of it (on the reach's boundary the steps run along it), and a step whose
-corrected solve fails or does not gain a tenth of the prediction shrinks the radius.  The band
-of tips one magnet reaches is thin where it must stay off the reach: some targets (two of the
-benchmark's planar targets rounded to 0.1 mm) lie off it: the search then creeps along the
-reach's boundary, and it stops when the last two accepted steps together decreased the miss by
-less than 20 % with the magnet's body within 0.05 L of the reach (or a pose component at a
-bound) -- Gauss-Newton converging gains far more -- at the closest pose found, status
-"optimal" if the linearisation within the bounds and the reach predicts under 1e-3 relative
-gain there, else "stalled".
+the arc.  A step whose corrected solve fails or does not gain a tenth of the prediction
+halves the radius (the first radius is half the scale: the map is far from linear over the
+start's distance).  The band of tips one magnet reaches from off the robot's reach is thin
+near the start pose: a target off it (the benchmark's planar target rounded to 0.1 mm) may
+be met only at a pose far from the start, along the reach's boundary, or not within the
+budget ("max_solves").
 
 **The robot's reach** is the ball of radius L (the rod's length) about the clamp: every point
 of the rod lies in it whatever the load.  A pose is refused if any point of the magnet's body
@@ -114,16 +117,17 @@ class MagnetPoseResult:
     history : list of float
         Position miss of every forward solve of the search, m (in the model's field).
     status : str
-        "converged" (within ``tol``), "optimal" (not met, but no step within the bounds and
-        the reach predicts a relative decrease of the squared miss above 1e-6: the closest
-        pose), "max_solves" or "stalled" (the trust radius shrank to nothing, three accepted
-        steps in a row each gained under 1e-6 of the squared miss, or the search crept along
-        the reach or a bound: see the module docstring).
+        "converged" (within ``tol``), "optimal" (not met: a KKT point of the miss, where the
+        Gauss-Newton step within the bounds and off the reach, both linearised, predicts a
+        relative decrease of the squared miss under 1e-10: the closest pose there, the reach
+        (``reach_gap`` ~0) and/or the bounds (``active``) binding), "max_solves", or
+        "stalled" (a genuine failure: the trust radius shrank to nothing, or three accepted
+        steps in a row each gained under 1e-10 of the squared miss).
     active : list of int
         Pose components at a bound (within 1e-9 of its span).
     reach_gap : float
         Distance of the magnet's body beyond the robot's reach (and ``clearance``) at the
-        pose, m: ~0 where the reach is the active constraint.
+        pose, m: 0 to round-off where the reach is the active constraint.
     """
 
     pose: np.ndarray
@@ -777,10 +781,10 @@ def solve_magnet_pose(
     Notes
     -----
     The pose vector, the exact pose derivatives and the search are in the module docstring
-    (:mod:`coilrod.control.magnet_pose`).  A typical solve takes 4-20 forward solves; a target
-    off the thin band of tips the magnet can reach from off the robot's reach ends early
-    (status "optimal" or "stalled"), the magnet pressed against the reach (``reach_gap``), a
-    few um away.
+    (:mod:`coilrod.control.magnet_pose`).  A typical solve takes 4-12 forward solves.  A target
+    no pose within the bounds and off the robot's reach meets ends at the constrained optimum
+    (status "optimal"), the magnet's body on the reach's boundary (``reach_gap`` 0) and/or pose
+    components at their bounds (``active``).
 
     Examples
     --------
