@@ -34,7 +34,7 @@ constraints that can bind within the radius (:func:`_constrained_step`); a step 
 holds the reach ends on its curved boundary (a radial move), so a search pressed against the
 reach runs along it.  The search stops at a KKT point of the miss -- "optimal", the closest
 pose within the bounds and off the reach, named as active -- when the constrained Gauss-Newton
-step (no trust region) predicts under 1e-10 relative decrease of the squared miss.  The tip's
+step (no trust region) predicts under 1e-12 relative decrease of the squared miss.  The tip's
 map is ill-conditioned (singular values ~500-1000 apart: an inextensible rod's tip moves along
 its arc far more easily than across it, whatever bends it), so the step that closes the miss
 across the arc moves the pose far, and there the linearisation's error -- second order in the
@@ -45,11 +45,11 @@ decrease, one constrained least-norm Newton step with the Jacobian there moves t
 onto the linearisation's prediction (the target carried along the step: continuation); that
 costs little pose, as the error lies where the tip is sensitive, and keeps the gain across
 the arc.  A step whose corrected solve fails or does not gain a tenth of the prediction
-halves the radius (the first radius is half the scale: the map is far from linear over the
-start's distance).  The band of tips one magnet reaches from off the robot's reach is thin
-near the start pose: a target off it (the benchmark's planar target rounded to 0.1 mm) may
-be met only at a pose far from the start, along the reach's boundary, or not within the
-budget ("max_solves").
+halves the radius, and caps its regrowth below the size that failed (the first radius is half
+the scale: the map is far from linear over the start's distance).  The band of tips one
+magnet reaches from near the start pose is thin: a target off it (the benchmark's planar
+targets rounded to 0.1 mm) may be met only at a pose far from the start, the magnet run along
+the reach's boundary, or not within the budget ("max_solves").
 
 **The robot's reach** is the ball of radius L (the rod's length) about the clamp: every point
 of the rod lies in it whatever the load.  A pose is refused if any point of the magnet's body
@@ -119,10 +119,10 @@ class MagnetPoseResult:
     status : str
         "converged" (within ``tol``), "optimal" (not met: a KKT point of the miss, where the
         Gauss-Newton step within the bounds and off the reach, both linearised, predicts a
-        relative decrease of the squared miss under 1e-10: the closest pose there, the reach
+        relative decrease of the squared miss under 1e-12: the closest pose there, the reach
         (``reach_gap`` ~0) and/or the bounds (``active``) binding), "max_solves", or
         "stalled" (a genuine failure: the trust radius shrank to nothing, or three accepted
-        steps in a row each gained under 1e-10 of the squared miss).
+        steps in a row each gained under 1e-12 of the squared miss).
     active : list of int
         Pose components at a bound (within 1e-9 of its span).
     reach_gap : float
@@ -540,6 +540,7 @@ def _search(p: _Problem, q0, max_solves: int):
     res, r = evaluate(q)
     J = p.jacobian(res) * sc  # per scaled pose unit
     radius, status, crawl = RADIUS_START, "stalled", 0
+    cap = RADIUS_MAX  # the radius's cap after a failed step
     try:
         while True:
             if np.linalg.norm(r) * p.rod.length <= p.tol:
@@ -579,6 +580,7 @@ def _search(p: _Problem, q0, max_solves: int):
             else:
                 new = None
             if new is None:  # no decrease: a shorter step
+                cap = RADIUS_CAP * size
                 radius = RADIUS_SHRINK * min(radius, size)
                 if radius < 1e-10:
                     break
@@ -590,7 +592,8 @@ def _search(p: _Problem, q0, max_solves: int):
                 break
             J = p.jacobian(res) * sc
             if grow:
-                radius = min(max(radius, 2.0 * size), RADIUS_MAX)
+                radius = min(max(radius, 2.0 * size), cap, RADIUS_MAX)
+                cap *= RADIUS_CAP_GROWTH
     except _Spent:
         status = "max_solves"
     return q, res, status, len(history), history
@@ -598,13 +601,19 @@ def _search(p: _Problem, q0, max_solves: int):
 
 #: Relative decrease of the squared miss that the constrained Gauss-Newton step must predict
 #: to go on (below it: a KKT point, status "optimal").
-GAIN_TOL = 1e-10
+GAIN_TOL = 1e-12
 #: First trust radius and largest step, in scaled pose units (:func:`_scales`): half the
 #: scale on the first step (the tip's map is far from linear over the start pose's
 #: distance), and the radius's factor after a step that does not decrease the miss.
 RADIUS_START = 0.5
 RADIUS_MAX = 5.0
 RADIUS_SHRINK = 0.5
+#: After a step of size s fails, the radius grows back to at most RADIUS_CAP s, the cap
+#: itself growing by RADIUS_CAP_GROWTH with each step that grows the radius (without it the
+#: radius doubled back to the size that failed, and failed again: up to four solves per
+#: accepted step along a curved band).
+RADIUS_CAP = 0.7
+RADIUS_CAP_GROWTH = 1.5
 #: The error message says the magnet is pressed against the robot's reach when its body is
 #: within this fraction of L of it.
 REACH_NEAR = 1e-6
