@@ -26,27 +26,30 @@ The hessian is exact (closed forms) for :class:`coils.Dipole`, :class:`coils.Cyl
 (cylinder and ring) and :class:`coils.CuboidMagnet`, so the pose derivatives are exact.
 
 The search is trust-region Gauss-Newton in the pose scaled by a tenth of the magnet's
-distance from the clamp (centre) and 0.2 rad (turn): the least-norm Gauss-Newton step, or the
-Levenberg-Marquardt step on the trust radius, each followed where needed by a corrector.  The
-tip's map is ill-conditioned (singular values ~500-1000 apart: an inextensible rod's tip
-moves along its arc far more easily than across it, whatever bends it), so the step that
-closes the miss across the arc moves the pose far, and there the linearisation's error --
-second order in the step, and along the arc, where the tip is sensitive -- outgrows the gain.
-The trust region alone then shrank to steps that each gained little (a target rounded to
-10 um ended at the budget).  Instead, when a step's forward solve gains less than a quarter of
-the predicted decrease, one least-norm Newton step with the Jacobian there moves the tip back
+distance from the clamp (centre) and 0.2 rad (turn).  Each step is a constrained one: the box
+``bounds`` and the robot's reach (the distance of the magnet's body from the clamp >=
+L + clearance, linearised at the pose from the body's geometry) are linear inequalities of
+the trust-region Gauss-Newton subproblem, solved exactly over the faces of the few
+constraints that can bind within the radius (:func:`_constrained_step`); a step whose face
+holds the reach ends on its curved boundary (a radial move), so a search pressed against the
+reach runs along it.  The search stops at a KKT point of the miss -- "optimal", the closest
+pose within the bounds and off the reach, named as active -- when the constrained Gauss-Newton
+step (no trust region) predicts under 1e-12 relative decrease of the squared miss.  The tip's
+map is ill-conditioned (singular values ~500-1000 apart: an inextensible rod's tip moves along
+its arc far more easily than across it, whatever bends it), so the step that closes the miss
+across the arc moves the pose far, and there the linearisation's error -- second order in the
+step, and along the arc, where the tip is sensitive -- outgrows the gain.  The trust region
+alone then shrank to steps that each gained little (a target rounded to 10 um ended at the
+budget).  Instead, when a step's forward solve gains less than a quarter of the predicted
+decrease, one constrained least-norm Newton step with the Jacobian there moves the tip back
 onto the linearisation's prediction (the target carried along the step: continuation); that
 costs little pose, as the error lies where the tip is sensitive, and keeps the gain across
-the arc.  Steps are clipped to the box ``bounds``, a pose whose body enters the robot's reach
-is moved radially out of it (on the reach's boundary the steps run along it), and a step whose
-corrected solve fails or does not gain a tenth of the prediction shrinks the radius.  The band
-of tips one magnet reaches is thin where it must stay off the reach: some targets (two of the
-benchmark's planar targets rounded to 0.1 mm) lie off it: the search then creeps along the
-reach's boundary, and it stops when the last two accepted steps together decreased the miss by
-less than 20 % with the magnet's body within 0.05 L of the reach (or a pose component at a
-bound) -- Gauss-Newton converging gains far more -- at the closest pose found, status
-"optimal" if the linearisation within the bounds and the reach predicts under 1e-3 relative
-gain there, else "stalled".
+the arc.  A step whose corrected solve fails or does not gain a tenth of the prediction
+halves the radius, and caps its regrowth below the size that failed (the first radius is half
+the scale: the map is far from linear over the start's distance).  The band of tips one
+magnet reaches from near the start pose is thin: a target off it (the benchmark's planar
+targets rounded to 0.1 mm) may be met only at a pose far from the start, the magnet run along
+the reach's boundary, or not within the budget ("max_solves").
 
 **The robot's reach** is the ball of radius L (the rod's length) about the clamp: every point
 of the rod lies in it whatever the load.  A pose is refused if any point of the magnet's body
@@ -61,6 +64,7 @@ magnet's point dipole (``magnet.dipole()``), and the finite magnet is then place
 
 from __future__ import annotations
 
+import itertools
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -113,16 +117,17 @@ class MagnetPoseResult:
     history : list of float
         Position miss of every forward solve of the search, m (in the model's field).
     status : str
-        "converged" (within ``tol``), "optimal" (not met, but no step within the bounds and
-        the reach predicts a relative decrease of the squared miss above 1e-6: the closest
-        pose), "max_solves" or "stalled" (the trust radius shrank to nothing, three accepted
-        steps in a row each gained under 1e-6 of the squared miss, or the search crept along
-        the reach or a bound: see the module docstring).
+        "converged" (within ``tol``), "optimal" (not met: a KKT point of the miss, where the
+        Gauss-Newton step within the bounds and off the reach, both linearised, predicts a
+        relative decrease of the squared miss under 1e-12: the closest pose there, the reach
+        (``reach_gap`` ~0) and/or the bounds (``active``) binding), "max_solves", or
+        "stalled" (a genuine failure: the trust radius shrank to nothing, or three accepted
+        steps in a row each gained under 1e-12 of the squared miss).
     active : list of int
         Pose components at a bound (within 1e-9 of its span).
     reach_gap : float
         Distance of the magnet's body beyond the robot's reach (and ``clearance``) at the
-        pose, m: ~0 where the reach is the active constraint.
+        pose, m: 0 to round-off where the reach is the active constraint.
     """
 
     pose: np.ndarray
@@ -309,18 +314,27 @@ class _Problem:
             self.rod.length + self.clearance
         )
 
-    def off_reach(self, q) -> np.ndarray:
+    def off_reach(self, q, onto: bool = False) -> np.ndarray:
         """q with the magnet's centre moved radially away from the clamp (in the plane for a
-        planar pose) until its body is just off the reach (q itself if it is)."""
-        if self.clear(q) >= 0.0:
+        planar pose) until its body is just off the reach (q itself if it is); ``onto``: also
+        moved radially in onto the reach's boundary if it is off it (a step along the
+        linearised boundary ends a little off the curved one)."""
+        gap = self.clear(q)
+        if gap > 0.0 and not onto or gap == 0.0:
             return q
         c = self.center(q)
         v = c - self.clamp
         if self.planar:
             v[2] = 0.0
-        lo_t, hi_t = 1.0, 2.0
-        while self.clear(self._scaled(q, v, hi_t)) < 0.0:
-            hi_t *= 2.0
+        lo_t, hi_t = 1.0, 1.0
+        if gap < 0.0:
+            hi_t = 2.0
+            while self.clear(self._scaled(q, v, hi_t)) < 0.0:
+                hi_t *= 2.0
+        else:
+            lo_t = 0.5
+            while self.clear(self._scaled(q, v, lo_t)) >= 0.0:
+                lo_t *= 0.5
         for _ in range(60):  # bisection to round-off: the body just off the reach
             mid = 0.5 * (lo_t + hi_t)
             lo_t, hi_t = (mid, hi_t) if self.clear(self._scaled(q, v, mid)) < 0.0 else (lo_t, mid)
@@ -334,17 +348,16 @@ class _Problem:
             out[2] = self.clamp[2] + t * v[2]
         return out
 
-    def reach_normal(self, q, sc):
-        """d(clear)/d(scaled q) where the magnet's body touches the reach (within 1e-6 L),
-        else None: the outward normal of the reach in the scaled pose space."""
-        if self.clear(q) > 1e-6 * self.rod.length:
-            return None
+    def reach_row(self, q, sc):
+        """The reach constraint ``clear >= 0`` linearised at q in the scaled pose: (g, c) with
+        ``clear(q + s * sc) ~ c + g @ s`` (m; g by central differences of the body's geometry,
+        :func:`reach_distance`, no forward solve)."""
         g = np.empty(q.size)
         for k in range(q.size):
             e = np.zeros(q.size)
             e[k] = 1e-6 * sc[k]
             g[k] = (self.clear(q + e) - self.clear(q - e)) / 2e-6
-        return g
+        return g, self.clear(q)
 
     def forward(self, magnet, q) -> RodResult:
         placed = _PoseField(self.place(magnet, q), q, self.planar)
@@ -493,9 +506,10 @@ class _Spent(Exception):
 
 
 def _search(p: _Problem, q0, max_solves: int):
-    """Trust-region Gauss-Newton on the tip miss with the exact Jacobian and a corrector
-    after a mispredicted step, in the pose scaled by :func:`_scales` (module docstring).  Returns
-    (q, result, status, solves, history)."""
+    """Trust-region Gauss-Newton on the tip miss with the exact Jacobian, the bounds and the
+    robot's reach as linear inequalities of each step (:func:`_constrained_step`), and a
+    corrector after a mispredicted step, in the pose scaled by :func:`_scales` (module
+    docstring).  Returns (q, result, status, solves, history)."""
     history = []
 
     def evaluate(q):
@@ -515,41 +529,50 @@ def _search(p: _Problem, q0, max_solves: int):
     def sq(v) -> float:
         return float(v @ v)
 
+    def feasible(q, face, reach):
+        """q within the bounds and with the body off the reach -- on it if the step's face
+        held the reach (the linearised constraints' round-off: a clip, and a radial move onto
+        the reach's curved boundary)."""
+        return p.off_reach(np.clip(q, p.lo, p.hi), onto=reach is not None and reach in face)
+
     sc = _scales(p, q0)
     q = q0.copy()
     res, r = evaluate(q)
     J = p.jacobian(res) * sc  # per scaled pose unit
-    radius, status, crawl = 1.0, "stalled", 0
-    accepted = [float(np.linalg.norm(r))]  # the miss after each accepted step (units of L)
+    radius, status, crawl = RADIUS_START, "stalled", 0
+    cap = RADIUS_MAX  # the radius's cap after a failed step
     try:
         while True:
             if np.linalg.norm(r) * p.rod.length <= p.tol:
                 status = "converged"
                 break
-            N = _directions(p, q, J, r, sc)
-            if not N.shape[1] or _gain(J @ N, r) <= GAIN_TOL:
+            A, b, reach = _constraints(p, q, sc)
+            # first-order optimality: the constrained Gauss-Newton step (no trust region)
+            # predicts no decrease of the squared miss -- a KKT point of the miss
+            best, _ = _constrained_step(J, r, np.inf, A, b)
+            if sq(r) - sq(r + J @ best) <= GAIN_TOL * sq(r):
                 status = "optimal"
                 break
-            step = N @ _tr_step(J @ N, r, radius)
+            step, face = _constrained_step(J, r, radius, A, b)
             size = float(np.linalg.norm(step))
             goal = r + J @ step  # the linearisation's miss after the step
             pred = sq(r) - sq(goal)
             if pred <= 0.0:
                 break
             # predictor: the Gauss-Newton step (shortened to the radius)
-            trial = p.off_reach(np.clip(q + step * sc, p.lo, p.hi))
+            trial = feasible(q + step * sc, face, reach)
             res_t, r_t = evaluate_or_none(trial)
             if res_t is not None and sq(r) - sq(r_t) >= 0.25 * pred:
                 new, grow = (trial, res_t, r_t), True
             elif res_t is not None:
                 # corrector: one least-norm Newton step from the predictor back to the
                 # linearisation's miss ``goal`` (the target moved along by the step), with the
-                # Jacobian there -- it undoes the model's second-order error, which lies in
-                # the tip's stiff directions and costs little pose
+                # Jacobian there and the constraints -- it undoes the model's second-order
+                # error, which lies in the tip's stiff directions and costs little pose
                 J_t = p.jacobian(res_t) * sc
-                N_t = _directions(p, trial, J_t, r_t - goal, sc)
-                fix = N_t @ np.linalg.lstsq(J_t @ N_t, goal - r_t, rcond=None)[0]
-                corr = p.off_reach(np.clip(trial + fix * sc, p.lo, p.hi))
+                A_t, b_t, reach_t = _constraints(p, trial, sc)
+                fix, face_t = _constrained_step(J_t, r_t - goal, np.inf, A_t, b_t)
+                corr = feasible(trial + fix * sc, face_t, reach_t)
                 res_c, r_c = evaluate_or_none(corr)
                 ok = res_c is not None and sq(r) - sq(r_c) >= 0.1 * pred
                 new = (corr, res_c, r_c) if ok else None
@@ -557,49 +580,43 @@ def _search(p: _Problem, q0, max_solves: int):
             else:
                 new = None
             if new is None:  # no decrease: a shorter step
-                radius = 0.25 * min(radius, size)
+                cap = RADIUS_CAP * size
+                radius = RADIUS_SHRINK * min(radius, size)
                 if radius < 1e-10:
                     break
                 continue
             gained = sq(r) - sq(new[2])
-            crawl = crawl + 1 if gained < 1e-6 * sq(r) else 0
+            crawl = crawl + 1 if gained < GAIN_TOL * sq(r) else 0
             q, res, r = new
             if crawl >= 3:
                 break
             J = p.jacobian(res) * sc
-            accepted.append(float(np.linalg.norm(r)))
-            if _creeping(p, q, accepted):
-                N = _directions(p, q, J, r, sc)
-                status = "optimal" if not N.shape[1] or _gain(J @ N, r) <= CREEP_GAIN else status
-                break
             if grow:
-                radius = min(max(radius, 2.0 * size), RADIUS_MAX)
+                radius = min(max(radius, 2.0 * size), cap, RADIUS_MAX)
+                cap *= RADIUS_CAP_GROWTH
     except _Spent:
         status = "max_solves"
     return q, res, status, len(history), history
 
 
-#: Relative decrease of the squared miss that the best step must predict to go on.
-GAIN_TOL = 1e-6
-#: Largest step, in scaled pose units (:func:`_scales`).
+#: Relative decrease of the squared miss that the constrained Gauss-Newton step must predict
+#: to go on (below it: a KKT point, status "optimal").
+GAIN_TOL = 1e-12
+#: First trust radius and largest step, in scaled pose units (:func:`_scales`): half the
+#: scale on the first step (the tip's map is far from linear over the start pose's
+#: distance), and the radius's factor after a step that does not decrease the miss.
+RADIUS_START = 0.5
 RADIUS_MAX = 5.0
-#: A search pressed against a constraint stops when its last two accepted steps together
-#: decreased the miss by less than this fraction (Gauss-Newton converging gains far more) ...
-CREEP_DECREASE = 0.2
-#: ... with the magnet's body within this fraction of L of the reach, or a pose bound active.
-CREEP_NEAR = 0.05
-#: Relative decrease of the squared miss the constrained linearisation may still predict at a
-#: search stopped so for it to be reported "optimal" (else "stalled").
-CREEP_GAIN = 1e-3
-
-
-def _creeping(p: _Problem, q, accepted) -> bool:
-    """Whether the search creeps along a constraint: the last two accepted steps decreased
-    the miss by less than :data:`CREEP_DECREASE` in all, the magnet's body within
-    :data:`CREEP_NEAR` L of the robot's reach or a pose component at a bound."""
-    if len(accepted) < 3 or accepted[-1] < (1.0 - CREEP_DECREASE) * accepted[-3]:
-        return False
-    return p.clear(q) <= CREEP_NEAR * p.rod.length or bool(_at_bounds(p, q))
+RADIUS_SHRINK = 0.5
+#: After a step of size s fails, the radius grows back to at most RADIUS_CAP s, the cap
+#: itself growing by RADIUS_CAP_GROWTH with each step that grows the radius (without it the
+#: radius doubled back to the size that failed, and failed again: up to four solves per
+#: accepted step along a curved band).
+RADIUS_CAP = 0.7
+RADIUS_CAP_GROWTH = 1.5
+#: The error message says the magnet is pressed against the robot's reach when its body is
+#: within this fraction of L of it.
+REACH_NEAR = 1e-6
 
 
 def _at_bounds(p: _Problem, q) -> list:
@@ -608,43 +625,78 @@ def _at_bounds(p: _Problem, q) -> list:
     return np.flatnonzero((q - p.lo <= 1e-9 * span) | (p.hi - q <= 1e-9 * span)).tolist()
 
 
-def _directions(p: _Problem, q, J, r, sc) -> np.ndarray:
-    """A basis (columns, scaled pose units) of the steps allowed at q: the pose components
-    not at a bound that the descent of |r|^2 pushes against, and on the reach's boundary,
-    if the least-norm Gauss-Newton step would enter it, those along the boundary."""
-    N = np.eye(q.size)[:, _free(q, J, r, p)]
-    g = p.reach_normal(q, sc)
-    if g is not None and N.shape[1]:
-        s = np.linalg.lstsq(J @ N, -r, rcond=None)[0]
-        if float(s @ (N.T @ g)) < 0:
-            from scipy.linalg import null_space
+def _constraints(p: _Problem, q, sc):
+    """The constraints on a scaled step s from q as rows ``A s >= b`` (unit rows): the box
+    bounds, and the robot's reach linearised (:meth:`_Problem.reach_row`); and the reach's
+    row (None if its gradient vanishes)."""
+    rows, rhs = [], []
+    eye = np.eye(q.size)
+    for k in np.flatnonzero(np.isfinite(p.lo)):
+        rows.append(eye[k])
+        rhs.append((p.lo[k] - q[k]) / sc[k])
+    for k in np.flatnonzero(np.isfinite(p.hi)):
+        rows.append(-eye[k])
+        rhs.append((q[k] - p.hi[k]) / sc[k])
+    g, c = p.reach_row(q, sc)
+    ng = float(np.linalg.norm(g))
+    reach = None
+    if ng > 0.0:
+        reach = len(rows)
+        rows.append(g / ng)
+        rhs.append(-c / ng)
+    return np.array(rows).reshape(-1, q.size), np.array(rhs), reach
 
-            N = N @ null_space((N.T @ g)[None, :])
-    return N
+
+def _constrained_step(J, r, radius: float, A, b) -> np.ndarray:
+    """argmin |r + J s| over |s| <= radius and A s >= b (unit rows; s = 0 feasible up to
+    round-off), the least-norm one on its face: the smallest of the trust-region steps
+    (:func:`_tr_step`) on the faces ``A_W s = b_W`` of the constraints that can bind within
+    the radius that satisfy all the others -- exact for the convex subproblem (its optimum
+    lies on the face of its active set), and cheap: a few constraints, 3 or 6 unknowns.
+    Returns (s, face): the step and the rows held with equality."""
+    n = J.shape[1]
+    tol = 1e-10 * (1.0 + (radius if np.isfinite(radius) else 0.0))
+    near = np.flatnonzero(-b <= (radius if np.isfinite(radius) else np.inf))  # slack <= radius
+    best, best_val, face = np.zeros(n), float(r @ r), ()
+    for m in range(min(n, near.size) + 1):
+        for W in itertools.combinations(near.tolist(), m):
+            s = _face_step(J, r, radius, A[list(W)], b[list(W)])
+            if s is None or np.any(A @ s < b - tol):
+                continue
+            val = float((r + J @ s) @ (r + J @ s))
+            if val < best_val * (1.0 - 1e-14) or (
+                val <= best_val * (1.0 + 1e-14) and s @ s < best @ best
+            ):
+                best, best_val, face = s, val, W
+    return best, face
 
 
-def _free(q, J, r, p: _Problem) -> np.ndarray:
-    """Pose components free to move: not at a bound that the steepest descent pushes against."""
-    down = -(J.T @ r)  # descent direction (scaled)
-    at_lo = (q <= p.lo) & (down < 0)
-    at_hi = (q >= p.hi) & (down > 0)
-    return ~(at_lo | at_hi)
-
-
-def _gain(J, r) -> float:
-    """Relative decrease of |r|^2 of the least-squares step of the linearisation."""
-    rr = float(r @ r)
-    if rr == 0.0:
-        return 0.0
-    s = np.linalg.lstsq(J, -r, rcond=None)[0]
-    after = r + J @ s
-    return max(0.0, (rr - float(after @ after)) / rr)
+def _face_step(J, r, radius: float, AW, bW):
+    """argmin |r + J s| over |s| <= radius on the face ``AW s = bW`` (None if it misses the
+    ball): s = s0 + Z y with s0 the face's least-norm point and Z its orthonormal directions."""
+    n = J.shape[1]
+    if AW.shape[0] == 0:
+        s0, Z = np.zeros(n), np.eye(n)
+    else:
+        U, sv, Vt = np.linalg.svd(AW)
+        if sv[-1] < 1e-9 * sv[0] or AW.shape[0] > n:
+            return None  # dependent rows: a smaller face holds the same points
+        s0 = Vt[: AW.shape[0]].T @ ((U.T @ bW) / sv)
+        Z = Vt[AW.shape[0] :].T
+    room = radius**2 - float(s0 @ s0)
+    if room < 0.0:
+        return None
+    if Z.shape[1] == 0:
+        return s0
+    return s0 + Z @ _tr_step(J @ Z, r + J @ s0, math.sqrt(room))
 
 
 def _tr_step(J, r, radius: float) -> np.ndarray:
     """argmin |r + J s| over |s| <= radius (the least-norm one if several): the Gauss-Newton
     step, or the Levenberg-Marquardt step whose damping puts it on the radius."""
     U, sv, Vt = np.linalg.svd(J, full_matrices=False)
+    if not sv.size or sv[0] == 0.0 or radius <= 0.0:
+        return np.zeros(J.shape[1])
     b = -(U.T @ r)
     keep = sv > 1e-12 * sv[0]
     U, sv, Vt, b = U[:, keep], sv[keep], Vt[keep], b[keep]
@@ -738,10 +790,10 @@ def solve_magnet_pose(
     Notes
     -----
     The pose vector, the exact pose derivatives and the search are in the module docstring
-    (:mod:`coilrod.control.magnet_pose`).  A typical solve takes 4-20 forward solves; a target
-    off the thin band of tips the magnet can reach from off the robot's reach ends early
-    (status "optimal" or "stalled"), the magnet pressed against the reach (``reach_gap``), a
-    few um away.
+    (:mod:`coilrod.control.magnet_pose`).  A typical solve takes 4-12 forward solves.  A target
+    no pose within the bounds and off the robot's reach meets ends at the constrained optimum
+    (status "optimal"), the magnet's body on the reach's boundary (``reach_gap`` 0) and/or pose
+    components at their bounds (``active``).
 
     Examples
     --------
@@ -800,7 +852,7 @@ def solve_magnet_pose(
             "stalled": "status 'stalled': the steps stopped decreasing the miss",
         }[status]
         names = ["c_x", "c_y", "psi"] if p.planar else ["c_x", "c_y", "c_z", "r_x", "r_y", "r_z"]
-        near = out.reach_gap <= CREEP_NEAR * p.rod.length
+        near = out.reach_gap <= REACH_NEAR * p.rod.length
         err = ConvergenceError(
             f"solve_magnet_pose: the target {p.target.tolist()} m is not reached ({why}"
             + (
