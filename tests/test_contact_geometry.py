@@ -712,3 +712,38 @@ class TestAPI:
 
     def test_module_presets_are_importable_from_the_subpackage(self):
         assert vessel_module.Vessel is Vessel
+
+
+def test_vessel_remembered_search_is_the_search():
+    """A vessel remembers its last few nearest-point searches (a contact solve asks for the
+    same points again): a repeated query returns what a fresh vessel computes, bitwise,
+    whatever the caller did to the previous answer, at every order; the memory stays bounded
+    and a pickled copy starts without it."""
+    import pickle
+
+    def make():
+        return Vessel.bend(bend_radius=0.02, angle=np.pi / 2, radius=0.002,
+                           straight_before=0.02, straight_after=0.03)  # fmt: skip
+
+    v = make()
+    rng = np.random.default_rng(3)
+    sets = [v.position(rng.uniform(-0.005, 0.07, 9)) + 5e-4 * rng.standard_normal((9, 3))
+            for _ in range(vessel_module._LOCATED_KEPT + 2)]  # fmt: skip
+    first = v.evaluate(sets[0], order=1)
+    first.gap[:] = 7.0  # the caller's copy: the remembered search must not see this
+    first.gradient[:] = 7.0
+    fresh = make()
+
+    def same(p):
+        for order in (2, 0, 1):
+            got, want = v.evaluate(p, order=order), fresh.evaluate(p, order=order)
+            for a, b in zip(got, want, strict=True):
+                assert (a is None and b is None) or np.array_equal(a, b)
+
+    same(sets[0])  # remembered
+    for p in sets[1:]:  # pushes sets[0] out of the memory
+        v.evaluate(p, order=0)
+    assert len(v.__dict__["_located_memo"]) == vessel_module._LOCATED_KEPT
+    for p in sets[::-1]:
+        same(p)
+    assert pickle.loads(pickle.dumps(v)).__dict__["_located_memo"] is None

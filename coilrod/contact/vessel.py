@@ -141,6 +141,10 @@ def _unit_normal_to(v: np.ndarray) -> np.ndarray:
     return w / np.linalg.norm(w, axis=1, keepdims=True)
 
 
+#: Point sets whose nearest-point search a vessel remembers (:meth:`Vessel._located`).
+_LOCATED_KEPT = 4
+
+
 class Vessel(Obstacle):
     """Rigid tube of radius ``radius`` around the 3D curve ``centerline``.
 
@@ -192,6 +196,7 @@ class Vessel(Obstacle):
 
     _outside = "outside the vessel"
     _immutable = True
+    _caches = ("_located_memo",)
 
     def __init__(self, centerline, radius, *, smooth: bool = False, ends="extend", friction=0.0):
         self.friction = as_friction(friction)
@@ -632,13 +637,34 @@ class Vessel(Obstacle):
             XUU[rows, col],
         )
 
+    def _located(self, points: np.ndarray):
+        """The nearest-point search of ``points`` (gap, piece, parameter, and the centreline's
+        point and derivatives there or None), remembered for the last
+        :data:`_LOCATED_KEPT` point sets: a contact solve asks for the same points again (the
+        gaps of a state, then its linearization; a prediction's start and its events), and
+        the search is most of an evaluation.  The geometry never changes after
+        construction, so a remembered search is the search (the key is the points' bytes)."""
+        key = points.tobytes()
+        memo = self.__dict__.get("_located_memo")
+        if memo is None:  # (a cache: a pickled or evolved copy starts without it)
+            memo = {}
+            self._set_cache("_located_memo", memo)
+        hit = memo.pop(key, None)
+        if hit is None:
+            K = self._m + len(self._extra)
+            if (self._tree is None and not self._needs_newton.any()
+                    and len(points) * K <= PAIR_CHUNK):  # fmt: skip
+                hit = self._locate_closed_form(points)
+            else:
+                hit = (*self._locate(points), None, None, None)
+            if len(memo) >= _LOCATED_KEPT:
+                del memo[next(iter(memo))]  # the oldest
+        memo[key] = hit  # (re)inserted last: the most recent
+        return hit
+
     def _evaluate(self, points: np.ndarray, order: int):
-        K = self._m + len(self._extra)
-        if self._tree is None and not self._needs_newton.any() and len(points) * K <= PAIR_CHUNK:
-            g, j, u, x, xu, xuu = self._locate_closed_form(points)
-        else:
-            g, j, u = self._locate(points)
-            x = xu = xuu = None
+        g, j, u, x, xu, xuu = self._located(points)
+        g = g.copy()  # (the remembered search stays the caller's to keep)
         if order == 0:
             return g, None, None
         if x is None:

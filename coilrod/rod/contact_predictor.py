@@ -49,6 +49,13 @@ def event_fraction(problem, U: np.ndarray, dU: np.ndarray) -> np.ndarray:
     return np.minimum(frac, release.min(axis=(1, 2)))
 
 
+def _all_active(lam: np.ndarray, gaps: np.ndarray):
+    """The min complementarity function with every row taken as active: the value ``kappa
+    g`` is not used, its partials in lam (0) and in kappa g (1) make the contact rows the
+    gap's gradient (:meth:`~coilrod.rod.spatial.SpatialRod._ncp`'s interface)."""
+    return np.minimum(lam, gaps), np.zeros_like(lam), np.ones_like(lam)
+
+
 def _contact_entries(problem):
     """Band-storage indices (rows, cols), each (n - 1, nc, 6 + nc), of the contact rows of the
     free nodes: their entries in the node's position, rotation and multiplier columns."""
@@ -73,27 +80,24 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     n, nv, nc = problem.n, problem.nv, problem.nc
     if max_events is None:
         max_events = 2 * (n - 1) * nc + 4
-    old = problem.__dict__.get("ncp")
-    problem.ncp = "min"  # contact rows: the gradient of the gap (active) or the multiplier
+    # One linearization at u with every contact row active (the gradient of kappa g): the
+    # force and moment rows depend on the multipliers alone (not on which rows are active),
+    # and each rate below overwrites all the contact rows by the active set's, so this one
+    # tangent serves every switch.
+    problem._ncp = _all_active  # (an instance attribute: the class's method is untouched)
     try:
-        lin = problem.linearize(u[None], np.array([scale]))
-        V = u.reshape(n, nv).copy()
-        g = problem.surface_gaps(V[None, :, 0:3], problem.frames(u[None]))[0]
-        V[:, 9 : 9 + nc] = np.maximum(V[:, 9 : 9 + nc], problem.kappa * np.abs(g) + 1.0)
-        every = problem.linearize(V.reshape(1, -1), np.array([scale]))  # all rows active
+        every = problem.linearize(u[None], np.array([scale]))
     finally:
-        if old is None:
-            del problem.ncp
-        else:
-            problem.ncp = old
-    if not (bool(lin.ok[0]) and bool(every.ok[0])):
+        del problem._ncp
+    if not bool(every.ok[0]):
         return None
+    g = problem.surface_gaps(u.reshape(1, n, nv)[:, :, 0:3], problem.frames(u[None]))[0]
     bi, ci = _contact_entries(problem)
-    base = lin.tangent.parts
-    active_rows = every.tangent.parts[bi, ci]  # (n-1, nc, 6 + nc)
+    base = every.tangent.parts
+    active_rows = base[bi, ci]  # (n-1, nc, 6 + nc)
     inactive_rows = np.zeros_like(active_rows)
     inactive_rows[..., 6:] = np.eye(nc)
-    rhs = -np.asarray(lin.load_rate, float)  # (1, size)
+    rhs = -np.asarray(every.load_rate, float)  # (1, size)
     kl, ku = problem.kl, problem.ku
 
     def rate(active):
