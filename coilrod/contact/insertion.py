@@ -470,10 +470,12 @@ def _step(build, problem, u, prev, target, k, before=None):
     # settles (then it converges quadratically)
     opts = NewtonOptions(max_iter=40, stagnation=12)
     (prev_len, prev_field), (target_len, target_field) = prev, target
-    # a reversal (insertion after withdrawal or back): the secant would head back the old
-    # way; the start is the carried state with its friction turned round (see
-    # _reverse_friction)
-    reversal = before is not None and (target_len - prev_len) * (prev_len - before[2]) < 0
+    # a reversal with friction (insertion after withdrawal or back): the secant would head
+    # back to the old state; the start is the carried state with its friction turned round
+    # (_reverse_friction).  Frictionless, the secant is right (the states do not depend on
+    # the direction)
+    reversal = bool(problem.nt) and before is not None
+    reversal = reversal and (target_len - prev_len) * (prev_len - before[2]) < 0
     t, dt, solves, halvings = 0.0, 1.0, 0, 0
     cur_problem, cur_u, cur_lin, free = problem, u, None, None
     while t < 1.0:
