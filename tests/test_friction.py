@@ -195,47 +195,48 @@ def test_capstan_round_a_bend():
 
 
 def test_stick_is_exact_at_several_sticking_points():
-    # a cantilever pressed by a uniform load q (N/m, EI/L^3 units: 10) onto a floor 0.05 L
-    # below its surface lies on it from node 12 to the tip; then, at the same normal load, a
-    # uniform tangential load g q along the rod (toward the tip) is added in two steps.  The
-    # lying points stick: the friction between them is statically indeterminate (an
-    # inextensible straight span), yet each stuck point must not move at all (before: a
-    # stick slack r u = 1e-6 (tau_ref - tau) moved them 7.8e-11 L per step).  Equilibrium:
-    # the load per length A M t_x (G_xx, G_xy, 0) of the gradient's field (a dead force on
-    # the axial moment) integrates to A M (G_xx, G_xy, 0) (x_tip - x_clamp) (trapezoid
-    # weights, like the centreline's): the rod's forces on the clamp and on the wall add up
-    # to it
+    # a cantilever pressed by a uniform load q (N/m, EI/L^3 units: 10) onto a frictionless
+    # floor 0.05 L below its surface lies on it from node 11 to the tip; then, with friction
+    # and at the same normal load, a uniform tangential load 0.1 q along the rod (toward the
+    # tip) is added.  The lying points stick: the friction between them is statically
+    # indeterminate (an inextensible straight span), yet each stuck point must not move at
+    # all (before: a stick slack r u = 1e-6 (tau_ref - tau) moved them 1.5e-10 L).
+    # Equilibrium: the load per length A M t_x (G_xx, G_xy, 0) of the gradient's field (a
+    # dead force on the axial moment) integrates to A M (G_xx, G_xy, 0) (x_tip - x_clamp)
+    # (trapezoid weights, like the centreline's): the rod's forces on the clamp and on the
+    # wall add up to it
     rod = _rod()
     q, AM, mu = 10 * rod.bending_stiffness / L**3, rod.area * 128e3, 0.5
-    floor = Wall((0, -0.05 * L - 1e-3, 0), (0, 1, 0), friction=mu)
-    opts = PathOptions(relative_correction=1.0)
-    u = ref = None
-    for g in (0.0, 0.05, 0.1):
-        G = np.zeros((3, 3))
-        G[0, 0], G[0, 1] = g * q / AM, -q / AM
-        field = coils.LinearField(B0=(0, 0, 0), gradient=G)
-        P = build_spatial_problem(rod, field, make_mesh(rod, 16), np.zeros(3), np.eye(3),
-                                  1e-10, obstacles=[floor])  # fmt: skip
-        if u is None:  # lay it down (the lying points slide)
-            run = follow_load(P, P.straight(), [0.5, 1.0], opts)
-        else:
-            P.set_reference(*ref)
-            run = follow_load(P, u, [1.0], opts, start_scale=1.0)
-        u = run.points[-1].u
-        V = u.reshape(P.n, P.nv)
-        lam, tau = V[:, 9], V[:, 10:13]
-        points = P.contact_points(u[None])[0]
-        force, _, active = P.contact_state(u[None])
-        if g > 0:
-            stuck = np.flatnonzero(active[0, :, 0])
-            np.testing.assert_array_equal(stuck, np.arange(12, 17))
-            t = np.linalg.norm(tau[stuck], axis=1)
-            assert np.all(t < mu * lam[stuck])  # strictly inside the cone
-            assert np.all(t > 0)
-            assert np.abs(points[stuck] - ref[0][stuck]).max() <= 1e-12  # units of L
-        f = AM * G[0, :] * L**3 / rod.bending_stiffness  # per length along x, EI / L^3
-        wall = P.contact_totals(force)[0, 0]  # the rod's force on the wall, EI / L^2
-        clamp = V[0, 6:9] + P.mesh.w[0] * f  # on the clamp (its node's share of the load)
-        np.testing.assert_allclose(clamp + wall, f * (V[-1, 0] - V[0, 0]), rtol=0, atol=1e-9)
-        assert abs(wall[0]) > 1.0  # the friction carries most of the tangential load
-        ref = (points, P.friction_forces(u[None])[0])
+    G = np.zeros((3, 3))
+    G[0, 1] = -q / AM
+    floor = Wall((0, -0.05 * L - 1e-3, 0), (0, 1, 0))
+    args = (rod, coils.LinearField(B0=(0, 0, 0), gradient=G), make_mesh(rod, 16), np.zeros(3),
+            np.eye(3), 1e-10)  # fmt: skip
+    P0 = build_spatial_problem(*args, obstacles=[floor])
+    u0 = follow_load(P0, P0.straight(), [1.0]).points[-1].u
+    G[0, 0] = 0.1 * q / AM
+    args = (*args[:1], coils.LinearField(B0=(0, 0, 0), gradient=G), *args[2:])
+    P = build_spatial_problem(*args, obstacles=[floor.with_friction(mu)])
+    ref = P0.contact_points(u0[None])[0]
+    P.set_reference(ref)
+    start = np.zeros((P.n, P.nv))
+    start[:, : P0.nv] = u0.reshape(P0.n, P0.nv)
+    run = follow_load(P, start.ravel(), [1.0], PathOptions(relative_correction=1.0),
+                      start_scale=1.0)  # fmt: skip
+    u = run.points[-1].u
+    V = u.reshape(P.n, P.nv)
+    lam, tau = V[:, 9], V[:, 10:13]
+    force, _, active = P.contact_state(u[None])
+    touching = np.flatnonzero(active[0, :, 0])
+    np.testing.assert_array_equal(touching, np.arange(11, 17))
+    t = np.linalg.norm(tau[touching], axis=1)
+    assert np.all(t <= mu * lam[touching] * (1 + 1e-12))  # within the cone
+    stuck = touching[t < mu * lam[touching] * (1 - 1e-6)]  # strictly inside: stick
+    np.testing.assert_array_equal(stuck, np.arange(12, 17))  # (11 lifts off: on the cone)
+    assert np.all(t > 0)
+    assert np.abs(P.contact_points(u[None])[0][stuck] - ref[stuck]).max() <= 1e-12  # units of L
+    f = AM * G[0, :] * L**3 / rod.bending_stiffness  # per length along x, EI / L^3
+    wall = P.contact_totals(force)[0, 0]  # the rod's force on the wall, EI / L^2
+    clamp = V[0, 6:9] + P.mesh.w[0] * f  # on the clamp (its node's share of the load)
+    np.testing.assert_allclose(clamp + wall, f * (V[-1, 0] - V[0, 0]), rtol=0, atol=1e-9)
+    assert wall[0] > 0.5  # the friction carries much of the tangential load (1)
