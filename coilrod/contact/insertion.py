@@ -470,10 +470,10 @@ def _step(build, problem, u, prev, target, k, before=None):
     # settles (then it converges quadratically)
     opts = NewtonOptions(max_iter=40, stagnation=12)
     (prev_len, prev_field), (target_len, target_field) = prev, target
-    # a reversal with friction (insertion after withdrawal or back): the secant would head
-    # back to the old state; the start is the carried state with its friction turned round
-    # (_reverse_friction).  Frictionless, the secant is right (the states do not depend on
-    # the direction)
+    # a reversal with friction (insertion after withdrawal or back): the first try starts
+    # from the carried state with its friction turned round (_reverse_friction), the usual
+    # start (the secant, which heads back to the old state) second.  Frictionless, the
+    # secant is right (the states do not depend on the direction)
     reversal = bool(problem.nt) and before is not None
     reversal = reversal and (target_len - prev_len) * (prev_len - before[2]) < 0
     t, dt, solves, halvings = 0.0, 1.0, 0, 0
@@ -485,13 +485,15 @@ def _step(build, problem, u, prev, target, k, before=None):
         trial_free, trial = build(length, field)
         _carry_reference(cur_problem, cur_u, trial)
         start = _carry(cur_problem, cur_u, trial)
-        if reversal and t == 0.0:  # every point slides the other way: so does its friction
-            start = _reverse_friction(trial, start)
-        elif before is not None and t == 0.0 and t1 == 1.0 and before[2] != prev_len:
+        starts = [_reverse_friction(trial, start)] if reversal and t == 0.0 else []
+        if before is not None and t == 0.0 and t1 == 1.0 and before[2] != prev_len:
             w = (target_len - prev_len) / (prev_len - before[2])
             start = start + w * (start - _carry(before[0], before[1], trial))
-        res = newton(trial, start, 1.0, opts)
-        solves += 1
+        for guess in [*starts, start]:
+            res = newton(trial, guess, 1.0, opts)
+            solves += 1
+            if res.ok:
+                break
         if res.ok:  # (its linearization carries the state's stability)
             t, cur_problem, cur_u, cur_lin, free = t1, trial, res.u, res.lin, trial_free
             dt = min(1.0 - t, 2 * dt) if t < 1.0 else dt
