@@ -7,8 +7,9 @@ push force on a flat wall.
    on the free straight spans, s = 10 and 55 mm) against the motion -- toward the tip
    while it is inserted, toward the clamp while withdrawn.  The rope limit is EI -> 0 at
    a given tension T, i.e. EI / (T rho^2) -> 0: the pull is raised at fixed EI (E = 1 kPa)
-   for the withdrawal step.  Columns: the relative error of the tension ratio against
-   exp(mu theta), by mesh.
+   for the withdrawal (1 mm, then 1 mm more) and the re-insertion (2 mm: the motion
+   reversed under the high tension).  Columns: the relative error of the tension ratio
+   against exp(mu theta), by mesh.
 2. A tip bent onto a flat wall parallel to the introducer slides along it: the push force
    at the introducer is mu times the wall's normal reaction (insertion) and minus it
    (withdrawal), exactly.
@@ -35,20 +36,26 @@ MU = 0.2
 
 def capstan(nodes: int, pull: float):
     """Rows (direction, EI/(T rho^2), ratio, exp(mu theta), relative error) of an insertion
-    round the bend (dipole moment 5 A m^2) and one withdrawal step at ``pull`` A m^2."""
+    round the bend (dipole moment 5 A m^2), a withdrawal and a re-insertion at ``pull``
+    A m^2."""
     vessel = Vessel.bend(bend_radius=0.02, angle=np.pi / 2, radius=0.002, straight_before=0.02,
                          straight_after=0.06).with_friction(MU)  # fmt: skip
     mag = Magnetization.segments([0.09, 0.01], [0.0, 128e3], [0.0, 0.0])
     rod = Rod(0.1, 1e3, Circle(1e-3), mag)
     steps = 2 * nodes // 3
-    lengths = [*np.linspace(0.015, 0.08, steps), 0.079]
+    lengths = [*np.linspace(0.015, 0.08, steps), 0.079, 0.078, 0.08]
     fields = [coils.Dipole(moment=(0, m, 0), center=(0.04, 0.14, 0))
-              for m in [5.0] * steps + [pull]]  # fmt: skip
+              for m in [5.0] * steps + [pull] * 3]  # fmt: skip
     t0 = time.process_time()
     ins = insert(rod, vessel, lengths, fields, nodes=nodes)
     cpu = time.process_time() - t0
     rows = []
-    for k, sign, name in ((steps - 1, 1.0, "insert"), (steps, -1.0, "withdraw")):
+    cases = (
+        (steps - 1, 1.0, "insert"),
+        (steps + 1, -1.0, "withdraw"),
+        (steps + 2, 1.0, "re-insert"),
+    )
+    for k, sign, name in cases:
         s, axial = ins.s(k)[:-1], ins.axial_force(k)
         chord = np.diff(ins.centerline(k), axis=0)
         angle = np.arctan2(chord[:, 1], chord[:, 0])

@@ -228,13 +228,21 @@ def test_mm_units(tmp_path):
     assert cube.gap([0.0, 0.0, 0.0])[0] == pytest.approx(1e-3)
 
 
-def test_inward_normals_are_turned_with_a_warning(tmp_path):
+def test_inward_normals_are_an_error_unless_fixed(tmp_path):
+    # one clear error naming the file and the way out; fix_normals=True turns them round
+    # (the cube of half-width 1 mm: the gap at its centre is 1 mm, as the outward mesh's)
     v, f = _box()
     path = tmp_path / "inside_out.stl"
     trimesh.Trimesh(v, f[:, ::-1], process=False).export(path)
-    with pytest.warns(UserWarning, match="inside_out.stl.*point into the lumen"):
-        cube = MeshVessel.from_file(path)
+    with pytest.raises(ValueError, match="inside_out.stl.*point into the lumen.*fix_normals=True"):
+        MeshVessel.from_file(path)
+    with pytest.raises(ValueError, match="fix_normals"):
+        MeshVessel.from_file(path, fix_normals="yes")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        cube = MeshVessel.from_file(path, fix_normals=True)
     assert cube.gap([0.0, 0.0, 0.0])[0] == pytest.approx(1e-3)
+    assert MeshVessel.from_file(path, fix_normals=True).volume > 0
 
 
 def test_open_mesh_is_reported(tmp_path):

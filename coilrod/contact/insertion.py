@@ -470,6 +470,12 @@ def _step(build, problem, u, prev, target, k, before=None):
     # settles (then it converges quadratically)
     opts = NewtonOptions(max_iter=40, stagnation=12)
     (prev_len, prev_field), (target_len, target_field) = prev, target
+    # a reversal with friction (insertion after withdrawal or back): the first try starts
+    # from the carried state with its friction turned round (_reverse_friction), the usual
+    # start (the secant, which heads back to the old state) second.  Frictionless, the
+    # secant is right (the states do not depend on the direction)
+    reversal = bool(problem.nt) and before is not None
+    reversal = reversal and (target_len - prev_len) * (prev_len - before[2]) < 0
     t, dt, solves, halvings = 0.0, 1.0, 0, 0
     cur_problem, cur_u, cur_lin, free = problem, u, None, None
     while t < 1.0:
@@ -479,11 +485,15 @@ def _step(build, problem, u, prev, target, k, before=None):
         trial_free, trial = build(length, field)
         _carry_reference(cur_problem, cur_u, trial)
         start = _carry(cur_problem, cur_u, trial)
+        starts = [_reverse_friction(trial, start)] if reversal and t == 0.0 else []
         if before is not None and t == 0.0 and t1 == 1.0 and before[2] != prev_len:
             w = (target_len - prev_len) / (prev_len - before[2])
             start = start + w * (start - _carry(before[0], before[1], trial))
-        res = newton(trial, start, 1.0, opts)
-        solves += 1
+        for guess in [*starts, start]:
+            res = newton(trial, guess, 1.0, opts)
+            solves += 1
+            if res.ok:
+                break
         if res.ok:  # (its linearization carries the state's stability)
             t, cur_problem, cur_u, cur_lin, free = t1, trial, res.u, res.lin, trial_free
             dt = min(1.0 - t, 2 * dt) if t < 1.0 else dt
@@ -502,6 +512,22 @@ def _step(build, problem, u, prev, target, k, before=None):
         dt /= 2
     stable = np.ravel(cur_problem.stability(cur_lin))[0] > 0
     return cur_problem, cur_u, free, bool(stable), solves
+
+
+def _reverse_friction(problem, u):
+    """The start ``u`` (size,) with its friction forces turned round.  At a reversal of the
+    motion the carried state's friction opposes the old motion, and every carried material
+    point has moved the new way (from its reference) by the step: under a high tension
+    (EI / (T R^2) ~ 3e-4) Newton from there makes every point stick, which an inextensible
+    rod taut between its contacts cannot take up (a straight span lengthens only at second
+    order), and it diverged even for steps of 1e-5 of the length.  With the friction
+    turned round the start is the sliding state of the new direction (exact where the step
+    exceeds the short stick transition, which a quasi-static step does not resolve)."""
+    if not problem.nt:
+        return u
+    u = u.reshape(problem.n, problem.nv).copy()
+    u[:, 9 + problem.nc :] *= -1.0
+    return u.ravel()
 
 
 class _Record:

@@ -66,7 +66,8 @@ class MeshVessel(Obstacle):
         Vertex positions, m.
     faces : array-like of int, shape (m, 3)
         Vertex indices of the triangles, normals (right-hand rule) pointing out of the lumen.
-        Inward-facing meshes are turned around with a warning.
+        A closed mesh whose normals all point into the lumen is a ValueError unless
+        ``fix_normals``.
     source : str, optional
         Where the mesh came from (a file name), used in messages.
     friction : float
@@ -75,6 +76,9 @@ class MeshVessel(Obstacle):
         True (default): the smoothed gap (see the module: C1 across edges, exact derivatives,
         what contact and insertion need); False: the exact distance to the polyhedron.
         :meth:`closest` is the polyhedron's either way.
+    fix_normals : bool
+        Turn a closed mesh whose normals point into the lumen around (default False: a
+        ValueError naming ``source``; the orientation of an open mesh cannot be checked).
 
     Attributes
     ----------
@@ -92,8 +96,8 @@ class MeshVessel(Obstacle):
     ------
     ValueError
         Fewer than 4 vertices or 4 faces, non-finite vertices, bad indices, degenerate
-        faces, non-manifold edges (shared by more than two faces) or inconsistent winding;
-        each message names ``source``.
+        faces, non-manifold edges (shared by more than two faces), inconsistent winding, or
+        inward-facing normals without ``fix_normals``; each message names ``source``.
 
     Examples
     --------
@@ -107,7 +111,14 @@ class MeshVessel(Obstacle):
     _immutable = True
 
     def __init__(
-        self, vertices, faces, *, source: str | None = None, friction=0.0, smooth: bool = True
+        self,
+        vertices,
+        faces,
+        *,
+        source: str | None = None,
+        friction=0.0,
+        smooth: bool = True,
+        fix_normals: bool = False,
     ):
         import trimesh
         from scipy.spatial import cKDTree
@@ -116,6 +127,7 @@ class MeshVessel(Obstacle):
         self.source = source
         self.friction = nonnegative(friction, "friction")
         self.smooth = as_bool(smooth, "smooth")
+        fix_normals = as_bool(fix_normals, "fix_normals")
         v = as_points(vertices, "vertices")
         f = np.asarray(faces)
         if f.ndim != 2 or f.shape[1] != 3 or not np.issubdtype(f.dtype, np.integer):
@@ -144,11 +156,12 @@ class MeshVessel(Obstacle):
         self.watertight = bool(mesh.is_watertight)
         if self.watertight:
             if mesh.volume < 0:
-                warnings.warn(
-                    f"{label}: the face normals point into the lumen; turned around "
-                    "(the lumen is the enclosed volume)",
-                    stacklevel=2,
-                )
+                if not fix_normals:
+                    raise ValueError(
+                        f"{label}: the face normals point into the lumen (the lumen is the "
+                        "enclosed volume, its normals must point out of it); reverse the "
+                        "faces' winding, or pass fix_normals=True to turn them around"
+                    )
                 mesh.invert()
             self.volume = float(mesh.volume)
         else:
@@ -209,7 +222,9 @@ class MeshVessel(Obstacle):
 
     # -- files ----------------------------------------------------------------------------------
     @classmethod
-    def from_file(cls, path, units: str = "m", friction=0.0, smooth: bool = True) -> MeshVessel:
+    def from_file(
+        cls, path, units: str = "m", friction=0.0, smooth: bool = True, fix_normals: bool = False
+    ) -> MeshVessel:
         """Read a lumen from a surface mesh file (STL, OBJ, PLY, ... as trimesh reads them).
 
         Parameters
@@ -222,6 +237,9 @@ class MeshVessel(Obstacle):
             Friction coefficient mu >= 0 (see :class:`MeshVessel`).
         smooth : bool
             The smoothed gap (default) or the exact one (see :class:`MeshVessel`).
+        fix_normals : bool
+            Turn a closed mesh whose normals point into the lumen around (default False:
+            such a file is a ValueError naming it).
 
         Raises
         ------
@@ -252,6 +270,7 @@ class MeshVessel(Obstacle):
             source=path,
             friction=friction,
             smooth=smooth,
+            fix_normals=fix_normals,
         )
 
     # -- gap ------------------------------------------------------------------------------------

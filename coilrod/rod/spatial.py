@@ -237,7 +237,8 @@ class SpatialRod(DiscreteRod):
         """Set the friction's reference: contact points (n, 3) (units of L relative to the
         clamp) and friction forces per length (n, nc, 3) (EI_z / L^3 units; None: zero) of
         the last accepted state (:func:`~coilrod.contact.insert` carries them along the
-        material)."""
+        material).  Stick and slip are decided on the points alone (the forces are kept for
+        the record: the stick rows are exact, :meth:`_friction_rows`)."""
         points = np.asarray(points, float)
         if points.shape != (self.n, 3):
             raise ValueError(f"points must have shape ({self.n}, 3); got {points.shape}")
@@ -489,7 +490,8 @@ class SpatialRod(DiscreteRod):
     #: a contact problem sets 100 / h_min^2).
     kappa = 1.0
 
-    #: Slack of the friction's stick condition (:meth:`_friction_rows`), non-dimensional.
+    #: Proximal weight of the friction's stick rows in the Newton step only
+    #: (:meth:`_friction_rows`), non-dimensional: the rows themselves are exact.
     stick_slack = 1e-6
 
     #: Complementarity function: "min" (min(lam, kappa g); the default: a Newton step drops a
@@ -955,17 +957,20 @@ class SpatialRod(DiscreteRod):
         """Coulomb friction at the contact points: ``(Phi, tau, derivatives)``.
 
         ``tau`` (k, n, nc, 3) is the tangential force per length on the rod at contact point
-        p_j from each obstacle (unknowns, EI_z / L^3 units), ``Phi = tau - proj(P v - r u)``
+        p_j from each obstacle (unknowns, EI_z / L^3 units), ``Phi = tau - proj(P tau - r u)``
         (k, n, nc, 3) its row: ``P = I - n n^T`` the projection on the wall's tangent plane at
         p_j, ``u = P (p_j - p_ref)`` the tangential displacement of the contact point since
-        the last accepted state (:meth:`accept_state`), ``r`` = :attr:`kappa`, ``proj`` the
-        projection on the disk ``|.| <= mu max(lam, 0)`` and ``v = tau - eps (tau - tau_ref)``
-        with ``tau_ref`` the accepted state's force and eps = :attr:`stick_slack`.  Phi = 0 iff
-        n . tau = 0 and either ``r u = eps P (tau_ref - tau)`` (stick: u = 0 under a held
-        load, exactly; eps |change of tau| / r under a changing one) with |tau| <= mu lam,
-        or |tau| = mu lam with tau along -u (slip, up to eps).  The slack makes the friction
-        of several sticking points of an inextensible rod determinate (the nearest to
-        tau_ref); eps = 0 is exact stick with a singular Jacobian there.
+        the last accepted state (:meth:`accept_state`), ``r`` = :attr:`kappa` and ``proj`` the
+        projection on the disk ``|.| <= mu max(lam, 0)``.  Phi = 0 iff n . tau = 0 and either
+        u = 0 (stick, exactly) with |tau| <= mu lam, or |tau| = mu lam with tau along -u
+        (slip).  Several sticking points of an inextensible rod leave a combination of their
+        forces undetermined (a straight span between them carries any axial force): the
+        Jacobian of the stick rows in tau is singular.  The derivative returned is therefore
+        that of the rows with ``tau`` replaced by ``(1 - eps) tau + eps tau_k`` in ``proj``,
+        tau_k the current iterate and eps = :attr:`stick_slack` -- a proximal term on the
+        multiplier that is zero at the iterate, so the rows (and the converged state) stay
+        exact while each Newton step is regular and moves the undetermined combination only
+        as far as the rest needs (it stays near the predictor's).
         With ``hess`` (the gap hessians, 1/m) the derivatives ``(d Phi/d tau (k, n, nc, 3,
         3), d Phi/d lam (k, n, nc, 3), d Phi/d p (k, n, nc, 3, 3))``, else None."""
         k, n, nc = V.shape[0], self.n, self.nc
@@ -974,7 +979,7 @@ class SpatialRod(DiscreteRod):
         r, eps = self.kappa, self.stick_slack
         d = (X + cc[:, None] * frames[..., :, 0] - self._p_ref)[:, :, None, :]  # (k, n, 1, 3)
         nd = np.einsum("knoi,knoi->kno", normals, np.broadcast_to(d, normals.shape))
-        v = (1.0 - eps) * tau + eps * self._tau_ref
+        v = tau  # the row is exact: eps enters only its derivative (the Newton step)
         nv_ = np.einsum("knoi,knoi->kno", normals, v)
         a = v - normals * nv_[..., None] - r * (d - normals * nd[..., None])
         rho = self.mu_f * np.maximum(lam, 0.0)
