@@ -402,10 +402,13 @@ def insert(
                 free = free_part(rod, length)
                 mesh = make_mesh(free, nodes)
                 trial = build_spatial_problem(free, field, mesh, clamp, R0, tol, obstacles=[vessel])
-                # complementarity by the min function (the spatial rod's default): its Newton
-                # step enforces the gap of an active point exactly (Fischer-Burmeister mixes
-                # the two rows and releases or closes a point over several iterations:
-                # 330 against 218 iterations for the 50 steps of benchmarks/bench_contact.py)
+                # a plain Newton from the carried (penetrating) shape: Fischer-Burmeister is
+                # the more robust complementarity function there.  The min function takes
+                # fewer iterations (218 against 330 for the 50 steps of bench_contact.py) but
+                # cycles between contact sets, and in the navigation notebook's branch it
+                # steered the tip into the main vessel instead of the branch; with friction a
+                # held step's carried state sits on the stick-slip kink, which FB keeps exactly
+                trial.ncp = "fb"
                 if (trial.size, trial.nc) == layout:
                     trial._band_cache = band_cache  # the same layout's templates
                 return free, trial
