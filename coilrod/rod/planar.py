@@ -89,6 +89,8 @@ class RodTangent:
         self.parts = parts
         self.load_rate = load_rate  # dR/dscale, (k, size)
         self.bad = np.zeros(k, dtype=bool)
+        #: Sign of each member's det J when already known (the compiled corrector), else None.
+        self.signs = None
         self._lu = None
         self._per_member = False
 
@@ -195,6 +197,8 @@ class RodTangent:
 
     def det_signs(self) -> np.ndarray:
         """Sign of each member's Jacobian determinant, shape (k,) (+-1; 0 where singular)."""
+        if self.signs is not None:
+            return self.signs.copy()
         lu = self.factor()
         n = self.size
         # scipy returns gttrf's pivots 1-based and gbtrf's 0-based
@@ -459,6 +463,39 @@ class PlanarRod(DiscreteRod):
         lin.field_values = None if field_values is None else field_values[:2]
         lin.field_hessian = None if field_values is None else field_values[2]
         return lin
+
+    def compiled_newton(self, U: np.ndarray, S: np.ndarray, opts):
+        """Newton's method for the stack ``U`` (k, size) at scales ``S`` (k,) by the compiled
+        corrector of the uniform layout (:mod:`coilrod.rod._planar_newton`): the states of
+        :func:`~coilrod.path.corrector.newton`, in one call.  Returns ``(U, err, iters,
+        lin)`` (``lin`` the linearization at ``U``, with its tangent), or None where it does
+        not apply (the mixed layout) or does not pay yet (ski rental; the caller then runs the
+        numpy corrector and reports its iterations to :meth:`compiled_newton_rent`)."""
+        if not self.uniform:
+            return None
+        from . import _planar_newton as pn
+
+        if not pn.compiled_pays():
+            return None
+        U, err, iters, R, R1, d, stability = pn.newton_uniform(self, U, S, opts)
+        ok = np.isfinite(R).all(axis=1)
+        tan = RodTangent(U.shape[0], self.size, True, (d, self._off_diagonals(U.shape[0])), R1)
+        tan.bad |= ~ok
+        lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
+        lin.load_rate = R1
+        lin.field_values = None
+        lin.field_hessian = None
+        if stability is not None:  # (3D stability) read by det_signs and odd_count
+            tan.signs, lin.odd_definite = stability
+        return U, err, iters, lin
+
+    def compiled_newton_rent(self, iters) -> None:
+        """Charge a numpy corrector call of ``iters`` iterations (per member) to the ski rental
+        of :meth:`compiled_newton`."""
+        if self.uniform:
+            from . import _planar_newton as pn
+
+            pn.charge(iters)
 
     def dense_jacobian(self, u: np.ndarray, scale: float) -> np.ndarray:
         """The Jacobian of one state as a dense (size, size) array (tests, small problems)."""
