@@ -75,7 +75,9 @@ def test_compiled_corrector_matches_numpy(corrector):
         # corrector, the same counts as from the numpy factorisations
         assert b.lin.tangent.signs is not None
         assert a.lin.tangent.signs is None
-        for x, ref in zip(problem.negative_counts(b.lin), problem.negative_counts(a.lin)):
+        for x, ref in zip(
+            problem.negative_counts(b.lin), problem.negative_counts(a.lin), strict=True
+        ):
             np.testing.assert_array_equal(x, ref)
         np.testing.assert_array_equal(problem.stability(b.lin), problem.stability(a.lin))
         outcomes.append((np.atleast_1d(a.ok), np.atleast_1d(a.error), problem.stability(a.lin)))
