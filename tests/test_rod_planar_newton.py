@@ -71,6 +71,14 @@ def test_compiled_corrector_matches_numpy(corrector):
         np.testing.assert_array_equal(b.lin.tangent.parts[0], a.lin.tangent.parts[0])
         np.testing.assert_array_equal(b.lin.tangent.load_rate, a.lin.tangent.load_rate)
         np.testing.assert_array_equal(b.lin.tangent.det_signs(), a.lin.tangent.det_signs())
+        # the path rate du/dscale from the same factorisation, as the engine's numpy solve
+        with np.errstate(all="ignore"):
+            rate = -problem.solve(a.lin, a.lin.load_rate)
+        np.testing.assert_array_equal(b.lin.path_rate, rate)
+        for j in range(len(rate)):  # the stacked solve: each member as if alone
+            one = problem.take(a.lin, [j])
+            with np.errstate(all="ignore"):
+                np.testing.assert_array_equal(rate[j], -problem.solve(one, one.load_rate)[0])
         # 3D stability: det J's sign and the out-of-plane Cholesky test from the compiled
         # corrector, the same counts as from the numpy factorisations
         assert b.lin.tangent.signs is not None

@@ -54,72 +54,52 @@ def charge(iterations) -> None:
 
 
 def newton_uniform(problem, U, S, opts):
-    """Newton's method for the stack ``U`` (k, n) at scales ``S`` (k,) of a uniform-layout
+    """Newton's method for the stack ``U`` (k, n) (float, C order: iterated in place) at scales
+    ``S`` (k,) of a uniform-layout
     :class:`~coilrod.rod.planar.PlanarRod` with :class:`~coilrod.path.corrector.NewtonOptions`
     ``opts``.
 
     Returns
     -------
     U : ndarray, shape (k, n)
-        Last iterates.
-    err : ndarray, shape (k,)
-        Errors (inf where inadmissible).
-    iters : ndarray of int, shape (k,)
-    R, R1, d : ndarray, shape (k, n)
-        Residual, its load derivative and the Jacobian's diagonal at ``U``.
-    stability : tuple or None
-        With the problem's out-of-plane block (3D stability): the sign of det J (k,) (0 where
-        singular or inadmissible; ``RodTangent.det_signs``) and whether a Cholesky
-        factorisation proves the out-of-plane block positive definite (k,) bool (as
-        ``out_of_plane._positive_definite``) at ``U``.
+        Last iterates (the argument).
+    F : ndarray, shape (4, k, n)
+        At ``U``: the residual, its load derivative dR/dscale, the Jacobian's diagonal and the
+        path rate ``du/dscale = -J^-1 dR/dscale`` (NaN rows where J is singular).
+    M : ndarray, shape (k, 5)
+        Per member: the error (inf where inadmissible), the sign of det J (0 where singular or
+        inadmissible; ``RodTangent.det_signs``), 1 where a Cholesky factorisation proves the
+        out-of-plane block of the 3D second variation positive definite (as
+        ``out_of_plane._positive_definite``; computed with the problem's out-of-plane block
+        only), 1 where the residual is finite, and the iterations.
     """
-    U = np.array(U, dtype=float)
-    S = np.ascontiguousarray(S, dtype=float)
     k, n = U.shape
-    R = np.empty((k, n))
-    R1 = np.empty((k, n))
-    d = np.empty((k, n))
-    err = np.empty(k)
-    iters = np.zeros(k, dtype=np.int64)
-    p = problem
+    consts, par = _constants(problem)
+    ipar = np.array([opts.max_iter, opts.backtracks, opts.stagnation])
+    F = np.empty((4, k, n))
+    M = np.zeros((k, 5))
+    _newton(U, S, consts, par, ipar, F, M)
+    return U, F, M
+
+
+def _constants(p):
+    """The problem's arrays (9, n) and numbers (9,) that the kernel reads (cached on it)."""
+    cached = p.__dict__.get("_newton_constants")
+    if cached is not None:
+        return cached
+    n = p.n
+    consts = np.zeros((9, n))
+    consts[0], consts[1], consts[2], consts[3] = p._P1, p._Q1, p._inv_w, p._k_diag
+    consts[4], consts[5], consts[6] = p.mu[:, 0], p.mu[:, 1], p.mesh.w
+    consts[7, : n - 1], consts[8, : n - 1] = p._inv_h, p._floor_bend
     oop = p.out_of_plane
     stab = oop is not None
     k1, k2 = (float(oop.stiffness[0]), float(oop.stiffness[1])) if stab else (1.0, 1.0)
     bx, by = (float(oop._b[0]), float(oop._b[1])) if stab else (0.0, 0.0)
-    signs = np.zeros(k)
-    definite = np.zeros(k, dtype=np.bool_)
-    _newton(
-        U,
-        S,
-        p._P1,
-        p._Q1,
-        p._inv_h,
-        p._inv_w,
-        p._floor_bend,
-        p._k_diag,
-        p.theta0,
-        p.tol,
-        float(p.max_rotation),
-        float(p.full_step_growth),
-        int(opts.max_iter),
-        int(opts.backtracks),
-        int(opts.stagnation),
-        R,
-        R1,
-        d,
-        err,
-        iters,
-        stab,
-        k1,
-        k2,
-        bx,
-        by,
-        p.mu,
-        p.mesh.w,
-        signs,
-        definite,
-    )
-    return U, err, iters, R, R1, d, (signs, definite) if stab else None
+    growth, rot = float(p.full_step_growth), float(p.max_rotation)
+    par = np.array([p.theta0, p.tol, rot, growth, k1, k2, bx, by, 1.0 if stab else 0.0])
+    p._newton_constants = (consts, par)
+    return consts, par
 
 
 @nb.njit(cache=True)
@@ -293,41 +273,20 @@ def _odd_definite(th, s, k1, k2, bx, by, mu, inv_h, w):
 
 
 @nb.njit(cache=True)
-def _newton(
-    U,
-    S,
-    P1,
-    Q1,
-    inv_h,
-    inv_w,
-    floor_bend,
-    k_diag,
-    theta0,
-    tol,
-    max_rotation,
-    growth,
-    max_iter,
-    backtracks,
-    stagnation,
-    R,
-    R1,
-    D,
-    err,
-    iters,
-    stab,
-    k1,
-    k2,
-    bx,
-    by,
-    mu,
-    w,
-    signs,
-    definite,
-):
-    """The compiled corrector (see :func:`newton_uniform`): U (k, n) in place; with ``stab``
-    also the sign of det J (``signs``, 0 where singular or inadmissible) and the positive
-    definiteness of the out-of-plane block (``definite``) at the last iterates."""
+def _newton(U, S, consts, par, ipar, F, M):
+    """The compiled corrector (see :func:`newton_uniform`): U (k, n) in place, F and M out."""
     k, n = U.shape
+    P1, Q1, inv_w, k_diag = consts[0], consts[1], consts[2], consts[3]
+    mu = np.empty((n, 2))
+    mu[:, 0] = consts[4]
+    mu[:, 1] = consts[5]
+    w = consts[6]
+    inv_h = consts[7, : max(n - 1, 1)]
+    floor_bend = consts[8, : max(n - 1, 1)]
+    theta0, tol, max_rotation, growth = par[0], par[1], par[2], par[3]
+    k1, k2, bx, by, stab = par[4], par[5], par[6], par[7], par[8] != 0.0
+    max_iter, backtracks, stagnation = ipar[0], ipar[1], ipar[2]
+    R, R1, D, rate = F[0], F[1], F[2], F[3]
     off_low = np.zeros(max(n - 1, 1))
     off_up = np.zeros(max(n - 1, 1))
     for i in range(n - 1):
@@ -353,6 +312,7 @@ def _newton(
         e = _error(th, R[j], inv_w, floor_bend, tol, ok)
         alive = ok and math.isfinite(e)
         slow = 0
+        iters = 0
         for _ in range(max_iter):
             if not (alive and e > 1.0):
                 break
@@ -387,27 +347,35 @@ def _newton(
                     accepted = True
                     break
                 alpha = 0.5 * alpha
-            iters[j] += 1
+            iters += 1
             if not accepted:
                 alive = False
                 break
             if slow >= stagnation and e > 1.0:
                 alive = False
                 break
-        err[j] = e
-        if stab:
-            ok = True
+        # at the last iterate: the path rate and det J's sign from one factorisation
+        ok = True
+        for i in range(n):
+            rhs[i] = R1[j, i]
+            if not math.isfinite(R[j, i]):
+                ok = False
+        sign = 0.0
+        if ok and _solve(D[j], off_low, off_up, rhs, dU, dl, dd, du, du2, ipiv):
+            odd = 0
             for i in range(n):
-                rhs[i] = 0.0
-                if not math.isfinite(R[j, i]):
-                    ok = False
-            signs[j] = 0.0
-            if ok and _solve(D[j], off_low, off_up, rhs, dU, dl, dd, du, du2, ipiv):
-                odd = 0
-                for i in range(n):
-                    if dd[i] < 0.0:
-                        odd += 1
-                    if ipiv[i] != i:
-                        odd += 1
-                signs[j] = 1.0 if odd % 2 == 0 else -1.0
-            definite[j] = _odd_definite(th, s, k1, k2, bx, by, mu, inv_h, w)
+                rate[j, i] = -dU[i]
+                if dd[i] < 0.0:
+                    odd += 1
+                if ipiv[i] != i:
+                    odd += 1
+            sign = 1.0 if odd % 2 == 0 else -1.0
+        else:
+            for i in range(n):
+                rate[j, i] = math.nan
+        M[j, 0] = e
+        M[j, 1] = sign
+        if stab and _odd_definite(th, s, k1, k2, bx, by, mu, inv_h, w):
+            M[j, 2] = 1.0
+        M[j, 3] = 1.0 if ok else 0.0
+        M[j, 4] = iters

@@ -154,8 +154,11 @@ class RodTangent:
                 out[j] = _take_tangent(self, [j]).solve(rhs[j : j + 1])[0]
             return out
         if self.uniform:
-            b = np.ascontiguousarray(rhs, dtype=float).reshape(-1)
-            x, info = dgttrs(*lu, b)
+            b = np.ascontiguousarray(rhs, dtype=float)
+            if self.bad.any():  # (a NaN right-hand side of one would spread to the others)
+                b = b.copy()
+                b[self.bad] = 0.0
+            x, info = dgttrs(*lu, b.reshape(-1))
             if info != 0:
                 raise np.linalg.LinAlgError(f"LAPACK solve failed (info {info})")
         else:
@@ -465,8 +468,9 @@ class PlanarRod(DiscreteRod):
         return lin
 
     def compiled_newton(self, U: np.ndarray, S: np.ndarray, opts):
-        """Newton's method for the stack ``U`` (k, size) at scales ``S`` (k,) by the compiled
-        corrector of the uniform layout (:mod:`coilrod.rod._planar_newton`): the states of
+        """Newton's method for the stack ``U`` (k, size) (float, C order: iterated in place)
+        at scales ``S`` (k,) by the compiled corrector of the uniform layout
+        (:mod:`coilrod.rod._planar_newton`): the states of
         :func:`~coilrod.path.corrector.newton`, in one call.  Returns ``(U, err, iters,
         lin)`` (``lin`` the linearization at ``U``, with its tangent), or None where it does
         not apply (the mixed layout) or does not pay yet (ski rental; the caller then runs the
@@ -477,16 +481,21 @@ class PlanarRod(DiscreteRod):
 
         if not pn.compiled_pays():
             return None
-        U, err, iters, R, R1, d, stability = pn.newton_uniform(self, U, S, opts)
-        ok = np.isfinite(R).all(axis=1)
-        tan = RodTangent(U.shape[0], self.size, True, (d, self._off_diagonals(U.shape[0])), R1)
+        U, F, M = pn.newton_uniform(self, U, S, opts)
+        k = U.shape[0]
+        R, R1 = F[0], F[1]
+        ok = M[:, 3] != 0.0
+        tan = RodTangent(k, self.size, True, (F[2], self._off_diagonals(k)), R1)
         tan.bad |= ~ok
+        tan.signs = M[:, 1]
         lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
         lin.load_rate = R1
         lin.field_values = None
         lin.field_hessian = None
-        if stability is not None:  # (3D stability) read by det_signs and odd_count
-            tan.signs, lin.odd_definite = stability
+        lin.path_rate = F[3]  # read by the path engine (coilrod.path.stepping)
+        if self.out_of_plane is not None:  # read by OutOfPlane.odd_count
+            lin.odd_definite = M[:, 2] != 0.0
+        err, iters = M[:, 0], M[:, 4].astype(int)
         return U, err, iters, lin
 
     def compiled_newton_rent(self, iters) -> None:
@@ -605,7 +614,12 @@ class PlanarRod(DiscreteRod):
         cached = getattr(lin, "_counts_3d", None)
         if cached is not None:
             return cached
-        odd = self.out_of_plane.odd_count(lin, getattr(lin, "uniform_fields", None))
+        fields = getattr(lin, "uniform_fields", None)
+        known = getattr(lin, "odd_definite", None)  # (the compiled corrector's Cholesky test)
+        if known is not None and fields is None and known.all():
+            odd = np.zeros(known.shape[0], dtype=int)
+        else:
+            odd = self.out_of_plane.odd_count(lin, fields)
         signs = lin.tangent.det_signs() * self.det_reference()
         even = np.where(signs > 0, 0, np.where(signs < 0, 1, -1))
         total = np.where((odd >= 0) & (even >= 0), odd + even, -1)
