@@ -74,32 +74,35 @@ def newton_uniform(problem, U, S, opts):
         only), 1 where the residual is finite, and the iterations.
     """
     k, n = U.shape
-    consts, par = _constants(problem)
+    arrays, par = _constants(problem)
     ipar = np.array([opts.max_iter, opts.backtracks, opts.stagnation])
     F = np.empty((4, k, n))
     M = np.zeros((k, 5))
-    _newton(U, S, consts, par, ipar, F, M)
+    _newton(U, S, *arrays, par, ipar, F, M)
     return U, F, M
 
 
 def _constants(p):
-    """The problem's arrays (9, n) and numbers (9,) that the kernel reads (cached on it)."""
+    """The problem's arrays and numbers (9,) that the kernel reads (cached on it)."""
     cached = p.__dict__.get("_newton_constants")
     if cached is not None:
         return cached
     n = p.n
-    consts = np.zeros((9, n))
-    consts[0], consts[1], consts[2], consts[3] = p._P1, p._Q1, p._inv_w, p._k_diag
-    consts[4], consts[5], consts[6] = p.mu[:, 0], p.mu[:, 1], p.mesh.w
-    consts[7, : n - 1], consts[8, : n - 1] = p._inv_h, p._floor_bend
+    seg = max(n - 1, 1)  # (segment arrays padded for a single node)
+    inv_h, floor_bend = np.zeros(seg), np.zeros(seg)
+    inv_h[: n - 1], floor_bend[: n - 1] = p._inv_h, p._floor_bend
+    arrays = tuple(
+        np.ascontiguousarray(a, dtype=float)
+        for a in (p._P1, p._Q1, p._inv_w, p._k_diag, p.mu, p.mesh.w, inv_h, floor_bend)
+    )
     oop = p.out_of_plane
     stab = oop is not None
     k1, k2 = (float(oop.stiffness[0]), float(oop.stiffness[1])) if stab else (1.0, 1.0)
     bx, by = (float(oop._b[0]), float(oop._b[1])) if stab else (0.0, 0.0)
     growth, rot = float(p.full_step_growth), float(p.max_rotation)
     par = np.array([p.theta0, p.tol, rot, growth, k1, k2, bx, by, 1.0 if stab else 0.0])
-    p._newton_constants = (consts, par)
-    return consts, par
+    p._newton_constants = (arrays, par)
+    return arrays, par
 
 
 @nb.njit(cache=True)
@@ -273,16 +276,9 @@ def _odd_definite(th, s, k1, k2, bx, by, mu, inv_h, w):
 
 
 @nb.njit(cache=True)
-def _newton(U, S, consts, par, ipar, F, M):
+def _newton(U, S, P1, Q1, inv_w, k_diag, mu, w, inv_h, floor_bend, par, ipar, F, M):
     """The compiled corrector (see :func:`newton_uniform`): U (k, n) in place, F and M out."""
     k, n = U.shape
-    P1, Q1, inv_w, k_diag = consts[0], consts[1], consts[2], consts[3]
-    mu = np.empty((n, 2))
-    mu[:, 0] = consts[4]
-    mu[:, 1] = consts[5]
-    w = consts[6]
-    inv_h = consts[7, : max(n - 1, 1)]
-    floor_bend = consts[8, : max(n - 1, 1)]
     theta0, tol, max_rotation, growth = par[0], par[1], par[2], par[3]
     k1, k2, bx, by, stab = par[4], par[5], par[6], par[7], par[8] != 0.0
     max_iter, backtracks, stagnation = ipar[0], ipar[1], ipar[2]

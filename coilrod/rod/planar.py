@@ -616,10 +616,12 @@ class PlanarRod(DiscreteRod):
             return cached
         fields = getattr(lin, "uniform_fields", None)
         known = getattr(lin, "odd_definite", None)  # (the compiled corrector's Cholesky test)
-        if known is not None and fields is None and known.all():
-            odd = np.zeros(known.shape[0], dtype=int)
-        else:
-            odd = self.out_of_plane.odd_count(lin, fields)
+        if known is not None and fields is None and known.all():  # no out-of-plane negatives
+            signs = lin.tangent.det_signs() * self.det_reference()
+            total = np.where(signs > 0, 0, np.where(signs < 0, 1, -1))
+            lin._counts_3d = (total, np.zeros_like(total))
+            return lin._counts_3d
+        odd = self.out_of_plane.odd_count(lin, fields)
         signs = lin.tangent.det_signs() * self.det_reference()
         even = np.where(signs > 0, 0, np.where(signs < 0, 1, -1))
         total = np.where((odd >= 0) & (even >= 0), odd + even, -1)
