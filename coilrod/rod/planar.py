@@ -580,6 +580,7 @@ class PlanarRod(DiscreteRod):
         from .out_of_plane import OutOfPlane
 
         self.out_of_plane = OutOfPlane(self, stiffness)
+        self.__dict__.pop("_newton_constants", None)  # (the compiled corrector's, now stale)
         return self
 
     def stability(self, lin: Linearization, precise: bool = False) -> np.ndarray:
