@@ -142,6 +142,23 @@ def per_iteration(segments: int) -> float:
     return best_cpu(one, 50)
 
 
+def per_iteration_corrector(segments: int) -> tuple[float, float, int]:
+    """CPU time (s) of one whole ``newton`` call from the straight rod to lambda 5 (the
+    compiled corrector once numba's cache holds it), per iteration, its fixed part (the call
+    with one iteration: from the converged state) and the iterations."""
+    from coilrod.path.corrector import newton
+    from coilrod.rod.solve import build_problem, make_mesh
+
+    rod, field = unit_rod()
+    P = build_problem(rod, field, make_mesh(rod, segments), np.zeros(3), 0.0)
+    u0 = P.straight()
+    res = newton(P, u0, 5.0)
+    whole = best_cpu(lambda: newton(P, u0, 5.0), 50)
+    near = res.u + 1e-6
+    fixed = best_cpu(lambda: newton(P, near, 5.0), 50)
+    return whole / res.iterations, fixed, res.iterations
+
+
 PHASES = [
     ("solve_rod (whole call)", "solve.py", "solve_rod"),
     ("  follow_load (path engine)", "stepping.py", "follow_load"),
@@ -288,6 +305,15 @@ def main(v01: str) -> str:
         out(f"| {n} | {1e6 * per_iteration(n):.1f} |")
     out()
     out("The 4-segment figure is the fixed (size-independent) part; goal <= 30 us at 64.")
+    out("What the engine runs per iteration: the whole corrector (one compiled call in a uniform")
+    out("field, `coilrod.rod._planar_newton`) from the straight rod to lambda 5, per iteration,")
+    out("and one call from next to the solution (one or two iterations: the per-call cost):")
+    out()
+    out("| segments | iterations | per iteration (us) | one near call (us) |")
+    out("|---|---|---|---|")
+    for n in (4, 64, 256):
+        it_s, fixed, iters = per_iteration_corrector(n)
+        out(f"| {n} | {iters} | {1e6 * it_s:.1f} | {1e6 * fixed:.1f} |")
     out()
     rows, top = profile()
     out("## 3. Per-phase breakdown, 200 single-state solves (cProfile, per state)")

@@ -25,6 +25,7 @@ import pytest  # noqa: E402
 
 import coilrod.rod._compiled  # noqa: E402
 import coilrod.rod._inertia  # noqa: E402
+import coilrod.rod._planar_newton  # noqa: E402
 import coils.coaxial  # noqa: E402
 
 # The suite compiles every kernel anyway (far-field, error and large-grid tests need them), so
@@ -32,7 +33,12 @@ import coils.coaxial  # noqa: E402
 # README "Cold start") would only add their budgets to a cold run: compile at the first call.
 # The tests of that rule set these themselves; CLI subprocesses and the notebook kernel keep
 # the defaults.
-for _module in (coils.coaxial, coilrod.rod._compiled, coilrod.rod._inertia):
+for _module in (
+    coils.coaxial,
+    coilrod.rod._compiled,
+    coilrod.rod._inertia,
+    coilrod.rod._planar_newton,
+):
     _module.COMPILE_AFTER = 0.0
 
 

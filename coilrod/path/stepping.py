@@ -198,9 +198,14 @@ class _Tracker:
         return PathPoint(u, float(scale), float(error), stab, lin, rate, np.array(lin.residual[0]))
 
     def rate(self, lin: Linearization):
-        """du/dscale = -J^-1 dR/dscale at a converged state (None if J is singular)."""
-        with np.errstate(all="ignore"):
-            r = -self.P.solve(lin, self.P.d_residual_d_scale(lin))[0]
+        """du/dscale = -J^-1 dR/dscale at a converged state (None if J is singular); a
+        model's corrector may have computed it already (``lin.path_rate``, (k, size))."""
+        known = getattr(lin, "path_rate", None)
+        if known is not None:
+            r = known[0]
+        else:
+            with np.errstate(all="ignore"):
+                r = -self.P.solve(lin, self.P.d_residual_d_scale(lin))[0]
         return r if np.all(np.isfinite(r)) else None
 
     def predict(self, cur: PathPoint, prev: PathPoint | None, s1: float) -> np.ndarray:

@@ -89,6 +89,8 @@ class RodTangent:
         self.parts = parts
         self.load_rate = load_rate  # dR/dscale, (k, size)
         self.bad = np.zeros(k, dtype=bool)
+        #: Sign of each member's det J when already known (the compiled corrector), else None.
+        self.signs = None
         self._lu = None
         self._per_member = False
 
@@ -152,8 +154,11 @@ class RodTangent:
                 out[j] = _take_tangent(self, [j]).solve(rhs[j : j + 1])[0]
             return out
         if self.uniform:
-            b = np.ascontiguousarray(rhs, dtype=float).reshape(-1)
-            x, info = dgttrs(*lu, b)
+            b = np.ascontiguousarray(rhs, dtype=float)
+            if self.bad.any():  # (a NaN right-hand side of one would spread to the others)
+                b = b.copy()
+                b[self.bad] = 0.0
+            x, info = dgttrs(*lu, b.reshape(-1))
             if info != 0:
                 raise np.linalg.LinAlgError(f"LAPACK solve failed (info {info})")
         else:
@@ -195,6 +200,8 @@ class RodTangent:
 
     def det_signs(self) -> np.ndarray:
         """Sign of each member's Jacobian determinant, shape (k,) (+-1; 0 where singular)."""
+        if self.signs is not None:
+            return self.signs.copy()
         lu = self.factor()
         n = self.size
         # scipy returns gttrf's pivots 1-based and gbtrf's 0-based
@@ -460,6 +467,45 @@ class PlanarRod(DiscreteRod):
         lin.field_hessian = None if field_values is None else field_values[2]
         return lin
 
+    def compiled_newton(self, U: np.ndarray, S: np.ndarray, opts):
+        """Newton's method for the stack ``U`` (k, size) (float, C order: iterated in place)
+        at scales ``S`` (k,) by the compiled corrector of the uniform layout
+        (:mod:`coilrod.rod._planar_newton`): the states of
+        :func:`~coilrod.path.corrector.newton`, in one call.  Returns ``(U, err, iters,
+        lin)`` (``lin`` the linearization at ``U``, with its tangent), or None where it does
+        not apply (the mixed layout) or does not pay yet (ski rental; the caller then runs the
+        numpy corrector and reports its iterations to :meth:`compiled_newton_rent`)."""
+        if not self.uniform:
+            return None
+        from . import _planar_newton as pn
+
+        if not pn.compiled_pays():
+            return None
+        U, F, M = pn.newton_uniform(self, U, S, opts)
+        k = U.shape[0]
+        R, R1 = F[0], F[1]
+        ok = M[:, 3] != 0.0
+        tan = RodTangent(k, self.size, True, (F[2], self._off_diagonals(k)), R1)
+        tan.bad |= ~ok
+        tan.signs = M[:, 1]
+        lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
+        lin.load_rate = R1
+        lin.field_values = None
+        lin.field_hessian = None
+        lin.path_rate = F[3]  # read by the path engine (coilrod.path.stepping)
+        if self.out_of_plane is not None:  # read by OutOfPlane.odd_count
+            lin.odd_definite = M[:, 2] != 0.0
+        err, iters = M[:, 0], M[:, 4].astype(int)
+        return U, err, iters, lin
+
+    def compiled_newton_rent(self, iters) -> None:
+        """Charge a numpy corrector call of ``iters`` iterations (per member) to the ski rental
+        of :meth:`compiled_newton`."""
+        if self.uniform:
+            from . import _planar_newton as pn
+
+            pn.charge(iters)
+
     def dense_jacobian(self, u: np.ndarray, scale: float) -> np.ndarray:
         """The Jacobian of one state as a dense (size, size) array (tests, small problems)."""
         tan = self.linearize(u, scale).tangent
@@ -534,6 +580,7 @@ class PlanarRod(DiscreteRod):
         from .out_of_plane import OutOfPlane
 
         self.out_of_plane = OutOfPlane(self, stiffness)
+        self.__dict__.pop("_newton_constants", None)  # (the compiled corrector's, now stale)
         return self
 
     def stability(self, lin: Linearization, precise: bool = False) -> np.ndarray:
@@ -568,7 +615,14 @@ class PlanarRod(DiscreteRod):
         cached = getattr(lin, "_counts_3d", None)
         if cached is not None:
             return cached
-        odd = self.out_of_plane.odd_count(lin, getattr(lin, "uniform_fields", None))
+        fields = getattr(lin, "uniform_fields", None)
+        known = getattr(lin, "odd_definite", None)  # (the compiled corrector's Cholesky test)
+        if known is not None and fields is None and known.all():  # no out-of-plane negatives
+            signs = lin.tangent.det_signs() * self.det_reference()
+            total = np.where(signs > 0, 0, np.where(signs < 0, 1, -1))
+            lin._counts_3d = (total, np.zeros_like(total))
+            return lin._counts_3d
+        odd = self.out_of_plane.odd_count(lin, fields)
         signs = lin.tangent.det_signs() * self.det_reference()
         even = np.where(signs > 0, 0, np.where(signs < 0, 1, -1))
         total = np.where((odd >= 0) & (even >= 0), odd + even, -1)
