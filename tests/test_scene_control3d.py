@@ -54,6 +54,10 @@ def test_the_shipped_3d_example_runs(tmp_path):
     summary = json.loads((tmp_path / "out" / "control.json").read_text())
     target = 1e-3 * np.array(summary["target_mm"])
     assert target.shape == (3,)
+    # the plan the run prints names the 3D target, not an (x, y) in the plane
+    shown = ", ".join(f"{1e3 * v:.6g}" for v in target)
+    assert f"target: tip at ({shown}) mm (3D" in out
+    assert "in the plane" not in out
     assert abs(target[2]) > 0.4 * L  # well out of the plane
     system = coils.presets.cardiomag()
     for run in summary["runs"]:

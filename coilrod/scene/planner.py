@@ -148,7 +148,14 @@ def _plan_control(scene: Scene) -> Plan:
         f"coil system: {spec.system}, {m} current channel{'s' if m > 1 else ''} "
         f"({', '.join(system.names)}), limits {limits} A"
     )
-    target = f"target: tip at ({_mm(spec.target[0])}, {_mm(spec.target[1])}) mm in the plane"
+    if len(spec.target) == 3:
+        target = "target: tip at ({}) mm (3D: the spatial rod)".format(
+            ", ".join(_mm(v) for v in spec.target)
+        )
+        if spec.direction is not None:
+            target += ", tip direction ({})".format(", ".join(f"{v:.6g}" for v in spec.direction))
+    else:
+        target = f"target: tip at ({_mm(spec.target[0])}, {_mm(spec.target[1])}) mm in the plane"
     if spec.angle is not None:
         target += (
             f", tip angle {math.degrees(spec.angle):.6g} deg (three conditions: with fewer "
