@@ -21,6 +21,7 @@ import datetime
 import io
 import json
 import re
+import types
 import warnings
 
 import numpy as np
@@ -639,3 +640,33 @@ def test_readme_control_scene_is_the_example_and_its_output(example):
     for line in shown.splitlines():
         if "..." not in line:
             assert " ".join(line.split()) in printed, line
+
+
+@pytest.mark.parametrize(
+    ("status", "said", "not_said"),
+    [
+        ("max_solves", "search stopped (max_solves, after 40 solves)", "the current limits"),
+        ("optimal", "within the current limits", "search stopped"),
+    ],
+)
+def test_an_ideal_controller_stopped_by_its_budget_is_not_blamed_on_the_limits(
+    status, said, not_said
+):
+    """The ideal controller's reason names what stopped it: a search that ran out of solves
+    (Navion at (20, 30) mm creeps there on a nearly singular Jacobian) is not 'within the
+    current limits' (the old message said so whatever stopped it)."""
+    from coilrod.control.currents import ControlResult
+    from coilrod.scene.control_runner import _unmet
+
+    L = 0.04
+    rod = types.SimpleNamespace(length=L)
+    spec = types.SimpleNamespace(target=np.array([0.02, 0.03]))
+    out = ControlResult(
+        currents=np.zeros(3), tip=np.array([0.02, 0.03001, 0.0]), tip_angle=0.0, miss=1e-5,
+        angle_miss=None, power=0.0, result=None, model="ideal", target=spec.target, solves=40,
+        start_solves=0, history=[1e-3, 1.36e-5], status=status,
+    )  # fmt: skip
+    text = _unmet(out, spec, rod)
+    assert said in text
+    assert not_said not in text
+    assert "0.0136 mm away" in text

@@ -278,10 +278,17 @@ def _unmet(out: ControlResult, spec, rod) -> str:
         own = float(min(out.history))
         if own <= MET * L:
             return ""
+        if out.status in ("max_solves", "stalled"):  # the search stopped, not the limits
+            why = (
+                f"in its own model (the centre field) its search stopped ({out.status}, after "
+                f"{out.solves} solves) before the target, not at a current limit"
+            )
+        else:
+            why = "even in its own model (the centre field) within the current limits"
         return (
-            "the ideal controller cannot put the tip on the target even in its own model (the "
-            f"centre field) within the current limits: the closest it finds there is "
-            f"{1e3 * own:.4g} mm away; in the real field its currents put the tip at "
+            f"the ideal controller cannot put the tip on the target {why}: the closest it "
+            f"finds there is {1e3 * own:.4g} mm away; in the real field its currents put the "
+            "tip at "
             f"({', '.join(f'{1e3 * v:.4g}' for v in out.tip[: spec.target.size])}) mm, "
             f"{1e3 * out.miss:.4g} mm "
             f"({100 * out.miss / L:.3g} % of L) from the target"
