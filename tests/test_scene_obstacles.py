@@ -63,6 +63,27 @@ def test_wall_mesh_and_friction(tmp_path):
         assert wall.friction == 0.3
 
 
+def test_inward_mesh_names_the_key_and_fix_normals_turns_it(tmp_path):
+    # the mesh file's faces wound inward: an error naming the table and the way out, and
+    # fix_normals = true gives the outward mesh's gaps (the straight lumen's, closed form)
+    verts, faces = tessellate(Vessel.straight(0.05, 3e-3, start=(-1e-3, 0, 0)), 12, 2e-3)
+    trimesh.Trimesh(verts, faces[:, ::-1], process=False).export(tmp_path / "inward.stl")
+    scene_file = tmp_path / "s.toml"
+    scene_file.write_text("")
+
+    def build(**extra):
+        return parse_scene(
+            _scene({"mesh": [{"file": "inward.stl", **extra}]}), source=str(scene_file)
+        )
+
+    with pytest.raises(SceneError, match=r"obstacles.mesh\[0\].file: .*inward.stl.*fix_normals"):
+        build()
+    with pytest.raises(SceneError, match=r"obstacles.mesh\[0\].fix_normals: expected true or"):
+        build(fix_normals="yes")
+    (mesh,) = build(fix_normals=True).rod_options["obstacles"]
+    assert mesh.gap([0.02, 0.0, 0.0])[0] == pytest.approx(3e-3 * math.cos(math.pi / 12))
+
+
 @pytest.mark.parametrize(
     ("obstacles", "models", "match"),
     [

@@ -16,6 +16,7 @@
     file = "lumen.stl"                   # relative to the scene file
     units = "mm"
     translate = ["-2 mm", "0 mm", "0 mm"]  # optional: moves the mesh (the clamp is the origin)
+    fix_normals = false                  # optional: true turns inward-facing normals round
     [[obstacles.centerline]]
     file = "centerline.csv"              # VMTK: x, y, z, MaximumInscribedSphereRadius
     units = "mm"
@@ -142,7 +143,9 @@ def _file_obstacle(item, key, base: Path, kind: str, friction: float = 0.0):
 
     item = _table(item, key)
     _unknown_keys(
-        item, key, {"file", "units", "translate"} if kind == "mesh" else {"file", "units"}
+        item,
+        key,
+        {"file", "units", "translate", "fix_normals"} if kind == "mesh" else {"file", "units"},
     )
     name = item.get("file")
     if not isinstance(name, str) or not name:
@@ -153,10 +156,13 @@ def _file_obstacle(item, key, base: Path, kind: str, friction: float = 0.0):
     shift = None
     if "translate" in item:
         shift = _vector(item["translate"], "length", f"{key}.translate", "position")
+    fix = item.get("fix_normals", False)
+    if not isinstance(fix, bool):
+        raise SceneError(f"{key}.fix_normals: expected true or false; got {_show(fix)}")
     path = Path(name) if Path(name).is_absolute() else base / name
     try:
         if kind == "mesh":
-            mesh = MeshVessel.from_file(path, units=units, friction=friction)
+            mesh = MeshVessel.from_file(path, units=units, friction=friction, fix_normals=fix)
             if shift is None:
                 return mesh
             return MeshVessel(mesh.vertices + np.asarray(shift), mesh.faces, source=mesh.source,
