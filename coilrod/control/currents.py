@@ -535,7 +535,10 @@ def _approach(p: _Problem, search: _Search, I, max_iter: int) -> None:
        step only.  Once a minimum-power step has left the tip further off (with spare
        channels it moves far along the target's null space, where the linearisation is poor,
        and alternating would cycle), only restoring steps follow: the currents are then those
-       of the last minimum-power step, corrected onto the target;
+       of the last minimum-power step, corrected onto the target.  Both steps leave out the
+       output combinations the currents barely move (:func:`_moved`, ``STEP_RCOND``) until an
+       accepted step near the target fails to halve |r|; from then on they use every one
+       (a coarse rod's discretisation makes such a combination small but real);
     2. step control: the step is cut to the current limits (:func:`_within_limits`), a
        minimum-power step to the trust fraction ``trust`` (doubled after a success, set to the
        last fraction tried after a failure), and halved up to three times until the miss
