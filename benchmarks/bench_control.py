@@ -13,8 +13,10 @@ forward solve).  The ideal-field controller's miss is listed too.
 real-field forward solve at the answer, the best of three), against the issue's budget of 15;
 the miss by an independent forward solve.  The same targets with the tip direction of the
 made state too (five conditions on eight coils): solves of the search and of the start, with
-the start using the direction (``solve_currents``) and ignoring it (the position-only start,
-``--3d`` compares the two in one run).
+the start using the direction (``solve_currents``) and ignoring it (the position-only start),
+and with the Gauss-Newton steps inverting every singular value of the Jacobian (the old
+steps, ``STEP_RCOND = 0``; this rod's tip pose moves with only three current combinations,
+see ``coilrod.control.currents._moved``), all in one run.
 
 Run:  python benchmarks/bench_control.py            (both parts)
       python benchmarks/bench_control.py --3d       (the CardioMag part only)
@@ -93,10 +95,12 @@ def cardiomag_3d() -> list[str]:
             f"{t_ours:.2f} | {miss:.1e} | {'yes' if eq <= BUDGET_3D else 'NO'} |"
         )
     out += [
-        "\n### with the made state's tip direction (start with / without the direction)\n",
+        "\n### with the made state's tip direction (start with / without the direction; old steps)\n",
         "| target (mm) | made by | solves + start, direction start | solves + start, "
-        "position-only start | CPU (s) with / without | miss (L) | direction miss (rad) |",
-        "|---|---|---|---|---|---|---|",
+        "position-only start | solves + start, every singular value (old steps) | "
+        "CPU (s) direction / position-only / old | forward-solve equivalents (direction "
+        "start) | miss (L) | direction miss (rad) |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     from coilrod.control import currents
 
@@ -106,7 +110,7 @@ def cardiomag_3d() -> list[str]:
         )
         target, direction = res.tip[-1], res.frames(len(res) - 1)[-1, :, 0]
         rows = []
-        for use in (True, False):
+        for use, rcond in ((True, currents.STEP_RCOND), (False, currents.STEP_RCOND), (True, 0.0)):
             start = currents._start_3d
             if not use:  # the position-only start: the direction hidden from _start_3d
 
@@ -116,18 +120,27 @@ def cardiomag_3d() -> list[str]:
                     return _orig(replace(p, direction=None))
 
             saved, currents._start_3d = currents._start_3d, start
+            saved_rcond, currents.STEP_RCOND = currents.STEP_RCOND, rcond
             try:
                 t0 = time.process_time()
                 o = solve_currents(ROD, CARDIOMAG, target, direction=direction)
                 rows.append((o, time.process_time() - t0))
             finally:
-                currents._start_3d = saved
-        (o1, t1), (o2, t2) = rows
+                currents._start_3d, currents.STEP_RCOND = saved, saved_rcond
+        (o1, t1), (o2, t2), (o3, t3) = rows
+        times = []
+        for _ in range(3):
+            t0 = time.process_time()
+            tip_3d(CARDIOMAG, o1.currents)
+            times.append(time.process_time() - t0)
+        eq = t1 / min(times)
         label = "(" + ", ".join(f"{1e3 * v:.1f}" for v in target) + ")"
         how = "B" + (" + gradient" if "gradient" in made else "")
         out.append(
             f"| {label} | {how} | {o1.solves} + {o1.start_solves} ({o1.status}) | "
-            f"{o2.solves} + {o2.start_solves} ({o2.status}) | {t1:.2f} / {t2:.2f} | "
+            f"{o2.solves} + {o2.start_solves} ({o2.status}) | "
+            f"{o3.solves} + {o3.start_solves} ({o3.status}) | {t1:.2f} / {t2:.2f} / {t3:.2f} | "
+            f"{eq:.1f} ({'within' if eq <= BUDGET_3D else 'NOT within'} {BUDGET_3D}) | "
             f"{o1.miss / L:.1e} | {o1.direction_miss:.1e} |"
         )
     return out

@@ -458,19 +458,46 @@ class _Search:
 FAR = 1e-3
 
 
-def _restoring_step(J, r, I, p: _Problem):
+#: Singular values of the weighted Jacobian below this fraction of the largest are taken as
+#: zero by the Gauss-Newton steps: such an output combination needs a million times the
+#: currents of the best one to move it.  (An axially, uniformly magnetised rod feels only the
+#: field at its tip -- its magnetic energy is the field's potential there -- so its tip
+#: position and direction, five outputs, move with three current combinations; the other two
+#: singular values are round-off, ~1e-10 of the largest, and inverted they send the step to
+#: the current limits.)
+STEP_RCOND = 1e-6
+
+
+def _moved(J, r, rcond=STEP_RCOND):
+    """The linearised misses on the output combinations the currents move: (U_k^T J,
+    U_k^T r), U_k the left singular vectors of ``J`` (outputs, m) with singular values above
+    ``rcond`` of the largest.  Their solutions are the least-squares ones of J s = -r
+    (the misses the currents cannot move are left as they are).  ``J`` and ``r`` themselves
+    where none is dropped."""
+    U, sv, _ = np.linalg.svd(J, full_matrices=False)
+    k = int(np.sum(sv > rcond * sv[0])) if sv.size and sv[0] > 0.0 else 0
+    if k == sv.size:
+        return J, r
+    return U[:, :k].T @ J, U[:, :k].T @ r
+
+
+def _restoring_step(J, r, I, p: _Problem, rcond=STEP_RCOND):
     """The least correction towards the linearised target, in the power metric:
-    ``argmin sum R s^2`` over the least-squares solutions of ``J s = -r``."""
+    ``argmin sum R s^2`` over the least-squares solutions of ``J s = -r`` (on the misses the
+    currents move, :func:`_moved`)."""
     root = np.sqrt(p.resistance)
+    J, r = _moved(J, r, rcond)
     return (np.linalg.pinv(J / root) @ -r) / root
 
 
-def _least_power_step(J, r, I, p: _Problem):
+def _least_power_step(J, r, I, p: _Problem, rcond=STEP_RCOND):
     """The step to the minimum-power currents of the linearised target:
     ``argmin sum R I_new^2`` subject to ``J (I_new - I) = -r`` and the limits (or, out of
     reach within the limits, the least-squares currents within them; also where the
     least-distance program of :func:`coils.currents.minimum_power` fails, as its NNLS solver
-    can on an ill-conditioned J)."""
+    can on an ill-conditioned J).  The linearised target is that of the misses the currents
+    move (:func:`_moved`)."""
+    J, r = _moved(J, r, rcond)
     try:
         sol = minimum_power(J, J @ I - r, p.resistance, p.limits)
     except RuntimeError:  # the NNLS failure: the least-squares step within the limits
@@ -508,7 +535,10 @@ def _approach(p: _Problem, search: _Search, I, max_iter: int) -> None:
        step only.  Once a minimum-power step has left the tip further off (with spare
        channels it moves far along the target's null space, where the linearisation is poor,
        and alternating would cycle), only restoring steps follow: the currents are then those
-       of the last minimum-power step, corrected onto the target;
+       of the last minimum-power step, corrected onto the target.  Both steps leave out the
+       output combinations the currents barely move (:func:`_moved`, ``STEP_RCOND``) until an
+       accepted step near the target fails to halve |r|; from then on they use every one
+       (a coarse rod's discretisation makes such a combination small but real);
     2. step control: the step is cut to the current limits (:func:`_within_limits`), a
        minimum-power step to the trust fraction ``trust`` (doubled after a success, set to the
        last fraction tried after a failure), and halved up to three times until the miss
@@ -519,7 +549,7 @@ def _approach(p: _Problem, search: _Search, I, max_iter: int) -> None:
     """
     res, r, miss = search.evaluate(I)
     far = FAR * p.length
-    restore_next, trust = False, 1.0
+    restore_next, trust, rcond = False, 1.0, STEP_RCOND
     for _ in range(max_iter):
         if p.met(r):
             return
@@ -529,7 +559,7 @@ def _approach(p: _Problem, search: _Search, I, max_iter: int) -> None:
         moved = False
         for kind in kinds:
             least_power = kind is _least_power_step
-            step, t = _within_limits(kind(J, r, I, p), J, r, I, p.limits)
+            step, t = _within_limits(kind(J, r, I, p, rcond), J, r, I, p.limits)
             if not np.any(step) or t <= 0.0:
                 continue
             if least_power:
@@ -545,6 +575,8 @@ def _approach(p: _Problem, search: _Search, I, max_iter: int) -> None:
                     restore_next = restore_next or (least_power and miss_t > miss)
                     if least_power:
                         trust = min(1.0, 2.0 * t)
+                    if near and np.linalg.norm(r_t) > 0.5 * np.linalg.norm(r):
+                        rcond = 0.0  # slow near the target: every output combination
                     I, res, r, miss, moved = trial, res_t, r_t, miss_t, True
                     break
                 t /= 2
