@@ -51,3 +51,25 @@ def test_zero_and_not_finite():
     neg, zero = block_tridiagonal_inertia(D, E)
     assert neg.tolist() == [n, -1]  # one negative and one exact zero per block
     assert zero[0] == n
+
+
+def test_announced_counts_compile_at_once_only_when_renting_costs_more(monkeypatch):
+    """Ski rental with a known horizon (an insertion announces one count per step): the
+    compiled count is chosen at once when the announced numpy counts plus the rent so far
+    cost more than COMPILE_AFTER (the cost model's closed form), and not otherwise."""
+    from coilrod.rod import _inertia as mod
+
+    monkeypatch.setattr(mod, "COMPILE_AFTER", 1.5)
+    monkeypatch.setattr(mod, "_compiled_ready", False)
+    monkeypatch.setattr(mod, "_rent", 0.0)
+    per_call = mod._NUMPY_CALL_S + (mod._NUMPY_BLOCK_S + mod._NUMPY_BLOCK_ROW_S * 10) * 49
+    few = int(1.5 / per_call)  # their cost stays under the purchase price
+    mod.expect_counts(few, 49, 10)
+    assert not mod._compiled_ready
+    monkeypatch.setattr(mod, "_rent", 1.5 - 0.5 * per_call)  # rent paid so far tips it
+    mod.expect_counts(1, 49, 10)
+    assert mod._compiled_ready
+    monkeypatch.setattr(mod, "_compiled_ready", False)
+    monkeypatch.setattr(mod, "_rent", 0.0)
+    mod.expect_counts(few + 1, 49, 10)
+    assert mod._compiled_ready

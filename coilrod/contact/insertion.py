@@ -393,6 +393,12 @@ def insert(
         if bar is not None:
             bar.update(1)
         prev = (float(lengths[0]), field0)
+        # one stability count per step to come (of the free nodes' blocks): compile the
+        # count at once if renting the numpy one to the end would cost more (the counts are
+        # the same either way)
+        from ..rod._inertia import expect_counts
+
+        expect_counts(lengths.size - 1, problem.n - 1, problem.nv)
         layout, band_cache = (problem.size, problem.nc), problem._band_cache
         before = None  # the solved step before the previous one: (problem, state, length)
         for k in range(1, lengths.size):

@@ -143,6 +143,7 @@ def _unit_normal_to(v: np.ndarray) -> np.ndarray:
 
 #: Point sets whose nearest-point search a vessel remembers (:meth:`Vessel._located`).
 _LOCATED_KEPT = 4
+_EYE3 = np.eye(3)
 
 
 class Vessel(Obstacle):
@@ -562,18 +563,24 @@ class Vessel(Obstacle):
 
     def _closed_form_groups(self):
         """The candidate pieces of every point when all are in closed form and few (no
-        KD-tree): their columns and pieces by kind, cached (state-independent)."""
+        KD-tree), cached (state-independent): ``(everything, groups, lo, hi, rho)`` -- the
+        candidates, their columns and fields by kind (with a flag for a sloped ball), their
+        parameter ranges, and their ball radii where those are constant (else None)."""
         groups = self.__dict__.get("_groups_cache")
         if groups is None:
-            pcs = self._pieces
+            pcs, ball = self._pieces, self._ball
             everything = np.concatenate([np.arange(self._m), self._extra])
             groups = []
             for kind in (LINE, ARC):
                 col = np.flatnonzero(pcs.kind[everything] == kind)
                 jj = everything[col]
                 fields = (pcs.lo, pcs.hi, pcs.ref, pcs.a, pcs.b, pcs.c, pcs.rho, self._cone_slope)
-                groups.append((kind, col, *(f[jj] for f in fields)))
-            groups = (everything, groups)
+                sloped = bool(np.any(self._cone_slope[jj]))
+                groups.append((kind, col, sloped, *(f[jj] for f in fields)))
+            smooth = ball.smooth is not None and bool(np.any(ball.smooth_mask[everything]))
+            # a constant ball: value + 0 * (u - anchor) is the value exactly
+            rho = None if smooth or np.any(ball.slope[everything]) else ball.value[everything]
+            groups = (everything, groups, pcs.lo[everything], pcs.hi[everything], rho)
             self.__dict__["_groups_cache"] = groups
         return groups
 
@@ -582,33 +589,35 @@ class Vessel(Obstacle):
         pairs at once when every candidate piece is a line or an arc in closed form (the
         formulas of :meth:`Pieces.start_guess` and :meth:`Pieces.curve`): (gap, piece,
         parameter, c, c_u, c_uu)."""
-        everything, groups = self._closed_form_groups()
+        everything, groups, lo_all, hi_all, rho_all = self._closed_form_groups()
         n, K = len(p), len(everything)
         U = np.empty((n, K))
         X = np.empty((n, K, 3))
         XU = np.empty((n, K, 3))
         XUU = np.zeros((n, K, 3))
-        for kind, col, lo, hi, ref, a, b, c, rho, slope in groups:
+        for kind, col, sloped, lo, hi, ref, a, b, c, rho, slope in groups:
             if col.size == 0:
                 continue
             q = p[:, None, :] - a  # (n, k, 3)
             if kind == LINE:
                 along = np.einsum("nkj,kj->nk", q, b)
-                if np.any(slope):
+                if sloped:
                     across = np.linalg.norm(q - along[..., None] * b, axis=2)
                     along = along + slope * across / np.sqrt(1.0 - slope * slope)
-                u = np.clip(ref + along, lo, hi)
+                u = np.minimum(np.maximum(ref + along, lo), hi)
                 X[:, col] = a + b * (u - ref)[..., None]
                 XU[:, col] = b
             else:
                 x1_ = np.einsum("nkj,kj->nk", q, b)
                 x2_ = np.einsum("nkj,kj->nk", q, c)
-                phi = np.mod(np.arctan2(x2_, x1_), TWO_PI)
+                phi = np.arctan2(x2_, x1_)
+                phi = phi + TWO_PI * (phi < 0.0)  # np.mod(phi, 2 pi), bitwise on [-pi, pi]
                 span = (hi - lo) / rho
                 beyond = phi > span
-                to_start = TWO_PI - phi < phi - span
-                phi = np.where(beyond, np.where(to_start, 0.0, span), phi)
-                u = np.clip(lo + rho * phi, lo, hi)
+                if beyond.any():
+                    to_start = TWO_PI - phi < phi - span
+                    phi = np.where(beyond, np.where(to_start, 0.0, span), phi)
+                u = np.minimum(np.maximum(lo + rho * phi, lo), hi)
                 ang = ((u - ref) / rho)[..., None]
                 cos, sin = np.cos(ang), np.sin(ang)
                 radial = cos * b + sin * c
@@ -616,12 +625,12 @@ class Vessel(Obstacle):
                 XU[:, col] = cos * c - sin * b
                 XUU[:, col] = -radial / rho[:, None]
             U[:, col] = u
-        J = np.broadcast_to(everything, (n, K))
-        G = self._ball(J, U, 0)[0] - np.linalg.norm(p[:, None, :] - X, axis=-1)
+        if rho_all is None:
+            rho_all = self._ball(np.broadcast_to(everything, (n, K)), U, 0)[0]
+        G = rho_all - np.linalg.norm(p[:, None, :] - X, axis=-1)
         # the choice of _best: a piece whose maximiser is interior, within rounding
-        pcs = self._pieces
         best = G.max(axis=1)
-        inside = (U > pcs.lo[everything]) & (U < pcs.hi[everything])
+        inside = (U > lo_all) & (U < hi_all)
         tol = 64 * EPS * (np.abs(best) + self._rho_scale + np.abs(p).max(axis=1))
         tie = inside & (G >= (best - tol)[:, None])
         col = np.where(
@@ -672,8 +681,9 @@ class Vessel(Obstacle):
         r = points - x
         d = np.linalg.norm(r, axis=1)
         zero = d < ON_LINE
-        rh = r / np.where(zero, 1.0, d)[:, None]
-        if zero.any():  # on the centreline: any normal is a (sub)gradient
+        on_line = zero.any()
+        rh = r / (np.where(zero, 1.0, d) if on_line else d)[:, None]
+        if on_line:  # on the centreline: any normal is a (sub)gradient
             rh[zero] = _unit_normal_to(xu[zero])
         grad = -rh
         if order == 1:
@@ -682,7 +692,7 @@ class Vessel(Obstacle):
         # the hessian grows like 1/d towards the centreline (where the gap has a cone point);
         # below 1e-15 of the radius, where the normal is rounding noise, it is capped there
         ds = np.maximum(d, 1e-15 * rho)
-        proj = np.eye(3) - rh[:, :, None] * rh[:, None, :]
+        proj = _EYE3 - rh[:, :, None] * rh[:, None, :]
         hess = -proj / ds[:, None, None]
         pcs = self._pieces
         inside = (u > pcs.lo[j]) & (u < pcs.hi[j])

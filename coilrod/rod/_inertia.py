@@ -188,6 +188,20 @@ def _compiled_pays(blocks: int, b: int) -> bool:
     return True
 
 
+def expect_counts(calls: int, blocks: int, b: int) -> None:
+    """Announce ``calls`` counts of ``blocks`` blocks of size ``b`` to come (an insertion
+    makes one per step).  Ski rental with a known horizon: if the numpy counts so far plus
+    the announced ones would cost more than :data:`COMPILE_AFTER`, the compiled count runs
+    from the next count on (compiling once is cheaper than renting to the end).  The counts
+    are the same either way (:func:`_inertia_numpy` is bitwise :func:`_inertia`)."""
+    global _compiled_ready
+    if _compiled_ready or calls <= 0:
+        return
+    cost = calls * (_NUMPY_CALL_S + (_NUMPY_BLOCK_S + _NUMPY_BLOCK_ROW_S * b) * blocks)
+    if _rent + cost > COMPILE_AFTER:
+        _compiled_ready = True
+
+
 def block_tridiagonal_inertia(D: np.ndarray, E: np.ndarray, rtol: float = 1e-13):
     """Negative and (numerically) zero eigenvalue counts of symmetric block-tridiagonal
     matrices.
