@@ -378,6 +378,40 @@ def test_node_magnetization_3d_integrates_a_linear_profile_exactly():
     np.testing.assert_allclose(integral, M0 * L / 2 * direction, rtol=1e-12)
 
 
+def test_node_magnetization_cache_never_returns_a_stale_or_shared_result():
+    # constant profiles are cached (coilrod.rod.mesh): every input the result depends on is in
+    # the key, the caller's copy is its own, and the cache stays bounded.  Reference: the
+    # closed form |M| (cos a cos e, sin a cos e, sin e) at every node (constant profile).
+    from coilrod.rod import mesh as mesh_module
+
+    L, mesh = 0.04, RodMesh(8)
+    for angle, elevation in [(0.0, 0.0), (0.3, 0.0), (0.3, 0.2), (-0.0, 0.0)]:
+        for M0 in (1e5, 2e5):
+            m = Magnetization(M0, angle, elevation)
+            want = M0 * np.array(
+                [
+                    math.cos(angle) * math.cos(elevation),
+                    math.sin(angle) * math.cos(elevation),
+                    math.sin(elevation),
+                ]
+            )
+            for _ in range(2):  # a miss, then a hit
+                got = node_magnetization(m, mesh, L, dim=3)
+                np.testing.assert_allclose(got, np.broadcast_to(want, got.shape), rtol=1e-14)
+                got[:] = np.nan  # the caller's copy: must not poison the next call
+    # a changed mesh (same object, mutated nodes) is a new key
+    m = Magnetization(1e5, 0.3)
+    before = node_magnetization(m, mesh, L)
+    mesh.s, mesh.h, mesh.w = RodMesh(4).s, RodMesh(4).h, RodMesh(4).w
+    assert node_magnetization(m, mesh, L).shape == (5, 2) != before.shape
+    # a constant that differs only in the sign of zero keeps its own bits
+    plus = node_magnetization(Magnetization(1e5, 0.0), mesh, L)
+    minus = node_magnetization(Magnetization(1e5, -0.0), mesh, L)
+    assert not np.signbit(plus[:, 1]).any()
+    assert np.signbit(minus[:, 1]).all()
+    assert len(mesh_module._CONSTANT_CACHE) <= mesh_module._CACHE_SIZE
+
+
 @pytest.mark.parametrize("dim", [1, 4, True, "3", None])
 def test_node_magnetization_dim_is_2_or_3(dim):
     with pytest.raises(ValueError, match="dim must be 2 or 3"):

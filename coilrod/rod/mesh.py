@@ -12,6 +12,13 @@ __all__ = ["RodMesh", "node_magnetization", "segment_weights", "MERGE_BREAKS"]
 #: discrete equations ill-conditioned.
 MERGE_BREAKS = 1e-10
 
+#: Node magnetizations of constant profiles already computed, keyed on everything the result
+#: depends on (the profile's constants, the rod length, dim and the mesh's node arrays by
+#: value), so a changed input is a new key, never a stale hit; at most :data:`_CACHE_SIZE`
+#: entries (oldest dropped first).
+_CONSTANT_CACHE: dict = {}
+_CACHE_SIZE = 16
+
 
 class RodMesh:
     """Piecewise-uniform nodes on [0, 1] with a node at every breakpoint.
@@ -117,10 +124,36 @@ def node_magnetization(magnetization, mesh: RodMesh, length: float, dim: int = 2
     """
     if isinstance(dim, bool) or dim not in (2, 3):
         raise ValueError(f"dim must be 2 or 3; got {dim!r}")
+    key = _constant_key(magnetization, mesh, length, dim)
+    cached = _CONSTANT_CACHE.get(key) if key is not None else None
+    if cached is not None:
+        return cached.copy()
     vector = magnetization.vector if dim == 2 else magnetization.vector3
     left, right, hl, hr = _one_sided(mesh, length)
     both = vector(np.concatenate([left, right]))  # one evaluation of the profile
-    return hl[:, None] * both[: left.size] + hr[:, None] * both[left.size :]
+    out = hl[:, None] * both[: left.size] + hr[:, None] * both[left.size :]
+    if key is not None:
+        if len(_CONSTANT_CACHE) >= _CACHE_SIZE:
+            del _CONSTANT_CACHE[next(iter(_CONSTANT_CACHE))]
+        _CONSTANT_CACHE[key] = out.copy()
+    return out
+
+
+def _constant_key(magnetization, mesh: RodMesh, length: float, dim: int):
+    """Cache key of :func:`node_magnetization` for a constant profile of the plain
+    :class:`~coilrod.Magnetization` class (its constants as exact float bit patterns, the
+    length, dim and the mesh's ``s``, ``h``, ``w`` by value), or None: callable profiles
+    (which may read mutable state) and subclasses are evaluated every time."""
+    from ..robot.magnetization import Magnetization
+
+    if type(magnetization) is not Magnetization or not magnetization.is_constant:
+        return None
+    consts = (magnetization._magnitude, magnetization._angle, magnetization._elevation)
+    try:
+        bits = tuple(float(c).hex() for c in (*consts, length))
+    except (TypeError, ValueError):
+        return None
+    return (bits, dim, mesh.s.tobytes(), mesh.h.tobytes(), mesh.w.tobytes())
 
 
 def segment_weights(edges: np.ndarray, mesh: RodMesh, length: float) -> np.ndarray:
