@@ -412,6 +412,20 @@ def test_node_magnetization_cache_never_returns_a_stale_or_shared_result():
     assert len(mesh_module._CONSTANT_CACHE) <= mesh_module._CACHE_SIZE
 
 
+def test_rod_mesh_cache_gives_every_mesh_its_own_arrays():
+    # meshes are cached by value (coilrod.rod.mesh): a mesh changed by its caller must not
+    # change the next one; reference: the nodes by hand (two uniform pieces split at 0.25)
+    first = RodMesh(8, [0.25])
+    want = np.concatenate([np.linspace(0, 0.25, 3)[:-1], np.linspace(0.25, 1.0, 7)])
+    np.testing.assert_allclose(first.s, want, rtol=0, atol=1e-15)
+    for a in (first.s, first.h, first.w, first.edges, first.counts):
+        a[...] = 0
+    again = RodMesh(8, [0.25]).refined()
+    np.testing.assert_allclose(again.s[::2], want, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(again.w.sum(), 1.0, rtol=1e-15)
+    assert RodMesh(8.0, [0.25]).n == RodMesh(8, np.array([[0.25]])).n == 9
+
+
 @pytest.mark.parametrize("dim", [1, 4, True, "3", None])
 def test_node_magnetization_dim_is_2_or_3(dim):
     with pytest.raises(ValueError, match="dim must be 2 or 3"):

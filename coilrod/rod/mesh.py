@@ -18,6 +18,10 @@ MERGE_BREAKS = 1e-10
 #: entries (oldest dropped first).
 _CONSTANT_CACHE: dict = {}
 _CACHE_SIZE = 16
+#: Meshes already built: (edges, counts) keyed on ``(segments, breaks)`` and the node arrays
+#: (s, h, w) keyed on (edges, counts), all by value (a mesh is a pure function of them;
+#: every mesh gets its own copies); at most :data:`_CACHE_SIZE` entries.
+_NODE_CACHE: dict = {}
 
 
 class RodMesh:
@@ -42,27 +46,38 @@ class RodMesh:
     """
 
     def __init__(self, segments: int, breaks=()):
-        br = np.sort(np.asarray(breaks, float).ravel())
-        br = br[(br > MERGE_BREAKS) & (br < 1.0 - MERGE_BREAKS)]
-        if br.size:
-            br = br[np.concatenate([[True], np.diff(br) > MERGE_BREAKS])]
-        edges = np.concatenate([[0.0], br, [1.0]])
-        lengths = np.diff(edges)
-        counts = np.maximum(2, np.round(segments * lengths).astype(int))
-        self._build(edges, counts)
+        breaks = np.asarray(breaks, float)
+        key = (float(segments), breaks.tobytes())  # (an int count multiplies as its float)
+        cached = _NODE_CACHE.get(key)
+        if cached is None:
+            br = np.sort(breaks.ravel())
+            br = br[(br > MERGE_BREAKS) & (br < 1.0 - MERGE_BREAKS)]
+            if br.size:
+                br = br[np.concatenate([[True], np.diff(br) > MERGE_BREAKS])]
+            edges = np.concatenate([[0.0], br, [1.0]])
+            lengths = np.diff(edges)
+            counts = np.maximum(2, np.round(segments * lengths).astype(int))
+            cached = _remember(_NODE_CACHE, key, (edges, counts))
+        self._build(*(a.copy() for a in cached))
 
     def _build(self, edges: np.ndarray, counts: np.ndarray) -> None:
         self.edges = edges
         self.counts = counts
-        pieces = [
-            np.linspace(a, b, c + 1)[:-1]
-            for a, b, c in zip(edges[:-1], edges[1:], counts, strict=True)
-        ]
-        self.s = np.concatenate([*pieces, [1.0]])
-        self.h = np.diff(self.s)
-        self.w = np.zeros(self.s.size)
-        self.w[:-1] += self.h / 2
-        self.w[1:] += self.h / 2
+        key = (edges.tobytes(), counts.astype(np.int64).tobytes())  # (bytes: not __init__'s)
+        cached = _NODE_CACHE.get(key)
+        if cached is None:
+            pieces = [
+                np.linspace(a, b, c + 1)[:-1]
+                for a, b, c in zip(edges[:-1], edges[1:], counts, strict=True)
+            ]
+            s = np.concatenate([*pieces, [1.0]])
+            h = np.diff(s)
+            w = np.zeros(s.size)
+            w[:-1] += h / 2
+            w[1:] += h / 2
+            cached = _remember(_NODE_CACHE, key, (s, h, w))
+        # each mesh owns its arrays (a caller may change them: the cache keeps its own)
+        self.s, self.h, self.w = (a.copy() for a in cached)
 
     def refined(self) -> RodMesh:
         """The mesh with every segment halved (its nodes contain this mesh's nodes)."""
@@ -133,10 +148,17 @@ def node_magnetization(magnetization, mesh: RodMesh, length: float, dim: int = 2
     both = vector(np.concatenate([left, right]))  # one evaluation of the profile
     out = hl[:, None] * both[: left.size] + hr[:, None] * both[left.size :]
     if key is not None:
-        if len(_CONSTANT_CACHE) >= _CACHE_SIZE:
-            del _CONSTANT_CACHE[next(iter(_CONSTANT_CACHE))]
-        _CONSTANT_CACHE[key] = out.copy()
+        _remember(_CONSTANT_CACHE, key, out.copy())
     return out
+
+
+def _remember(cache: dict, key, value):
+    """Store ``value`` under ``key`` in ``cache``, dropping the oldest entry beyond
+    :data:`_CACHE_SIZE`; returns ``value``."""
+    if len(cache) >= _CACHE_SIZE:
+        del cache[next(iter(cache))]
+    cache[key] = value
+    return value
 
 
 def _constant_key(magnetization, mesh: RodMesh, length: float, dim: int):
