@@ -426,6 +426,27 @@ def test_rod_mesh_cache_gives_every_mesh_its_own_arrays():
     assert RodMesh(8.0, [0.25]).n == RodMesh(8, np.array([[0.25]])).n == 9
 
 
+def test_planar_rod_mesh_constants_cache_is_by_value_and_private():
+    # PlanarRod caches a mesh's constants (coilrod.rod.planar) by the mesh's h and w:
+    # reference 1/h and 1/w by hand; a problem's changes stay its own
+    from coilrod.rod.planar import PlanarRod
+
+    field = coils.UniformField(B=(0.0, 1e-3, 0.0))
+
+    def problem(mesh):
+        return PlanarRod(mesh, np.ones((mesh.n, 2)), field, 0.04, np.zeros(3), 0.0)
+
+    first = problem(RodMesh(8, [0.25]))
+    first._inv_h[:] = np.nan
+    first._k_diag[:] = np.nan
+    again = problem(RodMesh(8, [0.25]))
+    np.testing.assert_array_equal(again._inv_h, 1.0 / again.mesh.h)
+    np.testing.assert_array_equal(again._inv_w, 1.0 / again.mesh.w)
+    other = RodMesh(8, [0.25])
+    other.h, other.w = other.h * 2, other.w * 2  # a changed mesh: new constants
+    np.testing.assert_array_equal(problem(other)._inv_h, 0.5 / again.mesh.h)
+
+
 @pytest.mark.parametrize("dim", [1, 4, True, "3", None])
 def test_node_magnetization_dim_is_2_or_3(dim):
     with pytest.raises(ValueError, match="dim must be 2 or 3"):

@@ -156,7 +156,7 @@ def _remember(cache: dict, key, value):
     """Store ``value`` under ``key`` in ``cache``, dropping the oldest entry beyond
     :data:`_CACHE_SIZE`; returns ``value``."""
     if len(cache) >= _CACHE_SIZE:
-        del cache[next(iter(cache))]
+        cache.pop(next(iter(cache)), None)
     cache[key] = value
     return value
 

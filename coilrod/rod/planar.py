@@ -241,7 +241,7 @@ def _mesh_constants(h: np.ndarray, w: np.ndarray) -> tuple:
         floor_bend = _FLOOR * _EPS * bend_scale[1:]
         stab_e = -inv_h[1:] / np.sqrt(w[1:-1] * w[2:])
         if len(_MESH_CONSTANTS) >= 16:
-            del _MESH_CONSTANTS[next(iter(_MESH_CONSTANTS))]
+            _MESH_CONSTANTS.pop(next(iter(_MESH_CONSTANTS)), None)
         cached = _MESH_CONSTANTS[key] = (inv_h, inv_w, c, bend, bend_scale, floor_bend, stab_e)
     return tuple(a.copy() for a in cached)
 
