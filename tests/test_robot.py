@@ -378,6 +378,75 @@ def test_node_magnetization_3d_integrates_a_linear_profile_exactly():
     np.testing.assert_allclose(integral, M0 * L / 2 * direction, rtol=1e-12)
 
 
+def test_node_magnetization_cache_never_returns_a_stale_or_shared_result():
+    # constant profiles are cached (coilrod.rod.mesh): every input the result depends on is in
+    # the key, the caller's copy is its own, and the cache stays bounded.  Reference: the
+    # closed form |M| (cos a cos e, sin a cos e, sin e) at every node (constant profile).
+    from coilrod.rod import mesh as mesh_module
+
+    L, mesh = 0.04, RodMesh(8)
+    for angle, elevation in [(0.0, 0.0), (0.3, 0.0), (0.3, 0.2), (-0.0, 0.0)]:
+        for M0 in (1e5, 2e5):
+            m = Magnetization(M0, angle, elevation)
+            want = M0 * np.array(
+                [
+                    math.cos(angle) * math.cos(elevation),
+                    math.sin(angle) * math.cos(elevation),
+                    math.sin(elevation),
+                ]
+            )
+            for _ in range(2):  # a miss, then a hit
+                got = node_magnetization(m, mesh, L, dim=3)
+                np.testing.assert_allclose(got, np.broadcast_to(want, got.shape), rtol=1e-14)
+                got[:] = np.nan  # the caller's copy: must not poison the next call
+    # a changed mesh (same object, mutated nodes) is a new key
+    m = Magnetization(1e5, 0.3)
+    before = node_magnetization(m, mesh, L)
+    mesh.s, mesh.h, mesh.w = RodMesh(4).s, RodMesh(4).h, RodMesh(4).w
+    assert node_magnetization(m, mesh, L).shape == (5, 2) != before.shape
+    # a constant that differs only in the sign of zero keeps its own bits
+    plus = node_magnetization(Magnetization(1e5, 0.0), mesh, L)
+    minus = node_magnetization(Magnetization(1e5, -0.0), mesh, L)
+    assert not np.signbit(plus[:, 1]).any()
+    assert np.signbit(minus[:, 1]).all()
+    assert len(mesh_module._CONSTANT_CACHE) <= mesh_module._CACHE_SIZE
+
+
+def test_rod_mesh_cache_gives_every_mesh_its_own_arrays():
+    # meshes are cached by value (coilrod.rod.mesh): a mesh changed by its caller must not
+    # change the next one; reference: the nodes by hand (two uniform pieces split at 0.25)
+    first = RodMesh(8, [0.25])
+    want = np.concatenate([np.linspace(0, 0.25, 3)[:-1], np.linspace(0.25, 1.0, 7)])
+    np.testing.assert_allclose(first.s, want, rtol=0, atol=1e-15)
+    for a in (first.s, first.h, first.w, first.edges, first.counts):
+        a[...] = 0
+    again = RodMesh(8, [0.25]).refined()
+    np.testing.assert_allclose(again.s[::2], want, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(again.w.sum(), 1.0, rtol=1e-15)
+    assert RodMesh(8.0, [0.25]).n == RodMesh(8, np.array([[0.25]])).n == 9
+
+
+def test_planar_rod_mesh_constants_cache_is_by_value_and_private():
+    # PlanarRod caches a mesh's constants (coilrod.rod.planar) by the mesh's h and w:
+    # reference 1/h and 1/w by hand; a problem's changes stay its own
+    from coilrod.rod.planar import PlanarRod
+
+    field = coils.UniformField(B=(0.0, 1e-3, 0.0))
+
+    def problem(mesh):
+        return PlanarRod(mesh, np.ones((mesh.n, 2)), field, 0.04, np.zeros(3), 0.0)
+
+    first = problem(RodMesh(8, [0.25]))
+    first._inv_h[:] = np.nan
+    first._k_diag[:] = np.nan
+    again = problem(RodMesh(8, [0.25]))
+    np.testing.assert_array_equal(again._inv_h, 1.0 / again.mesh.h)
+    np.testing.assert_array_equal(again._inv_w, 1.0 / again.mesh.w)
+    other = RodMesh(8, [0.25])
+    other.h, other.w = other.h * 2, other.w * 2  # a changed mesh: new constants
+    np.testing.assert_array_equal(problem(other)._inv_h, 0.5 / again.mesh.h)
+
+
 @pytest.mark.parametrize("dim", [1, 4, True, "3", None])
 def test_node_magnetization_dim_is_2_or_3(dim):
     with pytest.raises(ValueError, match="dim must be 2 or 3"):

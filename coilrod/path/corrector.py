@@ -60,6 +60,9 @@ class NewtonOptions:
             raise ValueError(f"chord must lie in [0, 1); got {self.chord!r}")
 
 
+_DEFAULT_OPTIONS = NewtonOptions()  # (frozen: one instance serves every call)
+
+
 @dataclass
 class NewtonResult:
     """Outcome of :func:`newton` (arrays over the stack for a stacked start).
@@ -205,10 +208,10 @@ def newton(
     NewtonResult
         Shaped like the input (scalars for one state).
     """
-    opts = NewtonOptions() if opts is None else opts
+    opts = _DEFAULT_OPTIONS if opts is None else opts
     P = as_batched(problem)
     single = np.ndim(u0) == 1
-    U = np.array(np.atleast_2d(u0), dtype=float)
+    U = np.array(u0, dtype=float, ndmin=2)  # (a copy: iterated in place)
     k = len(U)
     S = np.array(scale, dtype=float)  # a copy
     if S.shape != (k,):

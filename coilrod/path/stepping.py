@@ -229,7 +229,8 @@ class _Tracker:
         tangent is known, within ``relative_correction`` of the predicted change."""
         if cur.rate is None:
             return float(self.P.distance((u - guess)[None])[0]) <= self.P.max_correction
-        correction, change = map(float, self.P.distance(np.stack([u - guess, guess - cur.u])))
+        # (np.array of equal-shape rows: np.stack's values, at a quarter of its overhead)
+        correction, change = map(float, self.P.distance(np.array([u - guess, guess - cur.u])))
         if correction > self.P.max_correction:
             return False
         return correction <= self.opts.relative_correction * change + self.negligible
@@ -247,7 +248,7 @@ class _Tracker:
         gap, size, moved = map(  # (one call of the model's distance for the three)
             float,
             self.P.distance(
-                np.stack([change - 0.5 * h * (cur.rate + rate), np.abs(cur.u) + np.abs(u), change])
+                np.array([change - 0.5 * h * (cur.rate + rate), np.abs(cur.u) + np.abs(u), change])
             ),
         )
         # rounding of the states themselves (a step far below their resolution)

@@ -12,6 +12,17 @@ __all__ = ["RodMesh", "node_magnetization", "segment_weights", "MERGE_BREAKS"]
 #: discrete equations ill-conditioned.
 MERGE_BREAKS = 1e-10
 
+#: Node magnetizations of constant profiles already computed, keyed on everything the result
+#: depends on (the profile's constants, the rod length, dim and the mesh's node arrays by
+#: value), so a changed input is a new key, never a stale hit; at most :data:`_CACHE_SIZE`
+#: entries (oldest dropped first).
+_CONSTANT_CACHE: dict = {}
+_CACHE_SIZE = 16
+#: Meshes already built: (edges, counts) keyed on ``(segments, breaks)`` and the node arrays
+#: (s, h, w) keyed on (edges, counts), all by value (a mesh is a pure function of them;
+#: every mesh gets its own copies); at most :data:`_CACHE_SIZE` entries.
+_NODE_CACHE: dict = {}
+
 
 class RodMesh:
     """Piecewise-uniform nodes on [0, 1] with a node at every breakpoint.
@@ -35,27 +46,38 @@ class RodMesh:
     """
 
     def __init__(self, segments: int, breaks=()):
-        br = np.sort(np.asarray(breaks, float).ravel())
-        br = br[(br > MERGE_BREAKS) & (br < 1.0 - MERGE_BREAKS)]
-        if br.size:
-            br = br[np.concatenate([[True], np.diff(br) > MERGE_BREAKS])]
-        edges = np.concatenate([[0.0], br, [1.0]])
-        lengths = np.diff(edges)
-        counts = np.maximum(2, np.round(segments * lengths).astype(int))
-        self._build(edges, counts)
+        breaks = np.asarray(breaks, float)
+        key = (float(segments), breaks.tobytes())  # (an int count multiplies as its float)
+        cached = _NODE_CACHE.get(key)
+        if cached is None:
+            br = np.sort(breaks.ravel())
+            br = br[(br > MERGE_BREAKS) & (br < 1.0 - MERGE_BREAKS)]
+            if br.size:
+                br = br[np.concatenate([[True], np.diff(br) > MERGE_BREAKS])]
+            edges = np.concatenate([[0.0], br, [1.0]])
+            lengths = np.diff(edges)
+            counts = np.maximum(2, np.round(segments * lengths).astype(int))
+            cached = _remember(_NODE_CACHE, key, (edges, counts))
+        self._build(*(a.copy() for a in cached))
 
     def _build(self, edges: np.ndarray, counts: np.ndarray) -> None:
         self.edges = edges
         self.counts = counts
-        pieces = [
-            np.linspace(a, b, c + 1)[:-1]
-            for a, b, c in zip(edges[:-1], edges[1:], counts, strict=True)
-        ]
-        self.s = np.concatenate([*pieces, [1.0]])
-        self.h = np.diff(self.s)
-        self.w = np.zeros(self.s.size)
-        self.w[:-1] += self.h / 2
-        self.w[1:] += self.h / 2
+        key = (edges.tobytes(), counts.astype(np.int64).tobytes())  # (bytes: not __init__'s)
+        cached = _NODE_CACHE.get(key)
+        if cached is None:
+            pieces = [
+                np.linspace(a, b, c + 1)[:-1]
+                for a, b, c in zip(edges[:-1], edges[1:], counts, strict=True)
+            ]
+            s = np.concatenate([*pieces, [1.0]])
+            h = np.diff(s)
+            w = np.zeros(s.size)
+            w[:-1] += h / 2
+            w[1:] += h / 2
+            cached = _remember(_NODE_CACHE, key, (s, h, w))
+        # each mesh owns its arrays (a caller may change them: the cache keeps its own)
+        self.s, self.h, self.w = (a.copy() for a in cached)
 
     def refined(self) -> RodMesh:
         """The mesh with every segment halved (its nodes contain this mesh's nodes)."""
@@ -117,10 +139,43 @@ def node_magnetization(magnetization, mesh: RodMesh, length: float, dim: int = 2
     """
     if isinstance(dim, bool) or dim not in (2, 3):
         raise ValueError(f"dim must be 2 or 3; got {dim!r}")
+    key = _constant_key(magnetization, mesh, length, dim)
+    cached = _CONSTANT_CACHE.get(key) if key is not None else None
+    if cached is not None:
+        return cached.copy()
     vector = magnetization.vector if dim == 2 else magnetization.vector3
     left, right, hl, hr = _one_sided(mesh, length)
     both = vector(np.concatenate([left, right]))  # one evaluation of the profile
-    return hl[:, None] * both[: left.size] + hr[:, None] * both[left.size :]
+    out = hl[:, None] * both[: left.size] + hr[:, None] * both[left.size :]
+    if key is not None:
+        _remember(_CONSTANT_CACHE, key, out.copy())
+    return out
+
+
+def _remember(cache: dict, key, value):
+    """Store ``value`` under ``key`` in ``cache``, dropping the oldest entry beyond
+    :data:`_CACHE_SIZE`; returns ``value``."""
+    if len(cache) >= _CACHE_SIZE:
+        cache.pop(next(iter(cache)), None)
+    cache[key] = value
+    return value
+
+
+def _constant_key(magnetization, mesh: RodMesh, length: float, dim: int):
+    """Cache key of :func:`node_magnetization` for a constant profile of the plain
+    :class:`~coilrod.Magnetization` class (its constants as exact float bit patterns, the
+    length, dim and the mesh's ``s``, ``h``, ``w`` by value), or None: callable profiles
+    (which may read mutable state) and subclasses are evaluated every time."""
+    from ..robot.magnetization import Magnetization
+
+    if type(magnetization) is not Magnetization or not magnetization.is_constant:
+        return None
+    consts = (magnetization._magnitude, magnetization._angle, magnetization._elevation)
+    try:
+        bits = tuple(float(c).hex() for c in (*consts, length))
+    except (TypeError, ValueError):
+        return None
+    return (bits, dim, mesh.s.tobytes(), mesh.h.tobytes(), mesh.w.tobytes())
 
 
 def segment_weights(edges: np.ndarray, mesh: RodMesh, length: float) -> np.ndarray:

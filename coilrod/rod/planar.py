@@ -217,6 +217,35 @@ class RodTangent:
         return out
 
 
+#: The mesh-only constants of :class:`PlanarRod` already computed, keyed on the mesh's h and w
+#: by value (every problem gets its own copies); at most 16 entries, oldest dropped first.
+_MESH_CONSTANTS: dict = {}
+
+
+def _mesh_constants(h: np.ndarray, w: np.ndarray) -> tuple:
+    """1/h, 1/w, h_{i-1}/2 (with 0 first), the bending diagonal 1/h_{i-1} + 1/h_i, its
+    round-off scale per w and floor, and the in-plane stability's off-diagonal (all as
+    :class:`PlanarRod` uses them), copies of cached arrays."""
+    key = (h.tobytes(), w.tobytes())
+    cached = _MESH_CONSTANTS.get(key)
+    if cached is None:
+        n = w.size
+        inv_h = 1.0 / h
+        inv_w = 1.0 / w
+        c = np.concatenate([[0.0], h / 2])  # h_{i-1} / 2
+        # round-off scale of each equation row's terms, per unit state magnitude
+        bend = np.zeros(n)
+        bend[1:] += inv_h
+        bend[:-1] += inv_h
+        bend_scale = bend * inv_w
+        floor_bend = _FLOOR * _EPS * bend_scale[1:]
+        stab_e = -inv_h[1:] / np.sqrt(w[1:-1] * w[2:])
+        if len(_MESH_CONSTANTS) >= 16:
+            _MESH_CONSTANTS.pop(next(iter(_MESH_CONSTANTS)), None)
+        cached = _MESH_CONSTANTS[key] = (inv_h, inv_w, c, bend, bend_scale, floor_bend, stab_e)
+    return tuple(a.copy() for a in cached)
+
+
 class PlanarRod(DiscreteRod):
     """The discrete problem for one rod, field and mesh (non-dimensional).
 
@@ -264,16 +293,10 @@ class PlanarRod(DiscreteRod):
         self.n = n = mesh.n
         self.size = n if self.uniform else _NV * n
         h, w = mesh.h, mesh.w
-        self._inv_h = 1.0 / h
-        self._inv_w = 1.0 / w
-        self._c = np.concatenate([[0.0], h / 2])  # h_{i-1} / 2
-        # round-off scale of each equation row's terms, per unit state magnitude
-        bend = np.zeros(n)
-        bend[1:] += self._inv_h
-        bend[:-1] += self._inv_h
-        self._bend_scale = bend * self._inv_w
-        self._floor_bend = _FLOOR * _EPS * self._bend_scale[1:]
-        self._stab_e = -self._inv_h[1:] / np.sqrt(w[1:-1] * w[2:])
+        (
+            self._inv_h, self._inv_w, self._c, bend, self._bend_scale, self._floor_bend,
+            self._stab_e,
+        ) = _mesh_constants(h, w)  # fmt: skip
         self._mu0 = None
         self._tri_cache: dict = {}
         self._no_h = np.zeros((1, 3, 3, 3))  # placeholder hessian of a linear field
@@ -317,7 +340,8 @@ class PlanarRod(DiscreteRod):
 
     def positions(self, theta: np.ndarray) -> np.ndarray:
         """Trapezoid centreline relative to the clamp, theta (..., n): (..., n, 2), units of L."""
-        t = np.stack([np.cos(theta), np.sin(theta)], axis=-1)
+        t = np.empty(np.shape(theta) + (2,))  # (np.stack's values, without its overhead)
+        t[..., 0], t[..., 1] = np.cos(theta), np.sin(theta)
         seg = self.mesh.h[:, None] * (t[..., :-1, :] + t[..., 1:, :]) / 2
         out = np.zeros(t.shape)
         np.cumsum(seg, axis=-2, out=out[..., 1:, :])
