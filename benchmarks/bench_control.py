@@ -95,7 +95,8 @@ def cardiomag_3d() -> list[str]:
             f"{t_ours:.2f} | {miss:.1e} | {'yes' if eq <= BUDGET_3D else 'NO'} |"
         )
     out += [
-        "\n### with the made state's tip direction (start with / without the direction; old steps)\n",
+        "\n### with the made state's tip direction "
+        "(start with / without the direction; old steps)\n",
         "| target (mm) | made by | solves + start, direction start | solves + start, "
         "position-only start | solves + start, every singular value (old steps) | "
         "CPU (s) direction / position-only / old | forward-solve equivalents (direction "
