@@ -8,6 +8,8 @@ single-threaded numpy).
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import os
 import platform
 import time
@@ -86,3 +88,39 @@ def best_wall(fn, repeat: int = 3):
         out = fn()
         best = min(best, time.perf_counter() - t0)
     return best, out
+
+
+@contextlib.contextmanager
+def phase_timers(targets):
+    """Time functions in place: each ``(label, owner, name)`` of ``targets`` has
+    ``owner.name`` wrapped by a process-CPU-time accumulator for the ``with`` block (restored
+    after it).  Yields ``{label: [calls, CPU s]}``; ``reset(acc)`` zeroes it (after a warm-up)."""
+    acc = {label: [0, 0.0] for label, _, _ in targets}
+    saved = []
+
+    def wrap(label, fn):
+        @functools.wraps(fn)
+        def timed(*a, **k):
+            t0 = time.process_time()
+            try:
+                return fn(*a, **k)
+            finally:
+                acc[label][0] += 1
+                acc[label][1] += time.process_time() - t0
+
+        return timed
+
+    for label, owner, name in targets:
+        saved.append((owner, name, getattr(owner, name)))
+        setattr(owner, name, wrap(label, getattr(owner, name)))
+    try:
+        yield acc
+    finally:
+        for owner, name, fn in reversed(saved):
+            setattr(owner, name, fn)
+
+
+def reset(acc) -> None:
+    """Zero the accumulators of :func:`phase_timers`."""
+    for entry in acc.values():
+        entry[:] = [0, 0.0]

@@ -206,7 +206,8 @@ def profile(states: int = 200):
 def phase_timer(states: int = 200):
     """CPU time per state (ms) of the phases without the profiler's per-call cost: each phase
     function wrapped by a process-time accumulator, 200 single-state solves."""
-    import functools
+    sys.path.insert(0, str(Path(__file__).parent))
+    from _machine import phase_timers, reset
 
     from coilrod.path import stepping
     from coilrod.rod import out_of_plane, planar
@@ -225,34 +226,12 @@ def phase_timer(states: int = 200):
         ("model solve (all)", planar.PlanarRod, "solve"),
         ("model error (all)", planar.PlanarRod, "error"),
     ]
-    acc = {label: [0, 0.0] for label, _, _ in targets}
-    saved = []
-
-    def wrap(label, fn):
-        @functools.wraps(fn)
-        def timed(*a, **k):
-            t0 = time.process_time()
-            try:
-                return fn(*a, **k)
-            finally:
-                acc[label][0] += 1
-                acc[label][1] += time.process_time() - t0
-
-        return timed
-
-    for label, owner, name in targets:
-        saved.append((owner, name, getattr(owner, name)))
-        setattr(owner, name, wrap(label, getattr(owner, name)))
-    try:
+    with phase_timers(targets) as acc:
         rod, field = unit_rod()
         solve_module.solve_rod(rod, field, [5.0])
-        for entry in acc.values():
-            entry[:] = [0, 0.0]
+        reset(acc)
         for _ in range(states):
             solve_module.solve_rod(rod, field, [5.0])
-    finally:
-        for owner, name, fn in saved:
-            setattr(owner, name, fn)
     return [(label, n / states, 1e3 * t / states) for label, (n, t) in acc.items()]
 
 

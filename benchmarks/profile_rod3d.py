@@ -100,10 +100,8 @@ def _best(a, b):
 
 def phase_timer(states: int = 200, segments: int = 4):
     """CPU ms per state of the model's methods and the engine around them (this checkout)."""
-    import functools
-    import time
-
     sys.path.insert(0, str(HERE))
+    from _machine import phase_timers, reset
     from bench_rod3d import _case
 
     from coilrod.path import corrector, stepping
@@ -124,35 +122,13 @@ def phase_timer(states: int = 200, segments: int = 4):
         ("model distance (all)", SpatialRod, "distance"),
         ("model event_fraction (all)", SpatialRod, "event_fraction"),
     ]
-    acc = {label: [0, 0.0] for label, _, _ in targets}
-    saved = []
-
-    def wrap(label, fn):
-        @functools.wraps(fn)
-        def timed(*a, **k):
-            t0 = time.process_time()
-            try:
-                return fn(*a, **k)
-            finally:
-                acc[label][0] += 1
-                acc[label][1] += time.process_time() - t0
-
-        return timed
-
-    for label, owner, name in targets:
-        saved.append((owner, name, getattr(owner, name)))
-        setattr(owner, name, wrap(label, getattr(owner, name)))
     rod, field = _case()
-    try:
+    with phase_timers(targets) as acc:
         run = lambda: solve_module.solve_rod(rod, field, [1.0], nodes=segments, richardson=False)  # noqa: E731
         run()
-        for entry in acc.values():
-            entry[:] = [0, 0.0]
+        reset(acc)
         for _ in range(states):
             run()
-    finally:
-        for owner, name, fn in saved:
-            setattr(owner, name, fn)
     rows = [(label, n / states, 1e3 * t / states) for label, (n, t) in acc.items()]
     model = sum(ms for label, _, ms in rows if label.startswith("model"))
     whole = rows[0][2]
