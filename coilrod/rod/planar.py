@@ -43,6 +43,7 @@ from ..path.protocol import Linearization
 from ._spectrum import closest_to_zero
 from ._spectrum import lowest_from_inverse as _lowest_from_inverse
 from .discrete import DiscreteRod
+from .mesh import _remember
 
 __all__ = ["PlanarRod", "RodTangent"]
 
@@ -218,7 +219,8 @@ class RodTangent:
 
 
 #: The mesh-only constants of :class:`PlanarRod` already computed, keyed on the mesh's h and w
-#: by value (every problem gets its own copies); at most 16 entries, oldest dropped first.
+#: by value (every problem gets its own copies); at most ``mesh._CACHE_SIZE`` entries, oldest
+#: dropped first (``mesh._remember``).
 _MESH_CONSTANTS: dict = {}
 
 
@@ -240,9 +242,9 @@ def _mesh_constants(h: np.ndarray, w: np.ndarray) -> tuple:
         bend_scale = bend * inv_w
         floor_bend = _FLOOR * _EPS * bend_scale[1:]
         stab_e = -inv_h[1:] / np.sqrt(w[1:-1] * w[2:])
-        if len(_MESH_CONSTANTS) >= 16:
-            _MESH_CONSTANTS.pop(next(iter(_MESH_CONSTANTS)), None)
-        cached = _MESH_CONSTANTS[key] = (inv_h, inv_w, c, bend, bend_scale, floor_bend, stab_e)
+        cached = _remember(
+            _MESH_CONSTANTS, key, (inv_h, inv_w, c, bend, bend_scale, floor_bend, stab_e)
+        )
     return tuple(a.copy() for a in cached)
 
 
