@@ -221,15 +221,21 @@ def test_readme_magnet_example_runs(capsys):
     assert "1.2 % low in B and 1.9 % in the gradient" in " ".join(text.split())
 
 
-def test_cuboid_B_and_gradient_match_magpylib():
-    """Any magnetisation direction, posed; points also in the face planes and on the lines of
-    edges outside the magnet (where the closed form's terms are rewritten)."""
+def _cuboid_and_magpylib():
+    """A posed cuboid magnetised along no axis, and magpylib's model of the same magnet."""
     size = np.array([6e-3, 8e-3, 10e-3])
     Mv = np.array([0.4, -0.7, 1.0]) / mu_0
     ours = CuboidMagnet(size, Mv, CENTER, orientation=ROT)
     ref = magpy.magnet.Cuboid(
         polarization=mu_0 * Mv, dimension=size, position=CENTER, orientation=ROT
     )
+    return size, ours, ref
+
+
+def test_cuboid_B_and_gradient_match_magpylib():
+    """Any magnetisation direction, posed; points also in the face planes and on the lines of
+    edges outside the magnet (where the closed form's terms are rewritten)."""
+    size, ours, ref = _cuboid_and_magpylib()
     local = RNG.uniform(-1.5, 1.5, size=(60, 3)) * size
     special = [[0.01, 0.0, 5e-3], [0.01, 4e-3, 0.0], [3e-3, 4e-3, 0.02], [0.0, 0.0, 0.01]]
     local = np.vstack([local, special, [[0.0, 0.0, 0.0]]])
@@ -252,12 +258,7 @@ def test_cuboid_hessian_is_exact():
     """Against 4th-order differences of the exact gradient (1e-10; the difference hessian
     was 1e-7 off), in the face planes and on the lines of edges too, and of magpylib's B
     twice (1e-8); symmetric and traceless; far away the dipole's, as (size / distance)^2."""
-    size = np.array([6e-3, 8e-3, 10e-3])
-    Mv = np.array([0.4, -0.7, 1.0]) / mu_0
-    ours = CuboidMagnet(size, Mv, CENTER, orientation=ROT)
-    ref = magpy.magnet.Cuboid(
-        polarization=mu_0 * Mv, dimension=size, position=CENTER, orientation=ROT
-    )
+    size, ours, ref = _cuboid_and_magpylib()
     local = RNG.uniform(-1.5, 1.5, size=(60, 3)) * size
     local = local[np.min(np.abs(np.abs(local) - size / 2), axis=1) > 1e-3][:12]
     special = [[0.01, 0.0, 5e-3], [0.01, 4e-3, 0.0], [3e-3, 4e-3, 0.02], [0.0, 0.0, 0.01]]
