@@ -173,6 +173,11 @@ _rent = 0.0
 _compiled_ready = False
 
 
+def _numpy_cost(blocks: int, b: int) -> float:
+    """Estimated CPU seconds of one numpy count of ``blocks`` blocks of size ``b``."""
+    return _NUMPY_CALL_S + (_NUMPY_BLOCK_S + _NUMPY_BLOCK_ROW_S * b) * blocks
+
+
 def _compiled_pays(blocks: int, b: int) -> bool:
     """True if the compiled count should run: it is compiled (or in numba's cache), or the
     numpy counts so far plus this one would cost more than :data:`COMPILE_AFTER`."""
@@ -180,7 +185,7 @@ def _compiled_pays(blocks: int, b: int) -> bool:
     if not _compiled_ready:
         from ._compiled import _on_disk
 
-        cost = _NUMPY_CALL_S + (_NUMPY_BLOCK_S + _NUMPY_BLOCK_ROW_S * b) * blocks
+        cost = _numpy_cost(blocks, b)
         if _rent + cost <= COMPILE_AFTER and not _on_disk(_inertia):
             _rent += cost
             return False
@@ -197,8 +202,7 @@ def expect_counts(calls: int, blocks: int, b: int) -> None:
     global _compiled_ready
     if _compiled_ready or calls <= 0:
         return
-    cost = calls * (_NUMPY_CALL_S + (_NUMPY_BLOCK_S + _NUMPY_BLOCK_ROW_S * b) * blocks)
-    if _rent + cost > COMPILE_AFTER:
+    if _rent + calls * _numpy_cost(blocks, b) > COMPILE_AFTER:
         _compiled_ready = True
 
 
