@@ -107,7 +107,7 @@ def insertion_table(r_ins=1.5e-3):
         try:
             ins = coilrod.insert(rod, mv, lengths, schedule, nodes=32, **clamp)
         except Exception as exc:  # report, do not hide
-            print(f"| mesh n={n} | failed: {type(exc).__name__}: {str(exc)[:80]} | | | | |")
+            print(f"| mesh n={n} | failed: {type(exc).__name__}: {str(exc)[:200]} | | | | |")
             prev = None
             continue
         dt = time.process_time() - t0
@@ -125,7 +125,7 @@ def insertion_table(r_ins=1.5e-3):
         coilrod.insert(rod, exact, lengths, schedule, nodes=32, **clamp)
         print("| polyhedral n=16 | converged | | | | | |")
     except Exception as exc:
-        print(f"| polyhedral n=16 | failed: {str(exc)[:90]} | | | | | |")
+        print(f"| polyhedral n=16 | failed: {str(exc)[:200]} | | | | | |")
 
 
 if __name__ == "__main__":
