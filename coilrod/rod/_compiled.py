@@ -289,7 +289,8 @@ def mixed_error(R, U, inv_w, inv_h, bend_scale, tol, floor, out):
 
 
 #: Threshold partial pivoting of :func:`band_lu`: the diagonal stays the pivot unless it is
-#: smaller than this fraction of the largest entry below it in its column.
+#: smaller than this fraction of the largest entry below it in its column (a constant of the
+#: compiled code: numba reads it when it compiles the kernel).
 PIVOT_THRESHOLD = 0.1
 
 
@@ -303,7 +304,7 @@ def band_lu(ab, kl, ku, ipiv):
     The planar rod's mixed Jacobian needs few exchanges (its position and force rows have unit
     diagonals), and without them U keeps ku upper diagonals instead of kl + ku, so the
     elimination updates half as many columns (measured: about 30 % less time than partial
-    pivoting at 64-128 segments).
+    pivoting at 64-128 segments).  The spatial rod's band Jacobian is factorised here too.
 
     ``ab`` (2 kl + ku + 1, n) holds A(i, j) at ``ab[kl + ku + i - j, j]`` (rows 0..kl-1 are
     workspace, zero on entry); on return it holds U (upper kl + ku diagonals) and the
