@@ -9,13 +9,15 @@ Prints (and writes to benchmarks/results/rod.md):
 2. time against error as the node count grows (one mesh and Richardson-extrapolated);
 3. the cost of a real-coil solve (Helmholtz and Maxwell pairs, Biot-Savart with exact gradients
    and closed-form Hessians, compiled) against the solve in the pair's ``ideal()`` field, per
-   load state, on a short and a long sweep;
+   load state, on a short and a long sweep -- the ideal() field solved with the uniform field's
+   compiled Newton corrector (as a process that has compiled it, or finds it in numba's cache)
+   and with the engine's numpy corrector (a fresh process's first seconds);
 4. where the Helmholtz pair's extra cost goes: a per-phase timer (field evaluation, model
    linearization, factorisation and solves, stability, the Richardson second mesh) side by side
    for the coil field, the ``ideal()`` field solved in the coil field's mixed layout (plus a
    1e-30 T/m gradient: not uniform, so the planar model keeps positions and forces as
-   unknowns) and the ``ideal()`` field (uniform: angles only, tridiagonal), compiled and with
-   the numpy passes a fresh process runs before compiling.
+   unknowns) and the ``ideal()`` field (uniform: angles only, tridiagonal; compiled and numpy
+   corrector), compiled and with the numpy passes a fresh process runs before compiling.
 
 One BLAS thread; process CPU time (``BENCH_CLOCK=wall`` for wall time), best of several runs.
 
@@ -167,14 +169,21 @@ def main() -> str:
     out(
         "Per load state: the whole solve_rod call (Richardson, stability, events) over the "
         f"number of requested states; {clock_name()} time, best of {3 * REPEAT} rounds that "
-        "solve in the coil field and in the ideal one in turn."
+        "solve in the coil field and in the ideal one in turn.  Every kernel compiled (as in a "
+        "process that has compiled them, or finds them in numba's cache), the uniform field's "
+        "Newton corrector (`coilrod/rod/_planar_newton.py`) included; 'numpy corrector': the "
+        "ideal() field solved with the engine's numpy corrector instead (a fresh process's "
+        "first ~4 s of uniform-field Newton iterations, and what the earlier figures compared "
+        "against).  A uniform field has no mixed-layout counterpart of that compiled "
+        "corrector; the Maxwell pair's ideal() field (a constant gradient) is solved in the "
+        "mixed layout like the coil field."
     )
     out()
     out(
         "| field | sweep | time (s) | per state (ms) | tip shift coil vs ideal / L | "
-        "cost ratio coil / ideal |"
+        "coil / ideal() | coil / ideal(), numpy corrector |"
     )
-    out("|---|---|---|---|---|---|")
+    out("|---|---|---|---|---|---|---|")
     helm = coils.HelmholtzPair(radius=2 * L, turns=200, current=1.0, axis="y")
     per_lambda = 1.0 / seed.magnetoelastic_number(helm.ideal().B0[1])
     maxw = coils.MaxwellPair(
@@ -211,19 +220,24 @@ def main() -> str:
         ),
     ]
     for name, sweep, r_, coil, ideal, scales in cases:
-        (t_c, t_i), (rc, ri) = best_alternating(
+        (t_c, t_i, t_n), (rc, ri, _) = best_alternating(
             [
-                lambda r_=r_, coil=coil, scales=scales: solve_rod(r_, coil, scales),
-                lambda r_=r_, ideal=ideal, scales=scales: solve_rod(r_, ideal, scales),
+                lambda r_=r_, coil=coil, scales=scales: solve_with(r_, coil, scales),
+                lambda r_=r_, ideal=ideal, scales=scales: solve_with(r_, ideal, scales),
+                lambda r_=r_, ideal=ideal, scales=scales: solve_with(r_, ideal, scales, False),
             ]
         )
         shift = np.linalg.norm(rc.tip[-1] - ri.tip[-1]) / L
         k = len(scales)
         out(
             f"| {name}: coil | {sweep} | {t_c:.4f} | {1e3 * t_c / k:.3f} | {shift:.2e} | "
-            f"{t_c / t_i:.2f} |"
+            f"{t_c / t_i:.2f} | {t_c / t_n:.2f} |"
         )
-        out(f"| {name}: ideal() | {sweep} | {t_i:.4f} | {1e3 * t_i / k:.3f} | | 1 |")
+        out(f"| {name}: ideal() | {sweep} | {t_i:.4f} | {1e3 * t_i / k:.3f} | | 1 | |")
+        out(
+            f"| {name}: ideal(), numpy corrector | {sweep} | {t_n:.4f} | {1e3 * t_n / k:.3f} | "
+            "| | 1 |"
+        )
     out()
     coil_phases(out, seed, helm, np.linspace(0.1, 1.0, 10) * 5 * per_lambda)
     return "\n".join(lines) + "\n"
@@ -272,9 +286,32 @@ def phase_timer(totals: dict, calls: dict):
 
 
 @contextlib.contextmanager
+def uniform_corrector(compiled: bool):
+    """Solve uniform fields with the compiled Newton corrector of
+    :mod:`coilrod.rod._planar_newton` (``compiled``; compiled now if numba's cache does not
+    hold it) or with the engine's numpy corrector, whatever the ski rental would choose."""
+    import coilrod.rod._planar_newton as pn
+
+    saved = (pn.compiled_pays, pn._rent)
+    pn.compiled_pays = lambda: compiled
+    try:
+        yield
+    finally:
+        pn.compiled_pays, pn._rent = saved
+
+
+def solve_with(rod, field, scales, compiled=True):
+    """``solve_rod`` with the uniform field's compiled corrector or its numpy one
+    (:func:`uniform_corrector`); a non-uniform field uses neither."""
+    with uniform_corrector(compiled):
+        return solve_rod(rod, field, scales)
+
+
+@contextlib.contextmanager
 def numpy_passes():
-    """Run the coil field and the planar rod's mixed assembly as a fresh process does before
-    its kernels compile (the numpy passes of coils._vectorised and coilrod.rod._mixed_numpy)."""
+    """Run the coil field, the planar rod's mixed assembly and the uniform field's Newton
+    corrector as a fresh process does before its kernels compile (the numpy passes of
+    coils._vectorised and coilrod.rod._mixed_numpy, the engine's numpy corrector)."""
     import coils.coaxial as cx
     from coilrod.rod import _compiled as rc
 
@@ -283,22 +320,24 @@ def numpy_passes():
     cx.COMPILE_AFTER, cx._compiled_ready, cx._disk_checked = math.inf, False, True
     rc.COMPILE_AFTER, rc._compiled_ready, rc._on_disk = math.inf, False, lambda d: False
     try:
-        yield
+        with uniform_corrector(False):
+            yield
     finally:
         cx.COMPILE_AFTER, cx._compiled_ready, cx._disk_checked, cx._rent = saved
         rc.COMPILE_AFTER, rc._compiled_ready, rc._on_disk, rc._rent = saved_rc
 
 
-def profile_solves(rod, fields, scales, repeat):
-    """For each field, the best (``clock``) of ``repeat`` solves, the fields solved in turn in
-    each round, with the per-phase totals of that run: [(time, phases, calls, result)]."""
-    best = [(math.inf, None, None, None)] * len(fields)
-    for field in fields:
-        solve_rod(rod, field, scales)
+def profile_solves(rod, runs, scales, repeat):
+    """For each ``(field, compiled)`` of ``runs`` (``compiled``: the uniform field's compiled
+    corrector, else its numpy one), the best (``clock``) of ``repeat`` solves, solved in turn
+    in each round, with the per-phase totals of that run: [(time, phases, calls, result)]."""
+    best = [(math.inf, None, None, None)] * len(runs)
+    for field, compiled in runs:
+        solve_with(rod, field, scales, compiled)
     for _ in range(repeat):
-        for i, field in enumerate(fields):
+        for i, (field, compiled) in enumerate(runs):
             totals, calls = {}, {}
-            with phase_timer(totals, calls):
+            with uniform_corrector(compiled), phase_timer(totals, calls):
                 t0 = clock()
                 res = solve_rod(rod, field, scales)
                 t = clock() - t0
@@ -309,28 +348,46 @@ def profile_solves(rod, fields, scales, repeat):
 
 def coil_phases(out, rod, pair, scales, repeat=3 * REPEAT):
     """Section 4: the per-phase breakdown of a solve in ``pair``'s field against its ideal()
-    field in the mixed and in the uniform layout."""
+    field in the mixed and in the uniform layout (the latter with the compiled and with the
+    numpy corrector)."""
     ideal = pair.ideal()
     eps = 1e-30  # T/m: a gradient that changes nothing but the layout (curl- and div-free)
     mixed = ideal + coils.LinearField(gradient=np.diag([eps, -eps, 0.0]))
-    fields = (("coil", pair), ("ideal(), mixed layout", mixed), ("ideal()", ideal))
     steps = len(scales)
     out(f"## 4. Where the coil field's cost goes (Helmholtz R = 2L, {steps} steps to lambda 5)")
     out()
     out(
         f"Per-phase timer ({clock_name()} time, one BLAS thread; each phase function "
         "wrapped, outermost call only; phases nest: the Richardson mesh's linearizations "
-        f"and solves count in their rows too), best of {repeat} rounds solving the three "
+        f"and solves count in their rows too), best of {repeat} rounds solving each column "
         "in turn.  'ideal(), mixed layout': the pair's ideal() field plus a 1e-30 T/m "
         "gradient, so the planar model solves it in the layout of a non-uniform field "
         "(positions, angles and forces at every node, a band Jacobian of 5 unknowns per "
-        "node) instead of the uniform field's angles-only tridiagonal one."
+        "node, the engine's numpy corrector) instead of the uniform field's angles-only "
+        "tridiagonal one.  A uniform field is solved by the compiled corrector of "
+        "`coilrod/rod/_planar_newton.py` once it is compiled (one call per load step: no "
+        "linearize or solve calls to time) and by the engine's numpy corrector before that "
+        "(ski rental, ~4 s of Newton iterations)."
     )
     out()
+    columns = {
+        "compiled": (
+            ("coil", pair, True),
+            ("ideal(), mixed layout", mixed, True),
+            ("ideal(), compiled corrector", ideal, True),
+            ("ideal(), numpy corrector", ideal, False),
+        ),
+        "numpy passes": (
+            ("coil", pair, False),
+            ("ideal(), mixed layout", mixed, False),
+            ("ideal(), numpy corrector", ideal, False),
+        ),
+    }
     for regime, ctx in (("compiled", contextlib.nullcontext), ("numpy passes", numpy_passes)):
+        cols = columns[regime]
         with ctx():
-            timed = profile_solves(rod, [f for _, f in fields], scales, repeat)
-            runs = [(name, *run) for (name, _), run in zip(fields, timed, strict=True)]
+            timed = profile_solves(rod, [(f, c) for _, f, c in cols], scales, repeat)
+            runs = [(name, *run) for (name, *_), run in zip(cols, timed, strict=True)]
         out(f"### {regime}")
         out()
         out("| phase | " + " | ".join(f"{n}: ms (calls)" for n, *_ in runs) + " |")
@@ -343,15 +400,30 @@ def coil_phases(out, rod, pair, scales, repeat=3 * REPEAT):
                 f"{1e3 * ph.get(label, 0.0):.2f} ({c.get(label, 0)})" for _, _, ph, c, _ in runs
             ]
             out(f"| {label} | " + " | ".join(cells) + " |")
+        model = ("model linearize (field included)", "factorisation and solves")
+        model += ("stability (3D count)",)
+        rest = [t - sum(ph.get(q, 0.0) for q in model) for _, t, ph, *_ in runs]
+        out(
+            "| the rest: engine, problem set-up, result | "
+            + " | ".join(f"{1e3 * r:.2f}" for r in rest)
+            + " |"
+        )
         its = [int(r.iterations.sum()) for *_, r in runs]
         out("| Newton iterations (both meshes) | " + " | ".join(map(str, its)) + " |")
-        t_coil, t_mixed, t_ideal = (t for _, t, *_ in runs)
+        t = {name: time for name, time, *_ in runs}
         out()
+        for ref in [
+            name for name, *_ in runs if name.startswith("ideal(), ") and "mixed" not in name
+        ]:
+            out(
+                f"{regime}: coil / {ref} **{t['coil'] / t[ref]:.2f}x** = layout (ideal() mixed "
+                f"/ {ref}) {t['ideal(), mixed layout'] / t[ref]:.2f}x times coil field (coil / "
+                f"ideal() mixed) {t['coil'] / t['ideal(), mixed layout']:.2f}x."
+            )
+            out()
         out(
-            f"{regime}: coil / ideal() **{t_coil / t_ideal:.2f}x** = layout (ideal() mixed / "
-            f"ideal()) {t_mixed / t_ideal:.2f}x times coil field (coil / ideal() mixed) "
-            f"{t_coil / t_mixed:.2f}x; the mixed-layout ideal() tip differs from the uniform "
-            f"one by {np.abs(runs[1][4].tip - runs[2][4].tip).max() / rod.length:.1e} L."
+            "The mixed-layout ideal() tip differs from the uniform one by "
+            f"{np.abs(runs[1][4].tip - runs[-1][4].tip).max() / rod.length:.1e} L."
         )
         out()
 
