@@ -341,7 +341,9 @@ def insert(
     contact at the corners of the rod's polygon and its tip, Coulomb friction if the
     vessel's ``friction`` is > 0, stick or slip decided on each material point's motion
     since the previous step); a step that fails is split in halves (free length and field
-    blended linearly), up to :data:`MAX_HALVINGS` times.  The first step is loaded from the
+    blended linearly), up to :data:`MAX_HALVINGS` times -- with friction also a step that
+    turns a node more than :data:`MAX_STEP_TURN` from its start (the state depends on the
+    path), up to :data:`MAX_JUMP_HALVINGS` times.  The first step is loaded from the
     straight rod by :func:`~coilrod.solve_rod`.
 
     Parameters
