@@ -6,19 +6,21 @@ push force on a flat wall.
    grows across the wrap by exp(mu theta) (theta: the turn of the tangent between points
    on the free straight spans, s = 10 and 55 mm) against the motion -- toward the tip
    while it is inserted, toward the clamp while withdrawn.  The rope limit is EI -> 0 at
-   a given tension T, i.e. EI / (T rho^2) -> 0: the pull is raised at fixed EI (E = 1 kPa)
-   for the withdrawal (1 mm, then 1 mm more) and the re-insertion (2 mm: the motion
-   reversed under the high tension).  Columns: the relative error of the tension ratio
-   against exp(mu theta), by mesh.
+   a given tension T, i.e. EI / (T rho^2) -> 0: the pull is raised at fixed EI (E = 1 kPa),
+   to 50 or 150 A m^2, for the withdrawal (1 mm, then 1 mm more) and the re-insertion
+   (2 mm: the motion reversed under the high tension).  Columns: the relative error of the
+   tension ratio against exp(mu theta), by mesh.
 2. The same in, back and in again with 7 to 14 insertion steps on the way in (16 segments,
-   the pull raised to 50 A m^2 for the reversals): every step count converges, with the
-   same re-entry error (before halving a step that turned a node more than 1 rad, 7, 12
-   and 13 steps failed: the rod, pushed against friction, folded at a coarse step).
+   the pull raised to 150 A m^2 for the reversals): every step count converges, with the
+   same re-entry error.  Before, with the pull at 50 A m^2, 7, 12 and 13 steps failed (the
+   rod, pushed against friction, folded at a coarse step: such a step is now halved), and
+   at 150 A m^2 the re-entry failed 5 um in, at 7 and 12 steps (stick and slip cycled in
+   Newton: the stick rows' proximal weight is now 1e-3).
 3. A tip bent onto a flat wall parallel to the introducer slides along it: the push force
    at the introducer is mu times the wall's normal reaction (insertion) and minus it
    (withdrawal), exactly.
 
-Run: ``python benchmarks/bench_friction.py`` (prints markdown tables; ~40 s).
+Run: ``python benchmarks/bench_friction.py`` (prints markdown tables; ~45 s).
 """
 
 from __future__ import annotations
@@ -87,7 +89,7 @@ def main():
     print("| step | segments | EI/(T rho^2) | T ratio | exp(mu theta) | rel. error | CPU s |")
     print("|---|---|---|---|---|---|---|")
     for nodes in (16, 32):
-        for pull in (5.0, 50.0):
+        for pull in (5.0, 50.0, 150.0):
             rows = capstan(nodes, pull)
             for name, n, stiff, ratio, ref, err, cpu in rows[1 if pull != 5.0 else 0 :]:
                 print(f"| {name} | {n} | {stiff:.1e} | {ratio:.5f} | {ref:.5f} | {err:+.1e} "
@@ -96,7 +98,7 @@ def main():
     print("| steps in | re-entry T ratio | exp(mu theta) | rel. error | CPU s |")
     print("|---|---|---|---|---|")
     for steps in range(7, 15):
-        *_, ratio, ref, err, cpu = capstan(16, 50.0, steps)[-1]
+        *_, ratio, ref, err, cpu = capstan(16, 150.0, steps)[-1]
         print(f"| {steps} | {ratio:.5f} | {ref:.5f} | {err:+.1e} | {cpu:.2f} |")
     print(f"\n## Push force on a flat wall (mu = {MU})\n")
     print("| free length mm | push mN | normal reaction mN | push / (mu N) |")
