@@ -495,7 +495,7 @@ class SpatialRod(DiscreteRod):
     #: Newton step that made a taut span's points stick together gave them tangential forces
     #: 1e3 times the cone (the inextensible span cannot take up their displacement), and the
     #: iteration cycled between stick and slip: a re-insertion after a withdrawal at
-    #: EI / (T R^2) ~ 1e-4 failed at every step size; at 1e-3 it converges (the capstan
+    #: EI / (T R^2) ~ 1e-4 failed even at 5 um steps; at 1e-3 it converges (the capstan
     #: test's sweep, benchmarks/bench_friction.py)
     stick_slack = 1e-3
 
