@@ -6,15 +6,21 @@ push force on a flat wall.
    grows across the wrap by exp(mu theta) (theta: the turn of the tangent between points
    on the free straight spans, s = 10 and 55 mm) against the motion -- toward the tip
    while it is inserted, toward the clamp while withdrawn.  The rope limit is EI -> 0 at
-   a given tension T, i.e. EI / (T rho^2) -> 0: the pull is raised at fixed EI (E = 1 kPa)
-   for the withdrawal (1 mm, then 1 mm more) and the re-insertion (2 mm: the motion
-   reversed under the high tension).  Columns: the relative error of the tension ratio
-   against exp(mu theta), by mesh.
-2. A tip bent onto a flat wall parallel to the introducer slides along it: the push force
+   a given tension T, i.e. EI / (T rho^2) -> 0: the pull is raised at fixed EI (E = 1 kPa),
+   to 50 or 150 A m^2, for the withdrawal (1 mm, then 1 mm more) and the re-insertion
+   (2 mm: the motion reversed under the high tension).  Columns: the relative error of the
+   tension ratio against exp(mu theta), by mesh.
+2. The same in, back and in again with 7 to 14 insertion steps on the way in (16 segments,
+   the pull raised to 150 A m^2 for the reversals): every step count converges, with the
+   same re-entry error.  Before, with the pull at 50 A m^2, 7, 12 and 13 steps failed (the
+   rod, pushed against friction, folded at a coarse step: such a step is now halved), and
+   at 150 A m^2 the re-entry failed 5 um in, at 7 and 12 steps (stick and slip cycled in
+   Newton: the stick rows' proximal weight is now 1e-3).
+3. A tip bent onto a flat wall parallel to the introducer slides along it: the push force
    at the introducer is mu times the wall's normal reaction (insertion) and minus it
    (withdrawal), exactly.
 
-Run: ``python benchmarks/bench_friction.py`` (prints markdown tables; ~30 s).
+Run: ``python benchmarks/bench_friction.py`` (prints markdown tables; ~45 s).
 """
 
 from __future__ import annotations
@@ -34,15 +40,15 @@ from coilrod import Circle, Magnetization, Rod, Vessel, Wall, insert  # noqa: E4
 MU = 0.2
 
 
-def capstan(nodes: int, pull: float):
+def capstan(nodes: int, pull: float, steps: int | None = None):
     """Rows (direction, EI/(T rho^2), ratio, exp(mu theta), relative error) of an insertion
-    round the bend (dipole moment 5 A m^2), a withdrawal and a re-insertion at ``pull``
-    A m^2."""
+    round the bend in ``steps`` steps (default 2 nodes / 3; dipole moment 5 A m^2), a
+    withdrawal and a re-insertion at ``pull`` A m^2."""
     vessel = Vessel.bend(bend_radius=0.02, angle=np.pi / 2, radius=0.002, straight_before=0.02,
                          straight_after=0.06).with_friction(MU)  # fmt: skip
     mag = Magnetization.segments([0.09, 0.01], [0.0, 128e3], [0.0, 0.0])
     rod = Rod(0.1, 1e3, Circle(1e-3), mag)
-    steps = 2 * nodes // 3
+    steps = 2 * nodes // 3 if steps is None else steps
     lengths = [*np.linspace(0.015, 0.08, steps), 0.079, 0.078, 0.08]
     fields = [coils.Dipole(moment=(0, m, 0), center=(0.04, 0.14, 0))
               for m in [5.0] * steps + [pull] * 3]  # fmt: skip
@@ -83,11 +89,17 @@ def main():
     print("| step | segments | EI/(T rho^2) | T ratio | exp(mu theta) | rel. error | CPU s |")
     print("|---|---|---|---|---|---|---|")
     for nodes in (16, 32):
-        for pull in (5.0, 50.0):
+        for pull in (5.0, 50.0, 150.0):
             rows = capstan(nodes, pull)
             for name, n, stiff, ratio, ref, err, cpu in rows[1 if pull != 5.0 else 0 :]:
                 print(f"| {name} | {n} | {stiff:.1e} | {ratio:.5f} | {ref:.5f} | {err:+.1e} "
                       f"| {cpu:.2f} |")  # fmt: skip
+    print(f"\n## In, back and in again by the number of steps in (16 segments, mu = {MU})\n")
+    print("| steps in | re-entry T ratio | exp(mu theta) | rel. error | CPU s |")
+    print("|---|---|---|---|---|")
+    for steps in range(7, 15):
+        *_, ratio, ref, err, cpu = capstan(16, 150.0, steps)[-1]
+        print(f"| {steps} | {ratio:.5f} | {ref:.5f} | {err:+.1e} | {cpu:.2f} |")
     print(f"\n## Push force on a flat wall (mu = {MU})\n")
     print("| free length mm | push mN | normal reaction mN | push / (mu N) |")
     print("|---|---|---|---|")

@@ -21,6 +21,11 @@ __all__ = ["insert", "Insertion", "free_part"]
 
 #: Largest number of halvings of an insertion step before the insertion stops.
 MAX_HALVINGS = 12
+#: With friction: the largest turn of a node (rad) from an insertion step's carried start
+#: to its solution before the step is halved (:func:`_step`), and the halvings of an
+#: insertion step after which a larger turn is accepted (a snap).
+MAX_STEP_TURN = 1.0
+MAX_JUMP_HALVINGS = 5
 
 
 @dataclasses.dataclass
@@ -336,7 +341,9 @@ def insert(
     contact at the corners of the rod's polygon and its tip, Coulomb friction if the
     vessel's ``friction`` is > 0, stick or slip decided on each material point's motion
     since the previous step); a step that fails is split in halves (free length and field
-    blended linearly), up to :data:`MAX_HALVINGS` times.  The first step is loaded from the
+    blended linearly), up to :data:`MAX_HALVINGS` times -- with friction also a step that
+    turns a node more than :data:`MAX_STEP_TURN` from its start (the state depends on the
+    path), up to :data:`MAX_JUMP_HALVINGS` times.  The first step is loaded from the
     straight rod by :func:`~coilrod.solve_rod`.
 
     Parameters
@@ -493,7 +500,7 @@ def _step(build, problem, u, prev, target, k, before=None):
         field = target_field if t1 == 1.0 else prev_field * (1 - t1) + target_field * t1
         trial_free, trial = build(length, field)
         _carry_reference(cur_problem, cur_u, trial)
-        start = _carry(cur_problem, cur_u, trial)
+        start = carried = _carry(cur_problem, cur_u, trial)
         starts = [_reverse_friction(trial, start)] if reversal and t == 0.0 else []
         if before is not None and t == 0.0 and t1 == 1.0 and before[2] != prev_len:
             w = (target_len - prev_len) / (prev_len - before[2])
@@ -503,6 +510,16 @@ def _step(build, problem, u, prev, target, k, before=None):
             solves += 1
             if res.ok:
                 break
+        why = _reason(trial)
+        if res.ok and trial.nt and dt > 2.0**-MAX_JUMP_HALVINGS:
+            # with friction the state depends on the path: a step whose solution turned a
+            # node further than MAX_STEP_TURN from the carried start has not followed it (at
+            # a coarse step Newton jumps onto a folded branch of a floppy rod pushed against
+            # friction, from which later steps fail); halve it.  At the smallest such step
+            # the jump is accepted (a snap of the rod)
+            turn = float(trial.distance(res.u - carried)[0])
+            if turn > MAX_STEP_TURN:
+                res.ok, why = False, f"; a node turned {turn:.3g} rad in the step"
         if res.ok:  # (its linearization carries the state's stability)
             t, cur_problem, cur_u, cur_lin, free = t1, trial, res.u, res.lin, trial_free
             dt = min(1.0 - t, 2 * dt) if t < 1.0 else dt
@@ -513,7 +530,7 @@ def _step(build, problem, u, prev, target, k, before=None):
                 f"insert could not reach free length {target_len:.6g} m (step {k}): it "
                 f"stopped at {prev_len + t * (target_len - prev_len):.6g} m after "
                 f"{MAX_HALVINGS} halvings (error {float(res.error):.3g} of the "
-                f"tolerance){_reason(trial)}",
+                f"tolerance){why}",
                 reached=prev_len + t * (target_len - prev_len),
                 target=target_len,
                 residual=float(res.error),
