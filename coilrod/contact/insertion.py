@@ -15,6 +15,7 @@ from ..errors import ConvergenceError
 from ..path.corrector import NewtonOptions, newton
 from ..robot.magnetization import Magnetization
 from ..robot.rod import Rod
+from ..rod.contact_predictor import active_set_start
 from ..rod.solve import build_spatial_problem, make_mesh
 
 __all__ = ["insert", "Insertion", "free_part"]
@@ -495,7 +496,13 @@ def _step(build, problem, u, prev, target, k, before=None):
         _carry_reference(cur_problem, cur_u, trial)
         start = _carry(cur_problem, cur_u, trial)
         starts = [_reverse_friction(trial, start)] if reversal and t == 0.0 else []
-        if before is not None and t == 0.0 and t1 == 1.0 and before[2] != prev_len:
+        # frictionless contact: the solution of the linearised complementarity problem at
+        # the carried shape (its contact set found by an active-set iteration), else the
+        # secant through the last two steps
+        predicted = active_set_start(trial, start)
+        if predicted is not None:
+            start = predicted
+        elif before is not None and t == 0.0 and t1 == 1.0 and before[2] != prev_len:
             w = (target_len - prev_len) / (prev_len - before[2])
             start = start + w * (start - _carry(before[0], before[1], trial))
         for guess in [*starts, start]:
