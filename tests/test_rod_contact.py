@@ -223,6 +223,43 @@ class TestInsertion:
         # tolerance (without the tip's force: ~2e11)
         assert new.error(new.linearize(start[None], np.array([1.0])), None)[0] < 1e5
 
+    def test_active_set_start_is_second_order_in_the_length(self):
+        # an insertion step's start (coilrod.rod.contact_predictor.active_set_start): the
+        # tip-contact cantilever carried to free lengths longer by 2 % and 1 %; against the
+        # state Newton converges to from the carried shape (Fischer-Burmeister, as insert),
+        # the carried shape is first order in the length change, the solution of its
+        # linearised complementarity problem second order, with the same contact set
+        from coilrod.contact.insertion import _carry
+        from coilrod.path.corrector import NewtonOptions, newton
+        from coilrod.rod.contact_predictor import active_set_start
+        from coilrod.rod.solve import build_spatial_problem, make_mesh
+
+        rod = _rod()
+        field = coils.UniformField(B=(0, rod.field_for_lambda(6.0), 0))
+        wall = Wall((0, 0.2 * L, 0), (0, -1, 0))
+        res = solve_rod(rod, field, [1.0], nodes=16, richardson=False, obstacles=[wall],
+                        stability=False, model="spatial")  # fmt: skip
+        old, u = res._solution.problems[0], res._solution.states[0][0]
+        errors = []
+        for eps in (2e-2, 1e-2):
+            longer = Rod(L * (1 + eps), 1e6, Circle(2e-3), Magnetization(128e3, 0.0))
+            new = build_spatial_problem(longer, field, make_mesh(longer, 16), np.zeros(3),
+                                        np.eye(3), obstacles=[wall], mixed=True)  # fmt: skip
+            new.ncp = "fb"
+            start = _carry(old, u, new)
+            pred = active_set_start(new, start)
+            ref = newton(new, start, 1.0, NewtonOptions(max_iter=40, stagnation=12))
+            assert ref.ok
+            np.testing.assert_array_equal(
+                new.contact_state(pred[None])[2], new.contact_state(ref.u[None])[2]
+            )
+            shape = [np.abs((x - ref.u).reshape(new.n, new.nv)[:, :6]).max() for x in (start, pred)]
+            errors.append(shape)
+        (carried2, pred2), (carried1, pred1) = errors
+        assert 1.8 < carried2 / carried1 < 2.2
+        assert pred2 / pred1 > 3.5
+        assert pred1 < 1e-2 * carried1
+
     def test_zero_field_in_a_straight_tube(self):
         vessel = Vessel.straight(0.1, 0.002, start=(0.0, 0.0, 0.0))
         ins = coilrod.insert(
