@@ -267,7 +267,7 @@ def _default_clamp(vessel):
     return p0, np.column_stack([t, n, b])
 
 
-def _carry(prev_problem, prev_u, problem, scale_of_state=1.0):
+def _carry(prev_problem, prev_u, problem):
     """A start for ``problem`` (a longer or shorter free length) from a solved state of
     ``prev_problem``: rotations and contact forces per length follow the arc length from
     the clamp (follow-the-leader), extended along the old tip beyond its length."""
@@ -275,7 +275,8 @@ def _carry(prev_problem, prev_u, problem, scale_of_state=1.0):
     s_new = problem.mesh.s * problem.L
     V = prev_u.reshape(prev_problem.n, prev_problem.nv)
     phi = np.stack([np.interp(s_new, s_old, V[:, 3 + i]) for i in range(3)], axis=1)
-    u = problem.from_rotations(phi, scale_of_state).reshape(problem.n, problem.nv)
+    # (the positions from the rotations; every force below is carried, none from the field)
+    u = problem.from_rotations(phi).reshape(problem.n, problem.nv)
     # internal forces of the segments (at their start nodes, EI / L^2 units) and contact
     # forces per length (EI / L^3): the same forces in N in the new length's units
     ratio = problem.L / prev_problem.L
@@ -331,8 +332,12 @@ def insert(
     The clamp is an introducer at the vessel's entry; at step k the distal ``lengths[k]`` of
     the rod are out of it (:func:`free_part`) and the field is ``field_schedule`` of step k.
     Each step starts from the previous shape (follow-the-leader: the rotations and contact
-    forces as functions of the arc length from the clamp, extended along the old tip; from
-    the third step on, the secant through the last two such shapes) and is solved by the
+    forces as functions of the arc length from the clamp, extended along the old tip),
+    frictionless moved on to the solution of its linearised complementarity problem
+    (:func:`~coilrod.rod.contact_predictor.active_set_start`: the contact set where the
+    tip slides on a curved wall or a point contact passes from one corner to the next,
+    placed at once), else (friction, or no consistent contact set) from the third step on
+    the secant through the last two such shapes; it is solved by the
     contact Newton method of the spatial rod (:class:`~coilrod.rod.spatial.SpatialRod`;
     contact at the corners of the rod's polygon and its tip, Coulomb friction if the
     vessel's ``friction`` is > 0, stick or slip decided on each material point's motion
