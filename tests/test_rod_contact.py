@@ -260,6 +260,22 @@ class TestInsertion:
         assert pred2 / pred1 > 3.5
         assert pred1 < 1e-2 * carried1
 
+    def test_a_failed_active_set_start_falls_back_to_the_carried_shape(self, monkeypatch):
+        # Newton from a start it cannot use (every node turned 10 rad: beyond the rotation
+        # chart, inadmissible) fails at once; the step is tried again from the carried
+        # shape (the secant) before it is halved: two solves a step, the tip on the wall
+        # (without the second try every halved step failed the same way: ConvergenceError)
+        import coilrod.contact.insertion as insertion
+
+        vessel = Vessel.bend(bend_radius=0.02, angle=np.pi / 2, radius=0.002,
+                             straight_before=0.02, straight_after=0.03)  # fmt: skip
+        field = coils.UniformField(B=(0.0, 0.01, 0.0))
+        monkeypatch.setattr(insertion, "active_set_start", lambda p, u: u + 10.0)
+        ins = coilrod.insert(self._catheter(), vessel, [0.02, 0.023, 0.026], field, nodes=16)
+        np.testing.assert_array_equal(ins.substeps, [1, 2, 2])
+        assert ins.contact_nodes[-1][-1]  # the tip pressed on the outer wall
+        assert vessel.gap(ins.contact_points(2)).min() >= -1e-6 * 0.05
+
     def test_zero_field_in_a_straight_tube(self):
         vessel = Vessel.straight(0.1, 0.002, start=(0.0, 0.0, 0.0))
         ins = coilrod.insert(
@@ -448,7 +464,8 @@ def test_close_first_reaches_the_same_state(monkeypatch):
     out = []
     for close_first in (False, True):
         monkeypatch.setattr(SpatialRod, "close_first", close_first)
-        res = solve_rod(rod, field, [1.0], nodes=16, obstacles=[wall], stability=False)
+        res = solve_rod(rod, field, [1.0], nodes=16, richardson=False, obstacles=[wall],
+                        stability=False)  # fmt: skip
         out.append((res.tip[0], res.obstacle_forces(0)[0]))
     np.testing.assert_allclose(out[0][0], out[1][0], rtol=0, atol=1e-9 * L)
     np.testing.assert_allclose(out[0][1], out[1][1], rtol=1e-7)

@@ -477,10 +477,12 @@ def _step(build, problem, u, prev, target, k, before=None):
     """One insertion step from the solved (problem, u) at (length, field) ``prev`` to
     ``target``, halving the step on failure: (problem, state, free rod, stable, solves).
 
-    ``before`` (problem, state, length) is the step solved before ``prev``: the first try
-    then starts from the secant through the two states (each carried to the new length,
-    extrapolated linearly in the free length); a halved step starts from the carried
-    state alone."""
+    Frictionless, each try starts first from the solution of the linearised
+    complementarity problem at the carried state
+    (:func:`~coilrod.rod.contact_predictor.active_set_start`).  ``before`` (problem,
+    state, length) is the step solved before ``prev``: the (next) try then starts from the
+    secant through the two states (each carried to the new length, extrapolated linearly in
+    the free length); a halved step starts from the carried state alone."""
     # semi-smooth Newton: the error may stall for a few iterations while the contact set
     # settles (then it converges quadratically)
     opts = NewtonOptions(max_iter=40, stagnation=12)
@@ -501,16 +503,18 @@ def _step(build, problem, u, prev, target, k, before=None):
         _carry_reference(cur_problem, cur_u, trial)
         start = _carry(cur_problem, cur_u, trial)
         starts = [_reverse_friction(trial, start)] if reversal and t == 0.0 else []
-        # frictionless contact: the solution of the linearised complementarity problem at
-        # the carried shape (its contact set found by an active-set iteration), else the
-        # secant through the last two steps
+        # frictionless contact: first the solution of the linearised complementarity
+        # problem at the carried shape (its contact set found by an active-set iteration);
+        # then (friction, no consistent contact set, or Newton failed from there) the
+        # carried shape, from the third step on the secant through the last two
         predicted = active_set_start(trial, start)
-        if predicted is not None:
-            start = predicted
-        elif before is not None and t == 0.0 and t1 == 1.0 and before[2] != prev_len:
-            w = (target_len - prev_len) / (prev_len - before[2])
-            start = start + w * (start - _carry(before[0], before[1], trial))
-        for guess in [*starts, start]:
+        tries = starts if predicted is None else [*starts, predicted]
+        for guess in [*tries, None]:
+            if guess is None:
+                guess = start
+                if before is not None and t == 0.0 and t1 == 1.0 and before[2] != prev_len:
+                    w = (target_len - prev_len) / (prev_len - before[2])
+                    guess = start + w * (start - _carry(before[0], before[1], trial))
             res = newton(trial, guess, 1.0, opts)
             solves += 1
             if res.ok:
