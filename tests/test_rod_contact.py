@@ -406,6 +406,13 @@ def test_contact_jacobian_against_finite_differences(section):
     lam_cols = (np.arange(P.n)[:, None] * P.nv + 9 + np.arange(P.nc)).ravel()
     moment_rows = (np.arange(1, P.n)[:, None] * P.nv + 3 + np.arange(3)).ravel()
     assert np.abs(J[np.ix_(moment_rows, lam_cols)]).max() > 0
+    # the second variation's blocks are computed when a stability count asks for them: a
+    # linearization keeps its blocks when a later one reuses the assembly's arrays first
+    D, E = P.linearize(u[None], np.array([0.7])).tangent.blocks  # (evaluated now)
+    lazy = P.linearize(u[None], np.array([0.7]))
+    P.linearize(u[None] + 0.01 * rng.standard_normal(P.size), np.array([0.3]))
+    for x, y in zip(lazy.tangent.blocks, (D, E), strict=True):
+        np.testing.assert_array_equal(x, y)
 
 
 class TestSurface:
