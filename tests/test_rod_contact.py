@@ -223,6 +223,59 @@ class TestInsertion:
         # tolerance (without the tip's force: ~2e11)
         assert new.error(new.linearize(start[None], np.array([1.0])), None)[0] < 1e5
 
+    def test_active_set_start_is_second_order_in_the_length(self):
+        # an insertion step's start (coilrod.rod.contact_predictor.active_set_start): the
+        # tip-contact cantilever carried to free lengths longer by 2 % and 1 %; against the
+        # state Newton converges to from the carried shape (Fischer-Burmeister, as insert),
+        # the carried shape is first order in the length change, the solution of its
+        # linearised complementarity problem second order, with the same contact set
+        from coilrod.contact.insertion import _carry
+        from coilrod.path.corrector import NewtonOptions, newton
+        from coilrod.rod.contact_predictor import active_set_start
+        from coilrod.rod.solve import build_spatial_problem, make_mesh
+
+        rod = _rod()
+        field = coils.UniformField(B=(0, rod.field_for_lambda(6.0), 0))
+        wall = Wall((0, 0.2 * L, 0), (0, -1, 0))
+        res = solve_rod(rod, field, [1.0], nodes=16, richardson=False, obstacles=[wall],
+                        stability=False, model="spatial")  # fmt: skip
+        old, u = res._solution.problems[0], res._solution.states[0][0]
+        errors = []
+        for eps in (2e-2, 1e-2):
+            longer = Rod(L * (1 + eps), 1e6, Circle(2e-3), Magnetization(128e3, 0.0))
+            new = build_spatial_problem(longer, field, make_mesh(longer, 16), np.zeros(3),
+                                        np.eye(3), obstacles=[wall], mixed=True)  # fmt: skip
+            new.ncp = "fb"
+            start = _carry(old, u, new)
+            pred = active_set_start(new, start)
+            ref = newton(new, start, 1.0, NewtonOptions(max_iter=40, stagnation=12))
+            assert ref.ok
+            np.testing.assert_array_equal(
+                new.contact_state(pred[None])[2], new.contact_state(ref.u[None])[2]
+            )
+            shape = [np.abs((x - ref.u).reshape(new.n, new.nv)[:, :6]).max() for x in (start, pred)]
+            errors.append(shape)
+        (carried2, pred2), (carried1, pred1) = errors
+        assert 1.8 < carried2 / carried1 < 2.2
+        assert pred2 / pred1 > 3.5
+        assert pred1 < 1e-2 * carried1
+
+    def test_a_failed_active_set_start_falls_back_to_the_carried_shape(self, monkeypatch):
+        # Newton from a start it cannot use (every node turned 10 rad: beyond the rotation
+        # chart, inadmissible) fails at once; the step is tried again from the carried
+        # shape (the secant) before it is halved: two solves a step, the tip on the wall
+        # (without the second try every halved step failed the same way: ConvergenceError)
+        import coilrod.contact.insertion as insertion
+
+        vessel = Vessel.bend(bend_radius=0.02, angle=np.pi / 2, radius=0.002,
+                             straight_before=0.02, straight_after=0.03)  # fmt: skip
+        field = coils.UniformField(B=(0.0, 0.01, 0.0))
+        monkeypatch.setattr(insertion, "active_set_start", lambda p, u: u + 10.0)
+        ins = coilrod.insert(self._catheter(), vessel, [0.02, 0.023, 0.026], field, nodes=16)
+        np.testing.assert_array_equal(ins.substeps, [1, 2, 2])
+        assert ins.contact_nodes[-1][-1]  # the tip pressed on the outer wall
+        assert vessel.gap(ins.contact_points(2)).min() >= -1e-6 * 0.05
+
     def test_zero_field_in_a_straight_tube(self):
         vessel = Vessel.straight(0.1, 0.002, start=(0.0, 0.0, 0.0))
         ins = coilrod.insert(
@@ -353,6 +406,13 @@ def test_contact_jacobian_against_finite_differences(section):
     lam_cols = (np.arange(P.n)[:, None] * P.nv + 9 + np.arange(P.nc)).ravel()
     moment_rows = (np.arange(1, P.n)[:, None] * P.nv + 3 + np.arange(3)).ravel()
     assert np.abs(J[np.ix_(moment_rows, lam_cols)]).max() > 0
+    # the second variation's blocks are computed when a stability count asks for them: a
+    # linearization keeps its blocks when a later one reuses the assembly's arrays first
+    D, E = P.linearize(u[None], np.array([0.7])).tangent.blocks  # (evaluated now)
+    lazy = P.linearize(u[None], np.array([0.7]))
+    P.linearize(u[None] + 0.01 * rng.standard_normal(P.size), np.array([0.3]))
+    for x, y in zip(lazy.tangent.blocks, (D, E), strict=True):
+        np.testing.assert_array_equal(x, y)
 
 
 class TestSurface:
@@ -411,7 +471,8 @@ def test_close_first_reaches_the_same_state(monkeypatch):
     out = []
     for close_first in (False, True):
         monkeypatch.setattr(SpatialRod, "close_first", close_first)
-        res = solve_rod(rod, field, [1.0], nodes=16, obstacles=[wall], stability=False)
+        res = solve_rod(rod, field, [1.0], nodes=16, richardson=False, obstacles=[wall],
+                        stability=False)  # fmt: skip
         out.append((res.tip[0], res.obstacle_forces(0)[0]))
     np.testing.assert_allclose(out[0][0], out[1][0], rtol=0, atol=1e-9 * L)
     np.testing.assert_allclose(out[0][1], out[1][1], rtol=1e-7)

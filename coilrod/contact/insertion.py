@@ -15,6 +15,7 @@ from ..errors import ConvergenceError
 from ..path.corrector import NewtonOptions, newton
 from ..robot.magnetization import Magnetization
 from ..robot.rod import Rod
+from ..rod.contact_predictor import active_set_start
 from ..rod.solve import build_spatial_problem, make_mesh
 
 __all__ = ["insert", "Insertion", "free_part"]
@@ -271,7 +272,7 @@ def _default_clamp(vessel):
     return p0, np.column_stack([t, n, b])
 
 
-def _carry(prev_problem, prev_u, problem, scale_of_state=1.0):
+def _carry(prev_problem, prev_u, problem):
     """A start for ``problem`` (a longer or shorter free length) from a solved state of
     ``prev_problem``: rotations and contact forces per length follow the arc length from
     the clamp (follow-the-leader), extended along the old tip beyond its length."""
@@ -279,7 +280,8 @@ def _carry(prev_problem, prev_u, problem, scale_of_state=1.0):
     s_new = problem.mesh.s * problem.L
     V = prev_u.reshape(prev_problem.n, prev_problem.nv)
     phi = np.stack([np.interp(s_new, s_old, V[:, 3 + i]) for i in range(3)], axis=1)
-    u = problem.from_rotations(phi, scale_of_state).reshape(problem.n, problem.nv)
+    # (the positions from the rotations; every force below is carried, none from the field)
+    u = problem.from_rotations(phi).reshape(problem.n, problem.nv)
     # internal forces of the segments (at their start nodes, EI / L^2 units) and contact
     # forces per length (EI / L^3): the same forces in N in the new length's units
     ratio = problem.L / prev_problem.L
@@ -335,8 +337,12 @@ def insert(
     The clamp is an introducer at the vessel's entry; at step k the distal ``lengths[k]`` of
     the rod are out of it (:func:`free_part`) and the field is ``field_schedule`` of step k.
     Each step starts from the previous shape (follow-the-leader: the rotations and contact
-    forces as functions of the arc length from the clamp, extended along the old tip; from
-    the third step on, the secant through the last two such shapes) and is solved by the
+    forces as functions of the arc length from the clamp, extended along the old tip),
+    frictionless moved on to the solution of its linearised complementarity problem
+    (:func:`~coilrod.rod.contact_predictor.active_set_start`: the contact set where the
+    tip slides on a curved wall or a point contact passes from one corner to the next,
+    placed at once), else (friction, or no consistent contact set) from the third step on
+    the secant through the last two such shapes; it is solved by the
     contact Newton method of the spatial rod (:class:`~coilrod.rod.spatial.SpatialRod`;
     contact at the corners of the rod's polygon and its tip, Coulomb friction if the
     vessel's ``friction`` is > 0, stick or slip decided on each material point's motion
@@ -478,10 +484,12 @@ def _step(build, problem, u, prev, target, k, before=None):
     """One insertion step from the solved (problem, u) at (length, field) ``prev`` to
     ``target``, halving the step on failure: (problem, state, free rod, stable, solves).
 
-    ``before`` (problem, state, length) is the step solved before ``prev``: the first try
-    then starts from the secant through the two states (each carried to the new length,
-    extrapolated linearly in the free length); a halved step starts from the carried
-    state alone."""
+    Frictionless, each try starts first from the solution of the linearised
+    complementarity problem at the carried state
+    (:func:`~coilrod.rod.contact_predictor.active_set_start`).  ``before`` (problem,
+    state, length) is the step solved before ``prev``: the (next) try then starts from the
+    secant through the two states (each carried to the new length, extrapolated linearly in
+    the free length); a halved step starts from the carried state alone."""
     # semi-smooth Newton: the error may stall for a few iterations while the contact set
     # settles (then it converges quadratically)
     opts = NewtonOptions(max_iter=40, stagnation=12)
@@ -502,10 +510,18 @@ def _step(build, problem, u, prev, target, k, before=None):
         _carry_reference(cur_problem, cur_u, trial)
         start = carried = _carry(cur_problem, cur_u, trial)
         starts = [_reverse_friction(trial, start)] if reversal and t == 0.0 else []
-        if before is not None and t == 0.0 and t1 == 1.0 and before[2] != prev_len:
-            w = (target_len - prev_len) / (prev_len - before[2])
-            start = start + w * (start - _carry(before[0], before[1], trial))
-        for guess in [*starts, start]:
+        # frictionless contact: first the solution of the linearised complementarity
+        # problem at the carried shape (its contact set found by an active-set iteration);
+        # then (friction, no consistent contact set, or Newton failed from there) the
+        # carried shape, from the third step on the secant through the last two
+        predicted = active_set_start(trial, start)
+        tries = starts if predicted is None else [*starts, predicted]
+        for guess in [*tries, None]:
+            if guess is None:
+                guess = start
+                if before is not None and t == 0.0 and t1 == 1.0 and before[2] != prev_len:
+                    w = (target_len - prev_len) / (prev_len - before[2])
+                    guess = start + w * (start - _carry(before[0], before[1], trial))
             res = newton(trial, guess, 1.0, opts)
             solves += 1
             if res.ok:

@@ -924,8 +924,11 @@ class SpatialRod(DiscreteRod):
             }
         )
         sym = self._contact_blocks(contact, frames, phi, blocks)
-        D, E = self._second_variation(S, G, m, frames, blocks["f_xnext"], diag, A_ab, sym)
-        return R, R1, (self._scatter(k, blocks) if band else None), (D, E)
+        ab = self._scatter(k, blocks) if band else None
+        # the second variation lazily here too (a contact solve's predictions and Newton
+        # steps never count; the workspace's arrays copied)
+        args = (S, G, m.copy(), frames.copy(), blocks["f_xnext"].copy(), diag, A_ab, sym)
+        return R, R1, ab, _Deferred(self._second_variation, args)
 
     def _contact_rows(self, V, X, frames, R, tangent):
         """Add the contact terms to the residual R (k, n, nv) in place: the force and moment
