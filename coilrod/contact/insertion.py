@@ -22,7 +22,7 @@ __all__ = ["insert", "Insertion", "free_part"]
 
 #: Largest number of halvings of an insertion step before the insertion stops.
 MAX_HALVINGS = 12
-#: With friction: the largest turn of a node (rad) from an insertion step's carried start
+#: The largest turn of a node (rad) from an insertion step's carried start
 #: to its solution before the step is halved (:func:`_step`), and the halvings of an
 #: insertion step after which a larger turn is accepted (a snap).
 MAX_STEP_TURN = 1.0
@@ -347,9 +347,9 @@ def insert(
     contact at the corners of the rod's polygon and its tip, Coulomb friction if the
     vessel's ``friction`` is > 0, stick or slip decided on each material point's motion
     since the previous step); a step that fails is split in halves (free length and field
-    blended linearly), up to :data:`MAX_HALVINGS` times -- with friction also a step that
-    turns a node more than :data:`MAX_STEP_TURN` from its start (the state depends on the
-    path), up to :data:`MAX_JUMP_HALVINGS` times.  The first step is loaded from the
+    blended linearly), up to :data:`MAX_HALVINGS` times -- also a step that turns a node
+    more than :data:`MAX_STEP_TURN` from its start (Newton jumped to another branch; with
+    friction the state depends on the path), up to :data:`MAX_JUMP_HALVINGS` times.  The first step is loaded from the
     straight rod by :func:`~coilrod.solve_rod`.
 
     Parameters
@@ -527,12 +527,12 @@ def _step(build, problem, u, prev, target, k, before=None):
             if res.ok:
                 break
         why = _reason(trial)
-        if res.ok and trial.nt and dt > 2.0**-MAX_JUMP_HALVINGS:
-            # with friction the state depends on the path: a step whose solution turned a
-            # node further than MAX_STEP_TURN from the carried start has not followed it (at
-            # a coarse step Newton jumps onto a folded branch of a floppy rod pushed against
-            # friction, from which later steps fail); halve it.  At the smallest such step
-            # the jump is accepted (a snap of the rod)
+        if res.ok and dt > 2.0**-MAX_JUMP_HALVINGS:
+            # a step whose solution turned a node further than MAX_STEP_TURN from the
+            # carried start has not followed the path (at a coarse step Newton jumps onto a
+            # folded branch of a floppy rod pushed round a bend, from which later steps
+            # fail, with or without friction; with friction the state depends on the path
+            # too); halve it.  At the smallest such step the jump is accepted (a snap)
             turn = float(trial.distance(res.u - carried)[0])
             if turn > MAX_STEP_TURN:
                 res.ok, why = False, f"; a node turned {turn:.3g} rad in the step"
