@@ -21,6 +21,9 @@ alternative until its estimated cost reaches the compile cost (``COMPILE_AFTER``
 compiles.
 
 Run:  python benchmarks/bench_coldstart.py   (writes benchmarks/results/coldstart.md)
+      python benchmarks/bench_coldstart.py --compare OTHER_TREE ["all three" ...]
+      (cold CPU of this tree and another, e.g. ``git archive main | tar -x -C OTHER_TREE``,
+      alternating; printed only)
 """
 
 from __future__ import annotations
@@ -64,9 +67,10 @@ SCENARIOS = {
 }
 
 
-def run(args, cache_dir):
-    """(CPU s, wall s) of one subprocess with NUMBA_CACHE_DIR=cache_dir."""
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir), PYTHONPATH=str(ROOT))
+def run(args, cache_dir, root=ROOT):
+    """(CPU s, wall s) of one subprocess with NUMBA_CACHE_DIR=cache_dir, importing the
+    package from ``root``."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir), PYTHONPATH=str(root))
     env.pop("PYTHONDONTWRITEBYTECODE", None)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
@@ -77,11 +81,29 @@ def run(args, cache_dir):
     return cpu, wall
 
 
-def cold_and_warm(args):
+def cold_and_warm(args, root=ROOT):
     with tempfile.TemporaryDirectory() as cache:
-        cold = run(args, cache)
-        warm = run(args, cache)
+        cold = run(args, cache, root)
+        warm = run(args, cache, root)
     return cold, warm
+
+
+def side_by_side(names, other, repeats):
+    """Cold CPU of the scenarios ``names`` for this tree and the tree at ``other`` (e.g. an
+    export of main), alternating, ``repeats`` times; printed, not written."""
+    todo = {"--help": ["-m", "coilrod", "--help"]}
+    todo |= {name: ["-c", code] for name, code in SCENARIOS.items()}
+    print("| scenario | this tree: cold CPU (s) | other tree: cold CPU (s) |", flush=True)
+    print("|---|---|---|", flush=True)
+    for name in names:
+        ours, theirs = [], []
+        for _ in range(repeats):
+            for root, out in ((ROOT, ours), (Path(other), theirs)):
+                with tempfile.TemporaryDirectory() as cache:
+                    out.append(run(todo[name], cache, root)[0])
+        fmt = ", ".join
+        print(f"| {name} | {fmt(f'{t:.2f}' for t in ours)} | {fmt(f'{t:.2f}' for t in theirs)} |",
+              flush=True)  # fmt: skip
 
 
 COMPILE_EVENTS = """
@@ -238,6 +260,16 @@ def kernel_speed(lines, costs):
 
 
 def main():
+    if len(sys.argv) > 1:  # --compare OTHER_TREE [SCENARIO ...]: side by side, cold only
+        import argparse
+
+        parser = argparse.ArgumentParser()
+        parser.add_argument("--compare", required=True, help="another tree's root folder")
+        parser.add_argument("--repeats", type=int, default=2)
+        parser.add_argument("scenarios", nargs="*", default=["spatial", "all three"])
+        opts = parser.parse_args()
+        side_by_side(opts.scenarios, opts.compare, opts.repeats)
+        return
     lines = ["# Cold start (fresh NUMBA_CACHE_DIR) against warm (cache filled)", ""]
     lines += ["| scenario | cold CPU (s) | cold wall (s) | warm CPU (s) | warm wall (s) |"]
     lines += ["|---|---|---|---|---|"]
