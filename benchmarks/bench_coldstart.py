@@ -15,7 +15,8 @@ compiled code is loaded from disk). CPU time is the children's user + system tim
 Then what each compiled kernel costs to compile (numba's compile events in one process with an
 empty cache, the numpy alternatives switched off), and the steady-state speed of each kernel that
 has a numpy alternative (the coil pass, :mod:`coils._vectorised`; the planar mixed kernel,
-:mod:`coilrod.rod._mixed_numpy`; the inertia count) next to it, with the number of calls after
+:mod:`coilrod.rod._mixed_numpy`; the spatial per-node pass, :mod:`coilrod.rod._spatial_numpy`;
+the inertia count) next to it, with the number of calls after
 which compiling pays: compile cost / (numpy time - compiled time).  The library runs the numpy
 alternative until its estimated cost reaches the compile cost (``COMPILE_AFTER``), then
 compiles.
@@ -74,7 +75,10 @@ def run(args, cache_dir, root=ROOT):
     env.pop("PYTHONDONTWRITEBYTECODE", None)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, *args], env=env, check=True, stdout=subprocess.DEVNULL)
+    # cwd: ``python -c`` puts the working folder first on sys.path
+    subprocess.run(
+        [sys.executable, *args], env=env, check=True, stdout=subprocess.DEVNULL, cwd=root
+    )
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -112,8 +116,9 @@ from numba.core import event
 import coils.coaxial, coilrod.rod._compiled
 coils.coaxial.COMPILE_AFTER = 0.0  # compile everything the scenario uses
 coilrod.rod._compiled.COMPILE_AFTER = 0.0
-import coilrod.rod._inertia
+import coilrod.rod._inertia, coilrod.rod._compiled_spatial
 coilrod.rod._inertia.COMPILE_AFTER = 0.0
+coilrod.rod._compiled_spatial.COMPILE_AFTER = 0.0
 starts, out = {}, {}
 class Listener(event.Listener):
     def on_start(self, ev):
@@ -224,6 +229,7 @@ def rod_rows():
             best(lambda: mixed_assembly_numpy(*args)),
         )
     ]
+    rows.append(("spatial per-node pass, 65 nodes, residual + Jacobian", *spatial_times()))
     from coilrod.rod._inertia import _inertia, _inertia_numpy
 
     for b, what in ((3, "a planar rod's out-of-plane count"), (12, "a spatial rod's count")):
@@ -239,6 +245,31 @@ def rod_rows():
     return rows
 
 
+def spatial_times():
+    """(compiled s, numpy s) of the spatial per-node pass with the Jacobian, one member of 65
+    nodes in a coil pair's field (the arguments :meth:`SpatialRod._assemble` passes)."""
+    import numpy as np
+
+    import coils
+    from coilrod.rod import so3
+    from coilrod.rod._compiled_spatial import spatial_core
+    from coilrod.rod._spatial_numpy import spatial_core_numpy
+    from coilrod.rod.mesh import RodMesh
+    from coilrod.rod.spatial import SpatialRod
+
+    rng = np.random.default_rng(4)
+    field = coils.HelmholtzPair(0.05, 100, 2.0, axis="y")
+    rod = SpatialRod(
+        RodMesh(64), rng.normal(size=(65, 3)), [0.6, 4.0, 1.0], field, 0.04, np.zeros(3),
+        so3.expm(np.array([0.3, -0.2, 0.5])),
+    )  # fmt: skip
+    U = (rod.straight() + 0.2 * rng.normal(size=rod.size))[None]
+    captured = {}
+    rod._assemble(U, np.ones(1), True, core=lambda *a: captured.setdefault("args", a))
+    args = captured["args"]
+    return best(lambda: spatial_core(*args)), best(lambda: spatial_core_numpy(*args))
+
+
 def kernel_speed(lines, costs):
     """Steady state of each kernel with a numpy alternative, and where compiling pays."""
     names = {"coil": "coils._compiled.coaxial_field", "planar": "coilrod.rod._compiled."}
@@ -251,8 +282,16 @@ def kernel_speed(lines, costs):
     coil_cost = costs.get(names["coil"], float("nan"))
     rod_cost = costs.get(names["planar"] + "_mixed_compiled", float("nan"))
     inertia_cost = costs.get("coilrod.rod._inertia._inertia", float("nan"))
+    spatial_cost = costs.get("coilrod.rod._compiled_spatial.spatial_core", float("nan"))
     rows = [(row, coil_cost) for row in coil_rows()]
-    rows += [(row, inertia_cost if "inertia" in row[0] else rod_cost) for row in rod_rows()]
+    for row in rod_rows():
+        name = row[0]
+        cost = rod_cost
+        if "inertia" in name:
+            cost = inertia_cost
+        elif name.startswith("spatial"):
+            cost = spatial_cost
+        rows.append((row, cost))
     for (name, tc, tn), cost in rows:
         calls = cost / (tn - tc)
         lines.append(f"| {name} | {1e3 * tc:.3f} | {1e3 * tn:.3f} | {calls:,.0f} calls |")

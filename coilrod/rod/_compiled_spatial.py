@@ -21,7 +21,7 @@ from .so3 import _C_SERIES, _C_SMALL, _SMALL  # the same series and switch angle
 
 #: The helpers and member passes are called from compiled code only: no Python or C-callable
 #: wrappers (each would cost compile time in a fresh environment).
-_inner = nb.njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+_inner = nb.njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True, error_model="numpy")
 
 
 @_inner
@@ -141,7 +141,7 @@ def _sym_term(a, b, scale, out):
 #: first call, ``math.inf`` never.
 COMPILE_AFTER = 8.0
 # measured cost of one numpy pass: per call and per node x member, without and with the tangent
-_NUMPY_CALL_S, _NUMPY_NODE_S = (4e-4, 5e-4), (1.5e-6, 4e-6)
+_NUMPY_CALL_S, _NUMPY_NODE_S = (4e-4, 6e-4), (1.5e-6, 4.5e-6)
 _rent = 0.0  # estimated seconds spent in numpy passes so far in this process
 _compiled_ready = False
 
@@ -171,7 +171,7 @@ def spatial_pass(*args):
     return spatial_core(*args)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def spatial_core(
     phi, X, F, S, B, G, H, has_h, uniform, tangent, mu, K, h, w, R0, L,
     frames, R, R1, blk, diag, A_ab, m_out,
