@@ -248,6 +248,25 @@ class TestDiscreteProblem:
             assert len(calls) == 3 - numpy_calls
             assert cs._compiled_ready == (numpy_calls < 3)
 
+    def test_the_cache_is_looked_at_once_per_kernel(self, monkeypatch, tmp_path):
+        # _on_disk (every ski rental asks it at each call until it compiles) stats numba's
+        # index file at the first question only; another kernel gets its own look
+        from types import SimpleNamespace
+
+        import coilrod.rod._compiled as rc
+
+        class Kernel:  # what _on_disk reads of a numba dispatcher
+            def __init__(self, path):
+                self._cache = SimpleNamespace(_cache_file=SimpleNamespace(_index_path=str(path)))
+
+        monkeypatch.setattr(rc, "_disk_seen", {})
+        first = Kernel(tmp_path / "first.nbi")
+        assert not rc._on_disk(first)
+        (tmp_path / "first.nbi").write_text("")
+        assert not rc._on_disk(first)  # not looked at again
+        (tmp_path / "second.nbi").write_text("")
+        assert rc._on_disk(Kernel(tmp_path / "second.nbi"))
+
     def test_second_variation_is_symmetric_at_equilibrium(self):
         rod = _rod(Rectangle(3e-3, 1.5e-3), angle=0.3)
         field = coils.LinearField(B0=(1e-3, 5e-3, 2e-3), gradient=0.05 * GRADIENT)
