@@ -208,6 +208,15 @@ class TestDiscreteProblem:
                 for a, b, ref in zip(*flat, strict=True):
                     np.testing.assert_array_equal(b, a)
                     assert np.abs(a - ref).max() <= 1e-12 * max(np.abs(ref).max(), 1.0)
+            # a diverged Newton iterate: infinite and NaN angles give the same NaNs
+            bad = U[1:3].copy()
+            P.rotations(bad)[0, 2, 1], P.rotations(bad)[1, 3, 0] = np.inf, np.nan
+            a, b = (
+                P._assemble(bad, S[:2], True, core=c) for c in (spatial_core, spatial_core_numpy)
+            )
+            for x, y in zip(list(a[:3]) + list(a[3]), list(b[:3]) + list(b[3]), strict=True):
+                assert np.isnan(x).any()
+                np.testing.assert_array_equal(y, x)
 
     def test_spatial_pass_runs_numpy_until_compiling_pays(self, monkeypatch):
         # spatial_pass: the numpy pass while the estimated cost of the numpy calls so far stays
