@@ -15,12 +15,16 @@ compiled code is loaded from disk). CPU time is the children's user + system tim
 Then what each compiled kernel costs to compile (numba's compile events in one process with an
 empty cache, the numpy alternatives switched off), and the steady-state speed of each kernel that
 has a numpy alternative (the coil pass, :mod:`coils._vectorised`; the planar mixed kernel,
-:mod:`coilrod.rod._mixed_numpy`; the inertia count) next to it, with the number of calls after
+:mod:`coilrod.rod._mixed_numpy`; the spatial per-node pass, :mod:`coilrod.rod._spatial_numpy`;
+the inertia count) next to it, with the number of calls after
 which compiling pays: compile cost / (numpy time - compiled time).  The library runs the numpy
 alternative until its estimated cost reaches the compile cost (``COMPILE_AFTER``), then
 compiles.
 
 Run:  python benchmarks/bench_coldstart.py   (writes benchmarks/results/coldstart.md)
+      python benchmarks/bench_coldstart.py --compare OTHER_TREE ["all three" ...]
+      (cold CPU of this tree and another, e.g. ``git archive main | tar -x -C OTHER_TREE``,
+      alternating; printed only)
 """
 
 from __future__ import annotations
@@ -64,24 +68,46 @@ SCENARIOS = {
 }
 
 
-def run(args, cache_dir):
-    """(CPU s, wall s) of one subprocess with NUMBA_CACHE_DIR=cache_dir."""
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir), PYTHONPATH=str(ROOT))
+def run(args, cache_dir, root=ROOT):
+    """(CPU s, wall s) of one subprocess with NUMBA_CACHE_DIR=cache_dir, importing the
+    package from ``root``."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir), PYTHONPATH=str(root))
     env.pop("PYTHONDONTWRITEBYTECODE", None)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, *args], env=env, check=True, stdout=subprocess.DEVNULL)
+    # cwd: ``python -c`` puts the working folder first on sys.path
+    subprocess.run(
+        [sys.executable, *args], env=env, check=True, stdout=subprocess.DEVNULL, cwd=root
+    )
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     return cpu, wall
 
 
-def cold_and_warm(args):
+def cold_and_warm(args, root=ROOT):
     with tempfile.TemporaryDirectory() as cache:
-        cold = run(args, cache)
-        warm = run(args, cache)
+        cold = run(args, cache, root)
+        warm = run(args, cache, root)
     return cold, warm
+
+
+def side_by_side(names, other, repeats):
+    """Cold CPU of the scenarios ``names`` for this tree and the tree at ``other`` (e.g. an
+    export of main), alternating, ``repeats`` times; printed, not written."""
+    todo = {"--help": ["-m", "coilrod", "--help"]}
+    todo |= {name: ["-c", code] for name, code in SCENARIOS.items()}
+    print("| scenario | this tree: cold CPU (s) | other tree: cold CPU (s) |", flush=True)
+    print("|---|---|---|", flush=True)
+    for name in names:
+        ours, theirs = [], []
+        for _ in range(repeats):
+            for root, out in ((ROOT, ours), (Path(other), theirs)):
+                with tempfile.TemporaryDirectory() as cache:
+                    out.append(run(todo[name], cache, root)[0])
+        fmt = ", ".join
+        print(f"| {name} | {fmt(f'{t:.2f}' for t in ours)} | {fmt(f'{t:.2f}' for t in theirs)} |",
+              flush=True)  # fmt: skip
 
 
 COMPILE_EVENTS = """
@@ -90,8 +116,9 @@ from numba.core import event
 import coils.coaxial, coilrod.rod._compiled
 coils.coaxial.COMPILE_AFTER = 0.0  # compile everything the scenario uses
 coilrod.rod._compiled.COMPILE_AFTER = 0.0
-import coilrod.rod._inertia
+import coilrod.rod._inertia, coilrod.rod._compiled_spatial
 coilrod.rod._inertia.COMPILE_AFTER = 0.0
+coilrod.rod._compiled_spatial.COMPILE_AFTER = 0.0
 starts, out = {}, {}
 class Listener(event.Listener):
     def on_start(self, ev):
@@ -202,6 +229,7 @@ def rod_rows():
             best(lambda: mixed_assembly_numpy(*args)),
         )
     ]
+    rows.append(("spatial per-node pass, 65 nodes, residual + Jacobian", *spatial_times()))
     from coilrod.rod._inertia import _inertia, _inertia_numpy
 
     for b, what in ((3, "a planar rod's out-of-plane count"), (12, "a spatial rod's count")):
@@ -217,6 +245,31 @@ def rod_rows():
     return rows
 
 
+def spatial_times():
+    """(compiled s, numpy s) of the spatial per-node pass with the Jacobian, one member of 65
+    nodes in a coil pair's field (the arguments :meth:`SpatialRod._assemble` passes)."""
+    import numpy as np
+
+    import coils
+    from coilrod.rod import so3
+    from coilrod.rod._compiled_spatial import spatial_core
+    from coilrod.rod._spatial_numpy import spatial_core_numpy
+    from coilrod.rod.mesh import RodMesh
+    from coilrod.rod.spatial import SpatialRod
+
+    rng = np.random.default_rng(4)
+    field = coils.HelmholtzPair(0.05, 100, 2.0, axis="y")
+    rod = SpatialRod(
+        RodMesh(64), rng.normal(size=(65, 3)), [0.6, 4.0, 1.0], field, 0.04, np.zeros(3),
+        so3.expm(np.array([0.3, -0.2, 0.5])),
+    )  # fmt: skip
+    U = (rod.straight() + 0.2 * rng.normal(size=rod.size))[None]
+    captured = {}
+    rod._assemble(U, np.ones(1), True, core=lambda *a: captured.setdefault("args", a))
+    args = captured["args"]
+    return best(lambda: spatial_core(*args)), best(lambda: spatial_core_numpy(*args))
+
+
 def kernel_speed(lines, costs):
     """Steady state of each kernel with a numpy alternative, and where compiling pays."""
     names = {"coil": "coils._compiled.coaxial_field", "planar": "coilrod.rod._compiled."}
@@ -229,8 +282,16 @@ def kernel_speed(lines, costs):
     coil_cost = costs.get(names["coil"], float("nan"))
     rod_cost = costs.get(names["planar"] + "_mixed_compiled", float("nan"))
     inertia_cost = costs.get("coilrod.rod._inertia._inertia", float("nan"))
+    spatial_cost = costs.get("coilrod.rod._compiled_spatial.spatial_core", float("nan"))
     rows = [(row, coil_cost) for row in coil_rows()]
-    rows += [(row, inertia_cost if "inertia" in row[0] else rod_cost) for row in rod_rows()]
+    for row in rod_rows():
+        name = row[0]
+        cost = rod_cost
+        if "inertia" in name:
+            cost = inertia_cost
+        elif name.startswith("spatial"):
+            cost = spatial_cost
+        rows.append((row, cost))
     for (name, tc, tn), cost in rows:
         calls = cost / (tn - tc)
         lines.append(f"| {name} | {1e3 * tc:.3f} | {1e3 * tn:.3f} | {calls:,.0f} calls |")
@@ -238,6 +299,16 @@ def kernel_speed(lines, costs):
 
 
 def main():
+    if len(sys.argv) > 1:  # --compare OTHER_TREE [SCENARIO ...]: side by side, cold only
+        import argparse
+
+        parser = argparse.ArgumentParser()
+        parser.add_argument("--compare", required=True, help="another tree's root folder")
+        parser.add_argument("--repeats", type=int, default=2)
+        parser.add_argument("scenarios", nargs="*", default=["spatial", "all three"])
+        opts = parser.parse_args()
+        side_by_side(opts.scenarios, opts.compare, opts.repeats)
+        return
     lines = ["# Cold start (fresh NUMBA_CACHE_DIR) against warm (cache filled)", ""]
     lines += ["| scenario | cold CPU (s) | cold wall (s) | warm CPU (s) | warm wall (s) |"]
     lines += ["|---|---|---|---|---|"]

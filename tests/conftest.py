@@ -24,6 +24,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import coilrod.rod._compiled  # noqa: E402
+import coilrod.rod._compiled_spatial  # noqa: E402
 import coilrod.rod._inertia  # noqa: E402
 import coilrod.rod._planar_newton  # noqa: E402
 import coils.coaxial  # noqa: E402
@@ -36,6 +37,7 @@ import coils.coaxial  # noqa: E402
 for _module in (
     coils.coaxial,
     coilrod.rod._compiled,
+    coilrod.rod._compiled_spatial,
     coilrod.rod._inertia,
     coilrod.rod._planar_newton,
 ):

@@ -176,19 +176,105 @@ class TestDiscreteProblem:
         for x, y in zip(lazy.tangent.blocks, (D, E), strict=True):
             assert np.array_equal(x, y)
 
-    @pytest.mark.parametrize("name", ["uniform", "helmholtz"])
-    def test_compiled_pass_matches_numpy(self, name):
+    def test_compiled_pass_numpy_pass_and_reference_agree(self):
+        # the per-node pass three ways: compiled (spatial_core), its numpy twin that runs
+        # before compiling pays (bitwise the same numbers: a process's results do not change
+        # when it compiles) and numpy_core (independent, built on so3: to 1e-12); rotations
+        # in every branch -- zero (series), segments turning < 1 rad and > 1 rad (series and
+        # closed form of J_r^-1) and by pi - 1e-4 and pi - 1e-9 (the log's axis from the
+        # symmetric part) -- in a uniform field and a coil pair's (gradient, hessian rows)
+        from coilrod.rod._compiled_spatial import spatial_core
+        from coilrod.rod._spatial_numpy import spatial_core_numpy
+
         rng = np.random.default_rng(3)
         mesh = RodMesh(7)
-        P = SpatialRod(
-            mesh, rng.normal(size=(mesh.n, 3)), [0.6, 4.0, 1.0], FIELDS[name], L,
-            np.array([1e-3, 2e-3, -3e-3]), so3.expm(np.array([0.3, -0.2, 0.5])),
-        )  # fmt: skip
-        U = np.stack([P.straight() + 0.2 * rng.normal(size=P.size) for _ in range(3)])
-        S = np.array([0.3, 0.7, 1.1])
-        a, b = P._assemble(U, S, True), P._assemble(U, S, True, core=numpy_core)
-        for x, y in [(a[0], b[0]), (a[1], b[1]), (a[2], b[2]), (a[3][0], b[3][0])]:
-            assert np.abs(x - y).max() <= 1e-12 * max(np.abs(y).max(), 1.0)
+        axis = _unit([0.3, -0.5, 0.8])
+        for name in ("uniform", "helmholtz"):
+            P = SpatialRod(
+                mesh, rng.normal(size=(mesh.n, 3)), [0.6, 4.0, 1.0], FIELDS[name], L,
+                np.array([1e-3, 2e-3, -3e-3]), so3.expm(np.array([0.3, -0.2, 0.5])),
+            )  # fmt: skip
+            U = np.stack([P.straight() + q * rng.normal(size=P.size) for q in (0, 0.2, 1, 1)])
+            phi = P.rotations(U)  # a view of U
+            phi[2:, 3] = 0.0
+            phi[2, 4], phi[3, 4] = (np.pi - 1e-4) * axis, (np.pi - 1e-9) * axis
+            S = np.array([0.3, 0.7, 1.1, 0.9])
+            for tangent in (True, False):
+                out = [
+                    P._assemble(U, S, tangent, core=core)
+                    for core in (spatial_core, spatial_core_numpy, numpy_core)
+                ]
+                flat = [list(o[: 3 if tangent else 2]) + list(o[3] or ()) for o in out]
+                for a, b, ref in zip(*flat, strict=True):
+                    np.testing.assert_array_equal(b, a)
+                    assert np.abs(a - ref).max() <= 1e-12 * max(np.abs(ref).max(), 1.0)
+            # a diverged Newton iterate: infinite and NaN angles give the same NaNs
+            bad = U[1:3].copy()
+            P.rotations(bad)[0, 2, 1], P.rotations(bad)[1, 3, 0] = np.inf, np.nan
+            a, b = (
+                P._assemble(bad, S[:2], True, core=c) for c in (spatial_core, spatial_core_numpy)
+            )
+            for x, y in zip(list(a[:3]) + list(a[3]), list(b[:3]) + list(b[3]), strict=True):
+                assert np.isnan(x).any()
+                np.testing.assert_array_equal(y, x)
+
+    def test_spatial_pass_runs_numpy_until_compiling_pays(self, monkeypatch):
+        # spatial_pass: the numpy pass while the estimated cost of the numpy calls so far stays
+        # within COMPILE_AFTER, then the compiled pass (here a stand-in: the rule, not numba);
+        # at once if numba's cache holds the kernel or this process compiled it
+        import coilrod.rod._compiled as rc
+        import coilrod.rod._compiled_spatial as cs
+        from coilrod.rod._spatial_numpy import spatial_core_numpy
+
+        calls = []
+
+        class Kernel:
+            overloads: dict = {}
+
+            def __call__(self, *args):
+                calls.append(args[0].shape)
+                spatial_core_numpy(*args)
+
+        mu, K = np.ones((5, 3)), [0.6, 4.0, 1.0]
+        P = SpatialRod(RodMesh(4), mu, K, FIELDS["uniform"], L, np.zeros(3), np.eye(3))
+        U, S = np.stack([P.straight()] * 2), np.array([0.5, 1.0])
+        cost = cs._NUMPY_CALL_S[1] + cs._NUMPY_NODE_S[1] * 2 * P.n
+        for on_disk, overloads, after, numpy_calls in [
+            (False, {}, 2.5 * cost, 2),
+            (True, {}, np.inf, 0),
+            (False, {"compiled": 1}, np.inf, 0),
+        ]:
+            kernel = Kernel()
+            kernel.overloads = overloads
+            monkeypatch.setattr(cs, "spatial_core", kernel)
+            monkeypatch.setattr(rc, "_on_disk", lambda dispatcher, seen=on_disk: seen)
+            monkeypatch.setattr(cs, "_rent", 0.0)
+            monkeypatch.setattr(cs, "_compiled_ready", False)
+            monkeypatch.setattr(cs, "COMPILE_AFTER", after)
+            calls.clear()
+            for _ in range(3):
+                P._assemble(U, S, True)
+            assert len(calls) == 3 - numpy_calls
+            assert cs._compiled_ready == (numpy_calls < 3)
+
+    def test_the_cache_is_looked_at_once_per_kernel(self, monkeypatch, tmp_path):
+        # _on_disk (every ski rental asks it at each call until it compiles) stats numba's
+        # index file at the first question only; another kernel gets its own look
+        from types import SimpleNamespace
+
+        import coilrod.rod._compiled as rc
+
+        class Kernel:  # what _on_disk reads of a numba dispatcher
+            def __init__(self, path):
+                self._cache = SimpleNamespace(_cache_file=SimpleNamespace(_index_path=str(path)))
+
+        monkeypatch.setattr(rc, "_disk_seen", {})
+        first = Kernel(tmp_path / "first.nbi")
+        assert not rc._on_disk(first)
+        (tmp_path / "first.nbi").write_text("")
+        assert not rc._on_disk(first)  # not looked at again
+        (tmp_path / "second.nbi").write_text("")
+        assert rc._on_disk(Kernel(tmp_path / "second.nbi"))
 
     def test_second_variation_is_symmetric_at_equilibrium(self):
         rod = _rod(Rectangle(3e-3, 1.5e-3), angle=0.3)

@@ -236,12 +236,22 @@ def mixed_assembly(U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab
     return _mixed_compiled(*args)
 
 
+_disk_seen: dict = {}  # dispatcher -> whether its cache index was on disk at the first look
+
+
 def _on_disk(dispatcher) -> bool:
-    """Whether numba's cache holds compiled code of ``dispatcher`` (loading it costs ~0.1 s)."""
-    try:
-        return Path(dispatcher._cache._cache_file._index_path).exists()
-    except AttributeError:  # numba internals changed: assume not
-        return False
+    """Whether numba's cache held compiled code of ``dispatcher`` when this process first asked
+    (loading it costs ~0.1 s).  The disk is looked at once per kernel and process: the callers
+    ask on every call until they compile, and a cache another process writes later is not
+    noticed (the ski rental then runs its course)."""
+    seen = _disk_seen.get(dispatcher)
+    if seen is None:
+        try:
+            seen = Path(dispatcher._cache._cache_file._index_path).exists()
+        except AttributeError:  # numba internals changed: assume not
+            seen = False
+        _disk_seen[dispatcher] = seen
+    return seen
 
 
 @nb.njit(cache=True)

@@ -6,7 +6,10 @@ every segment (``psi = log(R_i^T R_{i+1})``, the moment ``p`` it carries and its
 block ``P``), the residual and its load derivative, the Jacobian blocks (world rotations,
 times ``J_l(phi)``) and the symmetric blocks of the second variation.  The equations are
 those of :mod:`coilrod.rod.spatial` (see there); this module only evaluates them without
-numpy's per-call overhead.  Imported on the first spatial solve.
+numpy's per-call overhead.  Imported on the first spatial solve; :func:`spatial_pass` runs
+the numpy version of :mod:`coilrod.rod._spatial_numpy` until compiling pays.  Compiled with
+numba's numpy error model: a division by zero gives inf or NaN, as in the numpy version (the
+Python model's ZeroDivisionError branches cost ~15 % more compile time).
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from .so3 import _C_SERIES, _C_SMALL, _SMALL  # the same series and switch angle
 
 #: The helpers and member passes are called from compiled code only: no Python or C-callable
 #: wrappers (each would cost compile time in a fresh environment).
-_inner = nb.njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+_inner = nb.njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True, error_model="numpy")
 
 
 @_inner
@@ -135,7 +138,42 @@ def _sym_term(a, b, scale, out):
             out[i, j] += scale * (0.5 * (a[i] * b[j] + b[i] * a[j]) - (d if i == j else 0.0))
 
 
-@nb.njit(cache=True)
+#: Estimated CPU seconds of numpy passes after which the compiled pass is used (ski rental:
+#: about what compiling it costs on a cold cache, README "Cold start"); 0 compiles at the
+#: first call, ``math.inf`` never.
+COMPILE_AFTER = 8.0
+# measured cost of one numpy pass: per call and per node x member, without and with the tangent
+_NUMPY_CALL_S, _NUMPY_NODE_S = (4e-4, 6e-4), (1.5e-6, 4.5e-6)
+_rent = 0.0  # estimated seconds spent in numpy passes so far in this process
+_compiled_ready = False
+
+
+def spatial_pass(*args):
+    """:func:`spatial_core` (same arguments and outputs) by the vectorised numpy version
+    (:mod:`coilrod.rod._spatial_numpy`, bitwise the same numbers) until its estimated cost
+    reaches :data:`COMPILE_AFTER`, numba's cache holds the compiled pass or this process has
+    compiled it; by the compiled pass from then on."""
+    global _rent, _compiled_ready
+    if not _compiled_ready:
+        from ._compiled import _on_disk
+
+        phi, tangent = args[0], args[9]
+        t = 1 if tangent else 0
+        cost = _NUMPY_CALL_S[t] + _NUMPY_NODE_S[t] * phi.shape[0] * phi.shape[1]
+        if (
+            _rent + cost <= COMPILE_AFTER
+            and not spatial_core.overloads
+            and not _on_disk(spatial_core)
+        ):
+            from ._spatial_numpy import spatial_core_numpy
+
+            _rent += cost
+            return spatial_core_numpy(*args)
+        _compiled_ready = True
+    return spatial_core(*args)
+
+
+@nb.njit(cache=True, error_model="numpy")
 def spatial_core(
     phi, X, F, S, B, G, H, has_h, uniform, tangent, mu, K, h, w, R0, L,
     frames, R, R1, blk, diag, A_ab, m_out,

@@ -851,14 +851,15 @@ class SpatialRod(DiscreteRod):
         self, U: np.ndarray, S: np.ndarray, tangent: bool, core=None, band=True, fields=None
     ):
         """Residual (k, size), load rate (k, size), band storage and symmetric blocks of a
-        stack: the per-node algebra by ``core`` (default: the compiled pass of
-        :mod:`coilrod.rod._compiled_spatial`; :func:`numpy_core` is the same in numpy), the
+        stack: the per-node algebra by ``core`` (default: the pass of
+        :mod:`coilrod.rod._compiled_spatial`, numpy until compiling pays;
+        :func:`numpy_core` is the same in numpy, rounding differently), the
         contact terms (:meth:`_contact_rows`, :meth:`_contact_blocks`) and the second
         variation's blocks (:meth:`_second_variation`) added here.  ``band`` False: no band
         storage (None; the blocks alone, for an inertia count).  ``fields``: (B (k n, 3),
         G (k n, 3, 3), H (k n, 3, 3, 3) or None) at the nodes, already evaluated."""
         if core is None:
-            from ._compiled_spatial import spatial_core as core
+            from ._compiled_spatial import spatial_pass as core
 
         k, n, nv = U.shape[0], self.n, self.nv
         ws = self._workspace(k, tangent)
