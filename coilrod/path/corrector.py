@@ -209,21 +209,21 @@ def newton(
         Shaped like the input (scalars for one state).
     """
     opts = _DEFAULT_OPTIONS if opts is None else opts
-    P = as_batched(problem)
     single = np.ndim(u0) == 1
     U = np.array(u0, dtype=float, ndmin=2)  # (a copy: iterated in place)
     k = len(U)
     S = np.array(scale, dtype=float)  # a copy
     if S.shape != (k,):
-        S = np.broadcast_to(S, (k,)).copy()
+        S = np.full(k, S[()]) if S.ndim == 0 else np.broadcast_to(S, (k,)).copy()
     fast = getattr(problem, "compiled_newton", None)
-    done = None if fast is None else fast(U, S, opts)
+    done = None if fast is None else fast(U, S, opts, tangent_at_end)
     if done is not None:  # the model's own compiled corrector: the same iteration, one call
         U, err, iters, lin = done
-        ok = np.isfinite(err) & (err <= 1.0)
+        ok = (err <= 1.0) & np.isfinite(err)
         if single:
             return NewtonResult(U[0], bool(ok[0]), float(err[0]), int(iters[0]), lin)
         return NewtonResult(U, ok, err, iters, lin)
+    P = as_batched(problem)
     with np.errstate(all="ignore"):
         state = _Iteration(P, U, S, opts)
         for _ in range(opts.max_iter):

@@ -38,6 +38,7 @@ converged with small corrections and unchanged stability is accepted, the rest i
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -206,7 +207,7 @@ class _Tracker:
         else:
             with np.errstate(all="ignore"):
                 r = -self.P.solve(lin, self.P.d_residual_d_scale(lin))[0]
-        return r if np.all(np.isfinite(r)) else None
+        return r if np.isfinite(r).all() else None
 
     def predict(self, cur: PathPoint, prev: PathPoint | None, s1: float) -> np.ndarray:
         ds = s1 - cur.scale
@@ -262,7 +263,7 @@ class _Tracker:
         bifurcation, where the path tangent blows up, instead of leaping across), at least a
         tenth and at most all of the model's ``max_step_change``."""
         cap = self.P.max_step_change
-        if self.last_change is None or not np.isfinite(cap):
+        if self.last_change is None or not math.isfinite(cap):
             return cap
         return min(cap, max(self.opts.change_growth * self.last_change, 0.1 * cap))
 
@@ -334,11 +335,11 @@ class _Tracker:
     def _trial(self, cur: PathPoint, prev, h: float, target: float):
         """:meth:`trial` without the contact events."""
         limit = self.change_limit()
-        bounded = cur.rate is not None and np.isfinite(limit)
+        bounded = cur.rate is not None and math.isfinite(limit)
         if bounded:
             per_unit = float(self.P.distance(cur.rate[None])[0])
             if per_unit * abs(h) > limit:
-                h = float(np.copysign(limit / per_unit, h))
+                h = math.copysign(limit / per_unit, h)
         remaining = target - cur.scale
         if abs(h) >= abs(remaining):
             h, s1 = remaining, target
@@ -449,7 +450,7 @@ class _Tracker:
                 elif res.iterations[0] <= 4:
                     # bisecting toward the change: grow, but never past the scale where it
                     # was seen (a step cut for another reason must not creep on at its size)
-                    h = float(np.copysign(min(2.0 * abs(h), abs(seen_at - s1)), h))
+                    h = math.copysign(min(2.0 * abs(h), abs(seen_at - s1)), h)
                 continue
             h /= 2.0
             failures += 1

@@ -82,12 +82,17 @@ def build_problem(
     clamp_angle,
     tol: float = 1e-9,
     stability3d: bool = True,
+    *,
+    clamp_field=None,
 ) -> PlanarRod:
     """The discrete problem of ``rod`` in ``field`` on ``mesh`` (non-dimensional); with
     ``stability3d`` (default) its stability counts the out-of-plane modes too
-    (:mod:`coilrod.rod.out_of_plane`)."""
+    (:mod:`coilrod.rod.out_of_plane`); ``clamp_field``: B (3,) T at the clamp if already
+    evaluated (:class:`~coilrod.rod.planar.PlanarRod`)."""
     mu = _node_moments(rod, mesh, dim=2)
-    problem = PlanarRod(mesh, mu, field, rod.length, clamp_position, clamp_angle, tol)
+    problem = PlanarRod(
+        mesh, mu, field, rod.length, clamp_position, clamp_angle, tol, clamp_field=clamp_field
+    )
     if stability3d:
         problem.with_out_of_plane(rod_stiffnesses(rod))
     return problem
@@ -281,7 +286,11 @@ def solve_rod(
     mesh = make_mesh(rod, nodes)
     meshes = [mesh, mesh.refined()] if richardson else [mesh]
     if chosen == "planar":
-        problems = [build_problem(rod, field, m, clamp, angle, tol) for m in meshes]
+        problems = [build_problem(rod, field, meshes[0], clamp, angle, tol)]
+        problems += [  # (the field at the clamp evaluated once)
+            build_problem(rod, field, m, clamp, angle, tol, clamp_field=problems[0].clamp_field)
+            for m in meshes[1:]
+        ]
         finish = _result
     else:
         problems = [
