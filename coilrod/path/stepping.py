@@ -186,6 +186,10 @@ class _Tracker:
         self.last_change = None  # change of the state in the last accepted step
         self.event = None  # (point, step) of a trial step ended at a contact event
         self.crossing = None  # the start of a trial step predicted across contact events
+        # distances already measured, reused by identity: (cur, guess, predicted change) of
+        # the last trial step and (cur, u, change) of the last smoothness test
+        self.predicted = None
+        self.moved = None
         #: Corrections below this (1e-3 of the model's max_correction) never signal a jump.
         limit = self.P.max_correction
         self.negligible = 1e-3 * limit if np.isfinite(limit) else 0.0
@@ -230,8 +234,11 @@ class _Tracker:
         tangent is known, within ``relative_correction`` of the predicted change."""
         if cur.rate is None:
             return float(self.P.distance((u - guess)[None])[0]) <= self.P.max_correction
-        # (np.array of equal-shape rows: np.stack's values, at a quarter of its overhead)
-        correction, change = map(float, self.P.distance(np.array([u - guess, guess - cur.u])))
+        known = self.predicted
+        if known is not None and known[0] is cur and known[1] is guess:  # measured by _trial
+            correction, change = float(self.P.distance((u - guess)[None])[0]), known[2]
+        else:  # (np.array of equal-shape rows: np.stack's values, at a quarter of its overhead)
+            correction, change = map(float, self.P.distance(np.array([u - guess, guess - cur.u])))
         if correction > self.P.max_correction:
             return False
         return correction <= self.opts.relative_correction * change + self.negligible
@@ -252,6 +259,7 @@ class _Tracker:
                 np.array([change - 0.5 * h * (cur.rate + rate), np.abs(cur.u) + np.abs(u), change])
             ),
         )
+        self.moved = (cur, u, moved)  # (the change again for accepted())
         # rounding of the states themselves (a step far below their resolution)
         rounding = 64 * _EPS * size
         tol = self.opts.relative_correction * moved
@@ -351,6 +359,7 @@ class _Tracker:
         for _ in range(60):
             change = float(self.P.distance((guess - cur.u)[None])[0])
             if change <= limit * (1.0 + 1e-9):
+                self.predicted = (cur, guess, change)
                 break
             h *= min(0.5, max(0.1, 0.9 * limit / change))
             s1 = cur.scale + h
@@ -360,7 +369,11 @@ class _Tracker:
     def accepted(self, old: PathPoint, new: PathPoint) -> None:
         """Record the change of an accepted step (for :meth:`change_limit`) and tell a
         path-dependent model (:meth:`commit`)."""
-        self.last_change = float(self.P.distance((new.u - old.u)[None])[0])
+        known = self.moved
+        if known is not None and known[0] is old and known[1] is new.u:  # measured by smooth
+            self.last_change = known[2]
+        else:
+            self.last_change = float(self.P.distance((new.u - old.u)[None])[0])
         self.commit(new)
 
     def commit(self, p: PathPoint) -> None:
@@ -420,11 +433,12 @@ class _Tracker:
             residual = float(res.error[0])
             stab = 1.0
             rate = None
+            u = res.u[0]
             if ok:
-                ok = self.continuous(cur, guess, res.u[0])
+                ok = self.continuous(cur, guess, u)
             if ok:
                 rate = self.rate(res.lin)
-                ok = self.smooth(cur, res.u[0], rate, h)
+                ok = self.smooth(cur, u, rate, h)
             if ok and opts.stability:
                 stab = float(self.P.stability(res.lin)[0])
                 if self.stable(stab) != self.stable(cur.stability):
@@ -436,7 +450,7 @@ class _Tracker:
                     locating = False
                     self.record_bifurcation(cur, s1, stab, k, first_of, target)
             if ok:
-                new = self.point(res.u[0], s1, residual, res.lin, stab, rate)
+                new = self.point(u, s1, residual, res.lin, stab, rate)
                 self.accepted(cur, new)
                 prev, cur = cur, new
                 failures = 0

@@ -524,7 +524,7 @@ class PlanarRod(DiscreteRod):
         R, R1 = F[0], F[1]
         ok = M[:, 3] != 0.0
         tan = RodTangent(k, self.size, True, (F[2], self._off_diagonals(k)), R1)
-        tan.bad |= ~ok
+        tan.bad = ~ok
         tan.signs = M[:, 1]
         lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
         lin.load_rate = R1
@@ -629,7 +629,8 @@ class PlanarRod(DiscreteRod):
         evaluated); ``precise``: its smallest eigenvalue (EI_z / L^3 units, the in-plane
         figure's normalisation).  ``lin`` may carry ``uniform_fields`` (k, 3) T, one uniform
         field per member (a fan of field directions)."""
-        if self.out_of_plane is None:
+        if self.out_of_plane is None or (not precise and _odd_definite(lin)):
+            # (no out-of-plane negatives: the 3D indicator is the in-plane sign of det J)
             return self.stability_in_plane(lin, precise)
         total, odd_count = self.negative_counts(lin)
         signs = np.negative(total, dtype=float)  # (+1 stable, -count, 0 not finite)
@@ -654,13 +655,11 @@ class PlanarRod(DiscreteRod):
         cached = getattr(lin, "_counts_3d", None)
         if cached is not None:
             return cached
-        fields = getattr(lin, "uniform_fields", None)
-        known = getattr(lin, "odd_definite", None)  # (the compiled corrector's Cholesky test)
         even = _even_count(lin.tangent.det_signs() * self.det_reference())
-        if known is not None and fields is None and known.all():  # no out-of-plane negatives
+        if _odd_definite(lin):  # no out-of-plane negatives
             lin._counts_3d = (even, np.zeros_like(even))
             return lin._counts_3d
-        odd = self.out_of_plane.odd_count(lin, fields)
+        odd = self.out_of_plane.odd_count(lin, getattr(lin, "uniform_fields", None))
         total = np.where((odd >= 0) & (even >= 0), odd + even, -1)
         lin._counts_3d = (total, odd)
         return lin._counts_3d
@@ -844,10 +843,14 @@ class PlanarRod(DiscreteRod):
 def _even_count(signs: np.ndarray) -> np.ndarray:
     """Negative in-plane eigenvalues (mod 2) from the signs of det J relative to the unloaded
     rod (k,): 0 for +1, 1 for -1, -1 (unknown) for 0."""
-    neg = signs < 0
-    even = neg.astype(int)
-    even[~(neg | (signs > 0))] = -1
-    return even
+    return np.where(signs > 0, 0, np.where(signs < 0, 1, -1))
+
+
+def _odd_definite(lin: Linearization) -> bool:
+    """The compiled corrector proved the out-of-plane block of every member of ``lin``
+    positive definite (its Cholesky test, ``lin.odd_definite``; not for a fan of fields)."""
+    known = getattr(lin, "odd_definite", None)
+    return known is not None and getattr(lin, "uniform_fields", None) is None and known.all()
 
 
 def _planar_newton():
