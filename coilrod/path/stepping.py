@@ -302,14 +302,15 @@ class _Tracker:
         across = getattr(self.model, "piecewise_prediction", None)
         if across is not None and cur.rate is not None:
             frac = float(hook(cur.u[None], (guess - cur.u)[None])[0])
-            if frac < 1.0:
-                crossed = across(cur.u, cur.scale, h1)
-                limit = self.change_limit()
-                if crossed is not None and float(
-                    self.P.distance((crossed - cur.u)[None])[0]
-                ) <= limit * (1.0 + 1e-9):
-                    self.crossing = cur  # a step across contact events: not smooth
-                    return h1, s1, crossed
+            if not frac < 1.0:  # no event ahead (the loop below would measure it again)
+                return h1, s1, guess
+            crossed = across(cur.u, cur.scale, h1)
+            limit = self.change_limit()
+            if crossed is not None and float(
+                self.P.distance((crossed - cur.u)[None])[0]
+            ) <= limit * (1.0 + 1e-9):
+                self.crossing = cur  # a step across contact events: not smooth
+                return h1, s1, crossed
         start = h1
         for _ in range(4):  # the Hermite term makes the prediction nonlinear in the step
             frac = float(hook(cur.u[None], (guess - cur.u)[None])[0])

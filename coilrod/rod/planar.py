@@ -315,14 +315,13 @@ class PlanarRod(DiscreteRod):
             if clamp_field is None:
                 clamp_field = field.B(self.clamp)[0]
             self.clamp_field = np.array(clamp_field, dtype=float)
-            bx, by = self.clamp_field[:2]
-            wmu = w[:, None] * self.mu
-            mt, mn = wmu[:, 0], wmu[:, 1]
+            bx, by = self.clamp_field[:2].tolist()  # (plain floats: the same products)
+            mt, mn = w * self.mu[:, 0], w * self.mu[:, 1]
             self._P1 = mt * by - mn * bx  # w (m x b) and w m.b at theta = 0, scale 1
             self._Q1 = mt * bx + mn * by
             self._k_diag = bend  # 1/h_{i-1} + 1/h_i on the diagonal
-            self._k_low = -self._inv_h.copy()  # J[i + 1, i]
-            self._k_up = -self._inv_h.copy()  # J[i, i + 1]
+            self._k_low = -self._inv_h  # J[i + 1, i] (a new array)
+            self._k_up = -self._inv_h  # J[i, i + 1]
             self._k_up[0] = 0.0  # row 0 is the clamp condition
 
     # -- states -----------------------------------------------------------------------------------
