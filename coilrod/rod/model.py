@@ -84,10 +84,13 @@ def clamp_frame(clamp_angle: float, clamp_rotation) -> np.ndarray:
 
 def _in_plane_rotation(R0: np.ndarray) -> bool:
     """True if the frame keeps the binormal on +z (a rotation about z)."""
-    return bool(
-        abs(R0[2, 2] - 1.0) <= 1e-14
-        and np.all(np.abs(R0[2, :2]) <= 1e-14)
-        and np.all(np.abs(R0[:2, 2]) <= 1e-14)
+    r = np.asarray(R0, float).tolist()  # (plain floats: five comparisons, no numpy calls)
+    return (
+        abs(r[2][2] - 1.0) <= 1e-14
+        and abs(r[2][0]) <= 1e-14
+        and abs(r[2][1]) <= 1e-14
+        and abs(r[0][2]) <= 1e-14
+        and abs(r[1][2]) <= 1e-14
     )
 
 
