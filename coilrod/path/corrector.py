@@ -336,8 +336,10 @@ class _Iteration:
                 e_new = _errors(P, tlin, step)
                 e_old = self.err[members]
                 first = alpha == full[pos]
-            accept = (e_new < e_old) | (e_new <= 1.0) | (first & (e_new <= growth * e_old))
-            accept &= np.isfinite(e_new)
+            accept = (e_new < e_old) | (e_new <= 1.0)  # (then e_new is finite: _errors)
+            if not accept.all():
+                accept |= first & (e_new <= growth * e_old)
+                accept &= np.isfinite(e_new)
             if accept.all():
                 self._take(members, trial, tlin, e_new, e_old, slice(None))
                 if pos.size == act.size:
