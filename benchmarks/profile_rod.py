@@ -13,8 +13,11 @@ process CPU time, best of several runs:
    and a plain per-phase timer without the profiler's per-call cost) and the cProfile top
    functions of 200 single-state solves.
 
-Run:  python benchmarks/profile_rod.py [--v01 PATH]   (PATH: a checkout of 0.1, d8091c8;
-default /work/wt-v01; skipped if absent)
+Run:  python benchmarks/profile_rod.py [--v01 PATH] [--base PATH]   (--v01: a checkout of 0.1,
+d8091c8, default /work/wt-v01, skipped if absent; --base: another checkout timed in the same
+rounds, e.g. ``git archive <commit> | tar -x -C PATH`` of the version before a change -- run
+one solve with its compiled kernels first so that numba's cache holds them, else its ski
+rental times the numpy passes)
 """
 
 from __future__ import annotations
@@ -167,7 +170,7 @@ PHASES = [
     ("      model linearize", "planar.py", "linearize"),
     ("      model solve", "planar.py", "solve"),
     ("      model error", "planar.py", "error"),
-    ("    stability (3D count)", "planar.py", "negative_counts"),
+    ("    stability (3D indicator)", "planar.py", "stability"),
     ("      out-of-plane block count", "out_of_plane.py", "odd_count"),
     ("  build_problem (setup, both meshes)", "solve.py", "build_problem"),
     ("  Richardson second mesh", "solve.py", "_refine"),
@@ -215,13 +218,20 @@ def phase_timer(states: int = 200):
 
     targets = [
         ("solve_rod (whole call)", solve_module, "solve_rod"),
+        ("  input checks", solve_module, "check_inputs"),
+        ("  model choice (clamp frame, planar load?)", solve_module, "resolve_clamp_and_model"),
+        ("  build_problem (both meshes)", solve_module, "build_problem"),
         ("  follow_load (path engine)", solve_module, "follow_load"),
         ("    newton (load steps)", stepping, "newton"),
+        ("    trial step (step control, predictor)", stepping._Tracker, "trial"),
+        ("    continuity check", stepping._Tracker, "continuous"),
+        ("    path rate (read from the corrector)", stepping._Tracker, "rate"),
+        ("    smoothness check", stepping._Tracker, "smooth"),
         ("    stability (3D count)", planar.PlanarRod, "stability"),
         ("      out-of-plane block count", out_of_plane.OutOfPlane, "odd_count"),
-        ("    path rate (one solve)", stepping._Tracker, "rate"),
-        ("  newton (Richardson second mesh)", solve_module, "newton"),
-        ("  build_problem (both meshes)", solve_module, "build_problem"),
+        ("    accepted point (record)", stepping._Tracker, "point"),
+        ("  result (Richardson mesh, extrapolation, assembly)", solve_module, "_result"),
+        ("    newton (Richardson second mesh)", solve_module, "newton"),
         ("model linearize (all)", planar.PlanarRod, "linearize"),
         ("model solve (all)", planar.PlanarRod, "solve"),
         ("model error (all)", planar.PlanarRod, "error"),
@@ -235,7 +245,7 @@ def phase_timer(states: int = 200):
     return [(label, n / states, 1e3 * t / states) for label, (n, t) in acc.items()]
 
 
-def main(v01: str) -> str:
+def main(v01: str, base: str | None = None) -> str:
     lines = []
 
     def out(text=""):
@@ -252,12 +262,15 @@ def main(v01: str) -> str:
     out()
     # the two versions alternate (ROUNDS each, best kept): a busy shared machine slows
     # whatever runs at the time, and alternating spreads that over both
-    new = old = None
+    new = old = before = None
     have_old = Path(v01, "coilrod").is_dir()
+    have_base = base is not None and Path(base, "coilrod").is_dir()
     for _ in range(ROUNDS):
         new = _best(new, child(here))
         if have_old:
             old = _best(old, child(v01))
+        if have_base:
+            before = _best(before, child(base))
     t_bvp = best_cpu(bvp_single)
     out("## 1. M(1), lambda 5 single state; 50-step sweep to lambda 20 (defaults)")
     out()
@@ -265,7 +278,7 @@ def main(v01: str) -> str:
     out("|---|---|---|---|---|---|")
     o_single = old["single"] if old else float("nan")
     o_sweep = old["sweep"] if old else float("nan")
-    for name, r in (("this version", new), ("0.1 (d8091c8)", old)):
+    for name, r in (("this version", new), (f"base ({base})", before), ("0.1 (d8091c8)", old)):
         if r is None:
             continue
         out(
@@ -325,7 +338,9 @@ def main(v01: str) -> str:
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--v01", default="/work/wt-v01", help="checkout of 0.1 (d8091c8)")
-    text = main(parser.parse_args().v01)
+    parser.add_argument("--base", default=None, help="another checkout timed alongside")
+    args = parser.parse_args()
+    text = main(args.v01, args.base)
     target = Path(__file__).parent / "results" / "rod_profile.md"
     target.parent.mkdir(parents=True, exist_ok=True)
     target.write_text(text)

@@ -66,6 +66,32 @@ class TestModelChoice:
         with pytest.raises(ValueError, match="cannot be evaluated on the plane around the clamp"):
             coilrod.solve_rod(rod, OnlyAtTheClamp(), [1.0], nodes=8)
 
+    def test_mirror_symmetry_agrees_with_the_sampled_disc(self):
+        # model.mirror_symmetric decides without evaluating the field; the sampled reach disc
+        # (the check it replaces) is the independent reference: B_z and dB_z/dx, dB_z/dy
+        # round-off small where it says symmetric, and a real leak where it does not
+        from coilrod.rod import model
+
+        L, z0 = 0.05, 0.01
+        clamp = np.array([0.0, 0.0, z0])
+        pair = coils.MaxwellPair(radius=2 * L, turns=200, current=1.0, axis="x", center=(L, 0, z0))
+        bias = coils.UniformField(B=(0.0, 2e-3, 0.0))
+        tilted = coils.HelmholtzPair(radius=2 * L, turns=200, current=1.0, axis=(0, 1, 0.1))
+        skew = np.zeros((3, 3))
+        skew[2, 0] = skew[0, 2] = 1e-3  # dB_z/dx: curl- and divergence-free
+        cases = [
+            (pair + bias, True),
+            (0.5 * tilted.replace(axis="y", center=(0, 0, z0)) + pair.ideal(), True),
+            (pair.replace(center=(L, 0, 0.0)) + bias, False),  # centre off the plane
+            (tilted.replace(center=(0, 0, z0)), False),  # axis out of the plane
+            (pair + coils.LinearField(gradient=skew, origin=clamp), False),
+        ]
+        for field, symmetric in cases:
+            assert model.mirror_symmetric(field, z0) == symmetric
+            bz, gz, size = model.plane_leak(*model.reach_fields(field.B_and_gradient, clamp, L), L)
+            assert (max(bz, gz) > model.PLANAR_FIELD_TOL * size) != symmetric
+            assert (model._field_reasons(field, clamp, L) == []) == symmetric
+
 
 class TestConvergedIsMeasured:
     def test_rod_reports_newtons_measure(self):

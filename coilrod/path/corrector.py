@@ -209,21 +209,21 @@ def newton(
         Shaped like the input (scalars for one state).
     """
     opts = _DEFAULT_OPTIONS if opts is None else opts
-    P = as_batched(problem)
     single = np.ndim(u0) == 1
     U = np.array(u0, dtype=float, ndmin=2)  # (a copy: iterated in place)
     k = len(U)
     S = np.array(scale, dtype=float)  # a copy
     if S.shape != (k,):
-        S = np.broadcast_to(S, (k,)).copy()
+        S = np.full(k, S[()]) if S.ndim == 0 else np.broadcast_to(S, (k,)).copy()
     fast = getattr(problem, "compiled_newton", None)
-    done = None if fast is None else fast(U, S, opts)
+    done = None if fast is None else fast(U, S, opts, tangent_at_end)
     if done is not None:  # the model's own compiled corrector: the same iteration, one call
         U, err, iters, lin = done
-        ok = np.isfinite(err) & (err <= 1.0)
+        ok = (err <= 1.0) & np.isfinite(err)
         if single:
             return NewtonResult(U[0], bool(ok[0]), float(err[0]), int(iters[0]), lin)
         return NewtonResult(U, ok, err, iters, lin)
+    P = as_batched(problem)
     with np.errstate(all="ignore"):
         state = _Iteration(P, U, S, opts)
         for _ in range(opts.max_iter):
@@ -247,7 +247,7 @@ class _Iteration:
         self.P, self.U, self.S, self.opts = P, U, S, opts
         self.T = P.linearize(U, S)  # the linearization whose tangent the solves use
         self.err = _errors(P, self.T, None)
-        self.alive = np.asarray(self.T.ok, bool) & np.isfinite(self.err)
+        self.alive = np.isfinite(self.err)  # (_errors: inf where not ok)
         self.R = np.array(self.T.residual)  # each member's current residual
         self.everyone = np.arange(k)
         self.owners = self.everyone  # T's members, in its row order (sorted)
@@ -269,7 +269,9 @@ class _Iteration:
             return False
         whole = n == len(U)  # every member active: plain arrays instead of index copies
         act = self.everyone if whole else np.flatnonzero(active)
-        chord = self.chords and float(self.ratio[act].max()) <= opts.chord
+        chord = (
+            self.chords and float((self.ratio if whole else self.ratio[act]).max()) <= opts.chord
+        )
         if not chord and not (self.fresh if whole else self.fresh[act]).all():
             # a new tangent at the current states
             self.T, self.owners = P.linearize(U[act], S[act]), act
@@ -283,8 +285,8 @@ class _Iteration:
             rhs = np.zeros((self.owners.size, P.size))
             rhs[rows] = -self.R[act]
             dU = P.solve(self.T, rhs)[rows]
-        finite = np.isfinite(dU).all(axis=1)
-        if not finite.all():
+        if not np.isfinite(dU).all():
+            finite = np.isfinite(dU).all(axis=1)
             self.alive[act[~finite]] = False
             act, dU = act[finite], dU[finite]
             if act.size == 0:
@@ -334,8 +336,10 @@ class _Iteration:
                 e_new = _errors(P, tlin, step)
                 e_old = self.err[members]
                 first = alpha == full[pos]
-            accept = (e_new < e_old) | (e_new <= 1.0) | (first & (e_new <= growth * e_old))
-            accept &= np.isfinite(e_new)
+            accept = (e_new < e_old) | (e_new <= 1.0)  # (then e_new is finite: _errors)
+            if not accept.all():
+                accept |= first & (e_new <= growth * e_old)
+                accept &= np.isfinite(e_new)
             if accept.all():
                 self._take(members, trial, tlin, e_new, e_old, slice(None))
                 if pos.size == act.size:
@@ -351,8 +355,8 @@ class _Iteration:
             pos, alpha = pos[keep], 0.5 * alpha[keep]
             if pos.size == 0:
                 break
-        failed = act[pos]
-        if failed.size:
+        if pos.size:
+            failed = act[pos]
             self.alive[failed] = False
             self.iters[failed] += 1
         if len(moved) == 1:  # (each round's members are in act's sorted order)

@@ -38,6 +38,7 @@ converged with small corrections and unchanged stability is accepted, the rest i
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -185,6 +186,10 @@ class _Tracker:
         self.last_change = None  # change of the state in the last accepted step
         self.event = None  # (point, step) of a trial step ended at a contact event
         self.crossing = None  # the start of a trial step predicted across contact events
+        # distances already measured, reused by identity: (cur, guess, predicted change) of
+        # the last trial step and (cur, u, change) of the last smoothness test
+        self.predicted = None
+        self.moved = None
         #: Corrections below this (1e-3 of the model's max_correction) never signal a jump.
         limit = self.P.max_correction
         self.negligible = 1e-3 * limit if np.isfinite(limit) else 0.0
@@ -206,7 +211,7 @@ class _Tracker:
         else:
             with np.errstate(all="ignore"):
                 r = -self.P.solve(lin, self.P.d_residual_d_scale(lin))[0]
-        return r if np.all(np.isfinite(r)) else None
+        return r if np.isfinite(r).all() else None
 
     def predict(self, cur: PathPoint, prev: PathPoint | None, s1: float) -> np.ndarray:
         ds = s1 - cur.scale
@@ -229,8 +234,11 @@ class _Tracker:
         tangent is known, within ``relative_correction`` of the predicted change."""
         if cur.rate is None:
             return float(self.P.distance((u - guess)[None])[0]) <= self.P.max_correction
-        # (np.array of equal-shape rows: np.stack's values, at a quarter of its overhead)
-        correction, change = map(float, self.P.distance(np.array([u - guess, guess - cur.u])))
+        known = self.predicted
+        if known is not None and known[0] is cur and known[1] is guess:  # measured by _trial
+            correction, change = float(self.P.distance((u - guess)[None])[0]), known[2]
+        else:  # (np.array of equal-shape rows: np.stack's values, at a quarter of its overhead)
+            correction, change = map(float, self.P.distance(np.array([u - guess, guess - cur.u])))
         if correction > self.P.max_correction:
             return False
         return correction <= self.opts.relative_correction * change + self.negligible
@@ -251,6 +259,7 @@ class _Tracker:
                 np.array([change - 0.5 * h * (cur.rate + rate), np.abs(cur.u) + np.abs(u), change])
             ),
         )
+        self.moved = (cur, u, moved)  # (the change again for accepted())
         # rounding of the states themselves (a step far below their resolution)
         rounding = 64 * _EPS * size
         tol = self.opts.relative_correction * moved
@@ -262,7 +271,7 @@ class _Tracker:
         bifurcation, where the path tangent blows up, instead of leaping across), at least a
         tenth and at most all of the model's ``max_step_change``."""
         cap = self.P.max_step_change
-        if self.last_change is None or not np.isfinite(cap):
+        if self.last_change is None or not math.isfinite(cap):
             return cap
         return min(cap, max(self.opts.change_growth * self.last_change, 0.1 * cap))
 
@@ -293,14 +302,15 @@ class _Tracker:
         across = getattr(self.model, "piecewise_prediction", None)
         if across is not None and cur.rate is not None:
             frac = float(hook(cur.u[None], (guess - cur.u)[None])[0])
-            if frac < 1.0:
-                crossed = across(cur.u, cur.scale, h1)
-                limit = self.change_limit()
-                if crossed is not None and float(
-                    self.P.distance((crossed - cur.u)[None])[0]
-                ) <= limit * (1.0 + 1e-9):
-                    self.crossing = cur  # a step across contact events: not smooth
-                    return h1, s1, crossed
+            if not frac < 1.0:  # no event ahead (the loop below would measure it again)
+                return h1, s1, guess
+            crossed = across(cur.u, cur.scale, h1)
+            limit = self.change_limit()
+            if crossed is not None and float(
+                self.P.distance((crossed - cur.u)[None])[0]
+            ) <= limit * (1.0 + 1e-9):
+                self.crossing = cur  # a step across contact events: not smooth
+                return h1, s1, crossed
         start = h1
         for _ in range(4):  # the Hermite term makes the prediction nonlinear in the step
             frac = float(hook(cur.u[None], (guess - cur.u)[None])[0])
@@ -334,11 +344,11 @@ class _Tracker:
     def _trial(self, cur: PathPoint, prev, h: float, target: float):
         """:meth:`trial` without the contact events."""
         limit = self.change_limit()
-        bounded = cur.rate is not None and np.isfinite(limit)
+        bounded = cur.rate is not None and math.isfinite(limit)
         if bounded:
             per_unit = float(self.P.distance(cur.rate[None])[0])
             if per_unit * abs(h) > limit:
-                h = float(np.copysign(limit / per_unit, h))
+                h = math.copysign(limit / per_unit, h)
         remaining = target - cur.scale
         if abs(h) >= abs(remaining):
             h, s1 = remaining, target
@@ -350,6 +360,7 @@ class _Tracker:
         for _ in range(60):
             change = float(self.P.distance((guess - cur.u)[None])[0])
             if change <= limit * (1.0 + 1e-9):
+                self.predicted = (cur, guess, change)
                 break
             h *= min(0.5, max(0.1, 0.9 * limit / change))
             s1 = cur.scale + h
@@ -359,7 +370,11 @@ class _Tracker:
     def accepted(self, old: PathPoint, new: PathPoint) -> None:
         """Record the change of an accepted step (for :meth:`change_limit`) and tell a
         path-dependent model (:meth:`commit`)."""
-        self.last_change = float(self.P.distance((new.u - old.u)[None])[0])
+        known = self.moved
+        if known is not None and known[0] is old and known[1] is new.u:  # measured by smooth
+            self.last_change = known[2]
+        else:
+            self.last_change = float(self.P.distance((new.u - old.u)[None])[0])
         self.commit(new)
 
     def commit(self, p: PathPoint) -> None:
@@ -419,11 +434,12 @@ class _Tracker:
             residual = float(res.error[0])
             stab = 1.0
             rate = None
+            u = res.u[0]
             if ok:
-                ok = self.continuous(cur, guess, res.u[0])
+                ok = self.continuous(cur, guess, u)
             if ok:
                 rate = self.rate(res.lin)
-                ok = self.smooth(cur, res.u[0], rate, h)
+                ok = self.smooth(cur, u, rate, h)
             if ok and opts.stability:
                 stab = float(self.P.stability(res.lin)[0])
                 if self.stable(stab) != self.stable(cur.stability):
@@ -435,7 +451,7 @@ class _Tracker:
                     locating = False
                     self.record_bifurcation(cur, s1, stab, k, first_of, target)
             if ok:
-                new = self.point(res.u[0], s1, residual, res.lin, stab, rate)
+                new = self.point(u, s1, residual, res.lin, stab, rate)
                 self.accepted(cur, new)
                 prev, cur = cur, new
                 failures = 0
@@ -449,7 +465,7 @@ class _Tracker:
                 elif res.iterations[0] <= 4:
                     # bisecting toward the change: grow, but never past the scale where it
                     # was seen (a step cut for another reason must not creep on at its size)
-                    h = float(np.copysign(min(2.0 * abs(h), abs(seen_at - s1)), h))
+                    h = math.copysign(min(2.0 * abs(h), abs(seen_at - s1)), h)
                 continue
             h /= 2.0
             failures += 1

@@ -53,11 +53,11 @@ def charge(iterations) -> None:
     _rent += _NUMPY_CALL_S + _NUMPY_ITER_S * (float(np.sum(iterations)) + 1.0)
 
 
-def newton_uniform(problem, U, S, opts):
+def newton_uniform(problem, U, S, opts, stability: bool = True):
     """Newton's method for the stack ``U`` (k, n) (float, C order: iterated in place) at scales
     ``S`` (k,) of a uniform-layout
     :class:`~coilrod.rod.planar.PlanarRod` with :class:`~coilrod.path.corrector.NewtonOptions`
-    ``opts``.
+    ``opts``; ``stability`` False skips the out-of-plane Cholesky test (``M[:, 2]`` stays 0).
 
     Returns
     -------
@@ -75,6 +75,9 @@ def newton_uniform(problem, U, S, opts):
     """
     k, n = U.shape
     arrays, par = _constants(problem)
+    if not stability and par[8] != 0.0:
+        par = par.copy()
+        par[8] = 0.0
     ipar = np.array([opts.max_iter, opts.backtracks, opts.stagnation])
     F = np.empty((4, k, n))
     M = np.zeros((k, 5))

@@ -17,6 +17,7 @@ __all__ = [
     "reach_fields",
     "plane_leak",
     "leaves_plane",
+    "mirror_symmetric",
     "clamp_azimuth",
     "resolve_clamp_and_model",
 ]
@@ -83,10 +84,13 @@ def clamp_frame(clamp_angle: float, clamp_rotation) -> np.ndarray:
 
 def _in_plane_rotation(R0: np.ndarray) -> bool:
     """True if the frame keeps the binormal on +z (a rotation about z)."""
-    return bool(
-        abs(R0[2, 2] - 1.0) <= 1e-14
-        and np.all(np.abs(R0[2, :2]) <= 1e-14)
-        and np.all(np.abs(R0[:2, 2]) <= 1e-14)
+    r = np.asarray(R0, float).tolist()  # (plain floats: five comparisons, no numpy calls)
+    return (
+        abs(r[2][2] - 1.0) <= 1e-14
+        and abs(r[2][0]) <= 1e-14
+        and abs(r[2][1]) <= 1e-14
+        and abs(r[0][2]) <= 1e-14
+        and abs(r[1][2]) <= 1e-14
     )
 
 
@@ -160,16 +164,51 @@ def leaves_plane(B, G, length: float, scale: float | None = None) -> bool:
     return bz > PLANAR_FIELD_TOL * size or gz > PLANAR_FIELD_TOL * size
 
 
+def mirror_symmetric(field: Field, z0: float) -> bool:
+    """True if ``field``'s own data prove ``B_z = 0`` on the whole plane z = ``z0`` (m) (then
+    ``dB_z/dx = dB_z/dy = 0`` there too: in-plane derivatives of zero); False if they do not
+    (the field may still be planar: :func:`_field_reasons` then samples it).
+
+    Sums and scaled fields are symmetric when every part is.  Coaxial coils
+    (:class:`coils.coaxial.CoaxialCoils`: coils, pairs) are when their axis lies in the plane
+    (``axis_z = 0``) and their centre on it: the reflection through the plane maps every loop
+    onto itself with its current reversed, so ``B(x') = P B(x)`` (``P`` the reflection,
+    ``x' = P x``) and on the plane ``B_z = -B_z``.  A linear field is when ``dB_z/dx`` and
+    ``dB_z/dy`` are zero and ``B_z`` vanishes at one point of the plane.  Exact comparisons:
+    any doubt leaves the decision to the sampled check."""
+    from coils.coaxial import CoaxialCoils
+    from coils.field import FieldSum, ScaledField
+    from coils.ideal import LinearField, UniformField
+
+    if isinstance(field, FieldSum):
+        return all(mirror_symmetric(p, z0) for p in field.parts)
+    if isinstance(field, ScaledField):
+        return mirror_symmetric(field.field, z0)
+    if isinstance(field, CoaxialCoils):
+        return bool(field.axis[2] == 0.0 and field.center[2] == z0)
+    if type(field) in (LinearField, UniformField):
+        G = field.G
+        return bool(
+            G[2, 0] == 0.0
+            and G[2, 1] == 0.0
+            and field.B0[2] + G[2, 2] * (z0 - field.origin[2]) == 0.0
+        )
+    return False
+
+
 def _field_reasons(field: Field, clamp: np.ndarray, length: float) -> list[str]:
     """Why ``field`` would push a rod clamped at ``clamp`` out of the plane z = clamp_z (empty
     if it does not): B_z or dB_z/dx, dB_z/dy nonzero on the disc of radius ``length`` the rod
-    can reach.  Uniform and linear fields are checked exactly, others on a polar grid of the
-    disc (17 radii x 48 angles)."""
+    can reach.  Uniform fields are checked exactly, fields whose geometry proves the plane a
+    mirror plane (:func:`mirror_symmetric`) are planar without evaluation, others are sampled
+    on a polar grid of the disc (17 radii x 48 angles)."""
     uniform = bool(getattr(field, "uniform", False))
     if uniform:
         B = np.asarray(field.B(clamp)[0], float)
         if B[2] != 0.0 and abs(B[2]) > PLANAR_FIELD_TOL * np.linalg.norm(B):
             return [f"the field has an out-of-plane component B_z = {B[2]:.3g} T"]
+        return []
+    if mirror_symmetric(field, float(clamp[2])):
         return []
     B, G = reach_fields(field.B_and_gradient, clamp, length)
     bz, gz, scale = plane_leak(B, G, length, float(np.max(np.linalg.norm(B, axis=1))))

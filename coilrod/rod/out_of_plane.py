@@ -79,7 +79,7 @@ class OutOfPlane:
         self.uniform = planar.uniform
         self.nb = 2 if self.uniform else 4  # unknowns per free node in the odd block
         if self.uniform:
-            self._b = np.asarray(planar.field.B(planar.clamp)[0], float)
+            self._b = planar.clamp_field  # (the planar rod's: evaluated once)
 
     # -- states -----------------------------------------------------------------------------
     def spatial_states(self, U: np.ndarray) -> np.ndarray:

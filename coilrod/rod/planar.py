@@ -270,6 +270,9 @@ class PlanarRod(DiscreteRod):
         per length, force per length in EI/L^3), is below ``tol`` plus its round-off floor.
     mixed : bool
         Use the mixed layout even in a uniform field (sensitivities to a field gradient).
+    clamp_field : array-like, shape (3,), optional
+        ``field.B(clamp_position)`` in T when the caller has it already (a uniform field is
+        then not evaluated again).
     """
 
     batched = True
@@ -281,7 +284,10 @@ class PlanarRod(DiscreteRod):
     #: Largest change of any node angle in one Newton step, rad.
     max_rotation = 0.5
 
-    def __init__(self, mesh, mu, field, length, clamp_position, clamp_angle, tol=1e-9, mixed=False):
+    def __init__(
+        self, mesh, mu, field, length, clamp_position, clamp_angle, tol=1e-9, mixed=False, *,
+        clamp_field=None,
+    ):  # fmt: skip
         self.mesh = mesh
         self.mu = np.asarray(mu, float)
         self.field = field
@@ -303,15 +309,19 @@ class PlanarRod(DiscreteRod):
         self._tri_cache: dict = {}
         self._no_h = np.zeros((1, 3, 3, 3))  # placeholder hessian of a linear field
         self.last_failure = ""
+        #: The field at the clamp (3,), T (uniform layout: the field everywhere), else None.
+        self.clamp_field = None
         if self.uniform:
-            bx, by = field.B(self.clamp)[0, :2]
-            wmu = w[:, None] * self.mu
-            mt, mn = wmu[:, 0], wmu[:, 1]
+            if clamp_field is None:
+                clamp_field = field.B(self.clamp)[0]
+            self.clamp_field = np.array(clamp_field, dtype=float)
+            bx, by = self.clamp_field[:2].tolist()  # (plain floats: the same products)
+            mt, mn = w * self.mu[:, 0], w * self.mu[:, 1]
             self._P1 = mt * by - mn * bx  # w (m x b) and w m.b at theta = 0, scale 1
             self._Q1 = mt * bx + mn * by
             self._k_diag = bend  # 1/h_{i-1} + 1/h_i on the diagonal
-            self._k_low = -self._inv_h.copy()  # J[i + 1, i]
-            self._k_up = -self._inv_h.copy()  # J[i, i + 1]
+            self._k_low = -self._inv_h  # J[i + 1, i] (a new array)
+            self._k_up = -self._inv_h  # J[i, i + 1]
             self._k_up[0] = 0.0  # row 0 is the clamp condition
 
     # -- states -----------------------------------------------------------------------------------
@@ -401,7 +411,7 @@ class PlanarRod(DiscreteRod):
         U = np.atleast_2d(U)
         k = U.shape[0]
         if self.uniform:
-            B = np.broadcast_to(self.field.B(self.clamp)[0], (k, self.n, 3))
+            B = np.broadcast_to(self.clamp_field, (k, self.n, 3))
             return B, np.zeros((k, self.n, 3, 3))
         B, G, _ = self._field(self.node_positions(U), False)
         return B.reshape(k, self.n, 3), G.reshape(k, self.n, 3, 3)
@@ -493,33 +503,34 @@ class PlanarRod(DiscreteRod):
         lin.field_hessian = None if field_values is None else field_values[2]
         return lin
 
-    def compiled_newton(self, U: np.ndarray, S: np.ndarray, opts):
+    def compiled_newton(self, U: np.ndarray, S: np.ndarray, opts, tangent: bool = True):
         """Newton's method for the stack ``U`` (k, size) (float, C order: iterated in place)
         at scales ``S`` (k,) by the compiled corrector of the uniform layout
         (:mod:`coilrod.rod._planar_newton`): the states of
         :func:`~coilrod.path.corrector.newton`, in one call.  Returns ``(U, err, iters,
         lin)`` (``lin`` the linearization at ``U``, with its tangent), or None where it does
         not apply (the mixed layout) or does not pay yet (ski rental; the caller then runs the
-        numpy corrector and reports its iterations to :meth:`compiled_newton_rent`)."""
+        numpy corrector and reports its iterations to :meth:`compiled_newton_rent`).
+        ``tangent`` False (the caller needs the states and residuals only): the out-of-plane
+        Cholesky test that :meth:`negative_counts` could reuse is skipped."""
         if not self.uniform:
             return None
-        from . import _planar_newton as pn
-
+        pn = _planar_newton()
         if not pn.compiled_pays():
             return None
-        U, F, M = pn.newton_uniform(self, U, S, opts)
+        U, F, M = pn.newton_uniform(self, U, S, opts, tangent)
         k = U.shape[0]
         R, R1 = F[0], F[1]
         ok = M[:, 3] != 0.0
         tan = RodTangent(k, self.size, True, (F[2], self._off_diagonals(k)), R1)
-        tan.bad |= ~ok
+        tan.bad = ~ok
         tan.signs = M[:, 1]
         lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
         lin.load_rate = R1
         lin.field_values = None
         lin.field_hessian = None
         lin.path_rate = F[3]  # read by the path engine (coilrod.path.stepping)
-        if self.out_of_plane is not None:  # read by OutOfPlane.odd_count
+        if tangent and self.out_of_plane is not None:  # read by OutOfPlane.odd_count
             lin.odd_definite = M[:, 2] != 0.0
         err, iters = M[:, 0], M[:, 4].astype(int)
         return U, err, iters, lin
@@ -528,9 +539,7 @@ class PlanarRod(DiscreteRod):
         """Charge a numpy corrector call of ``iters`` iterations (per member) to the ski rental
         of :meth:`compiled_newton`."""
         if self.uniform:
-            from . import _planar_newton as pn
-
-            pn.charge(iters)
+            _planar_newton().charge(iters)
 
     def dense_jacobian(self, u: np.ndarray, scale: float) -> np.ndarray:
         """The Jacobian of one state as a dense (size, size) array (tests, small problems)."""
@@ -587,8 +596,9 @@ class PlanarRod(DiscreteRod):
     def distance(self, du):
         """Largest change of a node angle, rad, shape (k,)."""
         du = np.asarray(du)
-        du = du if du.ndim == 2 else du[None]
-        return np.abs(self.theta(du)).max(axis=1)
+        if du.ndim != 2:
+            du = du[None]
+        return np.abs(du if self.uniform else du[:, _TH::_NV]).max(axis=1)
 
     def arclength_weights(self) -> np.ndarray:
         w = np.zeros(self.size)
@@ -618,10 +628,13 @@ class PlanarRod(DiscreteRod):
         evaluated); ``precise``: its smallest eigenvalue (EI_z / L^3 units, the in-plane
         figure's normalisation).  ``lin`` may carry ``uniform_fields`` (k, 3) T, one uniform
         field per member (a fan of field directions)."""
-        if self.out_of_plane is None:
+        if self.out_of_plane is None or (not precise and _odd_definite(lin)):
+            # (no out-of-plane negatives: the 3D indicator is the in-plane sign of det J)
             return self.stability_in_plane(lin, precise)
         total, odd_count = self.negative_counts(lin)
-        signs = np.where(total == 0, 1.0, np.where(total > 0, -total.astype(float), 0.0))
+        signs = np.negative(total, dtype=float)  # (+1 stable, -count, 0 not finite)
+        signs[total == 0] = 1.0
+        signs[total < 0] = 0.0
         if not precise:
             return signs
         odd = self.out_of_plane.lowest(lin, getattr(lin, "uniform_fields", None), odd_count)
@@ -641,16 +654,11 @@ class PlanarRod(DiscreteRod):
         cached = getattr(lin, "_counts_3d", None)
         if cached is not None:
             return cached
-        fields = getattr(lin, "uniform_fields", None)
-        known = getattr(lin, "odd_definite", None)  # (the compiled corrector's Cholesky test)
-        if known is not None and fields is None and known.all():  # no out-of-plane negatives
-            signs = lin.tangent.det_signs() * self.det_reference()
-            total = np.where(signs > 0, 0, np.where(signs < 0, 1, -1))
-            lin._counts_3d = (total, np.zeros_like(total))
+        even = _even_count(lin.tangent.det_signs() * self.det_reference())
+        if _odd_definite(lin):  # no out-of-plane negatives
+            lin._counts_3d = (even, np.zeros_like(even))
             return lin._counts_3d
-        odd = self.out_of_plane.odd_count(lin, fields)
-        signs = lin.tangent.det_signs() * self.det_reference()
-        even = np.where(signs > 0, 0, np.where(signs < 0, 1, -1))
+        odd = self.out_of_plane.odd_count(lin, getattr(lin, "uniform_fields", None))
         total = np.where((odd >= 0) & (even >= 0), odd + even, -1)
         lin._counts_3d = (total, odd)
         return lin._counts_3d
@@ -829,6 +837,34 @@ class PlanarRod(DiscreteRod):
             return sq * tan.solve(rhs)[0, idx]
 
         return closest_to_zero(matvec, self.n - 1, sign)
+
+
+def _even_count(signs: np.ndarray) -> np.ndarray:
+    """Negative in-plane eigenvalues (mod 2) from the signs of det J relative to the unloaded
+    rod (k,): 0 for +1, 1 for -1, -1 (unknown) for 0."""
+    return np.where(signs > 0, 0, np.where(signs < 0, 1, -1))
+
+
+def _odd_definite(lin: Linearization) -> bool:
+    """The compiled corrector proved the out-of-plane block of every member of ``lin``
+    positive definite (its Cholesky test, ``lin.odd_definite``; not for a fan of fields)."""
+    known = getattr(lin, "odd_definite", None)
+    return known is not None and getattr(lin, "uniform_fields", None) is None and known.all()
+
+
+def _planar_newton():
+    """The compiled corrector's module (:mod:`coilrod.rod._planar_newton`), imported on first
+    use (it imports numba) and kept: the import statement's lookup is a measurable part of a
+    small corrector call."""
+    global _PN
+    if _PN is None:
+        from . import _planar_newton as pn
+
+        _PN = pn
+    return _PN
+
+
+_PN = None
 
 
 def _take_tangent(tan: RodTangent, rows) -> RodTangent:

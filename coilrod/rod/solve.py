@@ -4,6 +4,7 @@ load sweeps."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 
@@ -82,12 +83,17 @@ def build_problem(
     clamp_angle,
     tol: float = 1e-9,
     stability3d: bool = True,
+    *,
+    clamp_field=None,
 ) -> PlanarRod:
     """The discrete problem of ``rod`` in ``field`` on ``mesh`` (non-dimensional); with
     ``stability3d`` (default) its stability counts the out-of-plane modes too
-    (:mod:`coilrod.rod.out_of_plane`)."""
+    (:mod:`coilrod.rod.out_of_plane`); ``clamp_field``: B (3,) T at the clamp if already
+    evaluated (:class:`~coilrod.rod.planar.PlanarRod`)."""
     mu = _node_moments(rod, mesh, dim=2)
-    problem = PlanarRod(mesh, mu, field, rod.length, clamp_position, clamp_angle, tol)
+    problem = PlanarRod(
+        mesh, mu, field, rod.length, clamp_position, clamp_angle, tol, clamp_field=clamp_field
+    )
     if stability3d:
         problem.with_out_of_plane(rod_stiffnesses(rod))
     return problem
@@ -281,7 +287,11 @@ def solve_rod(
     mesh = make_mesh(rod, nodes)
     meshes = [mesh, mesh.refined()] if richardson else [mesh]
     if chosen == "planar":
-        problems = [build_problem(rod, field, m, clamp, angle, tol) for m in meshes]
+        problems = [build_problem(rod, field, meshes[0], clamp, angle, tol)]
+        problems += [  # (the field at the clamp evaluated once)
+            build_problem(rod, field, m, clamp, angle, tol, clamp_field=problems[0].clamp_field)
+            for m in meshes[1:]
+        ]
         finish = _result
     else:
         problems = [
@@ -291,14 +301,7 @@ def solve_rod(
         if obstacles:
             _check_start(problems, obstacles)
         finish = _result_spatial
-    newton_opts = NewtonOptions(max_iter=max_iter)
-    path_kw = {}
-    if obstacles:  # semi-smooth Newton: the error may stall while the contact set settles
-        newton_opts = NewtonOptions(max_iter=max(max_iter, 40), stagnation=12)
-        # the path has kinks where contacts close or open: the trapezoidal smoothness check
-        # of a step would cut every step across one down to the tolerance
-        path_kw["relative_correction"] = 1.0
-    opts = PathOptions(newton=newton_opts, stability=bool(stability), **path_kw)
+    opts = _path_options(max_iter, bool(stability), bool(obstacles))
     bar = None
     tick = None
     if progress:
@@ -330,6 +333,25 @@ def solve_rod(
     result = finish(rod, problems, run.points, run.iterations, run.events, opts)
     warn_events(result.instabilities, stacklevel=3)
     return result
+
+
+@functools.lru_cache(maxsize=16)
+def _path_options(max_iter: int, stability: bool, contact: bool) -> PathOptions:
+    """The load stepping's settings of :func:`solve_rod` (frozen: one instance per choice)."""
+    newton_opts = NewtonOptions(max_iter=max_iter)
+    path_kw = {}
+    if contact:  # semi-smooth Newton: the error may stall while the contact set settles
+        newton_opts = NewtonOptions(max_iter=max(max_iter, 40), stagnation=12)
+        # the path has kinks where contacts close or open: the trapezoidal smoothness check
+        # of a step would cut every step across one down to the tolerance
+        path_kw["relative_correction"] = 1.0
+    return PathOptions(newton=newton_opts, stability=stability, **path_kw)
+
+
+@functools.lru_cache(maxsize=16)
+def _chord_start(opts: NewtonOptions) -> NewtonOptions:
+    """``opts`` starting in chord mode (frozen: one instance per ``opts``)."""
+    return dataclasses.replace(opts, chord_start=True)
 
 
 def _check_obstacles(obstacles) -> tuple:
@@ -392,7 +414,7 @@ def _refine(problems, states, scales, opts):
     if getattr(fine, "path_dependent", False):  # friction: the path matters
         return _refine_in_order(fine, scales, opts)
     guess = coarse.interpolate_to(fine, states)
-    newton_opts = dataclasses.replace(opts.newton, chord_start=True)
+    newton_opts = _chord_start(opts.newton)
     res = newton(fine, guess, scales, newton_opts, tangent_at_end=False)
     if not np.all(res.ok):
         k = int(np.argmin(res.ok))
