@@ -325,6 +325,12 @@ def test_numpy_and_compiled_mixed_kernels_agree(mixed_pass):
     assert not rc._compiled_ready  # the numpy kernel did run
     for x, ref in zip(out["numpy"], out["compiled"], strict=True):
         np.testing.assert_array_equal(x, ref)  # bitwise: numbers do not change on compiling
+    # an infinite angle is a non-finite residual on both paths (math.cos raised ValueError)
+    u_inf = u.copy()
+    u_inf[2 + 5 * 3] = np.inf
+    for name in ("compiled", "numpy"):
+        mixed_pass(name)
+        assert not np.isfinite(problem.residual(u_inf, 1.3)).all()
     # (the compiled Jacobian at this very state is checked against central finite differences
     # by test_jacobian_matches_finite_differences[helmholtz]: bitwise equal, so the numpy one is)
     # compiling starts once the numpy calls' estimated cost passes COMPILE_AFTER

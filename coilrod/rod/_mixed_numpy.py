@@ -14,6 +14,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from ._libm import libm
+
 __all__ = ["mixed_assembly_numpy"]
 
 _D = 10  # row of the diagonal in band storage (KL + KU)
@@ -44,9 +46,9 @@ def _node_terms(U, B, G, H, has_h, L, mu, k, n):
     """cos, sin, tau, m.b, f, g (times L) and df/dx (times L^2) at every node (k, n) each."""
     th = U[:, 2::5]
     # libm's cos and sin, as the compiled kernel calls them (numpy's own may differ in the last
-    # bit on some CPUs, and the two kernels must agree bitwise)
-    c = np.array([math.cos(x) for x in th.ravel()]).reshape(th.shape)
-    si = np.array([math.sin(x) for x in th.ravel()]).reshape(th.shape)
+    # bit on some CPUs, and the two kernels must agree bitwise; NaN at an infinite angle)
+    c = libm(math.cos, th)
+    si = libm(math.sin, th)
     a0 = c * mu[:, 0] - si * mu[:, 1]
     a1 = si * mu[:, 0] + c * mu[:, 1]
     p0 = -a1

@@ -17,22 +17,12 @@ import math
 
 import numpy as np
 
+from ._libm import libm as _libm
 from .so3 import _C_SERIES, _C_SMALL, _SMALL
 
 __all__ = ["spatial_core_numpy"]
 
 _EYE = np.eye(3)
-
-
-def _libm(f, x: np.ndarray) -> np.ndarray:
-    """``f`` (a :mod:`math` function) of every element of x; NaN where x is infinite (where
-    :mod:`math` raises and C's libm, which the compiled pass calls, returns NaN)."""
-    values = x.ravel().tolist()
-    try:
-        out = [f(v) for v in values]
-    except ValueError:  # sin or cos of +-inf
-        out = [f(v) if math.isfinite(v) else math.nan for v in values]
-    return np.array(out).reshape(x.shape)
 
 
 def _hat(v: np.ndarray) -> np.ndarray:
