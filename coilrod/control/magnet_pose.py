@@ -62,8 +62,9 @@ mesh (:data:`SCOUT_NODES`), to 1e-5 L -- and the real search starts where the sc
 the dipole's pose curve runs close to the finite magnet's, and the real search closes the
 difference (~1e-3 L) in 3-5 solves.  The scout only chooses the start: the pose returned is
 the real search's, met in the finite magnet's field (``scout_solves`` counts the scout's
-solves).  If the real forward solve fails at the scout's pose, the real search starts from
-the given pose.
+solves).  If the scout neither meets the target nor ends at an optimum of its model (its
+budget :data:`SCOUT_SOLVES` spent, or stalled), or the real forward solve fails at the
+scout's pose, the real search starts from the given pose.
 
 **The robot's reach** is the ball of radius L (the rod's length) about the clamp: every point
 of the rod lies in it whatever the load.  A pose is refused if any point of the magnet's body
@@ -536,7 +537,8 @@ def _scout(p: _Problem, q0):
     point dipole on a coarse mesh, to a loose tolerance.  Returns (q, solves): the pose it
     ends at (the real search's start) and its forward solves; (q0, 0) where the model has no
     cheaper stand-in (a :class:`coils.Dipole`, or ``model="dipole"``) or the scout's first
-    forward solve fails."""
+    forward solve fails; (q0, solves) if the scout neither meets the target nor ends at an
+    optimum of its model."""
     if p.magnet is not p.real or isinstance(p.real, coils.Dipole):
         return q0, 0
     cheap = replace(
@@ -547,9 +549,13 @@ def _scout(p: _Problem, q0):
         tol=SCOUT_TOL * p.rod.length,
     )
     try:
-        q, _, _, solves, _ = _search(cheap, q0, SCOUT_SOLVES, _scales(p, q0))
+        q, _, status, solves, _ = _search(cheap, q0, SCOUT_SOLVES, _scales(p, q0))
     except ConvergenceError:
         return q0, 0
+    if status not in ("converged", "optimal"):
+        # the scout ran out of solves or stalled: its end is no better a guide than the
+        # given pose (and may lie where the real forward solves are slow, the magnet close)
+        return q0, solves
     return q, solves
 
 
@@ -562,7 +568,7 @@ def _scout(p: _Problem, q0):
 SCOUT_NODES = 8
 SCOUT_STEPS = 3
 SCOUT_TOL = 1e-5
-SCOUT_SOLVES = 60
+SCOUT_SOLVES = 40
 #: A predictor bends by the last corrected step's correction (scaled by the square of the
 #: step's size) when the steps' directions have a cosine above this.
 BEND_COS = 0.5
@@ -847,7 +853,8 @@ def solve_magnet_pose(
     clearance : float
         Extra distance (m, >= 0) the magnet's body keeps beyond the robot's reach.
     max_solves : int
-        Most forward solves of the search.
+        Most forward solves of the search in the model's field (the scout, for a finite
+        magnet, has its own budget of :data:`SCOUT_SOLVES` cheap ones).
 
     Returns
     -------
