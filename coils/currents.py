@@ -172,17 +172,47 @@ def minimum_power(
     if fraction < 1.0 - RESIDUAL_TOL:
         return Solution(None, residual, rank, fraction, unlimited)
     u = limits * root
+    J = _least_distance_currents(J0, null, u)
+    if J is None:
+        # the linear program found currents within the limits, but the least-distance
+        # program in the exact null space failed: near-singular A (singular values just above
+        # RCOND, e.g. a rod that feels only the field at its tip) leaves the exact null space
+        # a sliver the limits miss, or the NNLS solver fails.  Directions that make less than
+        # RESIDUAL_TOL of the target are dropped from A (a truncated SVD) and tried again.
+        J = _truncated_currents(Aw, b, u, norm_b)
+    if J is None:
+        raise RuntimeError("the least-distance program failed on a feasible current target")
+    return Solution(J / root, residual, rank, fraction, unlimited)
+
+
+def _least_distance_currents(J0, null, u):
+    """The scaled currents ``J0 + null z`` closest to ``J0`` within ``|J| <= u``, or None if
+    the least-distance program fails."""
     finite = np.isfinite(u)
+    if not np.any(finite):
+        return J0
     G = np.vstack([null[finite], -null[finite]])
     h = np.concatenate([-u[finite] - J0[finite], -u[finite] + J0[finite]])
     z = least_distance(G, h)
     scale = float(np.abs(u[finite]).max())
     if z is None or np.any(G @ z < h - 1e-9 * scale):
-        # the linear program found currents within the limits: this cannot happen short of a
-        # failure of the NNLS solver
-        raise RuntimeError("the least-distance program failed on a feasible current target")
-    J = np.clip(J0 + null @ z, -u, u)  # the last ulp at an active limit
-    return Solution(J / root, residual, rank, fraction, unlimited)
+        return None
+    return np.clip(J0 + null @ z, -u, u)  # the last ulp at an active limit
+
+
+def _truncated_currents(Aw, b, u, norm_b):
+    """:func:`_least_distance_currents` with the SVD of ``Aw`` truncated at growing relative
+    cut-offs (1e-9 ... 1e-6 of the largest singular value), the first whose currents make
+    ``b`` to RESIDUAL_TOL; None if none does."""
+    U, sv, Vt = np.linalg.svd(Aw, full_matrices=True)
+    c = U.T @ b
+    for rcond in (1e-9, 1e-8, 1e-7, 1e-6):
+        rank = int(np.sum(sv > rcond * sv[0]))
+        J0 = Vt[:rank].T @ (c[:rank] / sv[:rank])
+        J = _least_distance_currents(J0, Vt[rank:].T, u)
+        if J is not None and np.linalg.norm(Aw @ J - b) <= RESIDUAL_TOL * norm_b:
+            return J
+    return None
 
 
 def _fmt_mm(point) -> str:

@@ -379,6 +379,34 @@ class TestBadInput:
             solve_currents(ROD, coils.UniformField(B=(0, 0.01, 0)), (0.03, 0.02))
 
 
+def test_minimum_power_on_near_singular_channels():
+    """coils.currents.minimum_power on a CardioMag-like rank-deficient map (5 targets, 8
+    channels, rank 3 plus two round-off singular values ~1e-10): instances 37 and 100 of this
+    stream raised RuntimeError (the least-distance program in the exact null space failed on
+    targets the limits allow).  Now: the currents make the target, within the limits, with no
+    more power than the feasible currents of an independent linear program (linprog)."""
+    from scipy.optimize import linprog
+
+    from coils.currents import minimum_power
+
+    rng = np.random.default_rng(0)
+    for t in range(101):
+        U = np.linalg.qr(rng.normal(size=(5, 5)))[0]
+        V = np.linalg.qr(rng.normal(size=(8, 8)))[0]
+        s = np.r_[rng.uniform(0.1, 1, 3), 1e-10 * rng.uniform(size=2)]
+        A = (U * s) @ V[:5]
+        b = A @ (15 * rng.uniform(-1, 1, 8))
+        lim = np.full(8, 20.0) * rng.uniform(0.5, 1.0)
+        if t not in (0, 37, 100):
+            continue
+        sol = minimum_power(A, b, np.ones(8), lim)
+        assert np.linalg.norm(A @ sol.currents - b) <= 1e-9 * np.linalg.norm(b)
+        assert np.all(np.abs(sol.currents) <= lim)
+        lp = linprog(np.zeros(8), A_eq=A, b_eq=b, bounds=list(zip(-lim, lim, strict=True)))
+        assert lp.status == 0
+        assert sol.currents @ sol.currents <= lp.x @ lp.x * (1 + 1e-9)
+
+
 def test_a_failed_least_distance_program_falls_back(monkeypatch):
     """coils.currents.minimum_power raises RuntimeError when its NNLS solver fails (met on
     CardioMag with a position and direction target): the minimum-power step then falls back to

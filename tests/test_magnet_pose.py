@@ -200,6 +200,20 @@ def test_planar_pose_puts_the_tip_on_a_rounded_target():
     assert np.allclose(out.magnet.axis, [-math.sin(psi), math.cos(psi), 0.0], atol=1e-15)
 
 
+def test_a_target_met_only_at_a_far_pose_is_scouted_in_the_dipoles_field():
+    """A target off the thin band of tips near the start, met with the magnet turned ~1 rad:
+    the search in the finite magnet's field walked there in 28 forward solves; the scout
+    walks it in its point dipole's field (cheap solves) and the real search then takes a few.
+    Checked by an independent forward solve at the magnet returned."""
+    goal = np.array([38.2e-3, 10.8e-3])  # m, to 0.1 mm
+    out = solve_magnet_pose(ROD, cylinder(), goal, **FAST)
+    assert out.status == "converged"
+    assert abs(out.pose[2]) > 0.5  # a far pose
+    assert out.solves <= 6  # was 28
+    assert out.scout_solves > 0
+    assert np.linalg.norm(tip_at(out.magnet) - goal) <= 1e-7 * L
+
+
 def test_spatial_pose_puts_the_tip_on_a_rounded_target():
     goal = np.array([37.8e-3, 10.9e-3, -4.9e-3])  # m, to 0.1 mm
     out = solve_magnet_pose(ROD, cylinder(), goal, **FAST)
