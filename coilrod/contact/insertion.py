@@ -349,8 +349,8 @@ def insert(
     since the previous step); a step that fails is split in halves (free length and field
     blended linearly), up to :data:`MAX_HALVINGS` times -- also a step that turns a node
     more than :data:`MAX_STEP_TURN` from its start (Newton jumped to another branch; with
-    friction the state depends on the path), up to :data:`MAX_JUMP_HALVINGS` times.  The first step is loaded from the
-    straight rod by :func:`~coilrod.solve_rod`.
+    friction the state depends on the path), up to :data:`MAX_JUMP_HALVINGS` times.  The
+    first step is loaded from the straight rod by :func:`~coilrod.solve_rod`.
 
     Parameters
     ----------
