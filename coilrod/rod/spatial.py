@@ -837,13 +837,11 @@ class SpatialRod(DiscreteRod):
         template, order, index = cached
         ab = template.copy(order="F")
         if index is not None:
-            vals = np.concatenate(
-                [
-                    np.broadcast_to(blocks[name], (k,) + self._index[name][0].shape).reshape(k, -1)
-                    for name in order
-                ],
-                axis=1,
-            )
+            vals = []
+            for name in order:  # (np.broadcast_to only where a block is shared)
+                v, shape = blocks[name], (k,) + self._index[name][0].shape
+                vals.append((v if v.shape == shape else np.broadcast_to(v, shape)).reshape(k, -1))
+            vals = np.concatenate(vals, axis=1)
             ab.ravel(order="K")[index] = vals
         return ab
 
