@@ -244,6 +244,10 @@ def test_stick_is_exact_at_several_sticking_points():
     np.testing.assert_array_equal(stuck, np.arange(12, 17))  # (11 lifts off: on the cone)
     assert np.all(t > 0)
     assert np.abs(P.contact_points(u[None])[0][stuck] - ref[stuck]).max() <= 1e-12  # units of L
+    # the frames at hand (an insertion's record) give the same contact state and points
+    frames = P.frames(u[None])
+    np.testing.assert_array_equal(P.contact_state(u[None], frames)[0], force)
+    np.testing.assert_array_equal(P.contact_points(u[None], frames), P.contact_points(u[None]))
     f = AM * G[0, :] * L**3 / rod.bending_stiffness  # per length along x, EI / L^3
     wall = P.contact_totals(force)[0, 0]  # the rod's force on the wall, EI / L^2
     clamp = V[0, 6:9] + P.mesh.w[0] * f  # on the clamp (its node's share of the load)

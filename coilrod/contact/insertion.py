@@ -585,9 +585,10 @@ class _Record:
     def add(self, problem, u, free, stable, solves):
         out = self.out
         V = u.reshape(problem.n, problem.nv)
-        R = problem.frames(u[None])[0]
+        frames = problem.frames(u[None])  # (once: the contact state and points use them)
+        R = frames[0]
         x = problem.points(V[:, 0:3])
-        force, gaps, active = problem.contact_state(u[None])
+        force, gaps, active = problem.contact_state(u[None], frames)
         EI, L = free.bending_stiffness, free.length
         per_length = force[0].sum(axis=1) * (EI / L**3)
         out["tip"].append(x[-1].copy())
@@ -601,7 +602,7 @@ class _Record:
         out["x"].append(x)
         out["R"].append(R)
         out["f"].append(per_length)
-        out["p"].append(problem.points(problem.contact_points(u[None])[0]))
+        out["p"].append(problem.points(problem.contact_points(u[None], frames)[0]))
         out["push"].append(-float(V[0, 6:9] @ problem.R0[:, 0]) * (EI / L**2))
         chord = np.diff(V[:, 0:3], axis=0)
         chord /= np.linalg.norm(chord, axis=1, keepdims=True)

@@ -56,16 +56,29 @@ def _all_active(lam: np.ndarray, gaps: np.ndarray):
     return np.minimum(lam, gaps), np.zeros_like(lam), np.ones_like(lam)
 
 
+_ENTRIES: dict = {}  # (n, nv, nc, kl + ku) -> _contact_entries (read-only arrays)
+
+
 def _contact_entries(problem):
     """Band-storage indices (rows, cols), each (n - 1, nc, 6 + nc), of the contact rows of the
-    free nodes: their entries in the node's position, rotation and multiplier columns."""
+    free nodes: their entries in the node's position, rotation and multiplier columns
+    (remembered by layout: an insertion asks once per step for the same one)."""
     n, nv, nc = problem.n, problem.nv, problem.nc
-    j = np.arange(1, n)[:, None, None]
-    rows = nv * j + 9 + np.arange(nc)[None, :, None]
-    offsets = np.concatenate([np.arange(6), 9 + np.arange(nc)])
-    cols = nv * j + offsets[None, None, :]
-    rows, cols = np.broadcast_arrays(rows, cols)
-    return problem.kl + problem.ku + rows - cols, cols
+    key = (n, nv, nc, problem.kl + problem.ku)
+    hit = _ENTRIES.get(key)
+    if hit is None:
+        j = np.arange(1, n)[:, None, None]
+        rows = nv * j + 9 + np.arange(nc)[None, :, None]
+        offsets = np.concatenate([np.arange(6), 9 + np.arange(nc)])
+        cols = nv * j + offsets[None, None, :]
+        rows, cols = np.broadcast_arrays(rows, cols)
+        hit = (problem.kl + problem.ku + rows - cols, np.array(cols))
+        for a in hit:
+            a.flags.writeable = False
+        if len(_ENTRIES) >= 16:
+            _ENTRIES.clear()
+        _ENTRIES[key] = hit
+    return hit
 
 
 def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_events=None):

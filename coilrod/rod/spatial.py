@@ -531,12 +531,13 @@ class SpatialRod(DiscreteRod):
         om[-2] = om[-1] = 0.5 * h[-1]
         return c, om
 
-    def contact_points(self, U: np.ndarray) -> np.ndarray:
+    def contact_points(self, U: np.ndarray, frames: np.ndarray | None = None) -> np.ndarray:
         """Contact points of states (k, size): the polygon's corners and the tip (k, n, 3),
-        units of L relative to the clamp (see :meth:`_contact_geometry`)."""
+        units of L relative to the clamp (see :meth:`_contact_geometry`).  ``frames``: the
+        states' node frames (k, n, 3, 3) if already at hand (:meth:`frames`)."""
         U = np.atleast_2d(U)
         c, _ = self._contact_geometry()
-        t = self.frames(U)[..., :, 0]
+        t = (self.frames(U) if frames is None else frames)[..., :, 0]
         return self.node_positions(U) + c[:, None] * t
 
     def _contact_terms(self, V: np.ndarray, x: np.ndarray, frames: np.ndarray, hessian: bool):
@@ -579,14 +580,16 @@ class SpatialRod(DiscreteRod):
         V = np.zeros(x.shape[:2] + (self.nv,))
         return self._contact_terms(V, x, frames, False)[1]
 
-    def contact_state(self, U: np.ndarray):
+    def contact_state(self, U: np.ndarray, frames: np.ndarray | None = None):
         """Contact of states (k, size) at the contact points (:meth:`contact_points`): force
         per length on the rod (k, n, nc, 3) in EI_z / L^3 units (times the weights omega_j:
         the point forces; the normal force plus friction), gaps (k, n, nc) in units of L, and
-        the active set (k, n, nc) (points where the gap is closed and the wall pushes)."""
+        the active set (k, n, nc) (points where the gap is closed and the wall pushes).
+        ``frames``: the states' node frames (k, n, 3, 3) if already at hand."""
         U = np.atleast_2d(U)
         V = U.reshape(U.shape[0], self.n, self.nv)
-        lam, gaps, normals, _, _ = self._contact_terms(V, V[:, :, 0:3], self.frames(U), False)
+        frames = self.frames(U) if frames is None else frames
+        lam, gaps, normals, _, _ = self._contact_terms(V, V[:, :, 0:3], frames, False)
         force = lam[..., None] * normals + self.friction_forces(U)
         force[:, 0] = 0.0
         active = self.kappa * gaps < lam
@@ -837,13 +840,11 @@ class SpatialRod(DiscreteRod):
         template, order, index = cached
         ab = template.copy(order="F")
         if index is not None:
-            vals = np.concatenate(
-                [
-                    np.broadcast_to(blocks[name], (k,) + self._index[name][0].shape).reshape(k, -1)
-                    for name in order
-                ],
-                axis=1,
-            )
+            vals = []
+            for name in order:  # (np.broadcast_to only where a block is shared)
+                v, shape = blocks[name], (k,) + self._index[name][0].shape
+                vals.append((v if v.shape == shape else np.broadcast_to(v, shape)).reshape(k, -1))
+            vals = np.concatenate(vals, axis=1)
             ab.ravel(order="K")[index] = vals
         return ab
 
