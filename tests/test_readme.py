@@ -30,8 +30,20 @@ def test_design_example_runs(capsys):
     text = README.read_text(encoding="utf-8")
     blocks = re.findall(r"```python\n(.*?)```", text, re.S)
     design = next(b for b in blocks if "sensitivities(res" in b)
+    # the workspace line runs on a 12 x 4 grid refined once (the README's 36 x 8 refined six
+    # times costs ~6 s of CPU and nothing below checks its area; test_workspace*.py check
+    # the workspace at its grids): the same call, fewer solves
+    line = "workspace(rod, b_max=0.012, directions=36, magnitudes=8)"
+    assert design.count(line) == 1
+    design = design.replace(
+        line, "workspace(rod, b_max=0.012, directions=12, magnitudes=4, refine=1)"
+    )
     namespace: dict = {}
     exec(compile(design, "README.md", "exec"), namespace)  # noqa: S102
+    # the polygon it returns encloses its area (shoelace against the shapely union)
+    x, y = namespace["ws"].boundary.T
+    shoelace = 0.5 * abs(np.dot(x, np.roll(y, 1)) - np.dot(y, np.roll(x, 1)))
+    assert shoelace == pytest.approx(namespace["ws"].area, rel=1e-9)
     # the ratio the README states in its comment is the one printed
     stated = re.search(r'print\(f"\{best.ratio:.2f\}"\)\s+# ([0-9.]+) ', design).group(1)
     assert capsys.readouterr().out.strip().endswith(stated)

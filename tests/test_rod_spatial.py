@@ -163,7 +163,9 @@ class TestDiscreteProblem:
         if not P.uniform:
             blocks.update({"clamp_x": I3, "p_x": I3, "p_xprev": -I3, "f_F": I3, "f_Fnext": -I3})
         assert np.array_equal(ab, P._scatter(2, blocks))
-        late = P.linearize(U[::-1] + 0.1, S[::-1])  # the same stack size: the same workspace
+        # S[::-1].copy(): a contiguous array, as the solver passes (a reversed view is another
+        # numba specialisation of the kernel: a second compile of ~2 s in a cold test run)
+        late = P.linearize(U[::-1] + 0.1, S[::-1].copy())  # the same stack size: the same workspace
         P.linearize(U[:1], S[:1], tangent=False)
         again = P.linearize(U, S)
         assert np.array_equal(first.residual, again.residual)
@@ -172,7 +174,7 @@ class TestDiscreteProblem:
             assert np.array_equal(x, y)
         assert not np.array_equal(late.residual, first.residual)
         lazy = P.linearize(U, S)
-        P.linearize(U[::-1] + 0.1, S[::-1])  # before the lazy blocks are asked for
+        P.linearize(U[::-1] + 0.1, S[::-1].copy())  # before the lazy blocks are asked for
         for x, y in zip(lazy.tangent.blocks, (D, E), strict=True):
             assert np.array_equal(x, y)
 
