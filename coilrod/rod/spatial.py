@@ -434,6 +434,8 @@ class SpatialRod(DiscreteRod):
         # the largest |scaled residual| of each node, divided by the node's tolerance (the
         # same maximum as dividing every equation: a positive divisor keeps the order)
         scaled = self._scaled_max(lin.residual)  # (k, n)
+        if scaled.shape[0] == 1:
+            return self._error_one(lin, scaled)
         with np.errstate(all="ignore"):
             size = _max(np.abs(lin.u), axis=1)  # rotations, positions, forces
             size += 1.0
@@ -449,6 +451,25 @@ class SpatialRod(DiscreteRod):
             if not out.sum() < np.inf:  # (one sum: NaN or inf if any member is not finite)
                 out[~np.isfinite(out)] = np.inf
         return out
+
+    def _error_one(self, lin: Linearization, scaled: np.ndarray) -> np.ndarray:
+        """:meth:`error` of one member (scaled: its (1, n) scaled residual maxima), the
+        member-wide numbers as Python floats (the same IEEE operations, fewer numpy calls)."""
+        size = 1.0 + float(_max(np.abs(lin.u), axis=None))
+        scale = lin.scale
+        scale = abs(float(scale[0] if isinstance(scale, np.ndarray) else scale))
+        # max over nodes of the scaled load rate (_scaled_max: the largest of |R1| row_scale;
+        # the rows _scaled zeroes are zero in R1: the clamp's and the tip force's rows)
+        load = float(_max(np.abs(lin.load_rate) * self._row_scale.reshape(-1), axis=None))
+        load *= scale
+        with np.errstate(all="ignore"):
+            div = self._bend_scale * size
+            div += load
+            div *= _FLOOR * _EPS
+            div += self.tol
+            scaled /= div
+            out = float(_max(scaled, axis=None))
+        return np.array([out if out < np.inf else np.inf])
 
     def residual_norm(self, residual) -> np.ndarray:
         """Max-norm of the scaled residual (non-dimensional), shape (k,)."""
@@ -903,7 +924,7 @@ class SpatialRod(DiscreteRod):
         k, n, nv = U.shape[0], self.n, self.nv
         ws = self._workspace(k, tangent)
         V = U.reshape(k, n, nv)
-        phi = np.ascontiguousarray(self.rotations(U))
+        phi = np.ascontiguousarray(V if self.uniform else V[:, :, 3:6])  # self.rotations(U)
         if self.uniform:
             B, G, Hs, X = ws["B"], ws["G"], None, ws["X"]
             F = X
