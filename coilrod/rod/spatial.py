@@ -63,6 +63,7 @@ _CS = None  # the module coilrod.rod._compiled_spatial once imported (it imports
 
 
 def _spatial_module():
+    """:mod:`coilrod.rod._compiled_spatial`, imported on first use (not at import time)."""
     global _CS
     if _CS is None:
         from . import _compiled_spatial
