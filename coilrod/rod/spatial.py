@@ -56,6 +56,28 @@ _DENSE_STABILITY = 600
 _LAYOUTS: dict = {}
 
 
+#: ``a.max(axis)`` without the method's Python wrapper (the same reduction).
+_max = np.maximum.reduce
+
+_CS = None  # the module coilrod.rod._compiled_spatial once imported (it imports numba)
+
+
+def _spatial_module():
+    """:mod:`coilrod.rod._compiled_spatial`, imported on first use (not at import time)."""
+    global _CS
+    if _CS is None:
+        from . import _compiled_spatial
+
+        _CS = _compiled_spatial
+    return _CS
+
+
+def _compiled_core():
+    """The compiled per-node pass if this process uses it already (its ski rental is over),
+    else None: :meth:`SpatialRod._assemble` then calls it directly."""
+    return _CS.spatial_core if _CS is not None and _CS._compiled_ready else None
+
+
 def _matvec(A, v):
     return np.einsum("...ij,...j->...i", A, v)
 
@@ -338,26 +360,36 @@ class SpatialRod(DiscreteRod):
     # -- the protocol -------------------------------------------------------------------------
     def linearize(self, u, scale, tangent: bool = True) -> Linearization:
         """Residual (k, size), admissibility (k,) and the tangent of a stack of states."""
-        U, S = self._stack(u, scale)
-        with np.errstate(all="ignore"):
+        if (
+            type(u) is np.ndarray and u.ndim == 2 and u.dtype == float
+            and type(scale) is np.ndarray and scale.shape == (u.shape[0],) and scale.dtype == float
+        ):  # fmt: skip
+            U, S = u, scale  # (the engine's stacks: no conversion)
+        else:
+            U, S = self._stack(u, scale)
+        if self.nc or _compiled_core() is None:  # numpy passes and contact terms may warn
+            with np.errstate(all="ignore"):
+                R, R1, ab, sym = self._assemble(U, S, tangent)
+        else:  # the compiled pass (numpy's error model, silent) and band gathers only
             R, R1, ab, sym = self._assemble(U, S, tangent)
-            ok = np.isfinite(R).all(axis=1)
-            phi = self.rotations(U)
-            # |phi| <= sqrt(3) max|phi_a|: the norms only where that bound exceeds the limit
-            if not np.abs(phi).max() <= self._turn_bound:
+        ok = np.logical_and.reduce(np.isfinite(R), axis=1)
+        phi = self.rotations(U)
+        # |phi| <= sqrt(3) max|phi_a|: the norms only where that bound exceeds the limit
+        if not _max(np.abs(phi), axis=None) <= self._turn_bound:
+            with np.errstate(all="ignore"):
                 turned = np.sqrt(np.einsum("kni,kni->kn", phi, phi)).max(axis=1)
-                bad_turn = turned > self.max_turn
-                if bad_turn.any():
-                    ok &= ~bad_turn
-                    self.last_failure = (
-                        f"a node turned {float(turned.max()):.3g} rad relative to the clamp "
-                        f"(the rotation chart of the spatial rod is limited to "
-                        f"{self.max_turn:.3g} rad)"
-                    )
+            bad_turn = turned > self.max_turn
+            if bad_turn.any():
+                ok &= ~bad_turn
+                self.last_failure = (
+                    f"a node turned {float(turned.max()):.3g} rad relative to the clamp "
+                    f"(the rotation chart of the spatial rod is limited to "
+                    f"{self.max_turn:.3g} rad)"
+                )
         tan = None
         if tangent:
             tan = RodTangent(U.shape[0], self.size, False, ab, R1, self.kl, self.ku)
-            tan.bad |= ~ok
+            tan.bad = ~ok  # (a new tangent: no member flagged yet)
             tan.blocks = sym  # (diagonal, upper) blocks of the second variation
         lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
         lin.load_rate = R1
@@ -392,8 +424,8 @@ class SpatialRod(DiscreteRod):
         """max over each node's equations of |scaled residual| (k, n) (:meth:`_scaled`; in
         the uniform layout each node's rows share one scale: the maximum first)."""
         if not self.uniform:
-            return np.abs(self._scaled(R)).max(axis=2)
-        out = np.abs(R.reshape(R.shape[0], self.n, 3)).max(axis=2)
+            return _max(np.abs(self._scaled(R)), axis=2)
+        out = _max(np.abs(R.reshape(R.shape[0], self.n, 3)), axis=2)
         out *= self._inv_w
         out[:, 0] = 0.0
         return out
@@ -403,19 +435,42 @@ class SpatialRod(DiscreteRod):
         # the largest |scaled residual| of each node, divided by the node's tolerance (the
         # same maximum as dividing every equation: a positive divisor keeps the order)
         scaled = self._scaled_max(lin.residual)  # (k, n)
+        if scaled.shape[0] == 1:
+            return self._error_one(lin, scaled)
         with np.errstate(all="ignore"):
-            size = 1.0 + np.abs(lin.u).max(axis=1)  # rotations, positions, forces
-            load = self._scaled_max(lin.load_rate).max(axis=1) * np.abs(lin.scale)
+            size = _max(np.abs(lin.u), axis=1)  # rotations, positions, forces
+            size += 1.0
+            load = _max(self._scaled_max(lin.load_rate), axis=1)
+            load *= np.abs(lin.scale)
             # tol + _FLOOR eps (size bend_scale + load), in place
-            div = np.multiply.outer(size, self._bend_scale)
+            div = size[:, None] * self._bend_scale
             div += load[:, None]
             div *= _FLOOR * _EPS
             div += self.tol
-            np.divide(scaled, div, out=div)
-            out = div.max(axis=1)
-        if not np.isfinite(out).all():
-            out[~np.isfinite(out)] = np.inf
+            scaled /= div
+            out = _max(scaled, axis=1)
+            if not out.sum() < np.inf:  # (one sum: NaN or inf if any member is not finite)
+                out[~np.isfinite(out)] = np.inf
         return out
+
+    def _error_one(self, lin: Linearization, scaled: np.ndarray) -> np.ndarray:
+        """:meth:`error` of one member (scaled: its (1, n) scaled residual maxima), the
+        member-wide numbers as Python floats (the same IEEE operations, fewer numpy calls)."""
+        size = 1.0 + float(_max(np.abs(lin.u), axis=None))
+        scale = lin.scale
+        scale = abs(float(scale[0] if isinstance(scale, np.ndarray) else scale))
+        # max over nodes of the scaled load rate (_scaled_max: the largest of |R1| row_scale;
+        # the rows _scaled zeroes are zero in R1: the clamp's and the tip force's rows)
+        load = float(_max(np.abs(lin.load_rate) * self._row_scale.reshape(-1), axis=None))
+        load *= scale
+        with np.errstate(all="ignore"):
+            div = self._bend_scale * size
+            div += load
+            div *= _FLOOR * _EPS
+            div += self.tol
+            scaled /= div
+            out = float(_max(scaled, axis=None))
+        return np.array([out if out < np.inf else np.inf])
 
     def residual_norm(self, residual) -> np.ndarray:
         """Max-norm of the scaled residual (non-dimensional), shape (k,)."""
@@ -425,9 +480,13 @@ class SpatialRod(DiscreteRod):
     def step_limit(self, u, du):
         """No node rotates by more than :attr:`max_rotation` in one Newton step."""
         rot = self._largest_rotation(du)
-        lim = np.ones(rot.shape)
-        np.divide(self.max_rotation, rot, out=lim, where=rot > 0)
-        np.minimum(lim, 1.0, out=lim)
+        if rot.shape == (1,):  # one member: in scalars (the same IEEE operations)
+            r = float(rot[0])
+            lim = np.array([min(self.max_rotation / r, 1.0) if r > 0.0 else 1.0])
+        else:
+            lim = np.ones(rot.shape)
+            np.divide(self.max_rotation, rot, out=lim, where=rot > 0)
+            np.minimum(lim, 1.0, out=lim)
         if self.nc and not self.uniform and self.close_first:
             lim = np.minimum(lim, self.closing_fraction(np.atleast_2d(u), np.atleast_2d(du)))
         return lim
@@ -476,9 +535,11 @@ class SpatialRod(DiscreteRod):
         return self._largest_rotation(du)
 
     def _largest_rotation(self, du):
-        du = np.asarray(du, float)
-        d = self.rotations(du if du.ndim == 2 else np.atleast_2d(du))
-        return np.sqrt(np.einsum("kni,kni->kn", d, d).max(axis=1))
+        if not (type(du) is np.ndarray and du.dtype == float):
+            du = np.asarray(du, float)
+        d = self.rotations(du if du.ndim == 2 else du.reshape(1, -1))
+        out = _max(np.einsum("kni,kni->kn", d, d), axis=1)
+        return np.sqrt(out, out=out)
 
     def arclength_weights(self) -> np.ndarray:
         w = np.zeros((self.n, self.nv))
@@ -860,12 +921,12 @@ class SpatialRod(DiscreteRod):
         storage (None; the blocks alone, for an inertia count).  ``fields``: (B (k n, 3),
         G (k n, 3, 3), H (k n, 3, 3, 3) or None) at the nodes, already evaluated."""
         if core is None:
-            from ._compiled_spatial import spatial_pass as core
+            core = _compiled_core() or _spatial_module().spatial_pass
 
         k, n, nv = U.shape[0], self.n, self.nv
         ws = self._workspace(k, tangent)
         V = U.reshape(k, n, nv)
-        phi = np.ascontiguousarray(self.rotations(U))
+        phi = np.ascontiguousarray(V if self.uniform else V[:, :, 3:6])  # self.rotations(U)
         if self.uniform:
             B, G, Hs, X = ws["B"], ws["G"], None, ws["X"]
             F = X
