@@ -125,9 +125,10 @@ class RodTangent:
         and :meth:`solve` then solves member by member so that it cannot spoil the others."""
         ab, n = self.parts, self.size
         diag = self.kl + self.ku
-        for j in np.flatnonzero(self.bad):
-            ab[:, j * n : (j + 1) * n] = 0.0
-            ab[diag, j * n : (j + 1) * n] = 1.0
+        if self.bad.any():
+            for j in np.flatnonzero(self.bad):
+                ab[:, j * n : (j + 1) * n] = 0.0
+                ab[diag, j * n : (j + 1) * n] = 1.0
         from ._compiled import band_lu
 
         ipiv = np.empty(ab.shape[1], dtype=np.int64)
@@ -168,7 +169,8 @@ class RodTangent:
             x = np.array(rhs, dtype=float).reshape(-1, 1)
             band_solve(lu[0], self.kl, self.ku, lu[1], x)
         x = x.reshape(self.k, self.size)
-        x[self.bad] = np.nan
+        if self.bad.any():
+            x[self.bad] = np.nan
         return x
 
     def solve_transposed(self, rhs: np.ndarray) -> np.ndarray:
