@@ -252,6 +252,18 @@ def neo_hookean(
     return W + U, P + Pv, T if dyadic else T.dense()
 
 
+def _a3333(T: DyadicTangent) -> np.ndarray:
+    """``A[:, 2, 2, 2, 2]`` of ``T.dense()``, shape (n,), Pa, without forming the (n, 3, 3, 3, 3)
+    array: the same products summed in the same order as :meth:`DyadicTangent.dense`, so the
+    same numbers to the last bit."""
+    f, g = T.F[:, 2, 2], T.FiT[:, 2, 2]
+    a = T.mixed * (f * g + g * f)
+    a += T.inverse * (g * g)
+    a += T.cross * (g * g)
+    a += T.identity * 1.0
+    return a
+
+
 def plane_stress(
     F2: np.ndarray,
     shear: float,
@@ -285,8 +297,8 @@ def plane_stress(
     F[:, :2, :2] = F2
     for _ in range(maxiter):
         F[:, 2, 2] = lam
-        _, P, A = neo_hookean(F, shear, bulk, True)
-        step = P[:, 2, 2] / A[:, 2, 2, 2, 2]
+        _, P, T = neo_hookean(F, shear, bulk, True, dyadic=True)
+        step = P[:, 2, 2] / _a3333(T)
         lam_new = lam - step
         # keep the stretch positive (halve toward zero instead of crossing it)
         lam = np.where(lam_new > 0, lam_new, 0.5 * lam)
