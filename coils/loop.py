@@ -331,9 +331,12 @@ def loop_point(a, A, C2, u, rho, z, want_B, want_G, want_H):
 def _invariants(rho, z, a, current, mu0, out):
     A = mu0 * current * a * a
     C2 = mu0 * current / (2.0 * math.pi)
+    # True, but a run-time bool as the coil pass passes: literal True would compile
+    # loop_point a second time (for Literal[bool] arguments)
+    on = out.shape[1] > 0
     for k in range(rho.shape[0]):
         r = rho[k]
-        res = loop_point(a, A, C2, r * r, r, z[k], True, True, True)
+        res = loop_point(a, A, C2, r * r, r, z[k], on, on, on)
         for j in range(7):
             out[k, j] = res[j]
 

@@ -237,5 +237,6 @@ def multipole_invariants(rho, z, moments: Moments) -> np.ndarray:
     rho = kernel_input(rho)
     z = kernel_input(np.broadcast_to(z, rho.shape))
     out = np.empty((rho.shape[0], 6))
-    _invariants(rho, z, moments.beta, moments.d, moments.n0, moments.kappa, out)
+    beta = kernel_input(moments.beta)  # read-only, as the coil pass passes it
+    _invariants(rho, z, beta, moments.d, moments.n0, moments.kappa, out)
     return out

@@ -356,7 +356,8 @@ def test_kernels_compile_once_for_sealed_or_writable_inputs(monkeypatch):
     # empty cache: seconds each); read-only (sealed, broadcast) and writable inputs reach each
     # kernel in one layout, with the same numbers
     from coils import _compiled, coaxial
-    from coils.loop import _invariants, loop_invariants
+    from coils.loop import _invariants, loop_invariants, loop_point
+    from coils.multipole import group_moments, multipole_invariants, multipole_point
 
     rho, z = np.array([0.2, 0.5]), np.array([0.3, -0.4])
     by_scalar = [loop_invariants(rho[i : i + 1], z[i], 1.0)[0] for i in range(2)]
@@ -369,3 +370,8 @@ def test_kernels_compile_once_for_sealed_or_writable_inputs(monkeypatch):
     sealed.flags.writeable = False
     assert np.array_equal(loop.B(pts), loop.B(sealed))
     assert len(_compiled.coaxial_field.signatures) == 1
+    # functions the coil pass calls, called by the invariants' kernels too (no version of
+    # their own when the callers come from numba's disk cache: at most one)
+    assert len(loop_point.signatures) <= 1
+    multipole_invariants(rho, z, group_moments(np.array([[0.0, 0.1, 1.0]]), mu_0))
+    assert len(multipole_point.signatures) <= 1
