@@ -42,8 +42,10 @@ def kernel_input(value, dtype=float) -> np.ndarray:
     ``value`` already is C-contiguous of ``dtype``) gives one compiled version whether the
     caller's array is sealed (:func:`sealed`) or not.
     """
-    arr = np.ascontiguousarray(value, dtype=dtype).view()
-    arr.flags.writeable = False
+    arr = np.ascontiguousarray(value, dtype=dtype)
+    if arr.flags.writeable:
+        arr = arr.view()
+        arr.flags.writeable = False
     return arr
 
 
