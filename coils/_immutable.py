@@ -28,10 +28,25 @@ import inspect
 
 import numpy as np
 
-__all__ = ["Immutable", "remembers_recipe", "sealed"]
+__all__ = ["Immutable", "kernel_input", "remembers_recipe", "sealed"]
 
 #: Longest repr of a value shown in an "is immutable" message.
 _SHOW = 40
+
+
+def kernel_input(value, dtype=float) -> np.ndarray:
+    """``value`` as a read-only C-contiguous ndarray of ``dtype`` for a compiled kernel's input.
+
+    numba compiles one version of a kernel per argument layout, and read-only and writable
+    arrays are different layouts: an input made read-only here (a view, no copy, when
+    ``value`` already is C-contiguous of ``dtype``) gives one compiled version whether the
+    caller's array is sealed (:func:`sealed`) or not.
+    """
+    arr = np.ascontiguousarray(value, dtype=dtype)
+    if arr.flags.writeable:
+        arr = arr.view()
+        arr.flags.writeable = False
+    return arr
 
 
 def sealed(value, dtype=float) -> np.ndarray:

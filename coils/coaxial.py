@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 from scipy.constants import mu_0
 
+from ._immutable import kernel_input
 from ._validate import as_array, as_axis, as_vector
 from .field import Field, FieldSum, ScaledField
 
@@ -194,14 +195,15 @@ class CoaxialCoils(Field):
         with np.errstate(over="ignore"):  # 1/L^3 of an absurd radius overflows: caught per point
             scales = np.ldexp(1.0, np.array([-e, -e, -2 * e, -3 * e]))
         params = np.array([*scales, (SWITCH * d) ** 2, d, moments.kappa, ON_WIRE_TOL**2])
+        # read-only inputs (kernel_input): one compiled kernel whatever the arrays' flags
         args = (
-            np.ascontiguousarray(self.center),
-            np.ascontiguousarray(self.axis),
-            np.ascontiguousarray(fil),
-            np.ascontiguousarray(wind.reshape(-1, 4)),
-            np.ascontiguousarray(moments.beta),
+            kernel_input(self.center),
+            kernel_input(self.axis),
+            kernel_input(fil),
+            kernel_input(wind.reshape(-1, 4)),
+            kernel_input(moments.beta),
             moments.n0,
-            params,
+            kernel_input(params),
         )
         self._set_cache("_kernel_args", (_compiled.coaxial_field, args, 3 + len(self.windings)))
         return self._kernel_args
@@ -211,7 +213,7 @@ class CoaxialCoils(Field):
         ValueError naming the first point on or inside a winding.  The numpy near-zone pass
         while compiling does not pay yet (:func:`_compiled_pays`), else the compiled one."""
         kernel, args, n_err = self._kernel_args or self._prepare()
-        pts = np.ascontiguousarray(pts)
+        pts = kernel_input(pts)
         if not _compiled_pays(pts.shape[0] * self.filaments.shape[0]):
             from ._vectorised import near_pass
 

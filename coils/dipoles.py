@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._immutable import kernel_input
+
 __all__ = ["dipole_sum"]
 
 _KERNEL = None
@@ -141,7 +143,12 @@ _SLOT = np.array(
 
 
 def _build_fast():
-    """B and gradient only: points in blocks, sources outer, points inner (SoA, vectorised)."""
+    """B and gradient only: points in blocks, sources outer, points inner (SoA, vectorised).
+
+    The kernel reaches ``inner`` as the module global ``_INNER``, not as a closure variable:
+    numba's disk-cache key includes the pickled closure, and a dispatcher pickles differently
+    in every process (the kernel would be compiled again in each)."""
+    global _INNER
     import numba
 
     @numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
@@ -172,6 +179,8 @@ def _build_fast():
             g02[i] += a * (r0 * p2 + p0 * r2) - e * r0 * r2
             g12[i] += a * (r1 * p2 + p1 * r2) - e * r1 * r2
 
+    _INNER = inner
+
     @numba.njit(cache=True, nogil=True)
     def kernel(pts, pos, mom, want_B, want_G, B, G):  # pragma: no cover
         n = pts.shape[0]
@@ -187,7 +196,7 @@ def _build_fast():
             o[:9, :m] = 0.0
             o[9, :m] = np.inf
             for q in range(pos.shape[0]):
-                inner(
+                _INNER(
                     x[0, :m], x[1, :m], x[2, :m], pos[q], mom[q], o[0, :m], o[1, :m],
                     o[2, :m], o[3, :m], o[4, :m], o[5, :m], o[6, :m], o[7, :m], o[8, :m], o[9, :m],
                 )  # fmt: skip
@@ -216,6 +225,7 @@ def _build_fast():
 #: Points per block of the B + gradient kernel (its accumulators stay in the L1 cache).
 _BLOCK = 256
 _FAST = None
+_INNER = None  # the per-source pass of the B + gradient kernel (set by _build_fast)
 
 
 def dipole_sum(pts, pos, mom, tol, B=None, G=None, H=None) -> int:
@@ -239,6 +249,8 @@ def dipole_sum(pts, pos, mom, tol, B=None, G=None, H=None) -> int:
         hold a partial sum).
     """
     global _KERNEL, _FAST
+    # read-only views: one compiled version whether the caller's arrays are sealed or not
+    pts, pos, mom = kernel_input(pts), kernel_input(pos), kernel_input(mom)
     n = pts.shape[0]
     if H is None and n >= 64:
         # B and/or G: the vectorised kernel; the exact kernel only to name a point on a source

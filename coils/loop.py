@@ -78,6 +78,8 @@ from llvmlite import ir
 from numba import njit, types
 from numba.extending import get_cython_function_address, intrinsic
 
+from ._immutable import kernel_input
+
 __all__ = ["W_SERIES", "W_TAYLOR", "SERIES_TERMS", "loop_point", "loop_invariants"]
 
 # -- K(m) and E(m): scipy's C implementations, linked by symbol name (cacheable) ----------------
@@ -329,9 +331,12 @@ def loop_point(a, A, C2, u, rho, z, want_B, want_G, want_H):
 def _invariants(rho, z, a, current, mu0, out):
     A = mu0 * current * a * a
     C2 = mu0 * current / (2.0 * math.pi)
+    # True, but a run-time bool as the coil pass passes: literal True would compile
+    # loop_point a second time (for Literal[bool] arguments)
+    on = out.shape[1] > 0
     for k in range(rho.shape[0]):
         r = rho[k]
-        res = loop_point(a, A, C2, r * r, r, z[k], True, True, True)
+        res = loop_point(a, A, C2, r * r, r, z[k], on, on, on)
         for j in range(7):
             out[k, j] = res[j]
 
@@ -356,8 +361,9 @@ def loop_invariants(rho, z, a: float, current: float = 1.0, mu0: float = 4e-7 * 
         Columns ``Q`` (T/m), ``Bz`` (T), ``b1`` (T/m^2), ``q1``, ``c1`` (T/m^3), ``d1`` (T/m^4)
         and ``alpha2`` (squared distance to the wire, m^2).
     """
-    rho = np.ascontiguousarray(rho, dtype=float)
-    z = np.ascontiguousarray(np.broadcast_to(z, rho.shape), dtype=float)
+    # read-only inputs: one compiled version whatever the arrays' flags (z may be broadcast)
+    rho = kernel_input(rho)
+    z = kernel_input(np.broadcast_to(z, rho.shape))
     out = np.empty((rho.shape[0], 7))
     _invariants(rho, z, float(a), float(current), float(mu0), out)
     return out

@@ -51,6 +51,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from ._immutable import kernel_input
+
 __all__ = ["SWITCH", "Moments", "group_moments", "multipole_point", "multipole_invariants"]
 
 #: The multipole series is used beyond SWITCH times the group radius d.
@@ -231,8 +233,10 @@ def multipole_invariants(rho, z, moments: Moments) -> np.ndarray:
     ndarray, shape (n, 6)
         Columns ``Q, Bz, b1, q1, c1, d1`` as in :func:`coils.loop.loop_invariants`.
     """
-    rho = np.ascontiguousarray(rho, dtype=float)
-    z = np.ascontiguousarray(np.broadcast_to(z, rho.shape), dtype=float)
+    # read-only inputs: one compiled version whatever the arrays' flags (z may be broadcast)
+    rho = kernel_input(rho)
+    z = kernel_input(np.broadcast_to(z, rho.shape))
     out = np.empty((rho.shape[0], 6))
-    _invariants(rho, z, moments.beta, moments.d, moments.n0, moments.kappa, out)
+    beta = kernel_input(moments.beta)  # read-only, as the coil pass passes it
+    _invariants(rho, z, beta, moments.d, moments.n0, moments.kappa, out)
     return out

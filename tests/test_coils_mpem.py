@@ -240,3 +240,24 @@ def test_good_file_reads(tmp_path):
     np.testing.assert_allclose(B, [0.0, 0.0, 2 * 2 * 1e-6 / 0.2**3], rtol=1e-15)
     with pytest.raises(ValueError, match="cannot read the MPEM file"):
         MPEM.from_yaml(tmp_path / "missing.yaml")
+
+
+def test_dipole_kernels_compile_once_for_sealed_or_writable_arrays():
+    # issue 19: a sealed (read-only) and a writable array are different layouts to numba, and
+    # each would compile its own version of a kernel (seconds on CI's empty cache)
+    from coils import dipoles
+
+    rng = np.random.default_rng(5)
+    pts, pos, mom = rng.normal(size=(70, 3)) + 4.0, rng.normal(size=(2, 3)), rng.normal(size=(2, 3))
+    out = []
+    for writeable in (True, False):
+        p, q = pts.copy(), pos.copy()
+        p.flags.writeable = q.flags.writeable = writeable
+        B, G, H = np.zeros((70, 3)), np.zeros((70, 3, 3)), np.zeros((70, 3, 3, 3))
+        dipoles.dipole_sum(p, q, mom, 0.0, B, G)  # the blocked B + gradient kernel
+        dipoles.dipole_sum(p, q, mom, 0.0, H=H)  # the exact one
+        out.append((B, G, H))
+    for a, b in zip(*out, strict=True):
+        assert np.array_equal(a, b)
+    assert len(dipoles._FAST.signatures) == 1
+    assert len(dipoles._KERNEL.signatures) == 1

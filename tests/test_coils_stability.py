@@ -349,3 +349,29 @@ def test_hessian_is_symmetric_and_harmonic(rng):
     # d2B_i/dx_j dx_l symmetric in all indices (curl-free) and harmonic (trace over j, l)
     np.testing.assert_allclose(H, H.transpose(0, 2, 1, 3), atol=1e-6 * scale)
     np.testing.assert_allclose(np.einsum("kijj->ki", H), 0, atol=1e-6 * scale)
+
+
+def test_kernels_compile_once_for_sealed_or_writable_inputs(monkeypatch):
+    # issue 19: numba compiles one version of a kernel per argument layout (CI starts with an
+    # empty cache: seconds each); read-only (sealed, broadcast) and writable inputs reach each
+    # kernel in one layout, with the same numbers
+    from coils import _compiled, coaxial
+    from coils.loop import _invariants, loop_invariants, loop_point
+    from coils.multipole import group_moments, multipole_invariants, multipole_point
+
+    rho, z = np.array([0.2, 0.5]), np.array([0.3, -0.4])
+    by_scalar = [loop_invariants(rho[i : i + 1], z[i], 1.0)[0] for i in range(2)]
+    assert np.array_equal(loop_invariants(rho, z, 1.0), np.array(by_scalar))
+    assert len(_invariants.signatures) == 1
+    monkeypatch.setattr(coaxial, "_compiled_ready", True)  # the compiled pass, not numpy's
+    loop = coils.Coil(A_LOOP, 1, I_LOOP, axis="z")
+    pts = np.array([[0.01, 0.02, 0.03], [0.02, -0.01, 0.05]])
+    sealed = pts.copy()
+    sealed.flags.writeable = False
+    assert np.array_equal(loop.B(pts), loop.B(sealed))
+    assert len(_compiled.coaxial_field.signatures) == 1
+    # functions the coil pass calls, called by the invariants' kernels too (no version of
+    # their own when the callers come from numba's disk cache: at most one)
+    assert len(loop_point.signatures) <= 1
+    multipole_invariants(rho, z, group_moments(np.array([[0.0, 0.1, 1.0]]), mu_0))
+    assert len(multipole_point.signatures) <= 1

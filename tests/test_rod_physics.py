@@ -379,3 +379,29 @@ def test_band_lu_exchanges_rows_only_where_the_diagonal_is_weak(diagonal):
     swaps = np.count_nonzero(ipiv != np.arange(n))
     negative = np.count_nonzero(ab[kl + ku] < 0)
     assert (-1) ** (swaps + negative) == np.linalg.slogdet(A)[0]
+
+
+def test_band_kernels_compile_once_for_either_band_order():
+    # issue 19: a C-ordered band (a member sliced out of a stack) and the assembled
+    # Fortran-ordered one reach band_lu / band_solve in one layout (one compiled version each);
+    # the solve against scipy's banded solver
+    from scipy.linalg import solve_banded
+
+    from coilrod.rod._compiled import band_lu, band_solve
+    from coilrod.rod.planar import RodTangent
+
+    rng = np.random.default_rng(2)
+    n, kl, ku = 12, 2, 3
+    band = rng.normal(size=(kl + ku + 1, n))
+    band[ku] += 8.0  # diagonally dominant
+    i = np.arange(kl + ku + 1)[:, None] - ku + np.arange(n)[None, :]  # row of each entry
+    band[(i < 0) | (i >= n)] = 0.0
+    rhs = rng.normal(size=(1, n))
+    expected = solve_banded((kl, ku), band, rhs[0])
+    for order in "CF":
+        ab = np.zeros((2 * kl + ku + 1, n), order=order)
+        ab[kl:] = band
+        x = RodTangent(1, n, False, ab, None, kl, ku).solve(rhs)[0]
+        np.testing.assert_allclose(x, expected, rtol=1e-12, atol=1e-12)
+    assert len(band_lu.signatures) == 1
+    assert len(band_solve.signatures) == 1

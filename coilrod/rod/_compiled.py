@@ -224,6 +224,9 @@ def mixed_assembly(U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab
     compiled kernel; the compiled one from then on.
     """
     global _rent, _compiled_ready
+    # the field inputs C-contiguous (a copy only of a strided view, e.g. the magnet pose's
+    # Hessian): one compiled version of the kernel, not one per layout
+    B, G, H = np.ascontiguousarray(B), np.ascontiguousarray(G), np.ascontiguousarray(H)
     args = (U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab, finite)
     if not _compiled_ready:
         cost = _NUMPY_CALL_S + _NUMPY_NODE_S * U.shape[0] * w.shape[0]

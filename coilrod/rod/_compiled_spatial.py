@@ -154,6 +154,9 @@ def spatial_pass(*args):
     reaches :data:`COMPILE_AFTER`, numba's cache holds the compiled pass or this process has
     compiled it; by the compiled pass from then on."""
     global _rent, _compiled_ready
+    # the field inputs B, G, H C-contiguous (a copy only of a strided view, e.g. the magnet
+    # pose's Hessian): one compiled version of the pass, not one per layout
+    args = (*args[:4], *(np.ascontiguousarray(a) for a in args[4:7]), *args[7:])
     if not _compiled_ready:
         from ._compiled import _on_disk
 

@@ -123,7 +123,9 @@ class RodTangent:
         that is flagged bad (inadmissible) is replaced by an identity block first; a member
         found singular (an exactly zero pivot; LAPACK completes the factorisation) is flagged,
         and :meth:`solve` then solves member by member so that it cannot spoil the others."""
-        ab, n = self.parts, self.size
+        # Fortran order, as assembled (a copy only of a C-ordered band): one compiled
+        # version of band_lu and band_solve, not one per layout
+        ab, n = np.asfortranarray(self.parts), self.size
         diag = self.kl + self.ku
         if self.bad.any():
             for j in np.flatnonzero(self.bad):
@@ -891,9 +893,9 @@ def _take_members(tan: RodTangent, rows: np.ndarray) -> RodTangent:
     if tan._lu is not None:
         lu, ipiv = tan._lu
         shift = np.repeat(rows * n - np.arange(rows.size) * n, n)
-        out._lu = (np.ascontiguousarray(lu[:, cols]), ipiv[cols] - shift)
+        out._lu = (np.asfortranarray(lu[:, cols]), ipiv[cols] - shift)
     else:
-        out.parts = np.ascontiguousarray(tan.parts[:, cols])
+        out.parts = np.asfortranarray(tan.parts[:, cols])
     return out
 
 
