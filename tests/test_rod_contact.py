@@ -199,11 +199,10 @@ class TestInsertion:
         assert_readable(fig)
         plt.close(fig)
 
-    def test_carried_start_keeps_the_tip_contact_force(self):
-        # a tip pressed on a wall, carried to a free length longer by 1e-9 L: the start of the
-        # insertion step is the solved state (continuity in the length), the tip's contact
-        # force included (it was dropped: the tip lay beyond the old arc lengths)
-        from coilrod.contact.insertion import _carry
+    @staticmethod
+    def _tip_on_wall_carried(*eps):
+        """The tip-on-a-wall cantilever (lambda 6, 16 segments, spatial rod): its solved
+        problem and state, and the problems of the same rod longer by each ``eps`` L."""
         from coilrod.rod.solve import build_spatial_problem, make_mesh
 
         rod = _rod()
@@ -212,9 +211,20 @@ class TestInsertion:
         res = solve_rod(rod, field, [1.0], nodes=16, richardson=False, obstacles=[wall],
                         stability=False, model="spatial")  # fmt: skip
         old, u = res._solution.problems[0], res._solution.states[0][0]
-        longer = Rod(L * (1 + 1e-9), 1e6, Circle(2e-3), Magnetization(128e3, 0.0))
-        new = build_spatial_problem(longer, field, make_mesh(longer, 16), np.zeros(3),
-                                    np.eye(3), obstacles=[wall], mixed=True)  # fmt: skip
+        new = []
+        for e in eps:
+            longer = Rod(L * (1 + e), 1e6, Circle(2e-3), Magnetization(128e3, 0.0))
+            new.append(build_spatial_problem(longer, field, make_mesh(longer, 16), np.zeros(3),
+                                             np.eye(3), obstacles=[wall], mixed=True))  # fmt: skip
+        return old, u, new
+
+    def test_carried_start_keeps_the_tip_contact_force(self):
+        # a tip pressed on a wall, carried to a free length longer by 1e-9 L: the start of the
+        # insertion step is the solved state (continuity in the length), the tip's contact
+        # force included (it was dropped: the tip lay beyond the old arc lengths)
+        from coilrod.contact.insertion import _carry
+
+        old, u, (new,) = self._tip_on_wall_carried(1e-9)
         tip_old = u.reshape(old.n, old.nv)[-1, 9]
         assert tip_old > 0  # the tip touches
         start = _carry(old, u, new)
@@ -232,19 +242,10 @@ class TestInsertion:
         from coilrod.contact.insertion import _carry
         from coilrod.path.corrector import NewtonOptions, newton
         from coilrod.rod.contact_predictor import active_set_start
-        from coilrod.rod.solve import build_spatial_problem, make_mesh
 
-        rod = _rod()
-        field = coils.UniformField(B=(0, rod.field_for_lambda(6.0), 0))
-        wall = Wall((0, 0.2 * L, 0), (0, -1, 0))
-        res = solve_rod(rod, field, [1.0], nodes=16, richardson=False, obstacles=[wall],
-                        stability=False, model="spatial")  # fmt: skip
-        old, u = res._solution.problems[0], res._solution.states[0][0]
         errors = []
-        for eps in (2e-2, 1e-2):
-            longer = Rod(L * (1 + eps), 1e6, Circle(2e-3), Magnetization(128e3, 0.0))
-            new = build_spatial_problem(longer, field, make_mesh(longer, 16), np.zeros(3),
-                                        np.eye(3), obstacles=[wall], mixed=True)  # fmt: skip
+        old, u, problems = self._tip_on_wall_carried(2e-2, 1e-2)
+        for new in problems:
             new.ncp = "fb"
             start = _carry(old, u, new)
             pred = active_set_start(new, start)
