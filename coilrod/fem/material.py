@@ -264,6 +264,22 @@ def _a3333(T: DyadicTangent) -> np.ndarray:
     return a
 
 
+def _dense_block(T: DyadicTangent, i: slice, j: slice, k: slice, l: slice) -> np.ndarray:
+    """``T.dense()[:, i, j, k, l]`` (Pa) without forming the whole (n, 3, 3, 3, 3) array: the
+    same products summed in the same order as :meth:`DyadicTangent.dense`, entry by entry."""
+    F, G = T.F, T.FiT
+    co = lambda c: c[:, None, None, None, None]  # noqa: E731
+    A = co(T.mixed) * (_dyad(F[:, i, j], G[:, k, l]) + _dyad(G[:, i, j], F[:, k, l]))
+    A += co(T.inverse) * _dyad(G[:, i, j], G[:, k, l])
+    # cross: Fi_Jk Fi_Li with Fi = G^T, i.e. G_kJ G_iL, arranged [n, i, J, k, L]
+    A += co(T.cross) * (
+        np.swapaxes(G[:, k, j], 1, 2)[:, None, :, :, None] * G[:, i, l][:, :, None, None, :]
+    )
+    eye = np.eye(3)
+    A += co(T.identity) * np.einsum("ik,JL->iJkL", eye[i, k], eye[j, l])[None]
+    return A
+
+
 def plane_stress(
     F2: np.ndarray,
     shear: float,
@@ -305,13 +321,14 @@ def plane_stress(
         if np.max(np.abs(step) / lam) < tol:
             break
     F[:, 2, 2] = lam
-    W, P, A = neo_hookean(F, shear, bulk, tangent)
+    W, P, T = neo_hookean(F, shear, bulk, tangent, dyadic=True)
     P2 = P[:, :2, :2].copy()
     if not tangent:
         return W, P2, None, lam
+    ab, t = slice(0, 2), slice(2, 3)
     A2 = (
-        A[:, :2, :2, :2, :2]
-        - _dyad(A[:, :2, :2, 2, 2], A[:, 2, 2, :2, :2])
-        / A[:, 2, 2, 2, 2][:, None, None, None, None]
+        _dense_block(T, ab, ab, ab, ab)
+        - _dyad(_dense_block(T, ab, ab, t, t)[..., 0, 0], _dense_block(T, t, t, ab, ab)[:, 0, 0])
+        / _a3333(T)[:, None, None, None, None]
     )
     return W, P2, A2, lam
