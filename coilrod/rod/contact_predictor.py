@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .mesh import _remember
+
 __all__ = ["event_fraction", "piecewise_prediction"]
 
 #: An active multiplier below this fraction of the largest one is taken as already released
@@ -56,7 +58,7 @@ def _all_active(lam: np.ndarray, gaps: np.ndarray):
     return np.minimum(lam, gaps), np.zeros_like(lam), np.ones_like(lam)
 
 
-_ENTRIES: dict = {}  # (n, nv, nc, kl + ku) -> _contact_entries (read-only arrays)
+_ENTRIES: dict = {}  # (n, nv, nc, kl + ku) -> _contact_entries (read-only arrays), bounded
 
 
 def _contact_entries(problem):
@@ -75,9 +77,7 @@ def _contact_entries(problem):
         hit = (problem.kl + problem.ku + rows - cols, np.array(cols))
         for a in hit:
             a.flags.writeable = False
-        if len(_ENTRIES) >= 16:
-            _ENTRIES.clear()
-        _ENTRIES[key] = hit
+        _remember(_ENTRIES, key, hit)
     return hit
 
 
