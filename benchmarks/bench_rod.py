@@ -315,15 +315,15 @@ def numpy_passes():
     import coils.coaxial as cx
     from coilrod.rod import _compiled as rc
 
-    saved = (cx.COMPILE_AFTER, cx._compiled_ready, cx._disk_checked, cx._rent)
+    saved = (cx.COMPILE_AFTER, cx._compiled_ready, cx._kernel_on_disk, cx._rent)
     saved_rc = (rc.COMPILE_AFTER, rc._compiled_ready, rc._on_disk, rc._rent)
-    cx.COMPILE_AFTER, cx._compiled_ready, cx._disk_checked = math.inf, False, True
+    cx.COMPILE_AFTER, cx._compiled_ready, cx._kernel_on_disk = math.inf, False, lambda: False
     rc.COMPILE_AFTER, rc._compiled_ready, rc._on_disk = math.inf, False, lambda d: False
     try:
         with uniform_corrector(False):
             yield
     finally:
-        cx.COMPILE_AFTER, cx._compiled_ready, cx._disk_checked, cx._rent = saved
+        cx.COMPILE_AFTER, cx._compiled_ready, cx._kernel_on_disk, cx._rent = saved
         rc.COMPILE_AFTER, rc._compiled_ready, rc._on_disk, rc._rent = saved_rc
 
 

@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sized
-from pathlib import Path
 
 import numpy as np
 from scipy.constants import mu_0
 
 from ._immutable import kernel_input
+from ._numba_cache import on_disk
 from ._validate import as_array, as_axis, as_vector
 from .field import Field, FieldSum, ScaledField
 
@@ -41,22 +41,17 @@ COMPILE_AFTER = 3.0
 _NUMPY_CALL_S, _NUMPY_POINT_S = 5e-4, 1e-6
 _rent = 0.0  # estimated seconds spent in numpy passes so far in this process
 _compiled_ready = False
-_disk_checked = False  # numba's cache was looked at (once per process: a stat per call costs)
 
 
 def _compiled_pays(work: int) -> bool:
     """True if the compiled pass should evaluate ``work`` = points x filaments: it is compiled
     (or on disk in numba's cache at the first evaluation of the process), or the numpy passes
     so far plus this one would cost more than :data:`COMPILE_AFTER`."""
-    global _rent, _compiled_ready, _disk_checked
+    global _rent, _compiled_ready
     if _compiled_ready:
         return True
     cost = _NUMPY_CALL_S + _NUMPY_POINT_S * work
-    on_disk = False
-    if not _disk_checked:
-        _disk_checked = True
-        on_disk = _kernel_on_disk()
-    if _rent + cost > COMPILE_AFTER or on_disk:
+    if _rent + cost > COMPILE_AFTER or _kernel_on_disk():
         _compiled_ready = True
         return True
     _rent += cost
@@ -64,13 +59,11 @@ def _compiled_pays(work: int) -> bool:
 
 
 def _kernel_on_disk() -> bool:
-    """Whether numba's cache holds the compiled pass already (loading it takes ~0.1 s)."""
+    """Whether numba's cache held the compiled pass at this process's first look (loading it
+    takes ~0.1 s; :func:`coils._numba_cache.on_disk`)."""
     from . import _compiled
 
-    try:
-        return Path(_compiled.coaxial_field._cache._cache_file._index_path).exists()
-    except AttributeError:  # numba internals changed: assume not
-        return False
+    return on_disk(_compiled.coaxial_field)
 
 
 def frame_from_axis(axis: np.ndarray) -> np.ndarray:

@@ -265,12 +265,13 @@ class TestDiscreteProblem:
         from types import SimpleNamespace
 
         import coilrod.rod._compiled as rc
+        import coils._numba_cache as nc
 
         class Kernel:  # what _on_disk reads of a numba dispatcher
             def __init__(self, path):
                 self._cache = SimpleNamespace(_cache_file=SimpleNamespace(_index_path=str(path)))
 
-        monkeypatch.setattr(rc, "_disk_seen", {})
+        monkeypatch.setattr(nc, "_seen", {})
         first = Kernel(tmp_path / "first.nbi")
         assert not rc._on_disk(first)
         (tmp_path / "first.nbi").write_text("")

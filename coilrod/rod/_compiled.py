@@ -24,10 +24,12 @@ compiles it.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numba as nb
 import numpy as np
+
+# the ski rentals' look at numba's cache (one look per kernel and process), shared with coils
+from coils._numba_cache import on_disk as _on_disk
 
 __all__ = ["mixed_assembly", "KL", "KU"]
 
@@ -237,24 +239,6 @@ def mixed_assembly(U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab
             return mixed_assembly_numpy(*args)
         _compiled_ready = True
     return _mixed_compiled(*args)
-
-
-_disk_seen: dict = {}  # dispatcher -> whether its cache index was on disk at the first look
-
-
-def _on_disk(dispatcher) -> bool:
-    """Whether numba's cache held compiled code of ``dispatcher`` when this process first asked
-    (loading it costs ~0.1 s).  The disk is looked at once per kernel and process: the callers
-    ask on every call until they compile, and a cache another process writes later is not
-    noticed (the ski rental then runs its course)."""
-    seen = _disk_seen.get(dispatcher)
-    if seen is None:
-        try:
-            seen = Path(dispatcher._cache._cache_file._index_path).exists()
-        except AttributeError:  # numba internals changed: assume not
-            seen = False
-        _disk_seen[dispatcher] = seen
-    return seen
 
 
 @nb.njit(cache=True)
