@@ -277,6 +277,39 @@ class TestInsertion:
         assert ins.contact_nodes[-1][-1]  # the tip pressed on the outer wall
         assert vessel.gap(ins.contact_points(2)).min() >= -1e-6 * 0.05
 
+    def test_step_problems_are_the_public_paths(self):
+        # an insertion step's problem built from the device's constants taken once
+        # (coilrod.contact._parts.StepProblems) against free_part + make_mesh +
+        # build_spatial_problem: the same mesh, node moments and scales, bit for bit -- free
+        # lengths inside the tip segment, on a segment edge (0.01 m: the proximal
+        # segment's length left exactly 0), across it and the whole rod; a profile off the
+        # bending plane; a callable profile (the public path itself)
+        from coilrod.contact._parts import StepProblems
+        from coilrod.contact.insertion import free_part
+        from coilrod.rod.solve import build_spatial_problem, make_mesh
+
+        vessel = Vessel.straight(0.1, 0.002)
+        field = coils.UniformField(B=(0.0, 0.01, 0.0))
+        tilted = Magnetization.segments([0.02, 0.02, 0.01], [9e4, 0.0, 128e3], [0.3, 0.0, -1.0],
+                                        [0.2, 0.0, -0.4])  # fmt: skip
+        graded = Magnetization(lambda s: 1e5 * (1 + np.asarray(s)), 0.2, breakpoints=[0.03])
+        for mag in (self._catheter().magnetization, tilted, graded):
+            rod = Rod(0.05, 1e6, Circle(1e-3), mag)
+            problems = StepProblems(rod, 12, np.zeros(3), np.eye(3), 1e-9, [vessel])
+            assert problems.fast == (mag is not graded)
+            for length in (0.004, 0.01, 0.0173, 0.04, 0.05):
+                free = free_part(rod, length)
+                ref = build_spatial_problem(free, field, make_mesh(free, 12), np.zeros(3),
+                                            np.eye(3), 1e-9, obstacles=[vessel])  # fmt: skip
+                got = problems(length, field)
+                for name in ("mu", "K", "L", "kappa", "_half", "_row_scale", "_bend_scale"):
+                    np.testing.assert_array_equal(getattr(got, name), getattr(ref, name))
+                for name in ("s", "h", "w", "edges", "counts"):
+                    np.testing.assert_array_equal(getattr(got.mesh, name), getattr(ref.mesh, name))
+                assert (got.size, got.nc, got.kl, got.ku) == (ref.size, ref.nc, ref.kl, ref.ku)
+            with pytest.raises(ValueError, match="free length"):
+                problems(0.06, field)
+
     def test_zero_field_in_a_straight_tube(self):
         vessel = Vessel.straight(0.1, 0.002, start=(0.0, 0.0, 0.0))
         ins = coilrod.insert(

@@ -16,7 +16,7 @@ from ..path.corrector import NewtonOptions, newton
 from ..robot.magnetization import Magnetization
 from ..robot.rod import Rod
 from ..rod.contact_predictor import active_set_start
-from ..rod.solve import build_spatial_problem, make_mesh
+from ._parts import StepProblems
 
 __all__ = ["insert", "Insertion", "free_part"]
 
@@ -391,7 +391,7 @@ def insert(
         raise ValueError(f"lengths must lie in (0, {rod.length:g}] m (the rod's length)")
     schedule = _fields(field_schedule, lengths.size)
     clamp, R0 = _introducer(vessel, clamp_position, clamp_rotation)
-    rec = _Record(lengths, vessel)
+    rec = _Record(lengths, vessel, rod.bending_stiffness)
     bar = None
     if progress:
         from tqdm import tqdm
@@ -402,7 +402,7 @@ def insert(
         field0 = schedule(0, float(lengths[0]))
         free0 = free_part(rod, float(lengths[0]))
         problem, u, stable = _first_step(free0, field0, nodes, clamp, R0, vessel, tol)
-        rec.add(problem, u, free0, stable, 1)
+        rec.add(problem, u, stable, 1)
         if bar is not None:
             bar.update(1)
         prev = (float(lengths[0]), field0)
@@ -413,14 +413,15 @@ def insert(
 
         expect_counts(lengths.size - 1, problem.n - 1, problem.nv)
         layout, band_cache = (problem.size, problem.nc), problem._band_cache
+        # each step's problem from the device's constants taken once (the problems of
+        # free_part, make_mesh and build_spatial_problem, bitwise)
+        problems = StepProblems(rod, nodes, clamp, R0, tol, [vessel])
         before = None  # the solved step before the previous one: (problem, state, length)
         for k in range(1, lengths.size):
             target = (float(lengths[k]), schedule(k, float(lengths[k])))
 
             def build(length, field):
-                free = free_part(rod, length)
-                mesh = make_mesh(free, nodes)
-                trial = build_spatial_problem(free, field, mesh, clamp, R0, tol, obstacles=[vessel])
+                trial = problems(length, field)
                 # a plain Newton from the carried (penetrating) shape: Fischer-Burmeister is
                 # the more robust complementarity function there.  The min function takes
                 # fewer iterations (218 against 330 for the 50 steps of bench_contact.py) but
@@ -430,11 +431,11 @@ def insert(
                 trial.ncp = "fb"
                 if (trial.size, trial.nc) == layout:
                     trial._band_cache = band_cache  # the same layout's templates
-                return free, trial
+                return trial
 
             last = (problem, u, prev[0])
-            problem, u, free, stable, solves = _step(build, problem, u, prev, target, k, before)
-            rec.add(problem, u, free, stable, solves)
+            problem, u, stable, solves = _step(build, problem, u, prev, target, k, before)
+            rec.add(problem, u, stable, solves)
             before, prev = last, target
             if bar is not None:
                 bar.update(1)
@@ -482,7 +483,7 @@ def _first_step(free, field, nodes, clamp, R0, vessel, tol):
 
 def _step(build, problem, u, prev, target, k, before=None):
     """One insertion step from the solved (problem, u) at (length, field) ``prev`` to
-    ``target``, halving the step on failure: (problem, state, free rod, stable, solves).
+    ``target``, halving the step on failure: (problem, state, stable, solves).
 
     Frictionless, each try starts first from the solution of the linearised
     complementarity problem at the carried state
@@ -501,12 +502,12 @@ def _step(build, problem, u, prev, target, k, before=None):
     reversal = bool(problem.nt) and before is not None
     reversal = reversal and (target_len - prev_len) * (prev_len - before[2]) < 0
     t, dt, solves, halvings = 0.0, 1.0, 0, 0
-    cur_problem, cur_u, cur_lin, free = problem, u, None, None
+    cur_problem, cur_u, cur_lin = problem, u, None
     while t < 1.0:
         t1 = min(1.0, t + dt)
         length = prev_len + t1 * (target_len - prev_len)
         field = target_field if t1 == 1.0 else prev_field * (1 - t1) + target_field * t1
-        trial_free, trial = build(length, field)
+        trial = build(length, field)
         _carry_reference(cur_problem, cur_u, trial)
         start = carried = _carry(cur_problem, cur_u, trial)
         starts = [_reverse_friction(trial, start)] if reversal and t == 0.0 else []
@@ -537,7 +538,7 @@ def _step(build, problem, u, prev, target, k, before=None):
             if turn > MAX_STEP_TURN:
                 res.ok, why = False, f"; a node turned {turn:.3g} rad in the step"
         if res.ok:  # (its linearization carries the state's stability)
-            t, cur_problem, cur_u, cur_lin, free = t1, trial, res.u, res.lin, trial_free
+            t, cur_problem, cur_u, cur_lin = t1, trial, res.u, res.lin
             dt = min(1.0 - t, 2 * dt) if t < 1.0 else dt
             continue
         halvings += 1
@@ -553,7 +554,7 @@ def _step(build, problem, u, prev, target, k, before=None):
             )
         dt /= 2
     stable = np.ravel(cur_problem.stability(cur_lin))[0] > 0
-    return cur_problem, cur_u, free, bool(stable), solves
+    return cur_problem, cur_u, bool(stable), solves
 
 
 def _reverse_friction(problem, u):
@@ -575,21 +576,22 @@ def _reverse_friction(problem, u):
 class _Record:
     """The per-step figures of an insertion, and the :class:`Insertion` they make."""
 
-    def __init__(self, lengths, vessel):
+    def __init__(self, lengths, vessel, bending_stiffness):
         self.lengths, self.vessel = lengths, vessel
+        self.EI = float(bending_stiffness)  # E I_z, N m^2 (every free part's)
         keys = ("tip", "wall", "fmax", "nodes", "gap", "stable", "sub", "s", "x", "R", "f", "p",
                 "push", "axial")  # fmt: skip
         self.out = {key: [] for key in keys}
         self.half_width = 0.0
 
-    def add(self, problem, u, free, stable, solves):
+    def add(self, problem, u, stable, solves):
         out = self.out
         V = u.reshape(problem.n, problem.nv)
         frames = problem.frames(u[None])  # (once: the contact state and points use them)
         R = frames[0]
         x = problem.points(V[:, 0:3])
         force, gaps, active = problem.contact_state(u[None], frames)
-        EI, L = free.bending_stiffness, free.length
+        EI, L = self.EI, problem.L
         per_length = force[0].sum(axis=1) * (EI / L**3)
         out["tip"].append(x[-1].copy())
         out["wall"].append(problem.contact_totals(force)[0].sum(axis=0) * (EI / L**2))
