@@ -56,10 +56,16 @@ class StepProblems:
         if not self.fast:
             return
         self.edges = np.asarray(mag.segment_edges, float)
-        self.mags = np.asarray(mag.segment_magnitudes, float)
-        self.angs = np.asarray(mag.segment_angles, float)
-        self.elevs = np.asarray(mag.segment_elevations, float)
+        mags = np.asarray(mag.segment_magnitudes, float)
+        angs = np.asarray(mag.segment_angles, float)
+        elevs = np.asarray(mag.segment_elevations, float)
+        # per segment, the factors Magnetization.vector3 forms per sample (the same
+        # functions of the same values: the products below are its products)
+        self.mags, self.elevs = mags, elevs
+        self.cos_a, self.sin_a = np.cos(angs), np.sin(angs)
+        self.cos_e, self.sin_e = np.cos(elevs), np.sin(elevs)
         self.stiffness = rod_stiffnesses(rod)
+        self.scale = (rod.area, rod.bending_stiffness)  # (_node_moments: A L^2 / EI)
 
     def __call__(self, length: float, field):
         if not self.fast:  # the public path (free_part checks the length)
@@ -78,30 +84,34 @@ class StepProblems:
         # the free part's segments, as free_part and Magnetization.segments form them
         off = max(self.rod.length - L, 0.0)
         cut = np.clip(self.edges - off, 0.0, None)
-        keep = np.flatnonzero(np.diff(cut) > 0)
-        edges = np.concatenate([[0.0], np.cumsum(np.diff(cut)[keep])])
-        mags, angs, elevs = self.mags[keep], self.angs[keep], self.elevs[keep]
-        # the mesh: make_mesh on the profile's breakpoints (Magnetization sorts them)
-        breaks = np.array(sorted(edges[1:-1].tolist()), dtype=float)
-        mesh = RodMesh(self.nodes, breaks / L)
+        lengths = np.diff(cut)
+        keep = np.flatnonzero(lengths > 0)
+        edges = np.concatenate([[0.0], np.cumsum(lengths[keep])])
+        # the mesh: make_mesh on the profile's breakpoints (increasing: Magnetization's sort
+        # leaves them as they are)
+        mesh = RodMesh(self.nodes, edges[1:-1] / L)
         # node magnetization (mesh.node_magnetization, dim 3) of the segment profile: the
         # one-sided limits at each node, read in the segments Magnetization.segments picks
         left, right, hl, hr = _one_sided(mesh, L)
         s = np.concatenate([left, right])
-        index = np.clip(np.searchsorted(edges, s, side="right") - 1, 0, len(mags) - 1)
-        mag, ang = mags[index], angs[index]
-        if np.any(elevs):  # (Magnetization.vector and vector3 off the plane)
-            elev = elevs[index]
-            in_plane = mag * np.cos(elev)
-            normal = mag * np.sin(elev)
+        index = np.searchsorted(edges, s, side="right")
+        index -= 1
+        np.clip(index, 0, keep.size - 1, out=index)
+        index = keep[index]  # (the rod's own segments)
+        mag = self.mags[index]
+        both = np.empty((s.size, 3))
+        if self.elevs[keep].any():  # (Magnetization.vector and vector3 off the plane)
+            in_plane = mag * self.cos_e[index]
+            both[:, 2] = mag * self.sin_e[index]
         else:
-            in_plane, normal = mag, np.zeros(s.shape)
-        both = np.concatenate(
-            [np.stack([in_plane * np.cos(ang), in_plane * np.sin(ang)], axis=-1),
-             normal[..., None]], axis=-1,
-        )  # fmt: skip
-        mu = hl[:, None] * both[: left.size] + hr[:, None] * both[left.size :]
-        mu = mu * (self.rod.area * L**2 / self.rod.bending_stiffness)
+            in_plane = mag
+            both[:, 2] = 0.0
+        both[:, 0] = in_plane * self.cos_a[index]
+        both[:, 1] = in_plane * self.sin_a[index]
+        n = left.size
+        mu = hl[:, None] * both[:n] + hr[:, None] * both[n:]
+        area, EI = self.scale
+        mu *= area * L**2 / EI
         return SpatialRod(
             mesh, mu, self.stiffness.copy(), field, L, self.clamp, self.R0, self.tol, False,
             self.obstacles, section=self.rod.section if self.obstacles else None,
