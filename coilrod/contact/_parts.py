@@ -1,7 +1,9 @@
-"""An insertion step's discrete problem from the rod's constants, taken once per insertion.
+"""The free part of a device and an insertion step's discrete problem (from the rod's
+constants, taken once per insertion).
 
 :func:`~coilrod.contact.insert` solves one spatial rod per step: the free part of the device
-(:func:`~coilrod.contact.insertion.free_part`), its mesh and its problem.  Built through the
+(:func:`free_part`, public as ``coilrod.contact.insertion.free_part``), its mesh and its
+problem.  Built through the
 public constructors, each step checks a rod that was checked already (``Rod``,
 ``Magnetization.segments``: the segment lengths, a maximum of the magnitude over 2001 samples
 for the units warning) and evaluates the magnetization profile through its validating
@@ -21,7 +23,45 @@ from ..robot.rod import Rod
 from ..rod.mesh import RodMesh, _one_sided
 from ..rod.solve import build_spatial_problem, make_mesh, rod_stiffnesses
 
-__all__ = ["StepProblems"]
+__all__ = ["StepProblems", "free_part"]
+
+
+def free_part(rod: Rod, length: float) -> Rod:
+    """The distal ``length`` (m) of ``rod`` as a rod clamped at its proximal end: the part
+    out of the introducer.  Its magnetization is the rod's, shifted so that the tips coincide
+    (segment profiles stay segments)."""
+    off = rod.length - length
+    if not 0 < length <= rod.length * (1 + 1e-12):
+        raise ValueError(f"free length must lie in (0, {rod.length:g}] m; got {length!r}")
+    off = max(off, 0.0)
+    mag = rod.magnetization
+    edges = getattr(mag, "segment_edges", None)
+    if edges is not None:
+        cut = np.clip(edges - off, 0.0, None)
+        keep = np.flatnonzero(np.diff(cut) > 0)
+        kw = {}
+        if hasattr(mag, "segment_elevations"):
+            kw["elevations"] = np.asarray(mag.segment_elevations)[keep]
+        new = Magnetization.segments(
+            np.diff(cut)[keep],
+            np.asarray(mag.segment_magnitudes)[keep],
+            np.asarray(mag.segment_angles)[keep],
+            **kw,
+        )
+    else:
+        kw = {}
+        if hasattr(mag, "elevation") and not getattr(mag, "is_planar", True):
+            kw["elevation"] = lambda s: mag.elevation(np.asarray(s) + off)
+        new = Magnetization(
+            lambda s: mag.magnitude(np.asarray(s) + off),
+            lambda s: mag.angle(np.asarray(s) + off),
+            breakpoints=[b - off for b in mag.breakpoints if off < b < rod.length],
+            **kw,
+        )
+    extra = {}
+    if hasattr(rod, "poisson_ratio"):
+        extra["poisson_ratio"] = rod.poisson_ratio
+    return Rod(length, rod.youngs_modulus, rod.section, new, **extra)
 
 
 class StepProblems:
@@ -69,8 +109,6 @@ class StepProblems:
 
     def __call__(self, length: float, field):
         if not self.fast:  # the public path (free_part checks the length)
-            from .insertion import free_part
-
             free = free_part(self.rod, length)
             return build_spatial_problem(
                 free, field, make_mesh(free, self.nodes), self.clamp, self.R0, self.tol,

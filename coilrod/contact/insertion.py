@@ -13,10 +13,9 @@ from coils.field import Field
 
 from ..errors import ConvergenceError
 from ..path.corrector import NewtonOptions, newton
-from ..robot.magnetization import Magnetization
 from ..robot.rod import Rod
 from ..rod.contact_predictor import active_set_start
-from ._parts import StepProblems
+from ._parts import StepProblems, free_part
 
 __all__ = ["insert", "Insertion", "free_part"]
 
@@ -179,44 +178,6 @@ class Insertion:
         axes[1].set_ylabel("wall force (mN)")
         axes[1].legend()
         return fig
-
-
-def free_part(rod: Rod, length: float) -> Rod:
-    """The distal ``length`` (m) of ``rod`` as a rod clamped at its proximal end: the part
-    out of the introducer.  Its magnetization is the rod's, shifted so that the tips coincide
-    (segment profiles stay segments)."""
-    off = rod.length - length
-    if not 0 < length <= rod.length * (1 + 1e-12):
-        raise ValueError(f"free length must lie in (0, {rod.length:g}] m; got {length!r}")
-    off = max(off, 0.0)
-    mag = rod.magnetization
-    edges = getattr(mag, "segment_edges", None)
-    if edges is not None:
-        cut = np.clip(edges - off, 0.0, None)
-        keep = np.flatnonzero(np.diff(cut) > 0)
-        kw = {}
-        if hasattr(mag, "segment_elevations"):
-            kw["elevations"] = np.asarray(mag.segment_elevations)[keep]
-        new = Magnetization.segments(
-            np.diff(cut)[keep],
-            np.asarray(mag.segment_magnitudes)[keep],
-            np.asarray(mag.segment_angles)[keep],
-            **kw,
-        )
-    else:
-        kw = {}
-        if hasattr(mag, "elevation") and not getattr(mag, "is_planar", True):
-            kw["elevation"] = lambda s: mag.elevation(np.asarray(s) + off)
-        new = Magnetization(
-            lambda s: mag.magnitude(np.asarray(s) + off),
-            lambda s: mag.angle(np.asarray(s) + off),
-            breakpoints=[b - off for b in mag.breakpoints if off < b < rod.length],
-            **kw,
-        )
-    extra = {}
-    if hasattr(rod, "poisson_ratio"):
-        extra["poisson_ratio"] = rod.poisson_ratio
-    return Rod(length, rod.youngs_modulus, rod.section, new, **extra)
 
 
 def _fields(field_schedule, m: int) -> Callable[[int, float], Field]:
