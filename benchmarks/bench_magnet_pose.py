@@ -10,7 +10,11 @@ independent forward solve at the magnet returned -- and the dipole controller's 
 found with the magnet's point dipole, the finite magnet placed there).  Goal (issue 21): a pose
 solve <= 20 forward-solve equivalents.
 
+Every kernel runs compiled (ski-rental thresholds 0, ``_machine.compile_at_once``): the
+figures are a warm process's; ``bench_coldstart.py`` measures what a fresh one pays.
+
 Run:  python benchmarks/bench_magnet_pose.py
+      python benchmarks/bench_magnet_pose.py --quick   (the first planar target, printed only)
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ import coils
 from coilrod import presets, solve_magnet_pose, solve_rod
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _machine import machine_info  # noqa: E402
+from _machine import bench_args, compile_at_once, machine_info  # noqa: E402
 
 warnings.simplefilter("ignore")
 ROD = presets.seed_rod(presets.M1())
@@ -57,6 +61,9 @@ def tip(m, planar):
 
 
 def main():
+    quick = bench_args(__doc__).quick
+    compile_at_once()
+    cases = [CASES[0] + (False,)] if quick else [c + (r,) for c in CASES for r in (False, True)]
     out = ["# Magnet pose benchmark\n", machine_info(), ""]
     out.append(
         "| case | target (mm) | forward solves (+ scout) | forward-solve equivalents (time) | "
@@ -66,7 +73,7 @@ def main():
     tip(START, True)  # compile (the real model's forward solve) ...
     solve_magnet_pose(ROD, START, tip(START, True))  # ... and the scout's (met at the start)
     eqs, t_all = [], []
-    for kind, c, rv, rounded in [case + (r,) for case in CASES for r in (False, True)]:
+    for kind, c, rv, rounded in cases:
         planar = kind == "planar"
         goal = tip(magnet(c, rv), planar)
         if rounded:  # the target as a user types it: to 0.1 mm, off the poses tried
@@ -109,7 +116,8 @@ def main():
     )
     text = "\n".join(out) + "\n"
     print(text)
-    (Path(__file__).parent / "results" / "magnet_pose.md").write_text(text)
+    if not quick:
+        (Path(__file__).parent / "results" / "magnet_pose.md").write_text(text)
 
 
 if __name__ == "__main__":
