@@ -8,7 +8,9 @@ coarse mesh), CPU time in forward-solve equivalents (the pose solve's CPU time o
 forward solve at the target's pose, default discretisation), the final miss checked by an
 independent forward solve at the magnet returned -- and the dipole controller's miss (the pose
 found with the magnet's point dipole, the finite magnet placed there).  Goal (issue 21): a pose
-solve <= 20 forward-solve equivalents.
+solve <= 20 forward-solve equivalents.  Then one forward solve of the scout (the magnet's point
+dipole, ``SCOUT_NODES`` segments, ``SCOUT_STEPS`` load steps) against one real forward solve
+(the cylinder, defaults, 10 load steps) at the first target's pose, best of 5 each.
 
 Every kernel runs compiled (ski-rental thresholds 0, ``_machine.compile_at_once``): the
 figures are a warm process's; ``bench_coldstart.py`` measures what a fresh one pays.
@@ -31,7 +33,7 @@ import coils
 from coilrod import presets, solve_magnet_pose, solve_rod
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _machine import bench_args, compile_at_once, machine_info  # noqa: E402
+from _machine import bench_args, best_times, compile_at_once, machine_info  # noqa: E402
 
 warnings.simplefilter("ignore")
 ROD = presets.seed_rod(presets.M1())
@@ -58,6 +60,26 @@ CASES = [
 def tip(m, planar):
     t = solve_rod(ROD, m, SCALES).tip[-1]
     return t[:2] if planar else t
+
+
+def scout_cost() -> str:
+    """One scout forward solve against one real one (the README's '~1/4'), best of 5 each."""
+    from coilrod.control.magnet_pose import SCOUT_NODES, SCOUT_STEPS
+
+    m = magnet(*CASES[0][1:])
+    scout_scales = np.arange(1, SCOUT_STEPS + 1) / SCOUT_STEPS
+    t_real, t_scout = best_times(
+        [
+            lambda: solve_rod(ROD, m, SCALES),
+            lambda: solve_rod(ROD, m.dipole(), scout_scales, nodes=SCOUT_NODES),
+        ],
+        repeat=5,
+    )
+    return (
+        f"One scout forward solve (point dipole, {SCOUT_NODES} segments, {SCOUT_STEPS} load "
+        f"steps): {t_scout * 1e3:.1f} ms CPU against {t_real * 1e3:.1f} ms for the real one "
+        f"(cylinder, defaults, {len(SCALES)} steps): **{t_scout / t_real:.2f}x**."
+    )
 
 
 def main():
@@ -114,6 +136,8 @@ def main():
         f"Forward-solve equivalents: median {np.median(eqs):.1f}, max {np.max(eqs):.1f} "
         "(goal <= 20)."
     )
+    out.append("")
+    out.append(scout_cost())
     text = "\n".join(out) + "\n"
     print(text)
     if not quick:
