@@ -55,7 +55,8 @@ def clock_name() -> str:
 
 
 def best_time(fn, repeat: int = 3, number: int = 1) -> float:
-    """Smallest wall time (s) of ``repeat`` runs of ``number`` calls of ``fn``, per call."""
+    """Smallest time (s, :func:`clock`) of ``repeat`` runs of ``number`` calls of ``fn``, per
+    call."""
     best = float("inf")
     for _ in range(repeat):
         t0 = clock()
@@ -76,6 +77,17 @@ def best_times(fns, repeat: int = 3, number: int = 1) -> list[float]:
                 fn()
             best[k] = min(best[k], (clock() - t0) / number)
     return best
+
+
+def best_run(fn, repeat: int = 3):
+    """Smallest time (s, :func:`clock`: process CPU unless ``BENCH_CLOCK=wall``) of ``repeat``
+    calls of ``fn``, and the last call's result."""
+    best, out = float("inf"), None
+    for _ in range(repeat):
+        t0 = clock()
+        out = fn()
+        best = min(best, clock() - t0)
+    return best, out
 
 
 def best_wall(fn, repeat: int = 3):

@@ -47,8 +47,8 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "tests"))
 from _machine import (  # noqa: E402
     bench_args,
+    best_run,
     best_time,
-    clock,
     clock_name,
     compile_at_once,
     machine_info,
@@ -62,14 +62,9 @@ L = 0.04
 
 
 def best(fn, repeat=None):
-    """Smallest time (s, the clock of benchmarks/_machine.py: process CPU by default) of
-    ``repeat`` calls of ``fn`` (default ``REPEAT``), and the last call's result."""
-    t_best, out = float("inf"), None
-    for _ in range(REPEAT if repeat is None else repeat):
-        t0 = clock()
-        out = fn()
-        t_best = min(t_best, clock() - t0)
-    return t_best, out
+    """Smallest time (s, process CPU unless ``BENCH_CLOCK=wall``) of ``repeat`` calls of ``fn``
+    (default ``REPEAT``), and the last call's result."""
+    return best_run(fn, REPEAT if repeat is None else repeat)
 
 
 def timing() -> str:
