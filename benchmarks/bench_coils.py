@@ -20,7 +20,12 @@ g) when the gridded cache pays: direct evaluation against the cache at 300 and 3
 Relative error = max |X - X_ref| / max |X_ref| over all entries and points.
 Run: ``python benchmarks/bench_coils.py`` (needs mpmath); writes benchmarks/results/coils.md.
 ``python benchmarks/bench_coils.py g`` (any subset of the letters a-g) runs only those parts and
-writes nothing.
+writes nothing; ``--quick`` runs part d alone.
+
+Parts a-e and g time the compiled coil pass: the ski-rental threshold is set to 0
+(``coils.coaxial.COMPILE_AFTER``, see ``_machine.compile_at_once``), so it compiles or loads
+from numba's cache at the first call instead of running its numpy twin first; part f and
+``bench_coldstart.py`` measure what a fresh process pays.
 """
 
 from __future__ import annotations
@@ -40,7 +45,15 @@ import numpy as np  # noqa: E402
 from scipy.constants import mu_0  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _machine import best_time, best_times, clock, clock_name, machine_info  # noqa: E402
+from _machine import (  # noqa: E402
+    bench_args,
+    best_time,
+    best_times,
+    clock,
+    clock_name,
+    compile_at_once,
+    machine_info,
+)
 
 import coils  # noqa: E402
 
@@ -706,8 +719,9 @@ PARTS = {
 
 
 def main(argv: list[str] | None = None) -> None:
-    argv = sys.argv[1:] if argv is None else argv
-    chosen = "".join(argv) or "".join(PARTS)
+    args = bench_args(__doc__, argv)
+    compile_at_once()
+    chosen = "".join(args.rest) or ("d" if args.quick else "".join(PARTS))
     unknown = sorted(set(chosen) - set(PARTS))
     if unknown:
         raise SystemExit(f"unknown part(s) {', '.join(unknown)}; choose from {''.join(PARTS)}")

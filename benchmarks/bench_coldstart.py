@@ -10,7 +10,9 @@ compiled code is loaded from disk). CPU time is the children's user + system tim
 - ``coil field``: B, grad B and the hessian of a Helmholtz pair with 3x3-filament windings;
 - ``coil rod``: one planar rod state (M(1)) in that pair's real field;
 - ``spatial``: one spatial rod state (tilted magnetization, oblique uniform field);
-- ``all three``: the three in one process (goal <= 10 s CPU cold, the issue 19 budget).
+- ``all three``: the three in one process (goal <= 10 s CPU cold, the issue 19 budget);
+- ``demo``: ``python -m coilrod demo --quiet`` (the README's quick start; its files go to a
+  temporary folder).
 
 Then what each compiled kernel costs to compile (numba's compile events in one process with an
 empty cache, the numpy alternatives switched off), and the steady-state speed of each kernel that
@@ -21,7 +23,11 @@ which compiling pays: compile cost / (numpy time - compiled time).  The library 
 alternative until its estimated cost reaches the compile cost (``COMPILE_AFTER``), then
 compiles.
 
+This is the benchmark of what a fresh process pays; every other benchmark times the compiled
+paths (ski-rental thresholds 0, ``_machine.compile_at_once``).
+
 Run:  python benchmarks/bench_coldstart.py   (writes benchmarks/results/coldstart.md)
+      python benchmarks/bench_coldstart.py --help
       python benchmarks/bench_coldstart.py --compare OTHER_TREE ["all three" ...]
       (cold CPU of this tree and another, e.g. ``git archive main | tar -x -C OTHER_TREE``,
       alternating; printed only)
@@ -116,9 +122,10 @@ from numba.core import event
 import coils.coaxial, coilrod.rod._compiled
 coils.coaxial.COMPILE_AFTER = 0.0  # compile everything the scenario uses
 coilrod.rod._compiled.COMPILE_AFTER = 0.0
-import coilrod.rod._inertia, coilrod.rod._compiled_spatial
+import coilrod.rod._inertia, coilrod.rod._compiled_spatial, coilrod.rod._planar_newton
 coilrod.rod._inertia.COMPILE_AFTER = 0.0
 coilrod.rod._compiled_spatial.COMPILE_AFTER = 0.0
+coilrod.rod._planar_newton.COMPILE_AFTER = 0.0
 starts, out = {}, {}
 class Listener(event.Listener):
     def on_start(self, ev):
@@ -139,7 +146,15 @@ KERNELS = {
     "coilrod.rod._compiled.mixed_error": "planar error measure",
     "coilrod.rod._inertia._inertia": "block inertia",
     "coilrod.rod._compiled_spatial.spatial_core": "spatial per-node pass",
+    "coilrod.rod._planar_newton._newton": "planar uniform-field Newton corrector",
 }
+#: a planar state in a uniform field (the uniform-field corrector; no scenario above uses it)
+UNIFORM = """
+import coils
+from coilrod import presets, solve_rod
+rod = presets.seed_rod(presets.M1())
+solve_rod(rod, coils.UniformField(B=(0, rod.field_for_lambda(5), 0)), [1.0])
+"""
 
 
 def compile_costs():
@@ -149,7 +164,7 @@ def compile_costs():
 
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=str(ROOT))
-        code = COIL + ROD + SPATIAL
+        code = COIL + ROD + SPATIAL + UNIFORM
         res = subprocess.run(
             [sys.executable, "-c", COMPILE_EVENTS, code], env=env, check=True, capture_output=True
         )
@@ -302,24 +317,34 @@ def main():
     if len(sys.argv) > 1:  # --compare OTHER_TREE [SCENARIO ...]: side by side, cold only
         import argparse
 
-        parser = argparse.ArgumentParser()
+        parser = argparse.ArgumentParser(
+            description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+        )
         parser.add_argument("--compare", required=True, help="another tree's root folder")
         parser.add_argument("--repeats", type=int, default=2)
         parser.add_argument("scenarios", nargs="*", default=["spatial", "all three"])
         opts = parser.parse_args()
         side_by_side(opts.scenarios, opts.compare, opts.repeats)
         return
+    sys.path.insert(0, str(HERE))
+    from _machine import machine_info
+
     lines = ["# Cold start (fresh NUMBA_CACHE_DIR) against warm (cache filled)", ""]
+    lines += [f"Machine: {machine_info()}; one run of each scenario.", ""]
     lines += ["| scenario | cold CPU (s) | cold wall (s) | warm CPU (s) | warm wall (s) |"]
     lines += ["|---|---|---|---|---|"]
     todo = {"--help": ["-m", "coilrod", "--help"]}
     todo |= {name: ["-c", code] for name, code in SCENARIOS.items()}
-    for name, args in todo.items():
-        (c_cpu, c_wall), (w_cpu, w_wall) = cold_and_warm(args)
-        lines.append(f"| {name} | {c_cpu:.2f} | {c_wall:.2f} | {w_cpu:.2f} | {w_wall:.2f} |")
-        print(lines[-1], flush=True)
+    with tempfile.TemporaryDirectory() as demo_out:
+        todo["demo"] = ["-m", "coilrod", "demo", "--quiet", "--out", demo_out]
+        for name, args in todo.items():
+            (c_cpu, c_wall), (w_cpu, w_wall) = cold_and_warm(args)
+            row = f"| {name} | {c_cpu:.2f} | {c_wall:.2f} | {w_cpu:.2f} | {w_wall:.2f} |"
+            lines.append(row)
+            print(row, flush=True)
     costs = compile_costs()
     kernel_speed(lines, costs)
+    lines += ["", f"Machine at the end: {machine_info()}"]
     text = "\n".join(lines) + "\n"
     print(text)
     OUT.write_text(text)

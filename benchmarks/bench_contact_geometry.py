@@ -9,7 +9,8 @@ as 512 chords): it is the natural alternative for a planar polyline, not for spl
 radii that vary, which it cannot represent.  Errors are max |gap - (R - shapely distance)|.
 
 Run: ``python benchmarks/bench_contact_geometry.py`` (prints a markdown table; the target is
-well under 1 s for 10^5 points, i.e. < 10 us per point).
+well under 1 s for 10^5 points, i.e. < 10 us per point).  ``--quick``: 10^4 points, one run.
+No compiled kernel with a numpy twin is involved (no ski rental to switch off).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ import numpy as np  # noqa: E402
 import shapely  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _machine import best_time, clock_name, machine_info  # noqa: E402
+from _machine import bench_args, best_time, clock_name, machine_info  # noqa: E402
 
 from coilrod.contact import Vessel  # noqa: E402
 
@@ -57,9 +58,11 @@ def cases():
 
 
 def main() -> None:
-    print("# Contact geometry: time per point, 10^5 points")
+    quick = bench_args(__doc__).quick
+    n, repeat = (N // 10, 1) if quick else (N, 3)
+    print(f"# Contact geometry: time per point, {n:.0e} points")
     print()
-    print(f"Machine: {machine_info()}; {clock_name()} time, best of 3.")
+    print(f"Machine: {machine_info()}; {clock_name()} time, best of {repeat}.")
     print()
     print(
         "| obstacle | pieces | gap (us/pt) | gap+grad+hess (us/pt) | shapely (us/pt) | "
@@ -69,22 +72,22 @@ def main() -> None:
     rng = np.random.default_rng(0)
     for name, ob, line in cases():
         lo, hi = ob.bounds
-        pts = rng.uniform(lo - R, hi + R, (N, 3))
+        pts = rng.uniform(lo - R, hi + R, (n, 3))
         if line is not None:
             pts[:, 2] = 0.0
-        t_gap = best_time(lambda ob=ob, pts=pts: ob.gap(pts))
-        t_all = best_time(lambda ob=ob, pts=pts: ob.evaluate(pts))
+        t_gap = best_time(lambda ob=ob, pts=pts: ob.gap(pts), repeat)
+        t_all = best_time(lambda ob=ob, pts=pts: ob.evaluate(pts), repeat)
         pieces = getattr(ob, "_m", None) or sum(v._m for v in ob.vessels)
         shap, diff = "-", "-"
         if line is not None:
             geom = shapely.LineString(line)
             sp = shapely.points(pts[:, :2])
-            t_sh = best_time(lambda geom=geom, sp=sp: shapely.distance(geom, sp))
+            t_sh = best_time(lambda geom=geom, sp=sp: shapely.distance(geom, sp), repeat)
             d = shapely.distance(geom, sp)
-            shap = f"{1e6 * t_sh / N:.2f}"
+            shap = f"{1e6 * t_sh / n:.2f}"
             diff = f"{np.max(np.abs(ob.gap(pts) - (R - d))):.1e}"
         print(
-            f"| {name} | {pieces} | {1e6 * t_gap / N:.2f} | {1e6 * t_all / N:.2f} | {shap} | "
+            f"| {name} | {pieces} | {1e6 * t_gap / n:.2f} | {1e6 * t_all / n:.2f} | {shap} | "
             f"{diff} |"
         )
     print()

@@ -18,8 +18,12 @@ and with the Gauss-Newton steps inverting every singular value of the Jacobian (
 steps, ``STEP_RCOND = 0``; this rod's tip pose moves with only three current combinations,
 see ``coilrod.control.currents._moved``), all in one run.
 
+Every kernel runs compiled (ski-rental thresholds 0, ``_machine.compile_at_once``): the
+figures are a warm process's; ``bench_coldstart.py`` measures what a fresh one pays.
+
 Run:  python benchmarks/bench_control.py            (both parts)
       python benchmarks/bench_control.py --3d       (the CardioMag part only)
+      python benchmarks/bench_control.py --quick    (one target of each part, printed only)
 """
 
 from __future__ import annotations
@@ -36,7 +40,7 @@ import coils
 from coilrod import presets, solve_currents, solve_rod
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _machine import machine_info  # noqa: E402
+from _machine import bench_args, compile_at_once, machine_info  # noqa: E402
 
 warnings.simplefilter("ignore")
 ROD = presets.seed_rod(presets.M1())
@@ -65,7 +69,7 @@ def tip_3d(system, currents, tol=1e-9):
     return res.tip[-1]
 
 
-def cardiomag_3d() -> list[str]:
+def cardiomag_3d(targets=TARGETS_3D) -> list[str]:
     """The CardioMag rows: 3D targets, forward-solve equivalents against the budget."""
     out = [
         "\n## 3D targets on CardioMag (calibrated MPEM, 8 coils)\n",
@@ -76,7 +80,7 @@ def cardiomag_3d() -> list[str]:
     # compile outside the timing: a forward solve and a whole 3D solve (start, sensitivities)
     warm = tip_3d(CARDIOMAG, CARDIOMAG.currents_for(B=(0.0, 0.003, 0.002)))
     solve_currents(ROD, CARDIOMAG, warm)
-    for made in TARGETS_3D:
+    for made in targets:
         target = tip_3d(CARDIOMAG, CARDIOMAG.currents_for(**made), tol=1e-12)
         t0 = time.process_time()
         ours = solve_currents(ROD, CARDIOMAG, target)
@@ -105,7 +109,7 @@ def cardiomag_3d() -> list[str]:
     ]
     from coilrod.control import currents
 
-    for made in TARGETS_3D:
+    for made in targets:
         res = solve_rod(
             ROD, CARDIOMAG.with_currents(CARDIOMAG.currents_for(**made)), SCALES, tol=1e-12
         )
@@ -148,10 +152,17 @@ def cardiomag_3d() -> list[str]:
 
 
 def main():
-    if "--3d" in sys.argv[1:]:
-        text = "\n".join(["# Control benchmark (3D part)\n", machine_info(), *cardiomag_3d()])
+    args = bench_args(__doc__)
+    compile_at_once()
+    quick = args.quick
+    fields, targets = (FIELDS[:1], TARGETS_3D[:1]) if quick else (FIELDS, TARGETS_3D)
+    if "--3d" in args.rest:
+        text = "\n".join(
+            ["# Control benchmark (3D part)\n", machine_info(), *cardiomag_3d(targets)]
+        )
         print(text)
-        Path(__file__).with_name("results").joinpath("control_3d.md").write_text(text + "\n")
+        if not quick:
+            Path(__file__).with_name("results").joinpath("control_3d.md").write_text(text + "\n")
         return
     out = ["# Control benchmark\n", machine_info(), ""]
     out.append(
@@ -160,7 +171,7 @@ def main():
     )
     out.append("|---|---|---|---|---|---|")
     ratios_solves, ratios_time, ratios_eq = [], [], []
-    for B in FIELDS:
+    for B in fields:
         target = tip(SYSTEM.currents_for(B=B), tol=1e-12)
         t0 = time.process_time()
         ours = solve_currents(ROD, SYSTEM, target)
@@ -206,10 +217,11 @@ def main():
         f"1/{np.max(ratios_eq):.1f}; CPU time 1/{np.min(ratios_time):.1f} to "
         f"1/{np.max(ratios_time):.1f} of least_squares' whole run.\n"
     )
-    out += cardiomag_3d()
+    out += cardiomag_3d(targets)
     text = "\n".join(out)
     print(text)
-    Path(__file__).with_name("results").joinpath("control.md").write_text(text + "\n")
+    if not quick:
+        Path(__file__).with_name("results").joinpath("control.md").write_text(text + "\n")
 
 
 if __name__ == "__main__":

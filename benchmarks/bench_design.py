@@ -13,7 +13,11 @@ Prints (and writes to benchmarks/results/design.md):
    gradient method against differential evolution, workspace solves to reach 99 % of the best
    area either found.
 
+Every kernel runs compiled (ski-rental thresholds 0, ``_machine.compile_at_once``): the
+figures are a warm process's; ``bench_coldstart.py`` measures what a fresh one pays.
+
 Run:  python benchmarks/bench_design.py [--optimise]
+      python benchmarks/bench_design.py --quick   (part 1 alone, printed only)
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ from coilrod import Magnetization, presets, sensitivities, solve_rod, workspace
 from coilrod.design.sensitivity import tip_derivatives
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _machine import best_wall, machine_info  # noqa: E402
+from _machine import bench_args, best_wall, compile_at_once, machine_info  # noqa: E402
 
 warnings.simplefilter("ignore")
 ROD = presets.seed_rod(presets.M42())
@@ -233,10 +237,15 @@ def optimisation_table(out):
 
 
 def main():
+    args = bench_args(__doc__)
+    compile_at_once()
     out = ["# Design benchmark\n", machine_info(), ""]
     sensitivity_table(out)
+    if args.quick:
+        print("\n".join(out))
+        return
     workspace_table(out)
-    if "--optimise" in sys.argv:
+    if "--optimise" in args.rest:
         optimisation_table(out)
     text = "\n".join(out)
     print(text)

@@ -15,7 +15,13 @@ Prints (and writes to benchmarks/results/fem.md), with the machine:
 3. time against tip error (max over the 20-step curve, against the closed-form elastica of
    ``coilrod.elastica``) for 2D/3D, order 1/2 and several meshes, next to the rod solver.
 
+Times are process CPU (``BENCH_CLOCK=wall`` for wall clock; one BLAS thread, so the two agree
+on an idle machine; before 2026-11-27 this benchmark timed wall clock).  The box FEM uses no
+kernel with a ski-rental threshold; they are set to 0 anyway (``_machine.compile_at_once``:
+the compiled paths, as the other benchmarks).
+
 Run:  python benchmarks/bench_fem.py
+      python benchmarks/bench_fem.py --quick   (section 3: 2D Q1 20x1, 3D Q2 10x1x1; printed)
 """
 
 from __future__ import annotations
@@ -34,8 +40,8 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from _machine import best_wall as best  # noqa: E402
-from _machine import clock_name, machine_info  # noqa: E402
+from _machine import bench_args, clock_name, compile_at_once, machine_info  # noqa: E402
+from _machine import best_run as best  # noqa: E402
 
 import coilrod  # noqa: E402
 import coils  # noqa: E402
@@ -273,7 +279,10 @@ def _skfem_free(basis):
     return np.flatnonzero(free)
 
 
-def section_time_vs_error():
+QUICK_CASES = [(2, 1, (20, 1)), (3, 2, (10, 1, 1))]
+
+
+def section_time_vs_error(quick: bool = False):
     emit("## 3. Time against tip error (M(1), lambda 0.5 ... 10, 20 steps)")
     emit()
     emit(
@@ -287,19 +296,23 @@ def section_time_vs_error():
     rod = box_rod()
     field = uniform(rod)
     ref = np.array([elastica(lam, math.pi / 2, length=L).tip[:2] for lam in LAMBDAS])
-    cases = [
-        (2, 1, (20, 1)),
-        (2, 1, (80, 2)),
-        (2, 1, (160, 4)),
-        (2, 2, (10, 1)),
-        (2, 2, (20, 1)),
-        (2, 2, (40, 2)),
-        (3, 1, (40, 2, 2)),
-        (3, 1, (80, 4, 4)),
-        (3, 2, (10, 1, 1)),
-        (3, 2, (20, 1, 1)),
-        (3, 2, (40, 2, 2)),
-    ]
+    cases = (
+        QUICK_CASES
+        if quick
+        else [
+            (2, 1, (20, 1)),
+            (2, 1, (80, 2)),
+            (2, 1, (160, 4)),
+            (2, 2, (10, 1)),
+            (2, 2, (20, 1)),
+            (2, 2, (40, 2)),
+            (3, 1, (40, 2, 2)),
+            (3, 1, (80, 4, 4)),
+            (3, 2, (10, 1, 1)),
+            (3, 2, (20, 1, 1)),
+            (3, 2, (40, 2, 2)),
+        ]
+    )
     for dim, order, el in cases:
         t, res = best(
             lambda dim=dim, order=order, el=el: coilrod.solve_fem(
@@ -319,10 +332,15 @@ def section_time_vs_error():
 
 
 def main():
+    quick = bench_args(__doc__).quick
+    compile_at_once(warm_up=False)
     emit("# FEM benchmark (benchmarks/bench_fem.py)")
     emit()
-    emit(machine_line("best of 3 (2 for factorisations, 1 for section 3)", clock="wall"))
+    emit(machine_line("best of 3 (2 for factorisations, 1 for section 3)"))
     emit()
+    if quick:
+        section_time_vs_error(quick=True)
+        return
     section_assembly_vs_solve()
     section_full_curve()
     section_time_vs_error()

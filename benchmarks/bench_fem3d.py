@@ -23,7 +23,13 @@ Timings: process CPU time by default (``BENCH_CLOCK=wall`` for wall clock), best
 ``--repeat`` runs; one BLAS thread unless ``OMP_NUM_THREADS``/``OPENBLAS_NUM_THREADS`` say
 otherwise (as bench_fem.py).
 
+The Helmholtz pair's coil pass runs compiled from the first call (ski-rental thresholds 0,
+``_machine.compile_at_once``; the baseline's child process without the warm-up, its first
+repeat compiles): the steady state;
+``bench_coldstart.py`` measures what a fresh process pays.
+
 Run:  python benchmarks/bench_fem3d.py [--baseline DIR] [--repeat 2]
+      python benchmarks/bench_fem3d.py --quick   (section 1, one run, printed only)
 """
 
 from __future__ import annotations
@@ -42,7 +48,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from _machine import clock  # noqa: E402
+from _machine import clock, compile_at_once  # noqa: E402
 from bench_fem import machine_line, skfem_bilinear_tangent  # noqa: E402
 
 OUT: list[str] = []
@@ -242,19 +248,28 @@ def section_meshes(res_default, t_default):
 
 
 def main():
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--baseline", help="a checkout of an older coilrod to time alongside")
     ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--quick", action="store_true", help="section 1, one run, nothing written")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
-    if args.child:
+    if args.child:  # an older checkout: its kernels compile in the first of the repeats
+        compile_at_once(warm_up=False)
         child(args.repeat)
         return
+    compile_at_once()
+    if args.quick:
+        args.repeat = 1
     emit("# FEM benchmark: the default 3D Circle curve (benchmarks/bench_fem3d.py)")
     emit()
     emit(machine_line(f"best of {args.repeat} (section 3: one run)"))
     emit()
     t, res = section_curve(args)
+    if args.quick:
+        return
     section_skfem(res, t)
     section_meshes(res, t)
     out = Path(__file__).parent / "results" / "fem3d.md"

@@ -20,7 +20,11 @@ push force on a flat wall.
    at the introducer is mu times the wall's normal reaction (insertion) and minus it
    (withdrawal), exactly.
 
-Run: ``python benchmarks/bench_friction.py`` (prints markdown tables; ~45 s).
+Every kernel runs compiled (ski-rental thresholds 0, ``_machine.compile_at_once``): the CPU
+columns are a warm process's; ``bench_coldstart.py`` measures what a fresh one pays.
+
+Run: ``python benchmarks/bench_friction.py`` (prints markdown tables; ~45 s);
+``--quick``: 16 segments, the first pull and step count only.
 """
 
 from __future__ import annotations
@@ -30,12 +34,17 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
+import sys  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 import coils  # noqa: E402
 from coilrod import Circle, Magnetization, Rod, Vessel, Wall, insert  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _machine import bench_args, compile_at_once, machine_info  # noqa: E402
 
 MU = 0.2
 
@@ -85,11 +94,17 @@ def flat_wall():
 
 
 def main():
+    quick = bench_args(__doc__).quick
+    compile_at_once()
+    nodes_list, pulls, step_counts = (
+        ((16,), (5.0,), (7,)) if quick else ((16, 32), (5.0, 50.0, 150.0), range(7, 15))
+    )
+    print(f"Machine: {machine_info()}; process CPU time, one run.\n")
     print(f"## Capstan round a bend (mu = {MU})\n")
     print("| step | segments | EI/(T rho^2) | T ratio | exp(mu theta) | rel. error | CPU s |")
     print("|---|---|---|---|---|---|---|")
-    for nodes in (16, 32):
-        for pull in (5.0, 50.0, 150.0):
+    for nodes in nodes_list:
+        for pull in pulls:
             rows = capstan(nodes, pull)
             for name, n, stiff, ratio, ref, err, cpu in rows[1 if pull != 5.0 else 0 :]:
                 print(f"| {name} | {n} | {stiff:.1e} | {ratio:.5f} | {ref:.5f} | {err:+.1e} "
@@ -97,7 +112,7 @@ def main():
     print(f"\n## In, back and in again by the number of steps in (16 segments, mu = {MU})\n")
     print("| steps in | re-entry T ratio | exp(mu theta) | rel. error | CPU s |")
     print("|---|---|---|---|---|")
-    for steps in range(7, 15):
+    for steps in step_counts:
         *_, ratio, ref, err, cpu = capstan(16, 150.0, steps)[-1]
         print(f"| {steps} | {ratio:.5f} | {ref:.5f} | {err:+.1e} | {cpu:.2f} |")
     print(f"\n## Push force on a flat wall (mu = {MU})\n")

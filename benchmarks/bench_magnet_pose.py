@@ -8,9 +8,15 @@ coarse mesh), CPU time in forward-solve equivalents (the pose solve's CPU time o
 forward solve at the target's pose, default discretisation), the final miss checked by an
 independent forward solve at the magnet returned -- and the dipole controller's miss (the pose
 found with the magnet's point dipole, the finite magnet placed there).  Goal (issue 21): a pose
-solve <= 20 forward-solve equivalents.
+solve <= 20 forward-solve equivalents.  Then one forward solve of the scout (the magnet's point
+dipole, ``SCOUT_NODES`` segments, ``SCOUT_STEPS`` load steps) against one real forward solve
+(the cylinder, defaults, 10 load steps) at the first target's pose, best of 5 each.
+
+Every kernel runs compiled (ski-rental thresholds 0, ``_machine.compile_at_once``): the
+figures are a warm process's; ``bench_coldstart.py`` measures what a fresh one pays.
 
 Run:  python benchmarks/bench_magnet_pose.py
+      python benchmarks/bench_magnet_pose.py --quick   (the first planar target, printed only)
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ import coils
 from coilrod import presets, solve_magnet_pose, solve_rod
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _machine import machine_info  # noqa: E402
+from _machine import bench_args, best_times, compile_at_once, machine_info  # noqa: E402
 
 warnings.simplefilter("ignore")
 ROD = presets.seed_rod(presets.M1())
@@ -56,7 +62,30 @@ def tip(m, planar):
     return t[:2] if planar else t
 
 
+def scout_cost() -> str:
+    """One scout forward solve against one real one (the README's '~1/4'), best of 5 each."""
+    from coilrod.control.magnet_pose import SCOUT_NODES, SCOUT_STEPS
+
+    m = magnet(*CASES[0][1:])
+    scout_scales = np.arange(1, SCOUT_STEPS + 1) / SCOUT_STEPS
+    t_real, t_scout = best_times(
+        [
+            lambda: solve_rod(ROD, m, SCALES),
+            lambda: solve_rod(ROD, m.dipole(), scout_scales, nodes=SCOUT_NODES),
+        ],
+        repeat=5,
+    )
+    return (
+        f"One scout forward solve (point dipole, {SCOUT_NODES} segments, {SCOUT_STEPS} load "
+        f"steps): {t_scout * 1e3:.1f} ms CPU against {t_real * 1e3:.1f} ms for the real one "
+        f"(cylinder, defaults, {len(SCALES)} steps): **{t_scout / t_real:.2f}x**."
+    )
+
+
 def main():
+    quick = bench_args(__doc__).quick
+    compile_at_once()
+    cases = [CASES[0] + (False,)] if quick else [c + (r,) for c in CASES for r in (False, True)]
     out = ["# Magnet pose benchmark\n", machine_info(), ""]
     out.append(
         "| case | target (mm) | forward solves (+ scout) | forward-solve equivalents (time) | "
@@ -66,7 +95,7 @@ def main():
     tip(START, True)  # compile (the real model's forward solve) ...
     solve_magnet_pose(ROD, START, tip(START, True))  # ... and the scout's (met at the start)
     eqs, t_all = [], []
-    for kind, c, rv, rounded in [case + (r,) for case in CASES for r in (False, True)]:
+    for kind, c, rv, rounded in cases:
         planar = kind == "planar"
         goal = tip(magnet(c, rv), planar)
         if rounded:  # the target as a user types it: to 0.1 mm, off the poses tried
@@ -107,9 +136,12 @@ def main():
         f"Forward-solve equivalents: median {np.median(eqs):.1f}, max {np.max(eqs):.1f} "
         "(goal <= 20)."
     )
+    out.append("")
+    out.append(scout_cost())
     text = "\n".join(out) + "\n"
     print(text)
-    (Path(__file__).parent / "results" / "magnet_pose.md").write_text(text)
+    if not quick:
+        (Path(__file__).parent / "results" / "magnet_pose.md").write_text(text)
 
 
 if __name__ == "__main__":

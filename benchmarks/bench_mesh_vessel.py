@@ -13,13 +13,19 @@ the polyhedral gap the contact Newton does not converge (its gradient jumps wher
 face changes); with the smoothed gap it does, and converges to the analytic insertion.
 Results: ``benchmarks/results/mesh_vessel.md``.
 
-Run: ``python benchmarks/bench_mesh_vessel.py`` (prints markdown tables).
+Every kernel runs compiled (ski-rental thresholds 0, ``_machine.compile_at_once``): the CPU
+column is a warm process's; ``bench_coldstart.py`` measures what a fresh one pays.
+
+Run: ``python benchmarks/bench_mesh_vessel.py`` (prints markdown tables); ``--quick``: 8 and 16
+vertices per ring (12 and 16 for the insertion).
 """
 
 from __future__ import annotations
 
 import math
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -27,6 +33,12 @@ import coilrod
 import coils
 from coilrod import presets
 from coilrod.contact import MeshVessel, Vessel, VesselNetwork, tessellate
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _machine import bench_args, compile_at_once, machine_info  # noqa: E402
+
+RINGS = (8, 16, 32, 64)  # vertices per ring, geometry table
+RINGS_INSERTION = (12, 16, 24, 32, 48, 64)
 
 
 def _samples(vessels, n=400, seed=0):
@@ -63,7 +75,7 @@ def geometry_table():
         e_ref = ref.evaluate(p, 1)
         for smooth in (True, False):
             prev = None
-            for n in (8, 16, 32, 64):
+            for n in RINGS:
                 meshes = [MeshVessel(*tessellate(m, n), smooth=smooth) for m in members]
                 mv = meshes[0] if len(meshes) == 1 else VesselNetwork(meshes)
                 ev = mv.evaluate(p, 1)
@@ -101,7 +113,7 @@ def insertion_table(r_ins=1.5e-3):
     print("|---|---|---|---|---|---|---|")
     print(f"| analytic (max wall force {1e3 * fmax:.4g} mN) | | 0 | | 0 | | {dt:.2f} |")
     prev = None
-    for n in (12, 16, 24, 32, 48, 64):
+    for n in RINGS_INSERTION:
         mv = MeshVessel(*tessellate(vessel, n))
         t0 = time.process_time()
         try:
@@ -129,5 +141,9 @@ def insertion_table(r_ins=1.5e-3):
 
 
 if __name__ == "__main__":
+    if bench_args(__doc__).quick:
+        RINGS, RINGS_INSERTION = (8, 16), (12, 16)
+    compile_at_once()
+    print(f"Machine: {machine_info()}; process CPU time, one run.\n")
     geometry_table()
     insertion_table(1.5e-3)

@@ -20,7 +20,14 @@ Prints (and writes to benchmarks/results/rod3d.md):
    sweep to the same load.  ``profile_rod3d.py`` breaks the per-iteration cost down further
    (side by side with another checkout; results/rod3d_profile.md).
 
+Timings: process CPU time (``BENCH_CLOCK=wall`` for wall clock), best of ``REPEAT`` runs (3 for
+solve_bvp and the insertion), every kernel compiled from its first call (ski-rental thresholds
+0, ``_machine.compile_at_once``: the steady state; ``bench_coldstart.py`` measures what a fresh
+process pays).  Section 3 reads PyElastica's JSON (PyElastica runs in its own environment); where
+there is none it says so and is skipped.
+
 Run:  python benchmarks/bench_rod3d.py
+      python benchmarks/bench_rod3d.py --quick   (sections 1-3 at 64 segments, one run, printed)
 """
 
 from __future__ import annotations
@@ -38,12 +45,30 @@ from coilrod import Circle, Magnetization, Rod, presets, solve_rod
 HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent / "tests"))
-from _machine import best_time, best_wall, clock_name, machine_info  # noqa: E402
+from _machine import (  # noqa: E402
+    bench_args,
+    best_run,
+    best_time,
+    clock_name,
+    compile_at_once,
+    machine_info,
+)
 from rod3d_bvp_reference import spatial_reference  # noqa: E402
 
 REPEAT = 5
+NODES = (8, 16, 32, 64, 128, 256)
 OUT = HERE / "results" / "rod3d.md"
 L = 0.04
+
+
+def best(fn, repeat=None):
+    """Smallest time (s, process CPU unless ``BENCH_CLOCK=wall``) of ``repeat`` calls of ``fn``
+    (default ``REPEAT``), and the last call's result."""
+    return best_run(fn, REPEAT if repeat is None else repeat)
+
+
+def timing() -> str:
+    return f"{clock_name()} time, best of {REPEAT}."
 
 
 def _unit(v):
@@ -52,7 +77,7 @@ def _unit(v):
 
 
 def planar_cases(lines):
-    lines += ["## 1. Planar cases by both models", ""]
+    lines += ["## 1. Planar cases by both models", "", timing(), ""]
     lines += ["| case | planar (s) | spatial (s) | ratio | tip difference / L |"]
     lines += ["|---|---|---|---|---|"]
     rod = presets.seed_rod(presets.M1())
@@ -64,8 +89,8 @@ def planar_cases(lines):
     ratios = []
     for name, field in cases.items():
         scales = np.linspace(0.1, 1, 10) if "sweep" in name else [1.0]
-        tp, rp = best_wall(lambda f=field, s=scales: solve_rod(rod, f, s, model="planar"), REPEAT)
-        ts, rs = best_wall(lambda f=field, s=scales: solve_rod(rod, f, s, model="spatial"), REPEAT)
+        tp, rp = best(lambda f=field, s=scales: solve_rod(rod, f, s, model="planar"))
+        ts, rs = best(lambda f=field, s=scales: solve_rod(rod, f, s, model="spatial"))
         diff = np.abs(rp.tip - rs.tip).max() / rod.length
         ratios.append(ts / tp)
         lines.append(f"| {name} | {tp:.4f} | {ts:.4f} | {ts / tp:.1f}x | {diff:.1e} |")
@@ -94,17 +119,15 @@ def spatial_case(lines):
     lines += [
         "M with angle 0.3 rad and elevation 0.4 rad, circular section (GJ = EI / 1.5), uniform "
         "field along (0.3, 1, 0.5) at lambda = 3; reference: solve_bvp on the 3D Kirchhoff "
-        "equations at tol 1e-11.",
+        f"equations at tol 1e-11.  {timing()} (solve_bvp: best of 3)",
         "",
         "| method | time (s) | tip error / L |",
         "|---|---|---|",
     ]
     out = {}
-    for n in (8, 16, 32, 64, 128, 256):
+    for n in NODES:
         for rich in (False, True):
-            t, res = best_wall(
-                lambda n=n, r=rich: solve_rod(rod, field, [1.0], nodes=n, richardson=r), REPEAT
-            )
+            t, res = best(lambda n=n, r=rich: solve_rod(rod, field, [1.0], nodes=n, richardson=r))
             err = np.linalg.norm(res.tip[0] - ref) / L
             label = f"solve_rod, {n} segments" + (" + Richardson" if rich else "")
             if n == 64 and rich:
@@ -112,7 +135,7 @@ def spatial_case(lines):
                 out["ours"] = (t, err)
             lines.append(f"| {label} | {t:.4f} | {err:.1e} |")
     for tol in (1e-6, 1e-8):
-        t, r = best_wall(lambda tol=tol: _reference(rod, field, tol), 3)
+        t, r = best(lambda tol=tol: _reference(rod, field, tol), 3)
         err = np.linalg.norm(r["tip"] - ref) / L
         out[f"bvp{tol:g}"] = (t, err)
         name = f"scipy solve_bvp (3D Kirchhoff, quaternions), tol {tol:g}"
@@ -131,14 +154,26 @@ def pyelastica(lines, ours, ref):
     path = HERE / "results" / "pyelastica_spatial.json"
     lines += ["## 3. PyElastica 1.0 (dynamic relaxation), the same problem", ""]
     if not path.exists():
-        lines += ["(no PyElastica run found: see benchmarks/peers/pyelastica_spatial.py)", ""]
+        try:
+            import elastica  # noqa: F401
+
+            here = "PyElastica is installed here"
+        except ImportError:
+            here = "PyElastica is not installed here"
+        lines += [
+            f"Skipped: no PyElastica run found ({path.name}; {here}).  PyElastica runs in its "
+            "own environment: see benchmarks/peers/pyelastica_spatial.py for the commands, and "
+            f"write its JSON to benchmarks/results/{path.name}.",
+            "",
+        ]
         return
     runs = json.loads(path.read_text())
     t_ours, e_ours = ours
     lines += [
         "PyElastica's rod is extensible and shearable (effects ~1e-4 at L/r = 40) and stops "
         "when the tip moves < 1e-6 L per period of the first mode; numbers from "
-        "benchmarks/results/pyelastica_spatial.json (same machine).",
+        "benchmarks/results/pyelastica_spatial.json (same machine; PyElastica's wall time "
+        "against our time in this run).",
         "",
         "| n_elem | time (s) | tip error / L | time / ours | error / ours |",
         "|---|---|---|---|---|",
@@ -153,16 +188,16 @@ def pyelastica(lines, ours, ref):
 
 
 def contact(lines):
-    lines += ["## 4. Contact", ""]
+    lines += ["## 4. Contact", "", f"{timing()} (the insertion: best of 3)", ""]
     rod = presets.seed_rod(presets.M1())
     field = coils.UniformField(B=(0, rod.field_for_lambda(3.0), 0))
     wall = coilrod.Wall(point=(0, 0.2 * rod.length, 0), normal=(0, -1, 0))
-    t_free, _ = best_wall(lambda: solve_rod(rod, field, [1.0], model="spatial"), REPEAT)
-    t_wall, res = best_wall(lambda: solve_rod(rod, field, [1.0], obstacles=[wall]), REPEAT)
+    t_free, _ = best(lambda: solve_rod(rod, field, [1.0], model="spatial"))
+    t_wall, res = best(lambda: solve_rod(rod, field, [1.0], obstacles=[wall]))
     # the free state in the mixed layout (positions and forces as unknowns, as contact has):
     # a field with a small gradient
     grad = coils.LinearField(B0=field.B0, gradient=np.diag([-0.5, 1.0, -0.5]) * 1e-6)
-    t_mixed, _ = best_wall(lambda: solve_rod(rod, grad, [1.0], model="spatial"), REPEAT)
+    t_mixed, _ = best(lambda: solve_rod(rod, grad, [1.0], model="spatial"))
     lines += [
         "| state (64 + 128 segments, Richardson) | time (s) | Newton iterations |",
         "|---|---|---|",
@@ -188,7 +223,7 @@ def contact(lines):
         a = np.pi / 2 * min(1.0, max(0.0, (length - 0.015) / 0.02))
         return coils.UniformField(B=0.01 * np.array([np.cos(a), np.sin(a), 0.0]))
 
-    t_ins, ins = best_wall(lambda: coilrod.insert(cath, vessel, lengths, schedule, nodes=48), 3)
+    t_ins, ins = best(lambda: coilrod.insert(cath, vessel, lengths, schedule, nodes=48), 3)
     force = np.linalg.norm(ins.wall_force, axis=1)
     lines += [
         f"Insertion through a 90 deg bend (radius 20 mm, lumen 2 mm), 50 steps, 48 segments: "
@@ -208,7 +243,12 @@ def iteration_cost(lines):
     from coilrod.rod import _compiled_spatial
 
     rod, field = _case()
-    lines += ["## 5. One Newton iteration of the 3D state", "", f"{clock_name()} time.", ""]
+    lines += [
+        "## 5. One Newton iteration of the 3D state",
+        "",
+        f"{clock_name()} time, best of 5.",
+        "",
+    ]
     lines += [
         "| segments | state (s) | Newton iterations | per iteration (ms) |",
         "|---|---|---|---|",
@@ -264,10 +304,18 @@ def iteration_cost(lines):
 
 
 def main():
+    global REPEAT, NODES
+    quick = bench_args(__doc__).quick
+    compile_at_once()
+    if quick:
+        REPEAT, NODES = 1, (64,)
     lines = ["# Spatial rod and contact benchmark", "", f"Machine: {machine_info()}", ""]
     planar_cases(lines)
     ours, ref = spatial_case(lines)
     pyelastica(lines, ours["ours"], ref)
+    if quick:
+        print("\n".join(lines))
+        return
     contact(lines)
     iteration_cost(lines)
     text = "\n".join(lines)

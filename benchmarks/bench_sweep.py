@@ -13,7 +13,13 @@ start-up is in the time); the LocalCluster is started once, before the runs, and
 reported separately.  The ceiling: the same run also measures how much faster two processes
 burn a pure-Python loop than one (on a shared or hyperthreaded machine, less than 2x).
 
+The ski-rental thresholds are 0 in this process (``_machine.compile_at_once``: kernels compile
+or load from numba's cache at their first call), and so in the local pool's forked workers; the
+Dask workers keep the defaults, which compile at once when numba's cache holds the kernel (the
+serial warm-up below fills it).
+
 Run:  python benchmarks/bench_sweep.py   (needs dask[distributed]: pip install -e ".[cluster]")
+      python benchmarks/bench_sweep.py --quick   (the light grid, one run, printed only)
 """
 
 from __future__ import annotations
@@ -28,7 +34,7 @@ import coilrod
 from coilrod.scene.cli import shipped_scenes
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _machine import machine_info  # noqa: E402
+from _machine import bench_args, compile_at_once, machine_info  # noqa: E402
 
 REPEAT = 3
 WORKERS = 2
@@ -75,8 +81,13 @@ def best_runs(fns: dict) -> dict:
     return best
 
 
-def main() -> str:
+def main(quick: bool = False) -> str:
     from distributed import Client, LocalCluster
+
+    global REPEAT
+    compile_at_once()
+    if quick:
+        REPEAT = 1
 
     lines = []
 
@@ -102,7 +113,7 @@ def main() -> str:
     try:
         out("| grid | executor | wall time (s) | points/s | speed-up over serial |")
         out("|---|---|---|---|---|")
-        for name, data in scenes().items():
+        for name, data in list(scenes().items())[: 1 if quick else None]:
             coilrod.sweep(data, {"robot.youngs_modulus": [1e6]}, workers=1, progress=False)
             runs = {
                 "serial (workers=1)": lambda d=data: coilrod.sweep(
@@ -142,7 +153,10 @@ def main() -> str:
 
 
 if __name__ == "__main__":
-    text = main()
+    quick = bench_args(__doc__).quick
+    text = main(quick)
+    if quick:
+        sys.exit()
     target = Path(__file__).parent / "results" / "sweep.md"
     target.parent.mkdir(parents=True, exist_ok=True)
     target.write_text(text)
