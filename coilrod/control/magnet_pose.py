@@ -134,7 +134,7 @@ class MagnetPoseResult:
     scout_solves : int
         Forward solves of the scout that gave the search its start (``model="real"`` with a
         finite magnet: the search in its point dipole's field on a coarse mesh, each solve
-        ~1/4 of a real one's CPU time; module docstring); 0 without a scout.
+        ~1/9 of a real one's CPU time, benchmarks/results/magnet_pose.md; module docstring); 0 without a scout.
     status : str
         "converged" (within ``tol``), "optimal" (not met: a KKT point of the miss, where the
         Gauss-Newton step within the bounds and off the reach, both linearised, predicts a
@@ -564,7 +564,7 @@ def _scout(p: _Problem, q0):
 #: than the thin band of tips is wide, and the scout ends on the wrong part of the pose
 #: curve), SCOUT_STEPS load steps, tolerance SCOUT_TOL L (the dipole's own tip is ~1e-3 L off
 #: the finite magnet's), at most SCOUT_SOLVES forward solves.  Each of its forward solves
-#: costs ~1/4 of a real one.
+#: costs ~1/9 of a real one (benchmarks/results/magnet_pose.md).
 SCOUT_NODES = 8
 SCOUT_STEPS = 3
 SCOUT_TOL = 1e-5
