@@ -236,6 +236,8 @@ class SpatialRod(DiscreteRod):
             self._b_uniform = np.asarray(field.B(self.clamp)[0], float)
         self.kl, self.ku, self._index = self._band_layout()
         self._p_ref = self._tau_ref = None
+        # the blocks of the last one-state contact tangent (:meth:`_every_active_band`)
+        self._kept = self._fresh = None
         if self.nt:  # the reference of the friction: the straight rod until a state is accepted
             self._p_ref = self.contact_points(self.straight()[None])[0]
             self._tau_ref = np.zeros((self.n, self.nc, 3))
@@ -373,6 +375,9 @@ class SpatialRod(DiscreteRod):
         else:  # the compiled pass (numpy's error model, silent) and band gathers only
             R, R1, ab, sym = self._assemble(U, S, tangent)
         ok = np.logical_and.reduce(np.isfinite(R), axis=1)
+        if self._fresh is not None:  # a one-state contact tangent: kept with its flag
+            fresh, self._fresh = self._fresh, None
+            self._kept = (*fresh, ok)
         phi = self.rotations(U)
         # |phi| <= sqrt(3) max|phi_a|: the norms only where that bound exceeds the limit
         if not _max(np.abs(phi), axis=None) <= self._turn_bound:
@@ -521,6 +526,28 @@ class SpatialRod(DiscreteRod):
         from .contact_predictor import event_fraction
 
         return event_fraction(self, U, dU)
+
+    def _every_active_band(self, u: np.ndarray, scale: float):
+        """The band storage and load rate (1, size) of the linearization at the state ``u``
+        (size,) and ``scale`` with every contact row the gap's (kappa times its gradient), from
+        the kept blocks of this problem's last one-state tangent if it was at that state
+        (a converged load step's: the prediction that follows starts there), else None.  The
+        force and moment rows depend on the multipliers alone, not on the complementarity
+        function, so the band is the one a linearization with every row active would build,
+        bitwise; None too where that linearization was not admissible."""
+        kept = self._kept
+        if kept is None:
+            return None
+        key, skey, blocks, (c_x, c_phi), R1, ok = kept
+        if not (
+            bool(ok[0])
+            and skey == np.array([scale], float).tobytes()
+            and key == np.asarray(u, float)[None].tobytes()
+        ):
+            return None
+        c_lam = np.zeros_like(blocks["c_lam"])
+        every = {**blocks, "c_x": c_x, "c_phi": c_phi, "c_lam": c_lam}
+        return self._scatter(1, every), R1
 
     def piecewise_prediction(self, u, scale, ds):
         """Prediction (size,) of the state at ``scale + ds`` from the converged state ``u``
@@ -963,6 +990,11 @@ class SpatialRod(DiscreteRod):
             # arrays of the workspace copied, the others are this call's own)
             args = (S, G, m.copy(), frames.copy(), blk[:, 1:, 8].copy(), diag, A_ab, None)
             return R, R1, ab, _Deferred(self._second_variation, args)
+        # one state of a frictionless contact: its blocks kept for a load step's prediction
+        # (:meth:`_every_active_band`; blk is the workspace's, overwritten by the next call)
+        keep = k == 1 and band and not self.nt
+        if keep:
+            blk = blk.copy()
         I3 = np.eye(3)
         blocks = {
             "clamp_phi": I3,
@@ -986,8 +1018,10 @@ class SpatialRod(DiscreteRod):
                 "f_phinext": blk[:, 1:, 9],
             }
         )
-        sym = self._contact_blocks(contact, frames, phi, blocks)
+        sym = self._contact_blocks(contact, frames, phi, blocks, keep)
         ab = self._scatter(k, blocks) if band else None
+        if keep:
+            self._fresh = (U.tobytes(), S.tobytes(), blocks, contact["every"], R1)
         # the second variation lazily here too (a contact solve's predictions and Newton
         # steps never count; the workspace's arrays copied)
         args = (S, G, m.copy(), frames.copy(), blocks["f_xnext"].copy(), diag, A_ab, sym)
@@ -1077,10 +1111,12 @@ class SpatialRod(DiscreteRod):
         da_dp = da_dp - r * (P - nd[..., None, None] * LH - _outer(normals, LHd))
         return Phi, tau, (d_tau, d_lam, -Dp @ da_dp)
 
-    def _contact_blocks(self, contact, frames, phi, blocks):
+    def _contact_blocks(self, contact, frames, phi, blocks, every=False):
         """Add the contact terms' Jacobian blocks to ``blocks`` (in place: the force and
         moment rows' blocks of the nodes, the multipliers' and friction rows' own blocks);
-        returns the pieces of the second variation (:meth:`_second_variation`)."""
+        returns the pieces of the second variation (:meth:`_second_variation`).  ``every``:
+        also the blocks ``c_x``, ``c_phi`` with every contact row the gap's (``kappa`` times
+        its gradient), as ``contact["every"]`` (:meth:`_every_active_band`)."""
         lam, gaps, normals, hess, arm = (contact[key] for key in ("lam", "gaps", "normals",
                                                                    "hess", "arm"))  # fmt: skip
         f_c, m_c, L = contact["f_c"], contact["m_c"], self.L
@@ -1125,6 +1161,8 @@ class SpatialRod(DiscreteRod):
             mc_d_sym = mc_d_sym + 0.5 * (arm_d + np.swapaxes(arm_d, -1, -2))
             m_c = m_c + contact["m_arm"]
         ck = (d_gap * self.kappa)[..., None]
+        if every:  # d_gap = 1 for every row: the same products as below, bitwise
+            contact["every"] = (self.kappa * gx, (self.kappa * gd) @ Jl)
         blocks.update(
             {
                 "m_x": m_x,
