@@ -107,7 +107,7 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
         if not bool(every.ok[0]):
             return None
         kept = every.tangent.parts, every.load_rate
-    g = problem.surface_gaps(u.reshape(1, n, nv)[:, :, 0:3], problem.frames(u[None]))[0]
+    g = problem._state_gaps(u[None])[0]
     bi, ci = _contact_entries(problem)
     base, load_rate = kept
     active_rows = base[bi, ci]  # (n-1, nc, 6 + nc)
@@ -124,7 +124,7 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
         return r if np.all(np.isfinite(r)) else None
 
     def gaps(x):
-        return problem.surface_gaps(x.reshape(1, n, nv)[:, :, 0:3], problem.frames(x[None]))[0, 1:]
+        return problem._state_gaps(x[None])[0, 1:]
 
     lam0 = u.reshape(n, nv)[1:, 9 : 9 + nc]
     active = problem.kappa * g[1:] < lam0

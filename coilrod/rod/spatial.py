@@ -86,6 +86,21 @@ def _outer(a, b):
     return a[..., :, None] * b[..., None, :]
 
 
+def _tangents(phi: np.ndarray, R0: np.ndarray) -> np.ndarray:
+    """Node tangents ``expm(phi) R0 e_1`` (..., 3) of rotation vectors phi (..., 3) by
+    Rodrigues' formula on the vector (the frames' first column without the whole frames;
+    the same to rounding)."""
+    r = R0[:, 0]
+    t2 = np.einsum("...i,...i->...", phi, phi)
+    theta = np.sqrt(t2)
+    small = theta < 0.05  # so3's series below this angle
+    t = np.where(small, 1.0, theta)
+    a = np.where(small, 1 - t2 / 6 * (1 - t2 / 20 * (1 - t2 / 42)), np.sin(t) / t)
+    b = np.where(small, 0.5 - t2 / 24 * (1 - t2 / 30 * (1 - t2 / 56)), (1 - np.cos(t)) / (t * t))
+    pr = cross(phi, np.broadcast_to(r, phi.shape))
+    return r + a[..., None] * pr + b[..., None] * cross(phi, pr)
+
+
 def _sym_term(a, b):
     """Hessian of ``b . (exp(hat(d)) a)`` in the world rotation d at 0: (a b^T + b a^T) / 2
     - (a . b) I."""
@@ -238,6 +253,7 @@ class SpatialRod(DiscreteRod):
         self._p_ref = self._tau_ref = None
         # the blocks of the last one-state contact tangent (:meth:`_every_active_band`)
         self._kept = self._fresh = None
+        self._gaps_memo: dict = {}  # state -> surface gaps (_state_gaps)
         if self.nt:  # the reference of the friction: the straight rod until a state is accepted
             self._p_ref = self.contact_points(self.straight()[None])[0]
             self._tau_ref = np.zeros((self.n, self.nc, 3))
@@ -508,9 +524,8 @@ class SpatialRod(DiscreteRod):
         step limited to it (:attr:`close_first`) ends on the wall instead of overshooting
         it, and the next one sees the contact; the load stepping's contact events
         (:meth:`event_fraction`) use it for the closing points."""
-        g0 = self.surface_gaps(self.node_positions(U), self.frames(U))
-        U1 = U + dU
-        g1 = self.surface_gaps(self.node_positions(U1), self.frames(U1))
+        g0 = self._state_gaps(U)
+        g1 = self._state_gaps(U + dU)
         closing = (g0 > 1e-6) & (g1 < 0.0)
         with np.errstate(all="ignore"):
             frac = np.where(closing, g0 / (g0 - g1), 1.0)
@@ -665,8 +680,43 @@ class SpatialRod(DiscreteRod):
         """Gaps of the rod's surface at the contact points of a rod given by its node
         positions x (k, n, 3) (units of L relative to the clamp) and frames (k, n, 3, 3)
         (e.g. a Richardson extrapolation): (k, n, nc), units of L."""
-        V = np.zeros(x.shape[:2] + (self.nv,))
-        return self._contact_terms(V, x, frames, False)[1]
+        if not self._round:  # a rectangle's support along the normal: the normals too
+            V = np.zeros(x.shape[:2] + (self.nv,))
+            return self._contact_terms(V, x, frames, False)[1]
+        return self._round_gaps(x, frames[..., :, 0])
+
+    def _round_gaps(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """:meth:`surface_gaps` of a round section from the node tangents t (k, n, 3): the
+        gaps alone (no normals), the same numbers as :meth:`_contact_terms`'."""
+        k, n = x.shape[:2]
+        c, _ = self._contact_geometry()
+        pts = self.points(x + c[:, None] * t).reshape(-1, 3)
+        gaps = np.empty((k, n, self.nc))
+        for o, ob in enumerate(self.obstacles):
+            g = ob.evaluate(pts, order=0)[0] if hasattr(ob, "evaluate") else ob.gap(pts)
+            gaps[:, :, o] = np.asarray(g, float).reshape(k, n) / self.L
+        gaps -= self._half[0]
+        return gaps
+
+    def _state_gaps(self, U: np.ndarray) -> np.ndarray:
+        """Surface gaps of states (k, size): :meth:`surface_gaps` at their node positions and
+        frames, (k, n, nc), units of L; the last few stacks remembered (a load step's event
+        test and its prediction ask for the converged state's), read-only."""
+        U = np.atleast_2d(U)
+        key = (U.shape, U.tobytes())
+        memo = self._gaps_memo
+        hit = memo.pop(key, None)
+        if hit is None:
+            if self._round:  # the tangents alone (Rodrigues on R0's first column)
+                t = _tangents(self.rotations(U), self.R0)
+                hit = self._round_gaps(self.node_positions(U), t)
+            else:
+                hit = self.surface_gaps(self.node_positions(U), self.frames(U))
+            hit.flags.writeable = False
+            if len(memo) >= 4:
+                del memo[next(iter(memo))]  # the oldest
+        memo[key] = hit  # (re)inserted last: the most recent
+        return hit
 
     def contact_state(self, U: np.ndarray, frames: np.ndarray | None = None):
         """Contact of states (k, size) at the contact points (:meth:`contact_points`): force
