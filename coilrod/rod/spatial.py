@@ -703,20 +703,26 @@ class SpatialRod(DiscreteRod):
         frames, (k, n, nc), units of L; the last few stacks remembered (a load step's event
         test and its prediction ask for the converged state's), read-only."""
         U = np.atleast_2d(U)
-        key = (U.shape, U.tobytes())
-        memo = self._gaps_memo
-        hit = memo.pop(key, None)
+        hit = self._gaps_memo.get((U.shape, U.tobytes()))
         if hit is None:
             if self._round:  # the tangents alone (Rodrigues on R0's first column)
                 t = _tangents(self.rotations(U), self.R0)
                 hit = self._round_gaps(self.node_positions(U), t)
             else:
                 hit = self.surface_gaps(self.node_positions(U), self.frames(U))
-            hit.flags.writeable = False
-            if len(memo) >= 4:
-                del memo[next(iter(memo))]  # the oldest
-        memo[key] = hit  # (re)inserted last: the most recent
-        return hit
+        return self._remember_gaps(U, hit)
+
+    def _remember_gaps(self, U: np.ndarray, gaps: np.ndarray) -> np.ndarray:
+        """Remember the surface gaps (k, n, nc) of states U (k, size) for
+        :meth:`_state_gaps` (the last four stacks; a linearization's too: a converged
+        state's event test then needs no search), read-only; returns them."""
+        key = (U.shape, U.tobytes())
+        memo = self._gaps_memo
+        if memo.pop(key, None) is None and len(memo) >= 4:
+            del memo[next(iter(memo))]  # the oldest
+        gaps.flags.writeable = False
+        memo[key] = gaps  # (re)inserted last: the most recent
+        return gaps
 
     def contact_state(self, U: np.ndarray, frames: np.ndarray | None = None):
         """Contact of states (k, size) at the contact points (:meth:`contact_points`): force
@@ -1028,6 +1034,8 @@ class SpatialRod(DiscreteRod):
             diag, A_ab, m,
         )  # fmt: skip
         contact = self._contact_rows(V, X, frames, R, tangent) if self.nc else None
+        if contact is not None and k == 1:  # the state's gaps for its event tests
+            self._remember_gaps(U, contact["gaps"].copy())
         R = R.reshape(k, -1)
         R1 = R1.reshape(k, -1)
         if not tangent:
