@@ -625,14 +625,19 @@ class SpatialRod(DiscreteRod):
         omega (n,) (units of L): the corners of the rod's polygon ``p_j = x_j + (h_j/2) t_j``
         (j < N; node j's straight piece ends there) and the tip ``p_N = x_N``; weights
         ``omega_j = h_j``, the last corner's and the tip's ``h_{N-1}/2`` (node 0's corner is
-        held by the clamp and carries no multiplier)."""
-        h, n = self.mesh.h, self.n
-        c = np.zeros(n)
-        c[:-1] = 0.5 * h
-        om = np.zeros(n)
-        om[:-1] = h
-        om[-2] = om[-1] = 0.5 * h[-1]
-        return c, om
+        held by the clamp and carries no multiplier).  Read-only, formed once (the mesh is
+        the problem's)."""
+        out = self.__dict__.get("_geometry")
+        if out is None:
+            h, n = self.mesh.h, self.n
+            c = np.zeros(n)
+            c[:-1] = 0.5 * h
+            om = np.zeros(n)
+            om[:-1] = h
+            om[-2] = om[-1] = 0.5 * h[-1]
+            c.flags.writeable = om.flags.writeable = False
+            out = self.__dict__["_geometry"] = (c, om)
+        return out
 
     def contact_points(self, U: np.ndarray, frames: np.ndarray | None = None) -> np.ndarray:
         """Contact points of states (k, size): the polygon's corners and the tip (k, n, 3),
@@ -1105,7 +1110,8 @@ class SpatialRod(DiscreteRod):
         R[:, :-1, 6:9] -= om[1:, None] * f_c[:, 1:]
         R[:, 1:, 3:6] += (m_c + m_arm)[:, 1:]
         ol, ot = 9, 9 + self.nc
-        R[:, :, ol:ot] = self._ncp(lam, gaps)[0]
+        ncp = self._ncp(lam, gaps)  # (its partials for _contact_blocks)
+        R[:, :, ol:ot] = ncp[0]
         R[:, 0, ol:ot] = lam[:, 0]
         if friction is not None:
             k, n = V.shape[:2]
@@ -1113,7 +1119,7 @@ class SpatialRod(DiscreteRod):
             R[:, 0, ot:] = friction[1][:, 0].reshape(k, -1)
         return {
             "lam": lam, "gaps": gaps, "normals": normals, "hess": hess, "arm": arm,
-            "f_c": f_c, "m_c": m_c, "m_arm": m_arm, "friction": friction,
+            "f_c": f_c, "m_c": m_c, "m_arm": m_arm, "friction": friction, "ncp": ncp,
         }  # fmt: skip
 
     def _friction_rows(self, V, X, frames, lam, normals, hess):
@@ -1192,7 +1198,7 @@ class SpatialRod(DiscreteRod):
         mc_d = mc_d + (oc * cc[1:, None, None]) * (That @ LH @ That)
         mc_d_sym = mc_d
         mc_d = mc_d - 0.5 * hat(m_c[:, 1:])
-        _, d_lam, d_gap = self._ncp(lam[:, 1:], gaps[:, 1:])
+        d_lam, d_gap = (a[:, 1:] for a in contact["ncp"][1:])  # (elementwise: the free nodes')
         c_lam = np.zeros((k, n - 1, nc, nc))
         c_lam[..., np.arange(nc), np.arange(nc)] = d_lam
         n_t = np.swapaxes(normals[:, 1:], -1, -2)  # (k, n-1, 3, nc)
