@@ -88,17 +88,25 @@ def _outer(a, b):
 
 def _tangents(phi: np.ndarray, R0: np.ndarray) -> np.ndarray:
     """Node tangents ``expm(phi) R0 e_1`` (..., 3) of rotation vectors phi (..., 3) by
-    Rodrigues' formula on the vector (the frames' first column without the whole frames;
-    the same to rounding)."""
+    Rodrigues' formula on the vector, ``cos(t) r + sin(t)/t phi x r + (1 - cos t)/t^2
+    (phi . r) phi`` with ``r = R0 e_1`` and ``t = |phi|`` (the frames' first column without
+    the whole frames; the same to rounding; so3's series below 0.05 rad)."""
     r = R0[:, 0]
     t2 = np.einsum("...i,...i->...", phi, phi)
     theta = np.sqrt(t2)
-    small = theta < 0.05  # so3's series below this angle
-    t = np.where(small, 1.0, theta)
-    a = np.where(small, 1 - t2 / 6 * (1 - t2 / 20 * (1 - t2 / 42)), np.sin(t) / t)
-    b = np.where(small, 0.5 - t2 / 24 * (1 - t2 / 30 * (1 - t2 / 56)), (1 - np.cos(t)) / (t * t))
-    pr = cross(phi, np.broadcast_to(r, phi.shape))
-    return r + a[..., None] * pr + b[..., None] * cross(phi, pr)
+    small = theta < 0.05
+    ts = np.where(small, 1.0, theta)
+    cos = np.cos(ts)
+    a = np.sin(ts) / ts
+    b = (1.0 - cos) / (ts * ts)
+    if small.any():  # (the clamp's node at least)
+        s2 = t2[small]
+        a[small] = 1 - s2 / 6 * (1 - s2 / 20 * (1 - s2 / 42))
+        b[small] = 0.5 - s2 / 24 * (1 - s2 / 30 * (1 - s2 / 56))
+        cos[small] = 1.0 - b[small] * s2
+    # phi x r = phi @ M, the rows of M the unit vectors' cross products with r
+    M = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+    return cos[..., None] * r + a[..., None] * (phi @ M) + (b * (phi @ r))[..., None] * phi
 
 
 def _sym_term(a, b):
