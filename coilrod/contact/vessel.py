@@ -638,7 +638,8 @@ class Vessel(Obstacle):
         U = U[:, back]
         if rho_all is None:
             rho_all = self._ball(np.broadcast_to(everything, (n, K)), U, 0)[0]
-        G = rho_all - np.linalg.norm(p[:, None, :] - X[:, back], axis=-1)
+        q = p[:, None, :] - X[:, back]
+        G = rho_all - np.sqrt(np.add.reduce(q * q, axis=-1))  # np.linalg.norm's own sum
         # the choice of _best: a piece whose maximiser is interior, within rounding
         best = G.max(axis=1)
         inside = (U > lo_all) & (U < hi_all)
@@ -691,7 +692,7 @@ class Vessel(Obstacle):
         if x is None:
             x, xu, xuu = self._pieces.curve(j, u, 2)
         r = points - x
-        d = np.linalg.norm(r, axis=1)
+        d = np.sqrt(np.add.reduce(r * r, axis=1))  # (np.linalg.norm's sum, bitwise)
         zero = d < ON_LINE
         on_line = zero.any()
         rh = r / (np.where(zero, 1.0, d) if on_line else d)[:, None]
