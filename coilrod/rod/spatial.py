@@ -260,7 +260,7 @@ class SpatialRod(DiscreteRod):
         self.kl, self.ku, self._index = self._band_layout()
         self._p_ref = self._tau_ref = None
         # the blocks of the last one-state contact tangent (:meth:`_every_active_band`)
-        self._kept = self._fresh = None
+        self._kept = None
         self._gaps_memo: dict = {}  # state -> surface gaps (_state_gaps)
         if self.nt:  # the reference of the friction: the straight rod until a state is accepted
             self._p_ref = self.contact_points(self.straight()[None])[0]
@@ -399,9 +399,6 @@ class SpatialRod(DiscreteRod):
         else:  # the compiled pass (numpy's error model, silent) and band gathers only
             R, R1, ab, sym = self._assemble(U, S, tangent)
         ok = np.logical_and.reduce(np.isfinite(R), axis=1)
-        if self._fresh is not None:  # a one-state contact tangent: kept with its flag
-            fresh, self._fresh = self._fresh, None
-            self._kept = (*fresh, ok)
         phi = self.rotations(U)
         # |phi| <= sqrt(3) max|phi_a|: the norms only where that bound exceeds the limit
         if not _max(np.abs(phi), axis=None) <= self._turn_bound:
@@ -561,12 +558,15 @@ class SpatialRod(DiscreteRod):
         kept = self._kept
         if kept is None:
             return None
-        key, skey, blocks, (c_x, c_phi), R1, ok = kept
+        key, skey, blocks, (c_x, c_phi), R1, R = kept
         if not (
-            bool(ok[0])
-            and skey == np.array([scale], float).tobytes()
+            skey == np.array([scale], float).tobytes()
             and key == np.asarray(u, float)[None].tobytes()
         ):
+            return None
+        phi = self.rotations(np.asarray(u, float))
+        turned = np.sqrt(np.einsum("ni,ni->n", phi, phi)).max()
+        if not (np.isfinite(R).all() and turned <= self.max_turn):  # (linearize's ok)
             return None
         c_lam = np.zeros_like(blocks["c_lam"])
         every = {**blocks, "c_x": c_x, "c_phi": c_phi, "c_lam": c_lam}
@@ -1092,7 +1092,7 @@ class SpatialRod(DiscreteRod):
         sym = self._contact_blocks(contact, frames, phi, blocks, keep)
         ab = self._scatter(k, blocks) if band else None
         if keep:
-            self._fresh = (U.tobytes(), S.tobytes(), blocks, contact["every"], R1)
+            self._kept = (U.tobytes(), S.tobytes(), blocks, contact["every"], R1, R)
         # the second variation lazily here too (a contact solve's predictions and Newton
         # steps never count; the workspace's arrays copied)
         args = (S, G, m.copy(), frames.copy(), blocks["f_xnext"].copy(), diag, A_ab, sym)
