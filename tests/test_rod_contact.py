@@ -591,3 +591,22 @@ def test_piecewise_prediction_across_the_tip_closing():
     change = P.distance((u1 - u0)[None])[0]
     assert P.distance((pred - u1)[None])[0] < 0.02 * change
     assert P.distance((plain - u1)[None])[0] > 0.5 * change
+    # the prediction above linearized at u0 with every contact row the gap's; after a tangent
+    # at u0 (``lin``) it reuses that one's blocks: the same band as a fresh linearization with
+    # every row active (bitwise), so the same prediction
+    from coilrod.rod.contact_predictor import _all_active
+
+    kept = P._every_active_band(u0, 0.05)
+    assert kept is not None
+    assert P._every_active_band(u0, 0.15) is None  # another scale: not the kept tangent's
+    P._ncp = _all_active
+    every = P.linearize(u0[None], np.array([0.05]))
+    del P._ncp
+    np.testing.assert_array_equal(kept[0], every.tangent.parts)
+    np.testing.assert_array_equal(kept[1], every.load_rate)
+    np.testing.assert_array_equal(P.piecewise_prediction(u0, 0.05, 0.1), pred)
+    # the event test's gaps by state (node tangents by Rodrigues, remembered): the surface
+    # gaps at the state's frames, to rounding
+    for u in (u0, u1):
+        ref = P.surface_gaps(P.node_positions(u[None]), P.frames(u[None]))
+        np.testing.assert_allclose(P._state_gaps(u[None]), ref, rtol=0, atol=1e-15)

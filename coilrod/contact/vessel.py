@@ -563,24 +563,31 @@ class Vessel(Obstacle):
 
     def _closed_form_groups(self):
         """The candidate pieces of every point when all are in closed form and few (no
-        KD-tree), cached (state-independent): ``(everything, groups, lo, hi, rho)`` -- the
-        candidates, their columns and fields by kind (with a flag for a sloped ball), their
-        parameter ranges, and their ball radii where those are constant (else None)."""
+        KD-tree), cached (state-independent): ``(everything, groups, lo, hi, rho, back)`` --
+        the candidates, their fields by kind (with a flag for a sloped ball) in kind order
+        (lines, then arcs: each kind's columns one contiguous slice), their parameter ranges
+        and ball radii where those are constant (else None) in that order, and ``back``, the
+        candidates' columns in kind order (the search ranks them in the candidates' order)."""
         groups = self.__dict__.get("_groups_cache")
         if groups is None:
             pcs, ball = self._pieces, self._ball
             everything = np.concatenate([np.arange(self._m), self._extra])
-            groups = []
+            order = np.concatenate(
+                [np.flatnonzero(pcs.kind[everything] == kind) for kind in (LINE, ARC)]
+            )
+            kinds, start = [], 0
             for kind in (LINE, ARC):
-                col = np.flatnonzero(pcs.kind[everything] == kind)
-                jj = everything[col]
+                count = int(np.count_nonzero(pcs.kind[everything] == kind))
+                jj = everything[order[start : start + count]]
                 fields = (pcs.lo, pcs.hi, pcs.ref, pcs.a, pcs.b, pcs.c, pcs.rho, self._cone_slope)
                 sloped = bool(np.any(self._cone_slope[jj]))
-                groups.append((kind, col, sloped, *(f[jj] for f in fields)))
+                kinds.append((kind, slice(start, start + count), sloped, *(f[jj] for f in fields)))
+                start += count
             smooth = ball.smooth is not None and bool(np.any(ball.smooth_mask[everything]))
             # a constant ball: value + 0 * (u - anchor) is the value exactly
             rho = None if smooth or np.any(ball.slope[everything]) else ball.value[everything]
-            groups = (everything, groups, pcs.lo[everything], pcs.hi[everything], rho)
+            back = np.argsort(order)  # kind-order column of each candidate
+            groups = (everything, kinds, pcs.lo[everything], pcs.hi[everything], rho, order, back)
             self.__dict__["_groups_cache"] = groups
         return groups
 
@@ -588,15 +595,17 @@ class Vessel(Obstacle):
         """:meth:`_locate` and the centreline's point and derivatives at the best pieces, all
         pairs at once when every candidate piece is a line or an arc in closed form (the
         formulas of :meth:`Pieces.start_guess` and :meth:`Pieces.curve`): (gap, piece,
-        parameter, c, c_u, c_uu)."""
-        everything, groups, lo_all, hi_all, rho_all = self._closed_form_groups()
+        parameter, c, c_u, c_uu).  The pairs are formed kind by kind in contiguous columns
+        (kind order); the gaps and parameters are then ranked in the candidates' own order,
+        and the centreline's point and derivatives gathered at the chosen pair alone."""
+        everything, kinds, lo_all, hi_all, rho_all, order, back = self._closed_form_groups()
         n, K = len(p), len(everything)
         U = np.empty((n, K))
         X = np.empty((n, K, 3))
         XU = np.empty((n, K, 3))
         XUU = np.zeros((n, K, 3))
-        for kind, col, sloped, lo, hi, ref, a, b, c, rho, slope in groups:
-            if col.size == 0:
+        for kind, col, sloped, lo, hi, ref, a, b, c, rho, slope in kinds:
+            if col.start == col.stop:
                 continue
             q = p[:, None, :] - a  # (n, k, 3)
             if kind == LINE:
@@ -625,9 +634,12 @@ class Vessel(Obstacle):
                 XU[:, col] = cos * c - sin * b
                 XUU[:, col] = -radial / rho[:, None]
             U[:, col] = u
+        # back to the candidates' order (the ranking's ties go to the first column)
+        U = U[:, back]
         if rho_all is None:
             rho_all = self._ball(np.broadcast_to(everything, (n, K)), U, 0)[0]
-        G = rho_all - np.linalg.norm(p[:, None, :] - X, axis=-1)
+        q = p[:, None, :] - X[:, back]
+        G = rho_all - np.sqrt(np.add.reduce(q * q, axis=-1))  # np.linalg.norm's own sum
         # the choice of _best: a piece whose maximiser is interior, within rounding
         best = G.max(axis=1)
         inside = (U > lo_all) & (U < hi_all)
@@ -637,13 +649,14 @@ class Vessel(Obstacle):
             tie.any(axis=1), np.argmax(np.where(tie, G, -np.inf), axis=1), np.argmax(G, axis=1)
         )
         rows = np.arange(n)
+        kcol = back[col]
         return (
             G[rows, col],
             everything[col],
             U[rows, col],
-            X[rows, col],
-            XU[rows, col],
-            XUU[rows, col],
+            X[rows, kcol],
+            XU[rows, kcol],
+            XUU[rows, kcol],
         )
 
     def _located(self, points: np.ndarray):
@@ -679,7 +692,7 @@ class Vessel(Obstacle):
         if x is None:
             x, xu, xuu = self._pieces.curve(j, u, 2)
         r = points - x
-        d = np.linalg.norm(r, axis=1)
+        d = np.sqrt(np.add.reduce(r * r, axis=1))  # (np.linalg.norm's sum, bitwise)
         zero = d < ON_LINE
         on_line = zero.any()
         rh = r / (np.where(zero, 1.0, d) if on_line else d)[:, None]

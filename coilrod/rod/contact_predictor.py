@@ -97,20 +97,23 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     # force and moment rows depend on the multipliers alone (not on which rows are active),
     # and each rate below overwrites all the contact rows by the active set's, so this one
     # tangent serves every switch.
-    problem._ncp = _all_active  # (an instance attribute: the class's method is untouched)
-    try:
-        every = problem.linearize(u[None], np.array([scale]))
-    finally:
-        del problem._ncp
-    if not bool(every.ok[0]):
-        return None
-    g = problem.surface_gaps(u.reshape(1, n, nv)[:, :, 0:3], problem.frames(u[None]))[0]
+    kept = problem._every_active_band(u, scale)  # the converged step's blocks, if at u
+    if kept is None:
+        problem._ncp = _all_active  # (an instance attribute: the class's method is untouched)
+        try:
+            every = problem.linearize(u[None], np.array([scale]))
+        finally:
+            del problem._ncp
+        if not bool(every.ok[0]):
+            return None
+        kept = every.tangent.parts, every.load_rate
+    g = problem._state_gaps(u[None])[0]
     bi, ci = _contact_entries(problem)
-    base = every.tangent.parts
+    base, load_rate = kept
     active_rows = base[bi, ci]  # (n-1, nc, 6 + nc)
     inactive_rows = np.zeros_like(active_rows)
     inactive_rows[..., 6:] = np.eye(nc)
-    rhs = -np.asarray(every.load_rate, float)  # (1, size)
+    rhs = -np.asarray(load_rate, float)  # (1, size)
     kl, ku = problem.kl, problem.ku
 
     def rate(active):
@@ -121,7 +124,7 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
         return r if np.all(np.isfinite(r)) else None
 
     def gaps(x):
-        return problem.surface_gaps(x.reshape(1, n, nv)[:, :, 0:3], problem.frames(x[None]))[0, 1:]
+        return problem._state_gaps(x[None])[0, 1:]
 
     lam0 = u.reshape(n, nv)[1:, 9 : 9 + nc]
     active = problem.kappa * g[1:] < lam0

@@ -86,6 +86,29 @@ def _outer(a, b):
     return a[..., :, None] * b[..., None, :]
 
 
+def _tangents(phi: np.ndarray, R0: np.ndarray) -> np.ndarray:
+    """Node tangents ``expm(phi) R0 e_1`` (..., 3) of rotation vectors phi (..., 3) by
+    Rodrigues' formula on the vector, ``cos(t) r + sin(t)/t phi x r + (1 - cos t)/t^2
+    (phi . r) phi`` with ``r = R0 e_1`` and ``t = |phi|`` (the frames' first column without
+    the whole frames; the same to rounding; so3's series below 0.05 rad)."""
+    r = R0[:, 0]
+    t2 = np.einsum("...i,...i->...", phi, phi)
+    theta = np.sqrt(t2)
+    small = theta < 0.05
+    ts = np.where(small, 1.0, theta)
+    cos = np.cos(ts)
+    a = np.sin(ts) / ts
+    b = (1.0 - cos) / (ts * ts)
+    if small.any():  # (the clamp's node at least)
+        s2 = t2[small]
+        a[small] = 1 - s2 / 6 * (1 - s2 / 20 * (1 - s2 / 42))
+        b[small] = 0.5 - s2 / 24 * (1 - s2 / 30 * (1 - s2 / 56))
+        cos[small] = 1.0 - b[small] * s2
+    # phi x r = phi @ M, the rows of M the unit vectors' cross products with r
+    M = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+    return cos[..., None] * r + a[..., None] * (phi @ M) + (b * (phi @ r))[..., None] * phi
+
+
 def _sym_term(a, b):
     """Hessian of ``b . (exp(hat(d)) a)`` in the world rotation d at 0: (a b^T + b a^T) / 2
     - (a . b) I."""
@@ -236,6 +259,9 @@ class SpatialRod(DiscreteRod):
             self._b_uniform = np.asarray(field.B(self.clamp)[0], float)
         self.kl, self.ku, self._index = self._band_layout()
         self._p_ref = self._tau_ref = None
+        # the blocks of the last one-state contact tangent (:meth:`_every_active_band`)
+        self._kept = None
+        self._gaps_memo: dict = {}  # state -> surface gaps (_state_gaps)
         if self.nt:  # the reference of the friction: the straight rod until a state is accepted
             self._p_ref = self.contact_points(self.straight()[None])[0]
             self._tau_ref = np.zeros((self.n, self.nc, 3))
@@ -503,9 +529,8 @@ class SpatialRod(DiscreteRod):
         step limited to it (:attr:`close_first`) ends on the wall instead of overshooting
         it, and the next one sees the contact; the load stepping's contact events
         (:meth:`event_fraction`) use it for the closing points."""
-        g0 = self.surface_gaps(self.node_positions(U), self.frames(U))
-        U1 = U + dU
-        g1 = self.surface_gaps(self.node_positions(U1), self.frames(U1))
+        g0 = self._state_gaps(U)
+        g1 = self._state_gaps(U + dU)
         closing = (g0 > 1e-6) & (g1 < 0.0)
         with np.errstate(all="ignore"):
             frac = np.where(closing, g0 / (g0 - g1), 1.0)
@@ -521,6 +546,31 @@ class SpatialRod(DiscreteRod):
         from .contact_predictor import event_fraction
 
         return event_fraction(self, U, dU)
+
+    def _every_active_band(self, u: np.ndarray, scale: float):
+        """The band storage and load rate (1, size) of the linearization at the state ``u``
+        (size,) and ``scale`` with every contact row the gap's (kappa times its gradient), from
+        the kept blocks of this problem's last one-state tangent if it was at that state
+        (a converged load step's: the prediction that follows starts there), else None.  The
+        force and moment rows depend on the multipliers alone, not on the complementarity
+        function, so the band is the one a linearization with every row active would build,
+        bitwise; None too where that linearization was not admissible."""
+        kept = self._kept
+        if kept is None:
+            return None
+        key, skey, blocks, (c_x, c_phi), R1, R = kept
+        if not (
+            skey == np.array([scale], float).tobytes()
+            and key == np.asarray(u, float)[None].tobytes()
+        ):
+            return None
+        phi = self.rotations(np.asarray(u, float))
+        turned = np.sqrt(np.einsum("ni,ni->n", phi, phi)).max()
+        if not (np.isfinite(R).all() and turned <= self.max_turn):  # (linearize's ok)
+            return None
+        c_lam = np.zeros_like(blocks["c_lam"])
+        every = {**blocks, "c_x": c_x, "c_phi": c_phi, "c_lam": c_lam}
+        return self._scatter(1, every), R1
 
     def piecewise_prediction(self, u, scale, ds):
         """Prediction (size,) of the state at ``scale + ds`` from the converged state ``u``
@@ -583,14 +633,19 @@ class SpatialRod(DiscreteRod):
         omega (n,) (units of L): the corners of the rod's polygon ``p_j = x_j + (h_j/2) t_j``
         (j < N; node j's straight piece ends there) and the tip ``p_N = x_N``; weights
         ``omega_j = h_j``, the last corner's and the tip's ``h_{N-1}/2`` (node 0's corner is
-        held by the clamp and carries no multiplier)."""
-        h, n = self.mesh.h, self.n
-        c = np.zeros(n)
-        c[:-1] = 0.5 * h
-        om = np.zeros(n)
-        om[:-1] = h
-        om[-2] = om[-1] = 0.5 * h[-1]
-        return c, om
+        held by the clamp and carries no multiplier).  Read-only, formed once (the mesh is
+        the problem's)."""
+        out = self.__dict__.get("_geometry")
+        if out is None:
+            h, n = self.mesh.h, self.n
+            c = np.zeros(n)
+            c[:-1] = 0.5 * h
+            om = np.zeros(n)
+            om[:-1] = h
+            om[-2] = om[-1] = 0.5 * h[-1]
+            c.flags.writeable = om.flags.writeable = False
+            out = self.__dict__["_geometry"] = (c, om)
+        return out
 
     def contact_points(self, U: np.ndarray, frames: np.ndarray | None = None) -> np.ndarray:
         """Contact points of states (k, size): the polygon's corners and the tip (k, n, 3),
@@ -638,8 +693,49 @@ class SpatialRod(DiscreteRod):
         """Gaps of the rod's surface at the contact points of a rod given by its node
         positions x (k, n, 3) (units of L relative to the clamp) and frames (k, n, 3, 3)
         (e.g. a Richardson extrapolation): (k, n, nc), units of L."""
-        V = np.zeros(x.shape[:2] + (self.nv,))
-        return self._contact_terms(V, x, frames, False)[1]
+        if not self._round:  # a rectangle's support along the normal: the normals too
+            V = np.zeros(x.shape[:2] + (self.nv,))
+            return self._contact_terms(V, x, frames, False)[1]
+        return self._round_gaps(x, frames[..., :, 0])
+
+    def _round_gaps(self, x: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """:meth:`surface_gaps` of a round section from the node tangents t (k, n, 3): the
+        gaps alone (no normals), the same numbers as :meth:`_contact_terms`'."""
+        k, n = x.shape[:2]
+        c, _ = self._contact_geometry()
+        pts = self.points(x + c[:, None] * t).reshape(-1, 3)
+        gaps = np.empty((k, n, self.nc))
+        for o, ob in enumerate(self.obstacles):
+            g = ob.evaluate(pts, order=0)[0] if hasattr(ob, "evaluate") else ob.gap(pts)
+            gaps[:, :, o] = np.asarray(g, float).reshape(k, n) / self.L
+        gaps -= self._half[0]
+        return gaps
+
+    def _state_gaps(self, U: np.ndarray) -> np.ndarray:
+        """Surface gaps of states (k, size): :meth:`surface_gaps` at their node positions and
+        frames, (k, n, nc), units of L; the last few stacks remembered (a load step's event
+        test and its prediction ask for the converged state's), read-only."""
+        U = np.atleast_2d(U)
+        hit = self._gaps_memo.get((U.shape, U.tobytes()))
+        if hit is None:
+            if self._round:  # the tangents alone (Rodrigues on R0's first column)
+                t = _tangents(self.rotations(U), self.R0)
+                hit = self._round_gaps(self.node_positions(U), t)
+            else:
+                hit = self.surface_gaps(self.node_positions(U), self.frames(U))
+        return self._remember_gaps(U, hit)
+
+    def _remember_gaps(self, U: np.ndarray, gaps: np.ndarray) -> np.ndarray:
+        """Remember the surface gaps (k, n, nc) of states U (k, size) for
+        :meth:`_state_gaps` (the last four stacks; a linearization's too: a converged
+        state's event test then needs no search), read-only; returns them."""
+        key = (U.shape, U.tobytes())
+        memo = self._gaps_memo
+        if memo.pop(key, None) is None and len(memo) >= 4:
+            del memo[next(iter(memo))]  # the oldest
+        gaps.flags.writeable = False
+        memo[key] = gaps  # (re)inserted last: the most recent
+        return gaps
 
     def contact_state(self, U: np.ndarray, frames: np.ndarray | None = None):
         """Contact of states (k, size) at the contact points (:meth:`contact_points`): force
@@ -951,6 +1047,8 @@ class SpatialRod(DiscreteRod):
             diag, A_ab, m,
         )  # fmt: skip
         contact = self._contact_rows(V, X, frames, R, tangent) if self.nc else None
+        if contact is not None and k == 1:  # the state's gaps for its event tests
+            self._remember_gaps(U, contact["gaps"].copy())
         R = R.reshape(k, -1)
         R1 = R1.reshape(k, -1)
         if not tangent:
@@ -963,6 +1061,11 @@ class SpatialRod(DiscreteRod):
             # arrays of the workspace copied, the others are this call's own)
             args = (S, G, m.copy(), frames.copy(), blk[:, 1:, 8].copy(), diag, A_ab, None)
             return R, R1, ab, _Deferred(self._second_variation, args)
+        # one state of a frictionless contact: its blocks kept for a load step's prediction
+        # (:meth:`_every_active_band`; blk is the workspace's, overwritten by the next call)
+        keep = k == 1 and band and not self.nt
+        if keep:
+            blk = blk.copy()
         I3 = np.eye(3)
         blocks = {
             "clamp_phi": I3,
@@ -986,8 +1089,10 @@ class SpatialRod(DiscreteRod):
                 "f_phinext": blk[:, 1:, 9],
             }
         )
-        sym = self._contact_blocks(contact, frames, phi, blocks)
+        sym = self._contact_blocks(contact, frames, phi, blocks, keep)
         ab = self._scatter(k, blocks) if band else None
+        if keep:
+            self._kept = (U.tobytes(), S.tobytes(), blocks, contact["every"], R1, R)
         # the second variation lazily here too (a contact solve's predictions and Newton
         # steps never count; the workspace's arrays copied)
         args = (S, G, m.copy(), frames.copy(), blocks["f_xnext"].copy(), diag, A_ab, sym)
@@ -1013,7 +1118,8 @@ class SpatialRod(DiscreteRod):
         R[:, :-1, 6:9] -= om[1:, None] * f_c[:, 1:]
         R[:, 1:, 3:6] += (m_c + m_arm)[:, 1:]
         ol, ot = 9, 9 + self.nc
-        R[:, :, ol:ot] = self._ncp(lam, gaps)[0]
+        ncp = self._ncp(lam, gaps)  # (its partials for _contact_blocks)
+        R[:, :, ol:ot] = ncp[0]
         R[:, 0, ol:ot] = lam[:, 0]
         if friction is not None:
             k, n = V.shape[:2]
@@ -1021,7 +1127,7 @@ class SpatialRod(DiscreteRod):
             R[:, 0, ot:] = friction[1][:, 0].reshape(k, -1)
         return {
             "lam": lam, "gaps": gaps, "normals": normals, "hess": hess, "arm": arm,
-            "f_c": f_c, "m_c": m_c, "m_arm": m_arm, "friction": friction,
+            "f_c": f_c, "m_c": m_c, "m_arm": m_arm, "friction": friction, "ncp": ncp,
         }  # fmt: skip
 
     def _friction_rows(self, V, X, frames, lam, normals, hess):
@@ -1077,10 +1183,12 @@ class SpatialRod(DiscreteRod):
         da_dp = da_dp - r * (P - nd[..., None, None] * LH - _outer(normals, LHd))
         return Phi, tau, (d_tau, d_lam, -Dp @ da_dp)
 
-    def _contact_blocks(self, contact, frames, phi, blocks):
+    def _contact_blocks(self, contact, frames, phi, blocks, every=False):
         """Add the contact terms' Jacobian blocks to ``blocks`` (in place: the force and
         moment rows' blocks of the nodes, the multipliers' and friction rows' own blocks);
-        returns the pieces of the second variation (:meth:`_second_variation`)."""
+        returns the pieces of the second variation (:meth:`_second_variation`).  ``every``:
+        also the blocks ``c_x``, ``c_phi`` with every contact row the gap's (``kappa`` times
+        its gradient), as ``contact["every"]`` (:meth:`_every_active_band`)."""
         lam, gaps, normals, hess, arm = (contact[key] for key in ("lam", "gaps", "normals",
                                                                    "hess", "arm"))  # fmt: skip
         f_c, m_c, L = contact["f_c"], contact["m_c"], self.L
@@ -1098,7 +1206,7 @@ class SpatialRod(DiscreteRod):
         mc_d = mc_d + (oc * cc[1:, None, None]) * (That @ LH @ That)
         mc_d_sym = mc_d
         mc_d = mc_d - 0.5 * hat(m_c[:, 1:])
-        _, d_lam, d_gap = self._ncp(lam[:, 1:], gaps[:, 1:])
+        d_lam, d_gap = (a[:, 1:] for a in contact["ncp"][1:])  # (elementwise: the free nodes')
         c_lam = np.zeros((k, n - 1, nc, nc))
         c_lam[..., np.arange(nc), np.arange(nc)] = d_lam
         n_t = np.swapaxes(normals[:, 1:], -1, -2)  # (k, n-1, 3, nc)
@@ -1125,6 +1233,8 @@ class SpatialRod(DiscreteRod):
             mc_d_sym = mc_d_sym + 0.5 * (arm_d + np.swapaxes(arm_d, -1, -2))
             m_c = m_c + contact["m_arm"]
         ck = (d_gap * self.kappa)[..., None]
+        if every:  # d_gap = 1 for every row: the same products as below, bitwise
+            contact["every"] = (self.kappa * gx, (self.kappa * gd) @ Jl)
         blocks.update(
             {
                 "m_x": m_x,
