@@ -430,6 +430,15 @@ def coil_phases(out, rod, pair, scales, repeat=3 * REPEAT):
 
 if __name__ == "__main__":
     if "--coil" in sys.argv:  # section 4 alone (printed, not written)
+        # every kernel compiled at its first call, as main()'s earlier sections leave them
+        # (else the "compiled" table would time the ski rentals' numpy passes)
+        import coilrod.rod._compiled
+        import coilrod.rod._planar_newton
+        import coils.coaxial
+
+        coils.coaxial.COMPILE_AFTER = 0.0
+        coilrod.rod._compiled.COMPILE_AFTER = 0.0
+        coilrod.rod._planar_newton.COMPILE_AFTER = 0.0
         seed = presets.seed_rod()
         helm = coils.HelmholtzPair(radius=2 * seed.length, turns=200, current=1.0, axis="y")
         per = 1.0 / seed.magnetoelastic_number(helm.ideal().B0[1])

@@ -130,6 +130,25 @@ class Field(Immutable, ABC):
             return B, G, np.zeros((n, 3, 3, 3))
         return self._B_gradient_hessian(pts)
 
+    def evaluator(self):
+        """A function ``fields(points, hessian)`` for a solver's repeated evaluations.
+
+        ``fields(points, hessian)`` returns ``(B, G, H)`` at ``points``, shapes (n, 3) T,
+        (n, 3, 3) T/m and, if ``hessian``, (n, 3, 3, 3) T/m^2 (else None): the values and
+        errors of :meth:`B_and_gradient` and :meth:`B_gradient_hessian`.  The points must be
+        a finite C-contiguous float64 array (n, 3) in m made by the caller, which is not
+        validated again (it may be made read-only); sources that can skip their per-call
+        dispatch (coaxial coils: their compiled pass is called directly) override this.
+        """
+
+        def fields(points, hessian):
+            if hessian:
+                return self.B_gradient_hessian(points)
+            B, G = self.B_and_gradient(points)
+            return B, G, None
+
+        return fields
+
     @property
     def length_scale(self) -> float:
         """A length (m) over which the field varies; used for finite-difference steps."""

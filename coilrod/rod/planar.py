@@ -485,6 +485,27 @@ class PlanarRod(DiscreteRod):
         return g_mu, g_b, g_G
 
     # -- field ---------------------------------------------------------------------------------
+    def _field(self, x: np.ndarray, hessian: bool):
+        """:meth:`DiscreteRod._field` through the field's prepared evaluator
+        (:meth:`coils.field.Field.evaluator`, bound once per problem): the points are made
+        here, checked finite once, and evaluated without the public methods' validation and
+        dispatch -- the same numbers.  Points that are not finite take the validated path
+        (its ValueError)."""
+        fields = self._fields
+        if fields is None:
+            make = getattr(self.field, "evaluator", None)
+            if make is None:
+                return super()._field(x, hessian)
+            fields = self._fields = make()
+        pts = np.empty((x.size // 2, 3))
+        pts[:, :2] = self.clamp[:2] + self.L * x.reshape(-1, 2)
+        pts[:, 2] = self.clamp[2]
+        if not np.isfinite(pts).all():
+            return super()._field(x, hessian)
+        return fields(pts, hessian and not self.linear)
+
+    _fields = None  # the field's prepared evaluator, bound on first use
+
     # -- the protocol -----------------------------------------------------------------------------
     def linearize(self, u, scale, tangent: bool = True) -> Linearization:
         """Residual (k, size), admissibility (k,) and the tangent of a stack of states."""

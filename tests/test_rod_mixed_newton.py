@@ -1,0 +1,108 @@
+"""The planar rod's mixed layout (non-uniform fields) on its fast paths against the general ones:
+the field's prepared evaluator (:meth:`coils.field.Field.evaluator`, bound once per problem)
+gives the numbers and errors of the validated public methods, bit for bit.  Nothing here
+compiles: the coaxial kernel is replaced by a recording stand-in or runs as the ski rental's
+numpy pass."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import coils
+import coils.coaxial as cx
+from coilrod import presets
+from coilrod.rod.discrete import DiscreteRod
+from coilrod.rod.solve import build_problem, make_mesh
+
+
+@pytest.fixture
+def numpy_pass(monkeypatch):
+    """The coaxial coils' numpy pass (the ski rental before compiling), whatever the process
+    has compiled."""
+    monkeypatch.setattr(cx, "_compiled_ready", False)
+    monkeypatch.setattr(cx, "COMPILE_AFTER", np.inf)
+    monkeypatch.setattr(cx, "_kernel_on_disk", lambda: False)
+
+
+def _points(pair, n=7):
+    rng = np.random.default_rng(3)
+    pts = pair.center + 0.3 * pair.filaments[0, 1] * rng.normal(size=(n, 3))
+    pts[0] = pair.center  # on the axis
+    return np.ascontiguousarray(pts)
+
+
+def test_coaxial_evaluator_is_the_public_methods(numpy_pass, monkeypatch):
+    pair = coils.MaxwellPair(radius=0.05, turns=100, current=2.0, axis=(0.0, 0.6, 0.8))
+    pts = _points(pair)
+    fields = pair.evaluator()
+    B, G, H = fields(pts.copy(), True)
+    refs = pair.B_gradient_hessian(pts)
+    for got, ref in zip((B, G, H), refs, strict=True):
+        assert got.shape == ref.shape
+        assert np.array_equal(got, ref)
+    B2, G2, none = fields(pts.copy(), False)
+    B_ref, G_ref = pair.B_and_gradient(pts)
+    assert none is None
+    assert np.array_equal(B2, B_ref)
+    assert np.array_equal(G2, G_ref)
+    # a point on the winding: the public methods' ValueError
+    on_wire = pts.copy()
+    on_wire[2] = (
+        pair.center + pair.filaments[1, 0] * pair.axis + pair.filaments[1, 1] * pair.rotation[:, 0]
+    )
+    with pytest.raises(ValueError, match="winding") as public:
+        pair.B_gradient_hessian(on_wire)
+    with pytest.raises(ValueError, match="winding") as fast:
+        fields(on_wire.copy(), True)
+    assert str(fast.value) == str(public.value)
+
+    # compiled: the kernel called directly with the arguments the public path gives it (a
+    # recording stand-in for the compiled pass: nothing compiles)
+    calls = []
+
+    def kernel(p, *rest):
+        *args, flags, factor, B_, G_, H_, err = rest
+        calls.append((p.copy(), p.flags.writeable, args, flags, factor, B_.shape, G_.shape))
+        B_ += p.sum(axis=1)[:, None]
+        G_ += 2.0 * p[:, :1]
+        if flags & 4:
+            H_ += 3.0 * p[:, 1:2]
+        return False
+
+    _, args, n_err = pair._kernel_args
+    fake = pair.replace()  # (a fresh object: its own kernel-argument cache)
+    fake._set_cache("_kernel_args", (kernel, args, n_err))
+    monkeypatch.setattr(cx, "_compiled_ready", True)
+    for hessian in (True, False):
+        public = fake.B_gradient_hessian(pts) if hessian else (*fake.B_and_gradient(pts), None)
+        got = fake.evaluator()(pts.copy(), hessian)
+        for a, b in zip(got, public, strict=True):
+            assert (a is None and b is None) or np.array_equal(a, b)
+        (p1, w1, a1, f1, s1, *sh1), (p2, w2, a2, f2, s2, *sh2) = calls[-2:]
+        assert np.array_equal(p1, p2)
+        assert not w1
+        assert not w2
+        assert all(x is y for x, y in zip(a1, a2, strict=True))
+        assert (f1, s1, sh1) == (f2, s2, sh2)
+
+
+def test_planar_field_through_the_evaluator_is_bitwise_the_validated_path(numpy_pass):
+    rod = presets.seed_rod()
+    pair = coils.HelmholtzPair(radius=2 * rod.length, turns=200, current=1.0, axis="y")
+    problem = build_problem(rod, pair, make_mesh(rod, 6), np.zeros(3), 0.3)
+    rng = np.random.default_rng(1)
+    x = 0.4 * rng.normal(size=(3, problem.n, 2))
+    for hessian in (True, False):
+        got = problem._field(x, hessian)
+        ref = DiscreteRod._field(problem, x, hessian)
+        for a, b in zip(got, ref, strict=True):
+            assert (a is None and b is None) or np.array_equal(a, b)
+    # a member that is not finite: the validated path's error, and NaN for that member only
+    x[1, 2, 0] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        problem._field(x, True)
+    B, _, _ = problem._field_by_member(x, True)
+    B = B.reshape(3, problem.n, 3)
+    assert np.isnan(B[1]).all()
+    assert np.isfinite(B[[0, 2]]).all()
