@@ -246,7 +246,7 @@ def main() -> str:
 #: The phases timed by :func:`coil_phases`: (label, module, class or None, function).  They
 #: nest (the Richardson mesh's linearizations count in the linearize row too).
 PHASES = (
-    ("field evaluation at the nodes", "coilrod.rod.discrete", "DiscreteRod", "_field"),
+    ("field evaluation at the nodes", "coilrod.rod.planar", "PlanarRod", "_field"),
     ("model linearize (field included)", "coilrod.rod.planar", "PlanarRod", "linearize"),
     ("factorisation and solves", "coilrod.rod.planar", "RodTangent", "solve"),
     ("stability (3D count)", "coilrod.rod.planar", "PlanarRod", "stability"),

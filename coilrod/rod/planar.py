@@ -131,8 +131,7 @@ class RodTangent:
             for j in np.flatnonzero(self.bad):
                 ab[:, j * n : (j + 1) * n] = 0.0
                 ab[diag, j * n : (j + 1) * n] = 1.0
-        from ._compiled import band_lu
-
+        band_lu = _compiled().band_lu
         ipiv = np.empty(ab.shape[1], dtype=np.int64)
         info = band_lu(ab, self.kl, self.ku, ipiv)  # LAPACK's gbtf2, compiled: no per-column calls
         lu = ab
@@ -166,10 +165,8 @@ class RodTangent:
             if info != 0:
                 raise np.linalg.LinAlgError(f"LAPACK solve failed (info {info})")
         else:
-            from ._compiled import band_solve
-
             x = np.array(rhs, dtype=float).reshape(-1, 1)
-            band_solve(lu[0], self.kl, self.ku, lu[1], x)
+            _compiled().band_solve(lu[0], self.kl, self.ku, lu[1], x)
         x = x.reshape(self.k, self.size)
         if self.bad.any():
             x[self.bad] = np.nan
@@ -510,13 +507,13 @@ class PlanarRod(DiscreteRod):
     def linearize(self, u, scale, tangent: bool = True) -> Linearization:
         """Residual (k, size), admissibility (k,) and the tangent of a stack of states."""
         U, S = self._stack(u, scale)
-        with np.errstate(all="ignore"):
-            field_values = None
-            if self.uniform:
+        if self.uniform:
+            with np.errstate(all="ignore"):
                 R, R1, parts = self._uniform(U, S, tangent)
-            else:
-                R, R1, parts, field_values = self._mixed(U, S, tangent)
-            ok = np.isfinite(R).all(axis=1)
+                ok = np.isfinite(R).all(axis=1)
+            field_values = None
+        else:  # (the compiled pass and its numpy twin raise no floating-point warnings)
+            R, R1, parts, field_values, ok = self._mixed(U, S, tangent)
         tan = RodTangent(U.shape[0], self.size, self.uniform, parts, R1) if tangent else None
         if tan is not None:
             tan.bad |= ~ok
@@ -589,10 +586,10 @@ class PlanarRod(DiscreteRod):
                 size_th = 1.0 + np.abs(U).max(axis=1, keepdims=True)
                 scaled = np.abs(R[:, 1:]) * self._inv_w[1:]
                 return (scaled / (self.tol + size_th * self._floor_bend)).max(axis=1)
-        from ._compiled import mixed_error
-
         out = np.empty(k)
-        mixed_error(R, U, self._inv_w, self._inv_h, self._bend_scale, self.tol, _FLOOR * _EPS, out)
+        _compiled().mixed_error(
+            R, U, self._inv_w, self._inv_h, self._bend_scale, self.tol, _FLOOR * _EPS, out
+        )
         return out
 
     def residual_norm(self, residual) -> np.ndarray:
@@ -615,8 +612,11 @@ class PlanarRod(DiscreteRod):
         du = np.asarray(du)
         du = du if du.ndim == 2 else du[None]
         rot = np.abs(self.theta(du)).max(axis=1)
-        with np.errstate(divide="ignore"):
-            return np.where(rot > 0, np.minimum(1.0, self.max_rotation / rot), 1.0)
+        out = np.ones(rot.shape)
+        turns = rot > 0  # (NaN: 1, as the line search then rejects the step)
+        if turns.any():
+            out[turns] = np.minimum(1.0, self.max_rotation / rot[turns])
+        return out
 
     def distance(self, du):
         """Largest change of a node angle, rad, shape (k,)."""
@@ -773,11 +773,11 @@ class PlanarRod(DiscreteRod):
 
     # -- mixed layout -----------------------------------------------------------------------------
     def _mixed(self, U: np.ndarray, S: np.ndarray, tangent: bool):
-        """Residual, load derivative, band Jacobian and the field at the nodes (B (k, n, 3),
-        G (k, n, 3, 3), kept for the adjoint) of a stack, by the compiled pass of
+        """Residual, load derivative, band Jacobian, the field at the nodes (B (k, n, 3),
+        G (k, n, 3, 3), kept for the adjoint) and which members are finite (k,) (their
+        residual rows are, the others' are NaN) of a stack, by the compiled pass of
         :mod:`coilrod.rod._compiled` (the equations are in the module docstring)."""
-        from ._compiled import mixed_assembly
-
+        mixed_assembly = _compiled().mixed_assembly
         k, n = U.shape[0], self.n
         B, G, H = self._field_by_member(U.reshape(k, n, _NV)[:, :, 0:2], tangent)
         R = np.empty((k, self.size))
@@ -806,8 +806,10 @@ class PlanarRod(DiscreteRod):
             ab,
             finite,
         )
-        R[~finite] = np.nan
-        return R, R1, (ab if tangent else None), (B.reshape(k, n, 3), G.reshape(k, n, 3, 3), H)
+        if not finite.all():
+            R[~finite] = np.nan
+        fields = (B.reshape(k, n, 3), G.reshape(k, n, 3, 3), H)
+        return R, R1, (ab if tangent else None), fields, finite
 
     def _stability_mixed(self, lin: Linearization, signs: np.ndarray) -> np.ndarray:
         """Smallest second-variation eigenvalue of each member (see :meth:`stability`).
@@ -890,6 +892,20 @@ def _planar_newton():
 
 
 _PN = None
+
+
+def _compiled():
+    """:mod:`coilrod.rod._compiled`, imported on first use (it imports numba) and kept (as
+    :func:`_planar_newton`)."""
+    global _PC
+    if _PC is None:
+        from . import _compiled as pc
+
+        _PC = pc
+    return _PC
+
+
+_PC = None
 
 
 def _take_tangent(tan: RodTangent, rows) -> RodTangent:
