@@ -13,6 +13,7 @@ import coils
 import coils.coaxial as cx
 from coilrod import presets
 from coilrod.rod.discrete import DiscreteRod
+from coilrod.rod.mesh import RodMesh
 from coilrod.rod.solve import build_problem, make_mesh
 
 
@@ -106,3 +107,37 @@ def test_planar_field_through_the_evaluator_is_bitwise_the_validated_path(numpy_
     B = B.reshape(3, problem.n, 3)
     assert np.isnan(B[1]).all()
     assert np.isfinite(B[[0, 2]]).all()
+
+
+def test_compiled_out_of_plane_blocks_are_the_numpy_assembly(numpy_pass, monkeypatch):
+    # the mixed layout's out-of-plane blocks assembled by the kernel (run as Python through
+    # its .py_func: nothing compiles) against the numpy assembly, at off-equilibrium states
+    # (moment residuals and forces nonzero) in a coil field (hessian terms) and a linear one;
+    # then the ski rental's switch: the 3D counts the same either way
+    import coilrod.rod._compiled as rc
+
+    rod = presets.seed_rod()
+    L = rod.length
+    pair = coils.MaxwellPair(radius=2 * L, turns=200, current=1.0, axis="y", center=(L, 0, 0))
+    rng = np.random.default_rng(2)
+    python_kernel = rc._odd_blocks_compiled.py_func
+    for field in (pair + coils.UniformField(B=(0.0, 2e-3, 0.0)), pair.ideal()):
+        mesh = RodMesh(5, (0.3,))  # (segments of two lengths)
+        problem = build_problem(rod, field, mesh, np.zeros(3), 0.2)
+        problem = problem.with_out_of_plane((0.77, 1.3, 1.0))
+        U = problem.straight() + rng.normal(scale=0.3, size=(2, problem.size))
+        lin = problem.linearize(U, np.array([2e5, -6e5]))
+        oop = problem.out_of_plane
+        monkeypatch.setattr(rc, "_odd_ready", False)
+        monkeypatch.setattr(rc, "ODD_COMPILE_AFTER", np.inf)
+        monkeypatch.setattr(rc, "_on_disk", lambda dispatcher: False)
+        D, E = oop.odd_blocks(lin)
+        counts = oop.odd_count(lin)
+        monkeypatch.setattr(rc, "_odd_ready", True)
+        monkeypatch.setattr(rc, "_odd_blocks_compiled", python_kernel)
+        Dc, Ec = oop.odd_blocks(lin)
+        # (libm's sin and cos against numpy's: equal, or a last-bit difference on some CPUs)
+        np.testing.assert_allclose(Dc, D, rtol=1e-13, atol=1e-13 * np.abs(D).max())
+        np.testing.assert_allclose(Ec, E, rtol=1e-13, atol=1e-13 * np.abs(E).max())
+        assert np.abs(D[:, :, 0, 0]).max() > 0 or field.linear  # (the hessian term is there)
+        np.testing.assert_array_equal(oop.odd_count(lin), counts)
