@@ -167,14 +167,17 @@ def main() -> str:
     return "\n".join(lines) + "\n"
 
 
-def coil_sections(out) -> None:
+def coil_sections(out, note: str = "") -> None:
     """Sections 3 and 4: the coil fields against their ideal() fields, and the per-phase
-    breakdown of the Helmholtz pair's solve."""
+    breakdown of the Helmholtz pair's solve (``note``: a paragraph under the heading)."""
     # -- 3. coil field against its ideal field ----------------------------------------------------
     seed = presets.seed_rod()
     L = seed.length
     out("## 3. Real coil field against the pair's ideal() field (seed rod)")
     out()
+    if note:
+        out(note)
+        out()
     out(
         "Per load state: the whole solve_rod call (Richardson, stability, events) over the "
         f"number of requested states; {clock_name()} time, best of {3 * REPEAT} rounds that "
@@ -317,22 +320,26 @@ def solve_with(rod, field, scales, compiled=True):
 
 @contextlib.contextmanager
 def numpy_passes():
-    """Run the coil field, the planar rod's mixed assembly and the uniform field's Newton
-    corrector as a fresh process does before its kernels compile (the numpy passes of
-    coils._vectorised and coilrod.rod._mixed_numpy, the engine's numpy corrector)."""
+    """Run the coil field, the planar rod's mixed assembly, its out-of-plane blocks and the
+    uniform field's Newton corrector as a fresh process does before its kernels compile (the
+    numpy passes of coils._vectorised, coilrod.rod._mixed_numpy and OutOfPlane.odd_blocks, the
+    engine's numpy corrector)."""
     import coils.coaxial as cx
     from coilrod.rod import _compiled as rc
 
     saved = (cx.COMPILE_AFTER, cx._compiled_ready, cx._kernel_on_disk, cx._rent)
     saved_rc = (rc.COMPILE_AFTER, rc._compiled_ready, rc._on_disk, rc._rent)
+    saved_odd = (rc.ODD_COMPILE_AFTER, rc._odd_ready, rc._odd_rent)
     cx.COMPILE_AFTER, cx._compiled_ready, cx._kernel_on_disk = math.inf, False, lambda: False
     rc.COMPILE_AFTER, rc._compiled_ready, rc._on_disk = math.inf, False, lambda d: False
+    rc.ODD_COMPILE_AFTER, rc._odd_ready = math.inf, False
     try:
         with uniform_corrector(False):
             yield
     finally:
         cx.COMPILE_AFTER, cx._compiled_ready, cx._kernel_on_disk, cx._rent = saved
         rc.COMPILE_AFTER, rc._compiled_ready, rc._on_disk, rc._rent = saved_rc
+        rc.ODD_COMPILE_AFTER, rc._odd_ready, rc._odd_rent = saved_odd
 
 
 def profile_solves(rod, runs, scales, repeat):
@@ -361,7 +368,8 @@ KERNELS = (
     ("band LU", "coilrod.rod._compiled", "band_lu"),
     ("band solves", "coilrod.rod._compiled", "band_solve"),
     ("error", "coilrod.rod._compiled", "mixed_error"),
-    ("3D count (block LDL^T)", "coilrod.rod._inertia", "_inertia"),
+    ("3D count: out-of-plane blocks", "coilrod.rod._compiled", "_odd_blocks_compiled"),
+    ("3D count: block LDL^T", "coilrod.rod._inertia", "_inertia"),
 )
 
 
@@ -490,8 +498,9 @@ def coil_phases(out, rod, pair, scales, repeat=3 * REPEAT):
                 f"Inside the compiled kernels of the coil solve (best of {repeat}, each kernel "
                 f"call wrapped by a timer): {1e3 * inside:.2f} ms of its {1e3 * total:.2f} ms "
                 f"({cells} ms); the rest, {1e3 * (total - inside):.2f} ms, is Python and numpy: "
-                "the engine's corrector and stepping, the model's glue, the out-of-plane "
-                "blocks' numpy assembly, set-up and result.  The uniform field's whole solve "
+                "the engine's corrector and stepping (line search, chord bookkeeping, "
+                "predictions), the model's glue around the kernels, set-up and result.  "
+                "The uniform field's whole solve "
                 f"with its compiled corrector: {1e3 * t['ideal(), compiled corrector']:.2f} ms."
             )
             out()
@@ -509,6 +518,7 @@ if __name__ == "__main__":
 
         coils.coaxial.COMPILE_AFTER = 0.0
         coilrod.rod._compiled.COMPILE_AFTER = 0.0
+        coilrod.rod._compiled.ODD_COMPILE_AFTER = 0.0
         coilrod.rod._inertia.COMPILE_AFTER = 0.0
         coilrod.rod._planar_newton.COMPILE_AFTER = 0.0
         lines = []
@@ -517,7 +527,14 @@ if __name__ == "__main__":
             print(text)
             lines.append(text)
 
-        coil_sections(out)
+        import datetime
+
+        day = datetime.date.today().isoformat()
+        coil_sections(
+            out,
+            f"Sections 3 and 4 rerun alone (`bench_rod.py --coil`) on {day}, load average "
+            f"{os.getloadavg()[0]:.2f} at start; sections 1 and 2 are an earlier run's.",
+        )
         old = target.read_text()
         head = old[: old.index("## 3. ")] if "## 3. " in old else old
         target.write_text(head + "\n".join(lines) + "\n")
