@@ -5,7 +5,10 @@ Every field maps points ``(n, 3)`` in metres to
 * ``B(points)``: flux density, shape ``(n, 3)``, tesla;
 * ``gradient(points)``: ``G[k, i, j] = dB_i/dx_j``, shape ``(n, 3, 3)``, tesla per metre;
 * ``hessian(points)``: ``H[k, i, j, l] = d2B_i/(dx_j dx_l)``, shape ``(n, 3, 3, 3)``, T/m^2;
-* ``B_gradient_hessian(points)``: the three at once (one compiled pass per coaxial coil group).
+* ``B_gradient_hessian(points)``: the three at once (one compiled pass per coaxial coil group);
+* ``evaluator()``: a function ``(points, hessian) -> (B, G, H)`` for a solver's repeated
+  evaluations at points it made itself (no validation; coaxial coils call their compiled pass
+  directly).
 
 and says what it does not need to compute, so solvers can skip work:
 
