@@ -34,6 +34,8 @@ factors serve every solve at that state (Newton step, path tangent, stability).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.linalg import eigvalsh_tridiagonal
 from scipy.linalg.lapack import dgttrf, dgttrs
@@ -495,9 +497,11 @@ class PlanarRod(DiscreteRod):
                 return super()._field(x, hessian)
             fields = self._fields = make()
         pts = np.empty((x.size // 2, 3))
-        pts[:, :2] = self.clamp[:2] + self.L * x.reshape(-1, 2)
+        xy = pts[:, :2]
+        np.multiply(x.reshape(-1, 2), self.L, out=xy)  # (the sum below commutes exactly)
+        xy += self.clamp[:2]
         pts[:, 2] = self.clamp[2]
-        if not np.isfinite(pts).all():
+        if not math.isfinite(pts.sum()):  # (a sum of finite points may overflow: checked again)
             return super()._field(x, hessian)
         return fields(pts, hessian and not self.linear)
 
