@@ -99,7 +99,20 @@ def test_planar_field_through_the_evaluator_is_bitwise_the_validated_path(numpy_
         ref = DiscreteRod._field(problem, x, hessian)
         for a, b in zip(got, ref, strict=True):
             assert (a is None and b is None) or np.array_equal(a, b)
+    # the 3D count's hessian where a linearization has none (a chord step's): the coils'
+    # hessian pass alone, bitwise the combined pass's
+    oop = problem.with_out_of_plane((0.77, 1.3, 1.0)).out_of_plane
+    U = problem.straight() + 0.05 * rng.normal(size=(3, problem.size))
+    lin = problem.linearize(U, np.full(3, 1e5), tangent=False)
+    assert lin.field_hessian is None
+    got = oop._mixed_fields(lin, 3)
+    ref = DiscreteRod._field_by_member(problem, U.reshape(3, problem.n, 5)[:, :, 0:2], True)
+    for a, b in zip(got, ref, strict=True):
+        assert np.array_equal(a.reshape(b.shape), b)
     # a member that is not finite: the validated path's error, and NaN for that member only
+    H = problem._hessian_by_member(np.where(np.arange(3)[:, None, None] == 1, np.nan, x))
+    assert np.isnan(H.reshape(3, -1)[1]).all()
+    assert np.isfinite(H.reshape(3, -1)[[0, 2]]).all()
     x[1, 2, 0] = np.nan
     with pytest.raises(ValueError, match="finite"):
         problem._field(x, True)

@@ -126,6 +126,10 @@ class OutOfPlane:
         H = getattr(lin, "field_hessian", None)
         if fv is None or (H is None and not P.linear):  # evaluate here (hessian included)
             x = np.atleast_2d(lin.u).reshape(k, n, 5)[:, :, 0:2]
+            if fv is not None and hasattr(P.field, "filaments"):
+                # coaxial coils: their hessian pass alone gives the combined pass's numbers
+                # (and B, G are the linearization's): a third less of the kernel's work
+                return fv[0], fv[1], P._hessian_by_member(x)
             return P._field_by_member(x, True)
         return fv[0], fv[1], H
 

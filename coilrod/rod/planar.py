@@ -507,6 +507,25 @@ class PlanarRod(DiscreteRod):
 
     _fields = None  # the field's prepared evaluator, bound on first use
 
+    def _hessian_by_member(self, x: np.ndarray) -> np.ndarray:
+        """The field's hessian alone (k n, 3, 3, 3) T/m^2 at positions x (k, n, 2) (units of
+        L; :meth:`coils.field.Field.hessian`), NaN for members where it cannot be evaluated
+        (as :meth:`_field_by_member`; the field's message kept in ``last_failure``)."""
+        try:
+            with np.errstate(all="ignore"):
+                return self.field.hessian(self.points(x).reshape(-1, 3))
+        except ValueError as exc:
+            self.last_failure = f"the field could not be evaluated at the trial states ({exc})"
+        k, n = x.shape[0], self.n
+        H = np.full((k, n, 3, 3, 3), np.nan)
+        for j in range(k):
+            try:
+                with np.errstate(all="ignore"):
+                    H[j] = self.field.hessian(self.points(x[j]))
+            except ValueError as exc:
+                self.last_failure = f"the field could not be evaluated at the trial states ({exc})"
+        return H.reshape(-1, 3, 3, 3)
+
     # -- the protocol -----------------------------------------------------------------------------
     def linearize(self, u, scale, tangent: bool = True) -> Linearization:
         """Residual (k, size), admissibility (k,) and the tangent of a stack of states."""
