@@ -21,7 +21,9 @@ Prints (and writes to benchmarks/results/rod.md):
 
 One BLAS thread; process CPU time (``BENCH_CLOCK=wall`` for wall time), best of several runs.
 
-Run:  python benchmarks/bench_rod.py
+Run:  python benchmarks/bench_rod.py            (writes benchmarks/results/rod.md)
+      python benchmarks/bench_rod.py --coil     (sections 3 and 4 only, every kernel compiled
+                                                 first; they replace the file's sections 3-4)
 """
 
 from __future__ import annotations
@@ -161,11 +163,21 @@ def main() -> str:
         out(f"| {n} | {t1:.4f} | {e1:.2e} | {t2:.4f} | {e2:.2e} |")
     out()
 
+    coil_sections(out)
+    return "\n".join(lines) + "\n"
+
+
+def coil_sections(out, note: str = "") -> None:
+    """Sections 3 and 4: the coil fields against their ideal() fields, and the per-phase
+    breakdown of the Helmholtz pair's solve (``note``: a paragraph under the heading)."""
     # -- 3. coil field against its ideal field ----------------------------------------------------
     seed = presets.seed_rod()
     L = seed.length
     out("## 3. Real coil field against the pair's ideal() field (seed rod)")
     out()
+    if note:
+        out(note)
+        out()
     out(
         "Per load state: the whole solve_rod call (Richardson, stability, events) over the "
         f"number of requested states; {clock_name()} time, best of {3 * REPEAT} rounds that "
@@ -240,13 +252,12 @@ def main() -> str:
         )
     out()
     coil_phases(out, seed, helm, np.linspace(0.1, 1.0, 10) * 5 * per_lambda)
-    return "\n".join(lines) + "\n"
 
 
 #: The phases timed by :func:`coil_phases`: (label, module, class or None, function).  They
 #: nest (the Richardson mesh's linearizations count in the linearize row too).
 PHASES = (
-    ("field evaluation at the nodes", "coilrod.rod.discrete", "DiscreteRod", "_field"),
+    ("field evaluation at the nodes", "coilrod.rod.planar", "PlanarRod", "_field"),
     ("model linearize (field included)", "coilrod.rod.planar", "PlanarRod", "linearize"),
     ("factorisation and solves", "coilrod.rod.planar", "RodTangent", "solve"),
     ("stability (3D count)", "coilrod.rod.planar", "PlanarRod", "stability"),
@@ -309,22 +320,26 @@ def solve_with(rod, field, scales, compiled=True):
 
 @contextlib.contextmanager
 def numpy_passes():
-    """Run the coil field, the planar rod's mixed assembly and the uniform field's Newton
-    corrector as a fresh process does before its kernels compile (the numpy passes of
-    coils._vectorised and coilrod.rod._mixed_numpy, the engine's numpy corrector)."""
+    """Run the coil field, the planar rod's mixed assembly, its out-of-plane blocks and the
+    uniform field's Newton corrector as a fresh process does before its kernels compile (the
+    numpy passes of coils._vectorised, coilrod.rod._mixed_numpy and OutOfPlane.odd_blocks, the
+    engine's numpy corrector)."""
     import coils.coaxial as cx
     from coilrod.rod import _compiled as rc
 
     saved = (cx.COMPILE_AFTER, cx._compiled_ready, cx._kernel_on_disk, cx._rent)
     saved_rc = (rc.COMPILE_AFTER, rc._compiled_ready, rc._on_disk, rc._rent)
+    saved_odd = (rc.ODD_COMPILE_AFTER, rc._odd_ready, rc._odd_rent)
     cx.COMPILE_AFTER, cx._compiled_ready, cx._kernel_on_disk = math.inf, False, lambda: False
     rc.COMPILE_AFTER, rc._compiled_ready, rc._on_disk = math.inf, False, lambda d: False
+    rc.ODD_COMPILE_AFTER, rc._odd_ready = math.inf, False
     try:
         with uniform_corrector(False):
             yield
     finally:
         cx.COMPILE_AFTER, cx._compiled_ready, cx._kernel_on_disk, cx._rent = saved
         rc.COMPILE_AFTER, rc._compiled_ready, rc._on_disk, rc._rent = saved_rc
+        rc.ODD_COMPILE_AFTER, rc._odd_ready, rc._odd_rent = saved_odd
 
 
 def profile_solves(rod, runs, scales, repeat):
@@ -343,6 +358,55 @@ def profile_solves(rod, runs, scales, repeat):
                 t = clock() - t0
             if t < best[i][0]:
                 best[i] = (t, totals, calls, res)
+    return best
+
+
+#: The compiled kernels timed by :func:`kernel_share`: (label, module, name); the coil pass is
+#: the pair's own (``_kernel_args``), wrapped on the object.
+KERNELS = (
+    ("assembly", "coilrod.rod._compiled", "_mixed_compiled"),
+    ("band LU", "coilrod.rod._compiled", "band_lu"),
+    ("band solves", "coilrod.rod._compiled", "band_solve"),
+    ("error", "coilrod.rod._compiled", "mixed_error"),
+    ("3D count: out-of-plane blocks", "coilrod.rod._compiled", "_odd_blocks_compiled"),
+    ("3D count: block LDL^T", "coilrod.rod._inertia", "_inertia"),
+)
+
+
+def kernel_share(rod, pair, scales, repeat):
+    """CPU time (s) inside each compiled kernel of the coil-field solve of the best of
+    ``repeat`` runs (coil pass included), and that run's whole time: (total, {label: s})."""
+    kernel, args, n_err = pair._kernel_args or pair._prepare()
+    owners = [(importlib.import_module(m), name) for _, m, name in KERNELS]
+    saved = [getattr(o, name) for o, name in owners]
+    acc: dict = {}
+
+    def timed(fn, label):
+        def call(*a):
+            t0 = clock()
+            try:
+                return fn(*a)
+            finally:
+                acc[label] = acc.get(label, 0.0) + clock() - t0
+
+        return call
+
+    pair.__dict__["_kernel_args"] = (timed(kernel, "coil pass"), args, n_err)
+    for (o, name), fn, (label, *_) in zip(owners, saved, KERNELS, strict=True):
+        setattr(o, name, timed(fn, label))
+    best = (math.inf, {})
+    try:
+        for _ in range(repeat):
+            acc.clear()
+            t0 = clock()
+            solve_rod(rod, pair, scales)
+            t = clock() - t0
+            if t < best[0]:
+                best = (t, dict(acc))
+    finally:
+        pair.__dict__["_kernel_args"] = (kernel, args, n_err)
+        for (o, name), fn in zip(owners, saved, strict=True):
+            setattr(o, name, fn)
     return best
 
 
@@ -426,17 +490,57 @@ def coil_phases(out, rod, pair, scales, repeat=3 * REPEAT):
             f"{np.abs(runs[1][4].tip - runs[-1][4].tip).max() / rod.length:.1e} L."
         )
         out()
+        if regime == "compiled":
+            total, parts = kernel_share(rod, pair, scales, repeat)
+            inside = sum(parts.values())
+            cells = ", ".join(f"{k} {1e3 * v:.2f}" for k, v in parts.items())
+            out(
+                f"Inside the compiled kernels of the coil solve (best of {repeat}, each kernel "
+                f"call wrapped by a timer): {1e3 * inside:.2f} ms of its {1e3 * total:.2f} ms "
+                f"({cells} ms); the rest, {1e3 * (total - inside):.2f} ms, is Python and numpy: "
+                "the engine's corrector and stepping (line search, chord bookkeeping, "
+                "predictions), the model's glue around the kernels, set-up and result.  "
+                "The uniform field's whole solve "
+                f"with its compiled corrector: {1e3 * t['ideal(), compiled corrector']:.2f} ms."
+            )
+            out()
 
 
 if __name__ == "__main__":
-    if "--coil" in sys.argv:  # section 4 alone (printed, not written)
-        seed = presets.seed_rod()
-        helm = coils.HelmholtzPair(radius=2 * seed.length, turns=200, current=1.0, axis="y")
-        per = 1.0 / seed.magnetoelastic_number(helm.ideal().B0[1])
-        coil_phases(print, seed, helm, np.linspace(0.1, 1.0, 10) * 5 * per)
+    target = Path(__file__).parent / "results" / "rod.md"
+    if "--coil" in sys.argv:  # sections 3 and 4 alone, in place of the file's
+        # every kernel compiled at its first call, as main()'s earlier sections leave them
+        # (else the "compiled" tables would time the ski rentals' numpy passes)
+        import coilrod.rod._compiled
+        import coilrod.rod._inertia
+        import coilrod.rod._planar_newton
+        import coils.coaxial
+
+        coils.coaxial.COMPILE_AFTER = 0.0
+        coilrod.rod._compiled.COMPILE_AFTER = 0.0
+        coilrod.rod._compiled.ODD_COMPILE_AFTER = 0.0
+        coilrod.rod._inertia.COMPILE_AFTER = 0.0
+        coilrod.rod._planar_newton.COMPILE_AFTER = 0.0
+        lines = []
+
+        def out(text=""):
+            print(text)
+            lines.append(text)
+
+        import datetime
+
+        day = datetime.date.today().isoformat()
+        coil_sections(
+            out,
+            f"Sections 3 and 4 rerun alone (`bench_rod.py --coil`) on {day}, load average "
+            f"{os.getloadavg()[0]:.2f} at start; sections 1 and 2 are an earlier run's.",
+        )
+        old = target.read_text()
+        head = old[: old.index("## 3. ")] if "## 3. " in old else old
+        target.write_text(head + "\n".join(lines) + "\n")
+        print(f"sections 3 and 4 written to {target}")
         sys.exit()
     text = main()
-    target = Path(__file__).parent / "results" / "rod.md"
     target.parent.mkdir(parents=True, exist_ok=True)
     target.write_text(text)
     print(f"written to {target}")

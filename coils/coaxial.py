@@ -241,6 +241,32 @@ class CoaxialCoils(Field):
             f"currents out of range)"
         )
 
+    def evaluator(self):
+        """:meth:`coils.field.Field.evaluator`: the compiled pass called directly once it is
+        compiled (no validation, no per-call dispatch; the points are made read-only), the
+        ski rental's numpy pass before (:meth:`_run`); the same numbers either way."""
+        kernel, args, n_err = self._kernel_args or self._prepare()
+        raise_error = self._raise_point_error
+        run = self._run
+        both, all3 = _WANT_B | _WANT_G, _WANT_B | _WANT_G | _WANT_H
+
+        def fields(pts, hessian):
+            n = pts.shape[0]
+            B = np.zeros((n, 3))
+            G = np.zeros((n, 9))
+            H = np.zeros((n, 27)) if hessian else _NO_H
+            flags = all3 if hessian else both
+            if _compiled_ready:
+                pts.flags.writeable = False  # (one compiled version: read-only inputs)
+                err = np.empty(n_err, dtype=np.int64)
+                if kernel(pts, *args, flags, 1.0, B, G, H, err):
+                    raise_error(err)
+            else:
+                run(pts, flags, 1.0, B, G, H)
+            return B, G.reshape(n, 3, 3), H.reshape(n, 3, 3, 3) if hessian else None
+
+        return fields
+
     def _evaluate(self, pts, flags: int):
         """New arrays B (n, 3) T, G (n, 3, 3) T/m, H (n, 3, 3, 3) T/m^2 as asked by ``flags``
         (None for the others)."""

@@ -5,7 +5,10 @@ Every field maps points ``(n, 3)`` in metres to
 * ``B(points)``: flux density, shape ``(n, 3)``, tesla;
 * ``gradient(points)``: ``G[k, i, j] = dB_i/dx_j``, shape ``(n, 3, 3)``, tesla per metre;
 * ``hessian(points)``: ``H[k, i, j, l] = d2B_i/(dx_j dx_l)``, shape ``(n, 3, 3, 3)``, T/m^2;
-* ``B_gradient_hessian(points)``: the three at once (one compiled pass per coaxial coil group).
+* ``B_gradient_hessian(points)``: the three at once (one compiled pass per coaxial coil group);
+* ``evaluator()``: a function ``(points, hessian) -> (B, G, H)`` for a solver's repeated
+  evaluations at points it made itself (no validation; coaxial coils call their compiled pass
+  directly).
 
 and says what it does not need to compute, so solvers can skip work:
 
@@ -129,6 +132,25 @@ class Field(Immutable, ABC):
             B, G = self._B_and_gradient(pts)
             return B, G, np.zeros((n, 3, 3, 3))
         return self._B_gradient_hessian(pts)
+
+    def evaluator(self):
+        """A function ``fields(points, hessian)`` for a solver's repeated evaluations.
+
+        ``fields(points, hessian)`` returns ``(B, G, H)`` at ``points``, shapes (n, 3) T,
+        (n, 3, 3) T/m and, if ``hessian``, (n, 3, 3, 3) T/m^2 (else None): the values and
+        errors of :meth:`B_and_gradient` and :meth:`B_gradient_hessian`.  The points must be
+        a finite C-contiguous float64 array (n, 3) in m made by the caller, which is not
+        validated again (it may be made read-only); sources that can skip their per-call
+        dispatch (coaxial coils: their compiled pass is called directly) override this.
+        """
+
+        def fields(points, hessian):
+            if hessian:
+                return self.B_gradient_hessian(points)
+            B, G = self.B_and_gradient(points)
+            return B, G, None
+
+        return fields
 
     @property
     def length_scale(self) -> float:

@@ -404,3 +404,144 @@ def band_solve_transposed(ab, kl, ku, ipiv, b):
                 tmp = b[p, q]
                 b[p, q] = b[j, q]
                 b[j, q] = tmp
+
+
+#: Estimated CPU seconds of numpy out-of-plane block assemblies (``OutOfPlane.odd_blocks``,
+#: mixed layout) after which :func:`_odd_blocks_compiled` is used (ski rental: about what
+#: compiling it costs on a cold cache); 0 compiles at the first call, ``math.inf`` never.
+ODD_COMPILE_AFTER = 1.0
+# measured cost of one numpy assembly: per call and per free node x member
+_ODD_CALL_S, _ODD_NODE_S = 1e-4, 3e-7
+_odd_rent = 0.0
+_odd_ready = False
+
+
+def odd_blocks_pays(k: int, n: int) -> bool:
+    """True if :func:`odd_blocks_mixed` should assemble the out-of-plane blocks of ``k``
+    states of ``n`` nodes: the kernel is compiled (or in numba's cache), or the numpy
+    assemblies so far plus this one would cost more than :data:`ODD_COMPILE_AFTER` (then the
+    caller's numpy assembly is charged here instead)."""
+    global _odd_rent, _odd_ready
+    if not _odd_ready:
+        cost = _ODD_CALL_S + _ODD_NODE_S * k * n
+        if _odd_rent + cost <= ODD_COMPILE_AFTER and not _on_disk(_odd_blocks_compiled):
+            _odd_rent += cost
+            return False
+        _odd_ready = True
+    return True
+
+
+def odd_blocks_mixed(U, S, mu, h, w, inv_h, k1, k2, L, B, G, H, D, E):
+    """The out-of-plane blocks of the mixed layout (``OutOfPlane.odd_blocks``: D (k, n - 1,
+    4, 4) and E (k, n - 2, 4, 4), zero on entry) of the states U (k, 5 n) at scales S (k,),
+    from the field at the nodes B (k n, 3) T, G (k n, 9) T/m and H (k n, 27) T/m^2 (None for
+    a linear field); stiffnesses k1, k2 = (GJ, EI_y) / EI_z, L in m.  The same arithmetic
+    in the same order as the numpy assembly, libm's sin and cos for numpy's."""
+    has_h = H is not None
+
+    def arr(a, cols=None):  # (writable C-contiguous float arrays: one compiled version)
+        a = np.require(a, float, ["C", "W"])
+        return a if cols is None else a.reshape(-1, cols)
+
+    _odd_blocks_compiled(
+        arr(U), arr(S), arr(mu), arr(h), arr(w), arr(inv_h), float(k1), float(k2), float(L),
+        arr(B, 3), arr(G, 9), arr(H, 27) if has_h else np.zeros((1, 27)), has_h, D, E,
+    )  # fmt: skip
+
+
+@nb.njit(cache=True)
+def _odd_blocks_compiled(U, S, mu, h, w, inv_h, k1, k2, L, B, G, H, has_h, D, E):
+    """The compiled :func:`odd_blocks_mixed` (per member: the segments' bending terms, then
+    the free nodes' blocks; the equations of :mod:`coilrod.rod.out_of_plane`)."""
+    k = U.shape[0]
+    n = w.shape[0]
+    nf = n - 1
+    Ap = np.empty(nf)
+    Am = np.empty(nf)
+    q = np.empty(nf)
+    pz = np.empty(nf)
+    cs = np.empty(nf)
+    sn = np.empty(nf)
+    fx = np.empty(nf)
+    fy = np.empty(nf)
+    kp = 0.5 * (k1 + k2)
+    km = 0.5 * (k1 - k2)
+    for j in range(k):
+        for f in range(nf):  # segment f: nodes f and f + 1 (free node f + 1)
+            th = U[j, 5 * (f + 1) + 2]
+            c = math.cos(th)
+            s = math.sin(th)
+            cs[f] = c
+            sn[f] = s
+            b = 0.5 * (th - U[j, 5 * f + 2])
+            sb = math.sin(b)
+            a = b * math.cos(b) / sb if sb != 0.0 else 1.0
+            aa = a * a
+            bb = b * b
+            alpha = (kp * (aa + bb) + a - aa - bb) * inv_h[f]
+            zr = aa - bb
+            zi = -2.0 * a * b
+            c2 = c * c - s * s
+            s2 = 2.0 * c * s
+            fac = km * inv_h[f]
+            r = fac * (zr * c2 - zi * s2)
+            q[f] = fac * (zr * s2 + zi * c2)
+            pz[f] = 2.0 * b * inv_h[f]
+            Ap[f] = alpha + r
+            Am[f] = alpha - r
+            fx[f] = 0.5 * h[f] * U[j, 5 * f + 3]
+            fy[f] = 0.5 * h[f] * U[j, 5 * f + 4]
+        for f in range(nf - 1):  # (the numpy assembly's in-place sums read the old values)
+            fx[f] += fx[f + 1]
+            fy[f] += fy[f + 1]
+        for f in range(nf):
+            i = f + 1
+            p = j * n + i
+            c = cs[f]
+            s = sn[f]
+            mx = c * mu[i, 0] - s * mu[i, 1]
+            my = s * mu[i, 0] + c * mu[i, 1]
+            bx = B[p, 0]
+            by = B[p, 1]
+            Sw = S[j] * w[i]
+            dxx = Sw * (my * by) + Ap[f]
+            dyy = Sw * (mx * bx) + Am[f]
+            dxy = q[f] - 0.5 * Sw * (mx * by + my * bx)
+            Mz = pz[f] - Sw * (mx * by - my * bx)
+            if f < nf - 1:
+                dxx += Ap[f + 1]
+                dyy += Am[f + 1]
+                dxy += q[f + 1]
+                Mz -= pz[f + 1]
+            Mz -= c * fy[f] - s * fx[f]
+            dxx += s * fy[f]
+            dyy += c * fx[f]
+            dxy -= 0.5 * (c * fy[f] + s * fx[f])
+            D[j, f, 2, 2] = dxx
+            D[j, f, 3, 3] = dyy
+            D[j, f, 2, 3] = dxy + 0.5 * Mz
+            D[j, f, 3, 2] = dxy - 0.5 * Mz
+            cwL = Sw * L
+            if has_h:
+                D[j, f, 0, 0] = -cwL * L * (mx * H[p, 8] + my * H[p, 17])
+            D[j, f, 0, 1] = 1.0
+            D[j, f, 1, 0] = 1.0
+            gz = G[p, 8]
+            D[j, f, 0, 2] = -cwL * gz * my
+            D[j, f, 2, 0] = D[j, f, 0, 2]
+            D[j, f, 0, 3] = cwL * gz * mx
+            D[j, f, 3, 0] = D[j, f, 0, 3]
+            hh = 0.5 * h[f]
+            D[j, f, 1, 2] = -hh * s
+            D[j, f, 2, 1] = D[j, f, 1, 2]
+            D[j, f, 1, 3] = hh * c
+            D[j, f, 3, 1] = D[j, f, 1, 3]
+            if f < nf - 1:
+                E[j, f, 2, 2] = -Ap[f + 1]
+                E[j, f, 3, 3] = -Am[f + 1]
+                E[j, f, 2, 3] = -q[f + 1] - 0.5 * pz[f + 1]
+                E[j, f, 3, 2] = -q[f + 1] + 0.5 * pz[f + 1]
+                E[j, f, 0, 1] = -1.0
+                hn = 0.5 * h[f + 1]
+                E[j, f, 2, 1] = -hn * s
+                E[j, f, 3, 1] = hn * c

@@ -105,24 +105,33 @@ class OutOfPlane:
         (k, 1)); mixed layout also dB_z/dz (k, n) T/m and
         ``m . d^2 b / dz^2`` needs the hessian ``H[:, :, 0:2, 2, 2]`` (k, n, 2) T/m^2 (zeros for
         a linear field)."""
-        P, n = self.planar, self.planar.n
+        n = self.planar.n
         if self.uniform:  # (bx, by): scalars, or (k, 1) arrays for one field per member
             if fields is None:
                 return (self._b[0], self._b[1]), None, None
             b = np.asarray(fields, float).reshape(-1, 3)
             return (b[:, 0:1], b[:, 1:2]), None, None
-        fv = getattr(lin, "field_values", None)
-        H = getattr(lin, "field_hessian", None)
-        if fv is None or (H is None and not P.linear):  # evaluate here (hessian included)
-            x = np.atleast_2d(lin.u).reshape(k, n, 5)[:, :, 0:2]
-            B, G, H = P._field_by_member(x, True)
-        else:
-            B, G = fv
+        B, G, H = self._mixed_fields(lin, k)
         B = B.reshape(k, n, 3)
         B = (B[:, 1:, 0], B[:, 1:, 1])
         Gzz = G.reshape(k, n, 3, 3)[..., 2, 2]
         Hzz = None if H is None else H.reshape(k, n, 3, 3, 3)[..., 0:2, 2, 2]
         return B, Gzz, Hzz
+
+    def _mixed_fields(self, lin: Linearization, k: int):
+        """B, G and H (None for a linear field) at the nodes of the states of ``lin`` (mixed
+        layout): the linearization's own, or evaluated here where it has no hessian."""
+        P, n = self.planar, self.planar.n
+        fv = getattr(lin, "field_values", None)
+        H = getattr(lin, "field_hessian", None)
+        if fv is None or (H is None and not P.linear):  # evaluate here (hessian included)
+            x = np.atleast_2d(lin.u).reshape(k, n, 5)[:, :, 0:2]
+            if fv is not None and hasattr(P.field, "filaments"):
+                # coaxial coils: their hessian pass alone gives the combined pass's numbers
+                # (and B, G are the linearization's): a third less of the kernel's work
+                return fv[0], fv[1], P._hessian_by_member(x)
+            return P._field_by_member(x, True)
+        return fv[0], fv[1], H
 
     def odd_blocks(self, lin: Linearization, fields=None, band: bool = False):
         """Diagonal (k, n - 1, nb, nb) and upper (k, n - 2, nb, nb) blocks of the
@@ -137,6 +146,16 @@ class OutOfPlane:
         S = np.asarray(lin.scale, float)
         S = S[:, None] if S.shape == (k,) else np.broadcast_to(S, (k,))[:, None]
         h, w, inv_h = P.mesh.h, P.mesh.w, P._inv_h
+        if not self.uniform:
+            from . import _compiled as pc
+
+            if pc.odd_blocks_pays(k, n):  # the compiled assembly (ski rental)
+                B, G, H = self._mixed_fields(lin, k)
+                D = np.zeros((k, n - 1, 4, 4))
+                E = np.zeros((k, max(n - 2, 0), 4, 4))
+                k1, k2 = self.stiffness[0], self.stiffness[1]
+                pc.odd_blocks_mixed(U, S[:, 0], P.mu, h, w, inv_h, k1, k2, P.L, B, G, H, D, E)
+                return D, E
         th = P.theta(U)
         thf = th[:, 1:]  # free nodes: everything below is per free node or per segment
         c, s = np.cos(thf), np.sin(thf)

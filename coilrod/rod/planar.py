@@ -34,6 +34,8 @@ factors serve every solve at that state (Newton step, path tangent, stability).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.linalg import eigvalsh_tridiagonal
 from scipy.linalg.lapack import dgttrf, dgttrs
@@ -131,8 +133,7 @@ class RodTangent:
             for j in np.flatnonzero(self.bad):
                 ab[:, j * n : (j + 1) * n] = 0.0
                 ab[diag, j * n : (j + 1) * n] = 1.0
-        from ._compiled import band_lu
-
+        band_lu = _compiled().band_lu
         ipiv = np.empty(ab.shape[1], dtype=np.int64)
         info = band_lu(ab, self.kl, self.ku, ipiv)  # LAPACK's gbtf2, compiled: no per-column calls
         lu = ab
@@ -166,10 +167,8 @@ class RodTangent:
             if info != 0:
                 raise np.linalg.LinAlgError(f"LAPACK solve failed (info {info})")
         else:
-            from ._compiled import band_solve
-
             x = np.array(rhs, dtype=float).reshape(-1, 1)
-            band_solve(lu[0], self.kl, self.ku, lu[1], x)
+            _compiled().band_solve(lu[0], self.kl, self.ku, lu[1], x)
         x = x.reshape(self.k, self.size)
         if self.bad.any():
             x[self.bad] = np.nan
@@ -485,17 +484,59 @@ class PlanarRod(DiscreteRod):
         return g_mu, g_b, g_G
 
     # -- field ---------------------------------------------------------------------------------
+    def _field(self, x: np.ndarray, hessian: bool):
+        """:meth:`DiscreteRod._field` through the field's prepared evaluator
+        (:meth:`coils.field.Field.evaluator`, bound once per problem): the points are made
+        here, checked finite once, and evaluated without the public methods' validation and
+        dispatch -- the same numbers.  Points that are not finite take the validated path
+        (its ValueError)."""
+        fields = self._fields
+        if fields is None:
+            make = getattr(self.field, "evaluator", None)
+            if make is None:
+                return super()._field(x, hessian)
+            fields = self._fields = make()
+        pts = np.empty((x.size // 2, 3))
+        xy = pts[:, :2]
+        np.multiply(x.reshape(-1, 2), self.L, out=xy)  # (the sum below commutes exactly)
+        xy += self.clamp[:2]
+        pts[:, 2] = self.clamp[2]
+        if not math.isfinite(pts.sum()):  # (a sum of finite points may overflow: checked again)
+            return super()._field(x, hessian)
+        return fields(pts, hessian and not self.linear)
+
+    _fields = None  # the field's prepared evaluator, bound on first use
+
+    def _hessian_by_member(self, x: np.ndarray) -> np.ndarray:
+        """The field's hessian alone (k n, 3, 3, 3) T/m^2 at positions x (k, n, 2) (units of
+        L; :meth:`coils.field.Field.hessian`), NaN for members where it cannot be evaluated
+        (as :meth:`_field_by_member`; the field's message kept in ``last_failure``)."""
+        try:
+            with np.errstate(all="ignore"):
+                return self.field.hessian(self.points(x).reshape(-1, 3))
+        except ValueError as exc:
+            self.last_failure = f"the field could not be evaluated at the trial states ({exc})"
+        k, n = x.shape[0], self.n
+        H = np.full((k, n, 3, 3, 3), np.nan)
+        for j in range(k):
+            try:
+                with np.errstate(all="ignore"):
+                    H[j] = self.field.hessian(self.points(x[j]))
+            except ValueError as exc:
+                self.last_failure = f"the field could not be evaluated at the trial states ({exc})"
+        return H.reshape(-1, 3, 3, 3)
+
     # -- the protocol -----------------------------------------------------------------------------
     def linearize(self, u, scale, tangent: bool = True) -> Linearization:
         """Residual (k, size), admissibility (k,) and the tangent of a stack of states."""
         U, S = self._stack(u, scale)
-        with np.errstate(all="ignore"):
-            field_values = None
-            if self.uniform:
+        if self.uniform:
+            with np.errstate(all="ignore"):
                 R, R1, parts = self._uniform(U, S, tangent)
-            else:
-                R, R1, parts, field_values = self._mixed(U, S, tangent)
-            ok = np.isfinite(R).all(axis=1)
+                ok = np.isfinite(R).all(axis=1)
+            field_values = None
+        else:  # (the compiled pass and its numpy twin raise no floating-point warnings)
+            R, R1, parts, field_values, ok = self._mixed(U, S, tangent)
         tan = RodTangent(U.shape[0], self.size, self.uniform, parts, R1) if tangent else None
         if tan is not None:
             tan.bad |= ~ok
@@ -568,10 +609,10 @@ class PlanarRod(DiscreteRod):
                 size_th = 1.0 + np.abs(U).max(axis=1, keepdims=True)
                 scaled = np.abs(R[:, 1:]) * self._inv_w[1:]
                 return (scaled / (self.tol + size_th * self._floor_bend)).max(axis=1)
-        from ._compiled import mixed_error
-
         out = np.empty(k)
-        mixed_error(R, U, self._inv_w, self._inv_h, self._bend_scale, self.tol, _FLOOR * _EPS, out)
+        _compiled().mixed_error(
+            R, U, self._inv_w, self._inv_h, self._bend_scale, self.tol, _FLOOR * _EPS, out
+        )
         return out
 
     def residual_norm(self, residual) -> np.ndarray:
@@ -594,8 +635,11 @@ class PlanarRod(DiscreteRod):
         du = np.asarray(du)
         du = du if du.ndim == 2 else du[None]
         rot = np.abs(self.theta(du)).max(axis=1)
-        with np.errstate(divide="ignore"):
-            return np.where(rot > 0, np.minimum(1.0, self.max_rotation / rot), 1.0)
+        out = np.ones(rot.shape)
+        turns = rot > 0  # (NaN: 1, as the line search then rejects the step)
+        if turns.any():
+            out[turns] = np.minimum(1.0, self.max_rotation / rot[turns])
+        return out
 
     def distance(self, du):
         """Largest change of a node angle, rad, shape (k,)."""
@@ -752,11 +796,11 @@ class PlanarRod(DiscreteRod):
 
     # -- mixed layout -----------------------------------------------------------------------------
     def _mixed(self, U: np.ndarray, S: np.ndarray, tangent: bool):
-        """Residual, load derivative, band Jacobian and the field at the nodes (B (k, n, 3),
-        G (k, n, 3, 3), kept for the adjoint) of a stack, by the compiled pass of
+        """Residual, load derivative, band Jacobian, the field at the nodes (B (k, n, 3),
+        G (k, n, 3, 3), kept for the adjoint) and which members are finite (k,) (their
+        residual rows are, the others' are NaN) of a stack, by the compiled pass of
         :mod:`coilrod.rod._compiled` (the equations are in the module docstring)."""
-        from ._compiled import mixed_assembly
-
+        mixed_assembly = _compiled().mixed_assembly
         k, n = U.shape[0], self.n
         B, G, H = self._field_by_member(U.reshape(k, n, _NV)[:, :, 0:2], tangent)
         R = np.empty((k, self.size))
@@ -785,8 +829,10 @@ class PlanarRod(DiscreteRod):
             ab,
             finite,
         )
-        R[~finite] = np.nan
-        return R, R1, (ab if tangent else None), (B.reshape(k, n, 3), G.reshape(k, n, 3, 3), H)
+        if not finite.all():
+            R[~finite] = np.nan
+        fields = (B.reshape(k, n, 3), G.reshape(k, n, 3, 3), H)
+        return R, R1, (ab if tangent else None), fields, finite
 
     def _stability_mixed(self, lin: Linearization, signs: np.ndarray) -> np.ndarray:
         """Smallest second-variation eigenvalue of each member (see :meth:`stability`).
@@ -869,6 +915,20 @@ def _planar_newton():
 
 
 _PN = None
+
+
+def _compiled():
+    """:mod:`coilrod.rod._compiled`, imported on first use (it imports numba) and kept (as
+    :func:`_planar_newton`)."""
+    global _PC
+    if _PC is None:
+        from . import _compiled as pc
+
+        _PC = pc
+    return _PC
+
+
+_PC = None
 
 
 def _take_tangent(tan: RodTangent, rows) -> RodTangent:

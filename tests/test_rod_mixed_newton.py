@@ -1,0 +1,156 @@
+"""The planar rod's mixed layout (non-uniform fields) on its fast paths against the general ones:
+the field's prepared evaluator (:meth:`coils.field.Field.evaluator`, bound once per problem)
+gives the numbers and errors of the validated public methods, bit for bit.  Nothing here
+compiles: the coaxial kernel is replaced by a recording stand-in or runs as the ski rental's
+numpy pass."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import coils
+import coils.coaxial as cx
+from coilrod import presets
+from coilrod.rod.discrete import DiscreteRod
+from coilrod.rod.mesh import RodMesh
+from coilrod.rod.solve import build_problem, make_mesh
+
+
+@pytest.fixture
+def numpy_pass(monkeypatch):
+    """The coaxial coils' numpy pass (the ski rental before compiling), whatever the process
+    has compiled."""
+    monkeypatch.setattr(cx, "_compiled_ready", False)
+    monkeypatch.setattr(cx, "COMPILE_AFTER", np.inf)
+    monkeypatch.setattr(cx, "_kernel_on_disk", lambda: False)
+
+
+def _points(pair, n=7):
+    rng = np.random.default_rng(3)
+    pts = pair.center + 0.3 * pair.filaments[0, 1] * rng.normal(size=(n, 3))
+    pts[0] = pair.center  # on the axis
+    return np.ascontiguousarray(pts)
+
+
+def test_coaxial_evaluator_is_the_public_methods(numpy_pass, monkeypatch):
+    pair = coils.MaxwellPair(radius=0.05, turns=100, current=2.0, axis=(0.0, 0.6, 0.8))
+    pts = _points(pair)
+    fields = pair.evaluator()
+    B, G, H = fields(pts.copy(), True)
+    refs = pair.B_gradient_hessian(pts)
+    for got, ref in zip((B, G, H), refs, strict=True):
+        assert got.shape == ref.shape
+        assert np.array_equal(got, ref)
+    B2, G2, none = fields(pts.copy(), False)
+    B_ref, G_ref = pair.B_and_gradient(pts)
+    assert none is None
+    assert np.array_equal(B2, B_ref)
+    assert np.array_equal(G2, G_ref)
+    # a point on the winding: the public methods' ValueError
+    on_wire = pts.copy()
+    on_wire[2] = (
+        pair.center + pair.filaments[1, 0] * pair.axis + pair.filaments[1, 1] * pair.rotation[:, 0]
+    )
+    with pytest.raises(ValueError, match="winding") as public:
+        pair.B_gradient_hessian(on_wire)
+    with pytest.raises(ValueError, match="winding") as fast:
+        fields(on_wire.copy(), True)
+    assert str(fast.value) == str(public.value)
+
+    # compiled: the kernel called directly with the arguments the public path gives it (a
+    # recording stand-in for the compiled pass: nothing compiles)
+    calls = []
+
+    def kernel(p, *rest):
+        *args, flags, factor, B_, G_, H_, err = rest
+        calls.append((p.copy(), p.flags.writeable, args, flags, factor, B_.shape, G_.shape))
+        B_ += p.sum(axis=1)[:, None]
+        G_ += 2.0 * p[:, :1]
+        if flags & 4:
+            H_ += 3.0 * p[:, 1:2]
+        return False
+
+    _, args, n_err = pair._kernel_args
+    fake = pair.replace()  # (a fresh object: its own kernel-argument cache)
+    fake._set_cache("_kernel_args", (kernel, args, n_err))
+    monkeypatch.setattr(cx, "_compiled_ready", True)
+    for hessian in (True, False):
+        public = fake.B_gradient_hessian(pts) if hessian else (*fake.B_and_gradient(pts), None)
+        got = fake.evaluator()(pts.copy(), hessian)
+        for a, b in zip(got, public, strict=True):
+            assert (a is None and b is None) or np.array_equal(a, b)
+        (p1, w1, a1, f1, s1, *sh1), (p2, w2, a2, f2, s2, *sh2) = calls[-2:]
+        assert np.array_equal(p1, p2)
+        assert not w1
+        assert not w2
+        assert all(x is y for x, y in zip(a1, a2, strict=True))
+        assert (f1, s1, sh1) == (f2, s2, sh2)
+
+
+def test_planar_field_through_the_evaluator_is_bitwise_the_validated_path(numpy_pass):
+    rod = presets.seed_rod()
+    pair = coils.HelmholtzPair(radius=2 * rod.length, turns=200, current=1.0, axis="y")
+    problem = build_problem(rod, pair, make_mesh(rod, 6), np.zeros(3), 0.3)
+    rng = np.random.default_rng(1)
+    x = 0.4 * rng.normal(size=(3, problem.n, 2))
+    for hessian in (True, False):
+        got = problem._field(x, hessian)
+        ref = DiscreteRod._field(problem, x, hessian)
+        for a, b in zip(got, ref, strict=True):
+            assert (a is None and b is None) or np.array_equal(a, b)
+    # the 3D count's hessian where a linearization has none (a chord step's): the coils'
+    # hessian pass alone, bitwise the combined pass's
+    oop = problem.with_out_of_plane((0.77, 1.3, 1.0)).out_of_plane
+    U = problem.straight() + 0.05 * rng.normal(size=(3, problem.size))
+    lin = problem.linearize(U, np.full(3, 1e5), tangent=False)
+    assert lin.field_hessian is None
+    got = oop._mixed_fields(lin, 3)
+    ref = DiscreteRod._field_by_member(problem, U.reshape(3, problem.n, 5)[:, :, 0:2], True)
+    for a, b in zip(got, ref, strict=True):
+        assert np.array_equal(a.reshape(b.shape), b)
+    # a member that is not finite: the validated path's error, and NaN for that member only
+    H = problem._hessian_by_member(np.where(np.arange(3)[:, None, None] == 1, np.nan, x))
+    assert np.isnan(H.reshape(3, -1)[1]).all()
+    assert np.isfinite(H.reshape(3, -1)[[0, 2]]).all()
+    x[1, 2, 0] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        problem._field(x, True)
+    B, _, _ = problem._field_by_member(x, True)
+    B = B.reshape(3, problem.n, 3)
+    assert np.isnan(B[1]).all()
+    assert np.isfinite(B[[0, 2]]).all()
+
+
+def test_compiled_out_of_plane_blocks_are_the_numpy_assembly(numpy_pass, monkeypatch):
+    # the mixed layout's out-of-plane blocks assembled by the kernel (run as Python through
+    # its .py_func: nothing compiles) against the numpy assembly, at off-equilibrium states
+    # (moment residuals and forces nonzero) in a coil field (hessian terms) and a linear one;
+    # then the ski rental's switch: the 3D counts the same either way
+    import coilrod.rod._compiled as rc
+
+    rod = presets.seed_rod()
+    L = rod.length
+    pair = coils.MaxwellPair(radius=2 * L, turns=200, current=1.0, axis="y", center=(L, 0, 0))
+    rng = np.random.default_rng(2)
+    python_kernel = rc._odd_blocks_compiled.py_func
+    for field in (pair + coils.UniformField(B=(0.0, 2e-3, 0.0)), pair.ideal()):
+        mesh = RodMesh(5, (0.3,))  # (segments of two lengths)
+        problem = build_problem(rod, field, mesh, np.zeros(3), 0.2)
+        problem = problem.with_out_of_plane((0.77, 1.3, 1.0))
+        U = problem.straight() + rng.normal(scale=0.3, size=(2, problem.size))
+        lin = problem.linearize(U, np.array([2e5, -6e5]))
+        oop = problem.out_of_plane
+        monkeypatch.setattr(rc, "_odd_ready", False)
+        monkeypatch.setattr(rc, "ODD_COMPILE_AFTER", np.inf)
+        monkeypatch.setattr(rc, "_on_disk", lambda dispatcher: False)
+        D, E = oop.odd_blocks(lin)
+        counts = oop.odd_count(lin)
+        monkeypatch.setattr(rc, "_odd_ready", True)
+        monkeypatch.setattr(rc, "_odd_blocks_compiled", python_kernel)
+        Dc, Ec = oop.odd_blocks(lin)
+        # (libm's sin and cos against numpy's: equal, or a last-bit difference on some CPUs)
+        np.testing.assert_allclose(Dc, D, rtol=1e-13, atol=1e-13 * np.abs(D).max())
+        np.testing.assert_allclose(Ec, E, rtol=1e-13, atol=1e-13 * np.abs(E).max())
+        assert np.abs(D[:, :, 0, 0]).max() > 0 or field.linear  # (the hessian term is there)
+        np.testing.assert_array_equal(oop.odd_count(lin), counts)
