@@ -162,6 +162,8 @@ def compile_at_once(warm_up: bool = True) -> None:
             continue
         if hasattr(module, "COMPILE_AFTER"):
             module.COMPILE_AFTER = 0.0
+        if hasattr(module, "ODD_COMPILE_AFTER"):  # coilrod.rod._compiled's out-of-plane blocks
+            module.ODD_COMPILE_AFTER = 0.0
     if warm_up:
         _warm_up()
 

@@ -122,6 +122,7 @@ from numba.core import event
 import coils.coaxial, coilrod.rod._compiled
 coils.coaxial.COMPILE_AFTER = 0.0  # compile everything the scenario uses
 coilrod.rod._compiled.COMPILE_AFTER = 0.0
+coilrod.rod._compiled.ODD_COMPILE_AFTER = 0.0
 import coilrod.rod._inertia, coilrod.rod._compiled_spatial, coilrod.rod._planar_newton
 coilrod.rod._inertia.COMPILE_AFTER = 0.0
 coilrod.rod._compiled_spatial.COMPILE_AFTER = 0.0
@@ -144,6 +145,7 @@ KERNELS = {
     "coilrod.rod._compiled.band_lu": "band LU",
     "coilrod.rod._compiled.band_solve": "band solve",
     "coilrod.rod._compiled.mixed_error": "planar error measure",
+    "coilrod.rod._compiled._odd_blocks_compiled": "out-of-plane blocks (mixed layout)",
     "coilrod.rod._inertia._inertia": "block inertia",
     "coilrod.rod._compiled_spatial.spatial_core": "spatial per-node pass",
     "coilrod.rod._planar_newton._newton": "planar uniform-field Newton corrector",
