@@ -329,6 +329,40 @@ class TestSpatialTarget:
         tip = _tip_3d(navion, out.currents, nodes=8)
         np.testing.assert_allclose(tip, (0.020, 0.030, 0.0), atol=1e-6 * L)
 
+    def test_the_ideal_controller_stops_at_a_branch_edge(self):
+        """Navion at 10 A, the ideal controller, (20, 30) mm: the miss left in its own model
+        lies across an edge of the rod's branch (every small step along it snaps the rod to
+        another branch, the tip ~1 L away).  The old search alternated such a jump with a
+        0.3-0.7 % gain and spent all 40 solves (from this warm start on the branch, 0.25 mm
+        off); it now stops at the edge within a handful, says so, and returns the closest
+        state on the branch.  Its misses are those of independent forward solves at the
+        returned currents: in the real field, and in the centre field's linearisation made
+        by coils (``MPEM.ideal``) rather than by the controller's per-ampere maps."""
+        import re
+
+        from coilrod.control.currents import ControlWarning
+
+        navion = coils.presets.navion()
+        target = np.array([0.020, 0.030, 0.0])
+        with pytest.warns(ControlWarning, match="edge of the rod's branch") as record:
+            out = solve_currents(
+                ROD, navion, target[:2], max_current=10.0, model="ideal", nodes=8, steps=3,
+                initial=[-1.1636, 5.0124, -2.1141],
+            )  # fmt: skip
+        assert (out.status, out.optimal) == ("branch_edge", False)
+        assert out.solves <= 8  # the old search: 40
+        said = str(record[0].message)
+        assert f"after {out.solves} solves" in said
+        own = float(re.search(r"model is (\S+) m", out.message).group(1))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            model = navion.with_currents(out.currents).ideal()
+            tip = solve_rod(ROD, model, SCALES, tol=1e-11, nodes=8).tip[-1]
+        assert own == pytest.approx(np.linalg.norm(tip - target), rel=1e-3)
+        assert own == pytest.approx(min(out.history), rel=1e-3)  # the closest state returned
+        assert 1e-7 * L < own < 2e-3 * L  # near the target, but not on it
+        assert out.miss == pytest.approx(np.linalg.norm(_tip_3d(navion, out.currents, 8) - target))
+
     def test_a_3d_target_needs_three_field_directions(self):
         planar = coils.CoilSystem(
             [

@@ -1181,7 +1181,7 @@ def _ending(p: _Problem, res, solves, status, edge) -> str:
     )
 
 
-def _finish(p: _Problem, I, res, solves, start_solves, history, status, edge) -> ControlResult:
+def _finish(p: _Problem, I, res, solves, start_solves, history, status, edge=None) -> ControlResult:
     """The result at currents ``I`` (``res`` the model's forward solve there), with the tip in
     the real field; raises for an unreachable position target and warns for a result that is
     not a local optimum (:func:`_report`)."""
