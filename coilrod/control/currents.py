@@ -426,7 +426,8 @@ class _BudgetSpent(Exception):
 
 #: A trial state is on another branch of the rod when its weighted misses moved by more than
 #: ``JUMP_RATIO`` times the change the linearisation predicted for the step, and by more than
-#: ``JUMP_MIN`` (in L, rad): the step was small enough for the linearisation, the rod was not.
+#: ``JUMP_MIN`` (in L, rad), away from the target: the step was small enough for the
+#: linearisation, the rod was not.
 JUMP_RATIO = 100.0
 JUMP_MIN = 0.01
 #: A branch edge: ``EDGE_JUMPS`` such jumps along the same direction of the currents (unit
@@ -452,8 +453,8 @@ class _EdgeWatch:
     """The trial steps of :func:`_damped` that sent the rod to another branch.
 
     A jump: the misses moved ``JUMP_RATIO`` times further than the step's linearisation
-    predicted, and by more than ``JUMP_MIN`` (a snap to another stable state, the tip ~L
-    away, where the step predicted a fraction of a per cent).  One jump is a step too long;
+    predicted, and by more than ``JUMP_MIN``, and grew (a snap to another stable state, the
+    tip ~L away, where the step predicted a fraction of a per cent).  One jump is a step too long;
     ``EDGE_JUMPS`` along the same direction of the currents, with the misses not halved
     between the first's state and the last's, are the edge of the branch the search is on:
     the remaining miss lies across it, and the steps would alternate a jump with a tiny gain
@@ -466,8 +467,8 @@ class _EdgeWatch:
         if it jumped, and raise :class:`_BranchEdge` at the edge."""
         moved = float(np.linalg.norm(r_t - r))
         change = float(np.linalg.norm(predicted))
-        if moved <= max(JUMP_RATIO * change, JUMP_MIN):
-            return
+        if moved <= max(JUMP_RATIO * change, JUMP_MIN) or r_t @ r_t <= r @ r:
+            return  # no jump, or one closer to the target (a snap-through that helps)
         u, here = step / np.linalg.norm(step), float(np.linalg.norm(r))
         self.jumps.append((u, moved, change, here))
         same = [j for j in self.jumps if abs(float(j[0] @ u)) >= EDGE_COS and here > 0.5 * j[3]]
