@@ -97,7 +97,7 @@ class ControlResult:
         1e-6), or, for a result that is neither, why the search stopped: "max_solves" (the
         solve budget spent), "stalled" (no step decreased the misses any more, or the steps
         crept towards the edge of the rod's branch without reaching an optimum), or
-        "branch_edge" (the damped search stopped where the rod's branch ends: steps of the
+        "branch_edge" (the search stopped where the rod's branch ends: trial steps of the
         currents along one direction, small enough that their linearisation predicts a
         small change, sent the rod to another branch ``EDGE_JUMPS`` times -- see
         :class:`_EdgeWatch`; ``message`` names the direction, the miss reached and the
@@ -438,7 +438,7 @@ EDGE_COS = 0.9
 
 
 class _BranchEdge(Exception):
-    """The damped search reached an edge of the rod's branch (:class:`_EdgeWatch`):
+    """The search reached an edge of the rod's branch (:class:`_EdgeWatch`):
     ``direction`` (m,) the unit step of the currents that leaves it, ``jumps`` how often,
     ``moved`` and ``predicted`` the largest jump of |r| and the change its step predicted."""
 
@@ -450,11 +450,13 @@ class _BranchEdge(Exception):
 
 @dataclass
 class _EdgeWatch:
-    """The trial steps of :func:`_damped` that sent the rod to another branch.
+    """The trial steps of a search (:func:`_approach`, :func:`_damped`) that sent the rod to
+    another branch.
 
     A jump: the misses moved ``JUMP_RATIO`` times further than the step's linearisation
     predicted, and by more than ``JUMP_MIN``, and grew (a snap to another stable state, the
-    tip ~L away, where the step predicted a fraction of a per cent).  One jump is a step too long;
+    tip ~L away, where the step predicted a fraction of a per cent).  One jump is a step
+    too long;
     ``EDGE_JUMPS`` along the same direction of the currents, with the misses not halved
     between the first's state and the last's, are the edge of the branch the search is on:
     the remaining miss lies across it, and the steps would alternate a jump with a tiny gain
