@@ -901,7 +901,8 @@ def solve_currents(
     -----
     ControlWarning
         The currents returned are neither on the target nor a local least-squares optimum
-        (``status`` "max_solves" or "stalled"; ``optimal`` False).
+        (``status`` "max_solves", "stalled" or "branch_edge"; ``optimal`` False;
+        ``message`` says how the search ended).
 
     Notes
     -----
