@@ -122,45 +122,50 @@ class TestIdealModel:
 class TestUnreachable:
     @pytest.fixture(scope="class")
     def beyond(self):
-        """The one solve both limit tests read: a target the compact system cannot reach
-        within 0.5 A (the ConvergenceError it raises)."""
-        target, _ = _target(COMPACT, (0.004, 0.012, 0.0))
-        with pytest.raises(ConvergenceError) as info:
-            solve_currents(ROD, COMPACT, target, max_current=0.5)
-        return info.value
-
-    def test_beyond_the_current_limits(self, beyond):
-        assert "beyond the current limits: not reachable within them" in str(beyond)
-        out = beyond.result
-        assert np.all(np.abs(out.currents) <= 0.5 + 1e-9)
-        # the closest tip reported is where those currents really put it
-        np.testing.assert_allclose(out.tip[:2], _tip(COMPACT, out.currents), atol=1e-8 * L)
-
-    def test_the_limits_named_when_they_bind(self, beyond):
-        out = beyond.result
-        at_limit = np.flatnonzero(np.abs(out.currents) >= 0.5 - 1e-9).tolist()
-        assert at_limit
-        assert out.active == at_limit
-        message = str(beyond)
-        assert f"channels {', '.join(map(str, at_limit))} at their limit" in message
-        assert "outside the robot's reachable set" not in message
-
-    def test_a_restarted_search_counts_both_searches(self, monkeypatch):
-        """A warm start that cannot reach the target is followed by a fresh one: the error's
-        result counts the forward solves of both (the old code reported the second's only).
-        Reference: the forward solves counted where they are made (the start's uniform-field
-        solves are start_solves - 1: its workspace grid counts one)."""
+        """The one solve the limit tests read: a target the compact system cannot reach within
+        0.5 A (the ConvergenceError it raises), from a warm start that cannot reach it either
+        (then a fresh one), and the forward solves counted where they are made."""
         import coilrod.control.currents as currents
 
         calls = []
         forward = currents._forward
-        monkeypatch.setattr(currents, "_forward", lambda *a: calls.append(1) or forward(*a))
         target, _ = _target(COMPACT, (0.004, 0.012, 0.0))
-        with pytest.raises(ConvergenceError, match="current limits") as info:
-            solve_currents(ROD, COMPACT, target, max_current=0.5, initial=(0.5, 0.0, 0.0), nodes=16)
-        out = info.value.result
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(currents, "_forward", lambda *a: calls.append(1) or forward(*a))
+            with pytest.raises(ConvergenceError) as info:
+                solve_currents(
+                    ROD, COMPACT, target, max_current=0.5, initial=(0.5, 0.0, 0.0), nodes=16
+                )
+        return info.value, len(calls)
+
+    def test_beyond_the_current_limits(self, beyond):
+        assert "beyond the current limits: not reachable within them" in str(beyond[0])
+        out = beyond[0].result
+        assert np.all(np.abs(out.currents) <= 0.5 + 1e-9)
+        # the closest tip reported is where those currents really put it
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            field = COMPACT.with_currents(out.currents)
+            tip = solve_rod(ROD, field, SCALES, tol=1e-11, nodes=16).tip[-1, :2]
+        np.testing.assert_allclose(out.tip[:2], tip, atol=1e-8 * L)
+
+    def test_the_limits_named_when_they_bind(self, beyond):
+        out = beyond[0].result
+        at_limit = np.flatnonzero(np.abs(out.currents) >= 0.5 - 1e-9).tolist()
+        assert at_limit
+        assert out.active == at_limit
+        message = str(beyond[0])
+        assert f"channels {', '.join(map(str, at_limit))} at their limit" in message
+        assert "outside the robot's reachable set" not in message
+
+    def test_a_restarted_search_counts_both_searches(self, beyond):
+        """A warm start that cannot reach the target is followed by a fresh one: the error's
+        result counts the forward solves of both (the old code reported the second's only).
+        Reference: the forward solves counted where they are made (the start's uniform-field
+        solves are start_solves - 1: its workspace grid counts one)."""
+        out, calls = beyond[0].result, beyond[1]
         assert out.start_solves > 0  # the fresh start was taken
-        assert out.solves + out.start_solves - 1 == len(calls)
+        assert out.solves + out.start_solves - 1 == calls
         assert len(out.history) == out.solves
 
     def test_outside_the_reachable_set_without_a_limit_active(self):
@@ -328,6 +333,40 @@ class TestSpatialTarget:
         assert np.all(np.abs(out.currents) <= 10.0)
         tip = _tip_3d(navion, out.currents, nodes=8)
         np.testing.assert_allclose(tip, (0.020, 0.030, 0.0), atol=1e-6 * L)
+
+    def test_the_ideal_controller_stops_at_a_branch_edge(self):
+        """Navion at 10 A, the ideal controller, (20, 30) mm: the miss left in its own model
+        lies across an edge of the rod's branch (every small step along it snaps the rod to
+        another branch, the tip ~1 L away).  The old search alternated such a jump with a
+        0.3-0.7 % gain and spent all 40 solves (from this warm start on the branch, 0.25 mm
+        off); it now stops at the edge within a handful, says so, and returns the closest
+        state on the branch.  Its misses are those of independent forward solves at the
+        returned currents: in the real field, and in the centre field's linearisation made
+        by coils (``MPEM.ideal``) rather than by the controller's per-ampere maps."""
+        import re
+
+        from coilrod.control.currents import ControlWarning
+
+        navion = coils.presets.navion()
+        target = np.array([0.020, 0.030, 0.0])
+        with pytest.warns(ControlWarning, match="edge of the rod's branch") as record:
+            out = solve_currents(
+                ROD, navion, target[:2], max_current=10.0, model="ideal", nodes=8, steps=3,
+                initial=[-1.1636, 5.0124, -2.1141],
+            )  # fmt: skip
+        assert (out.status, out.optimal) == ("branch_edge", False)
+        assert out.solves <= 8  # the old search: 40
+        said = str(record[0].message)
+        assert f"after {out.solves} solves" in said
+        own = float(re.search(r"model is (\S+) m", out.message).group(1))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            model = navion.with_currents(out.currents).ideal()
+            tip = solve_rod(ROD, model, SCALES, tol=1e-11, nodes=8).tip[-1]
+        assert own == pytest.approx(np.linalg.norm(tip - target), rel=1e-3)
+        assert own == pytest.approx(min(out.history), rel=1e-3)  # the closest state returned
+        assert 1e-7 * L < own < 2e-3 * L  # near the target, but not on it
+        assert out.miss == pytest.approx(np.linalg.norm(_tip_3d(navion, out.currents, 8) - target))
 
     def test_a_3d_target_needs_three_field_directions(self):
         planar = coils.CoilSystem(

@@ -117,6 +117,16 @@ def test_stalled_search_says_where_and_how_far():
     assert "outside the robot's reachable set" in text
     assert f"{miss:.4g} m (0.02 L) away" in text
     assert info.value.result.status == "stalled"
+    # a search stopped at a branch edge says so, with the edge's direction and the solves
+    edge = currents._BranchEdge(np.array([0.6, 0.0, 0.8]), 2, 1.05, 2e-4)
+    with pytest.raises(ConvergenceError, match="edge of the rod's branch") as info:
+        currents._finish(p, zero, res, 5, 0, [miss], "branch_edge", edge)
+    text = str(info.value)
+    assert "branch_edge after 5 solves" in text
+    assert "along [0.6, 0.0, 0.8]" in text
+    assert f"{miss:.4g} m (0.02 L) from the target" in text
+    assert "outside the robot's reachable set" not in text
+    assert info.value.result.message in text
 
 
 @pytest.mark.parametrize(

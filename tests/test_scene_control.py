@@ -646,6 +646,7 @@ def test_readme_control_scene_is_the_example_and_its_output(example):
     ("status", "said", "not_said"),
     [
         ("max_solves", "search stopped (max_solves, after 40 solves)", "the current limits"),
+        ("branch_edge", "search stopped (branch_edge, after 40 solves)", "the current limits"),
         ("optimal", "within the current limits", "search stopped"),
     ],
 )
@@ -653,8 +654,9 @@ def test_an_ideal_controller_stopped_by_its_budget_is_not_blamed_on_the_limits(
     status, said, not_said
 ):
     """The ideal controller's reason names what stopped it: a search that ran out of solves
-    (Navion at (20, 30) mm creeps there on a nearly singular Jacobian) is not 'within the
-    current limits' (the old message said so whatever stopped it)."""
+    (Navion at (20, 30) mm creeps there on a nearly singular Jacobian) or stopped at an edge
+    of the rod's branch (what it now does there) is not 'within the current limits' (the old
+    message said so whatever stopped it)."""
     from coilrod.control.currents import ControlResult
     from coilrod.scene.control_runner import _unmet
 

@@ -96,7 +96,12 @@ class ControlResult:
         Gauss-Newton step predicts a relative decrease of their squares above ``GAIN_TOL`` =
         1e-6), or, for a result that is neither, why the search stopped: "max_solves" (the
         solve budget spent), "stalled" (no step decreased the misses any more, or the steps
-        crept towards the edge of the rod's branch without reaching an optimum).
+        crept towards the edge of the rod's branch without reaching an optimum), or
+        "branch_edge" (the search stopped where the rod's branch ends: trial steps of the
+        currents along one direction, small enough that their linearisation predicts a
+        small change, sent the rod to another branch ``EDGE_JUMPS`` times -- see
+        :class:`_EdgeWatch`; ``message`` names the direction, the miss reached and the
+        solves spent).
     optimal : bool
         ``status`` is "converged" or "optimal".  A result that is not is returned with a
         :class:`ControlWarning` (or, for an unreachable position target, said in the error).
@@ -108,6 +113,10 @@ class ControlResult:
     direction_miss : float or None
         Angle between the real tip tangent and the target direction, rad (None without a
         target direction).
+    message : str
+        How the search ended when the target is not met in the model's own field (the
+        status, the closest miss there, the solves spent, and at a branch edge its
+        direction); "" when it is met.
     """
 
     currents: np.ndarray
@@ -127,6 +136,7 @@ class ControlResult:
     active: list = field(default_factory=list)
     tip_direction: np.ndarray | None = None
     direction_miss: float | None = None
+    message: str = ""
 
 
 class ControlWarning(RuntimeWarning):
@@ -414,24 +424,83 @@ class _BudgetSpent(Exception):
     """The search has spent its forward solves (``max_solves``)."""
 
 
+#: A trial state is on another branch of the rod when its weighted misses moved by more than
+#: ``JUMP_RATIO`` times the change the linearisation predicted for the step, and by more than
+#: ``JUMP_MIN`` (in L, rad), away from the target: the step was small enough for the
+#: linearisation, the rod was not.
+JUMP_RATIO = 100.0
+JUMP_MIN = 0.01
+#: A branch edge: ``EDGE_JUMPS`` such jumps along the same direction of the currents (unit
+#: steps with |cos| >= ``EDGE_COS``), the misses not halved from the first jump's state to the
+#: last's (a search that still halves them between jumps is still closing in).
+EDGE_JUMPS = 2
+EDGE_COS = 0.9
+
+
+class _BranchEdge(Exception):
+    """The search reached an edge of the rod's branch (:class:`_EdgeWatch`):
+    ``direction`` (m,) the unit step of the currents that leaves it, ``jumps`` how often,
+    ``moved`` and ``predicted`` the largest jump of |r| and the change its step predicted."""
+
+    def __init__(self, direction, jumps, moved, predicted):
+        super().__init__("branch edge")
+        self.direction, self.jumps = direction, jumps
+        self.moved, self.predicted = moved, predicted
+
+
+@dataclass
+class _EdgeWatch:
+    """The trial steps of a search (:func:`_approach`, :func:`_damped`) that sent the rod to
+    another branch.
+
+    A jump: the misses moved ``JUMP_RATIO`` times further than the step's linearisation
+    predicted, and by more than ``JUMP_MIN``, and grew (a snap to another stable state, the
+    tip ~L away, where the step predicted a fraction of a per cent).  One jump is a step
+    too long;
+    ``EDGE_JUMPS`` along the same direction of the currents, with the misses not halved
+    between the first's state and the last's, are the edge of the branch the search is on:
+    the remaining miss lies across it, and the steps would alternate a jump with a tiny gain
+    until the budget is spent.  Then :meth:`check` raises :class:`_BranchEdge`."""
+
+    jumps: list = field(default_factory=list)  # (unit step, moved, predicted, |r|) per jump
+
+    def check(self, r, r_t, predicted, step) -> None:
+        """Record the trial (misses ``r_t`` after ``step`` from ``r``; ``predicted`` = J step)
+        if it jumped, and raise :class:`_BranchEdge` at the edge."""
+        moved = float(np.linalg.norm(r_t - r))
+        change = float(np.linalg.norm(predicted))
+        if moved <= max(JUMP_RATIO * change, JUMP_MIN) or r_t @ r_t <= r @ r:
+            return  # no jump, or one closer to the target (a snap-through that helps)
+        u, here = step / np.linalg.norm(step), float(np.linalg.norm(r))
+        self.jumps.append((u, moved, change, here))
+        same = [j for j in self.jumps if abs(float(j[0] @ u)) >= EDGE_COS and here > 0.5 * j[3]]
+        if len(same) >= EDGE_JUMPS:
+            worst = max(same, key=lambda j: j[1])
+            raise _BranchEdge(u, len(same), worst[1], worst[2])
+
+
 @dataclass
 class _Search:
     """The forward solves of one search: the budget, the misses met and the closest state.
 
     ``best`` is (key, currents, result, r) of the closest state found, stable states first (an
-    unstable state is not where the tip stays), then by |r|."""
+    unstable state is not where the tip stays), then by |r|; ``edge`` watches the trial steps
+    for jumps to another branch of the rod (:class:`_EdgeWatch`)."""
 
     problem: _Problem
     max_solves: int
     solves: int = 0
     history: list = field(default_factory=list)
     best: tuple | None = None
+    edge: _EdgeWatch = field(default_factory=_EdgeWatch)
 
-    def evaluate(self, I):
+    def evaluate(self, I, base=None):
         """Forward solve at currents ``I``: (result, weighted misses r, position miss m).
+        ``base`` (I0, r0, J0): the state the trial ``I`` steps from, its misses and their
+        Jacobian (the step's jump to another branch is checked, :class:`_EdgeWatch`).
 
-        Raises _BudgetSpent once ``max_solves`` solves are spent, and ConvergenceError (naming
-        the currents) if the forward solve fails."""
+        Raises _BudgetSpent once ``max_solves`` solves are spent, ConvergenceError (naming
+        the currents) if the forward solve fails, and _BranchEdge at an edge of the branch."""
         p = self.problem
         if self.solves >= self.max_solves:
             raise _BudgetSpent
@@ -451,6 +520,9 @@ class _Search:
         key = (not bool(res.stable[-1]), float(np.linalg.norm(r)))
         if self.best is None or key < self.best[0]:
             self.best = (key, I.copy(), res, r)
+        if base is not None and np.any(I != base[0]):
+            I0, r0, J0 = base
+            self.edge.check(r0, r, J0 @ (I - I0), I - I0)
         return res, r, miss
 
 
@@ -545,7 +617,9 @@ def _approach(p: _Problem, search: _Search, I, max_iter: int) -> None:
        decreases (or, near the target, stays within FAR L) -- also when the forward solve at
        the trial currents fails (a load path that cannot be followed there);
     3. the iteration ends on the target, after ``max_iter`` iterations, or when no step is
-       accepted.
+       accepted -- or, raising :class:`_BranchEdge` from ``search.evaluate``, at an edge of
+       the rod's branch (trial steps along one direction jumping to another branch,
+       :class:`_EdgeWatch`).
     """
     res, r, miss = search.evaluate(I)
     far = FAR * p.length
@@ -567,7 +641,7 @@ def _approach(p: _Problem, search: _Search, I, max_iter: int) -> None:
             for _trial in range(4):  # backtracking
                 trial = np.clip(I + t * step, -p.limits, p.limits)
                 try:
-                    res_t, r_t, miss_t = search.evaluate(trial)
+                    res_t, r_t, miss_t = search.evaluate(trial, (I, r, J))
                 except ConvergenceError:  # no equilibrium followed there: a shorter step
                     t /= 2
                     continue
@@ -594,10 +668,11 @@ def _search(p: _Problem, I, max_iter: int, max_solves: int):
     (:func:`_approach`), then, if the target is not met, Levenberg-Marquardt within the limits
     from the closest state to a local least-squares optimum (:func:`_damped`).
 
-    Returns the search (solves, history), the closest currents and their forward solve, and the
-    status (see :class:`ControlResult`)."""
+    Returns the search (solves, history), the closest currents and their forward solve, the
+    status (see :class:`ControlResult`) and the :class:`_BranchEdge` met (or None)."""
     search = _Search(p, max_solves)
     bounds = (-p.limits, p.limits.copy())  # the currents' range (narrowed by _damped)
+    edge = None
     try:
         _approach(p, search, I, max_iter)
         if not p.met(search.best[3]):
@@ -605,6 +680,8 @@ def _search(p: _Problem, I, max_iter: int, max_solves: int):
             bounds = _damped(I, res, r, p.jacobian, search.evaluate, p.met, bounds)
     except _BudgetSpent:  # the closest tip found is reported
         stopped = "max_solves"
+    except _BranchEdge as err:  # the closest state on the branch is reported
+        stopped, edge = "branch_edge", err
     else:
         stopped = "stalled"
     _, I, res, r = search.best
@@ -614,7 +691,7 @@ def _search(p: _Problem, I, max_iter: int, max_solves: int):
         status = "optimal"
     else:
         status = stopped
-    return search, I, res, status
+    return search, I, res, status, edge
 
 
 def _target(target, angle, direction):
@@ -824,7 +901,8 @@ def solve_currents(
     -----
     ControlWarning
         The currents returned are neither on the target nor a local least-squares optimum
-        (``status`` "max_solves" or "stalled"; ``optimal`` False).
+        (``status`` "max_solves", "stalled" or "branch_edge"; ``optimal`` False;
+        ``message`` says how the search ended).
 
     Notes
     -----
@@ -836,7 +914,9 @@ def solve_currents(
     2. Gauss-Newton steps on the weighted misses r(I) with the exact Jacobian, minimum-power
        steps near the target (:func:`_approach`);
     3. off the target: Levenberg-Marquardt within the limits to a local least-squares
-       optimum (:func:`_damped`);
+       optimum (:func:`_damped`); steps 2 and 3 stop early at an edge of the rod's branch
+       (status "branch_edge": small steps along one direction of the currents land the rod
+       on another branch, again and again; the closest state on the branch is returned);
     4. a warm start (``initial``) that does not reach the target in the real field is followed
        by a fresh one from the uniform-field start (both searches' solves counted);
     5. the report (:func:`_finish`): the real-field tip of the currents, and an error or a
@@ -895,13 +975,13 @@ def solve_currents(
                 p.system,
                 p.B_fixed,
             )
-        search, I, res, status = _search(p, I, max_iter, max_solves)
+        search, I, res, status, edge = _search(p, I, max_iter, max_solves)
         solves, history = solves + search.solves, history + search.history
         # a warm start led astray (e.g. across a snap-through): start afresh
         astray = min(search.history) > p.tol and (not p.oriented or status != "optimal")
         if not (start == "warm" and p.model == "real" and astray):
             break
-    return _finish(p, I, res, solves, start_solves, history, status)
+    return _finish(p, I, res, solves, start_solves, history, status, edge)
 
 
 #: Largest relative decrease of the squared weighted misses a bounded Gauss-Newton step may
@@ -947,8 +1027,9 @@ def _damped(I, res, r, jacobian, evaluate, met, bounds):
     a step accepted when the misses decrease (and the state stays stable if it was), ``mu``
     raised after a failed step and lowered after a good one.  Ends at a local optimum (see
     :func:`_gain`), when ``mu`` grows beyond any useful step or three accepted steps in a row
-    gain almost nothing, or when ``evaluate`` spends the solve budget; the states met are
-    kept by ``evaluate``.
+    gain almost nothing, or when ``evaluate`` spends the solve budget or finds the edge of the
+    rod's branch (:class:`_EdgeWatch`: its steps along one direction jump to another branch,
+    the remaining miss lies across the edge); the states met are kept by ``evaluate``.
 
     A channel whose change of sign sent the rod to another branch (a step that raised the
     misses, e.g. the small current that decides to which side a rod in a nearly antiparallel
@@ -982,7 +1063,7 @@ def _damped(I, res, r, jacobian, evaluate, met, bounds):
             continue
         trial = np.clip(I + step, lo, hi)
         try:
-            res_t, r_t, _ = evaluate(trial)
+            res_t, r_t, _ = evaluate(trial, (I, r, J))
         except ConvergenceError:
             mu *= 4.0
             continue
@@ -1083,7 +1164,28 @@ def _fixed(system):
     return B[0], G[0]
 
 
-def _finish(p: _Problem, I, res, solves, start_solves, history, status) -> ControlResult:
+def _ending(p: _Problem, res, solves, status, edge) -> str:
+    """How the search ended, for ``ControlResult.message``: "" on the target; else the status,
+    the closest position miss in the model's own field (``res`` its forward solve at the
+    returned currents), the solves spent and, at a branch edge (``edge``, a
+    :class:`_BranchEdge`), the direction of the currents that leaves the branch."""
+    if status == "converged":
+        return ""
+    miss = p.position_miss(p.residual(res))
+    own = "the real field" if p.model == "real" else "the ideal (centre-field) model"
+    reached = f"the closest tip in {own} is {miss:.4g} m ({miss / p.length:.3g} L) from the target"
+    if edge is None:
+        return f"{status} after {solves} solves: {reached}"
+    return (
+        f"branch_edge after {solves} solves: the search stopped at an edge of the rod's branch "
+        f"-- {edge.jumps} small steps of the currents along {np.round(edge.direction, 3).tolist()}"
+        f" sent the rod to another branch (its misses moved {edge.moved:.3g} where the step's "
+        f"linearisation predicted {edge.predicted:.3g}; positions in L); {reached}, the "
+        "remaining miss lies across the edge"
+    )
+
+
+def _finish(p: _Problem, I, res, solves, start_solves, history, status, edge=None) -> ControlResult:
     """The result at currents ``I`` (``res`` the model's forward solve there), with the tip in
     the real field; raises for an unreachable position target and warns for a result that is
     not a local optimum (:func:`_report`)."""
@@ -1118,6 +1220,7 @@ def _finish(p: _Problem, I, res, solves, start_solves, history, status) -> Contr
             if p.direction is not None
             else None
         ),
+        message=_ending(p, res, solves, status, edge),
     )
     _report(p, out, history)
     return out
@@ -1166,6 +1269,8 @@ def _report(p: _Problem, out: ControlResult, history) -> None:
                 "outside the robot's reachable set (no current limit is active at the closest "
                 "tip, a local optimum of the miss)"
             )
+        elif out.status == "branch_edge":
+            why = f"not reached: the search stopped at an edge of the rod's branch ({out.message})"
         elif out.status == "max_solves":
             why = (
                 "not reached: the search stopped (the solve budget max_solves spent) before a "
@@ -1188,7 +1293,15 @@ def _report(p: _Problem, out: ControlResult, history) -> None:
         )
         err.result = out
         raise err
-    if not out.optimal:
+    if out.status == "branch_edge":
+        warnings.warn(
+            f"solve_currents: the currents {np.round(I, 4).tolist()} A do not meet the target "
+            f"({out.message}; in the real field the tip is {miss:.4g} m from it); "
+            "ControlResult.optimal is False",
+            ControlWarning,
+            stacklevel=4,
+        )
+    elif not out.optimal:
         warnings.warn(
             f"solve_currents: the currents {np.round(I, 4).tolist()} A are not a local "
             f"least-squares optimum of the misses ({out.status}: miss {miss:.4g} m"

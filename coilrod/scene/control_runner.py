@@ -278,7 +278,7 @@ def _unmet(out: ControlResult, spec, rod) -> str:
         own = float(min(out.history))
         if own <= MET * L:
             return ""
-        if out.status in ("max_solves", "stalled"):  # the search stopped, not the limits
+        if out.status in ("max_solves", "stalled", "branch_edge"):  # stopped, not the limits
             why = (
                 f"in its own model (the centre field) its search stopped ({out.status}, after "
                 f"{out.solves} solves) before the target, not at a current limit"
