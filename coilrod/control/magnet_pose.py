@@ -134,7 +134,8 @@ class MagnetPoseResult:
     scout_solves : int
         Forward solves of the scout that gave the search its start (``model="real"`` with a
         finite magnet: the search in its point dipole's field on a coarse mesh, each solve
-        ~1/9 of a real one's CPU time, benchmarks/results/magnet_pose.md; module docstring); 0 without a scout.
+        ~1/9 of a real one's CPU time, benchmarks/results/magnet_pose.md; module docstring); 0
+        without a scout.
     status : str
         "converged" (within ``tol``), "optimal" (not met: a KKT point of the miss, where the
         Gauss-Newton step within the bounds and off the reach, both linearised, predicts a
