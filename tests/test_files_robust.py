@@ -1,0 +1,130 @@
+"""Damaged, ambiguous and absurd input files and unwritable outputs: one clear error naming the
+file (never a traceback from inside a library, never a silently wrong number), and outputs
+written whole or not at all."""
+
+import numpy as np
+import pytest
+
+from coilrod.contact import MeshVessel, read_centerline
+from coils import MPEM
+from coils._files import MissingFileError, NotAFileError
+from coils.presets import NAVION_FILE, _data_file
+
+GOOD_CSV = "x,y,z,radius\n0,0,0,1\n10,0,0,1\n20,0,0,1\n"
+VTP = """<?xml version="1.0"?><VTKFile type="PolyData"><PolyData><Piece NumberOfPoints="3">
+<Points><DataArray NumberOfComponents="3" format="ascii">0 0 0 10 0 0 20 0 0</DataArray></Points>
+<PointData><DataArray Name="radius" format="ascii">1 1 1</DataArray></PointData>
+<Lines><DataArray Name="connectivity" format="ascii">CONN</DataArray>
+<DataArray Name="offsets" format="ascii">OFFS</DataArray></Lines></Piece></PolyData></VTKFile>"""
+
+
+def _vtp(conn="0 1 2", offs="3"):
+    return VTP.replace("CONN", conn).replace("OFFS", offs)
+
+
+# each case failed on the old code: a traceback (IndexError, a bare UnicodeDecodeError or
+# reshape error not naming the file), or a vessel built from the wrong column or points
+@pytest.mark.parametrize(
+    ("name", "content", "match"),
+    [
+        ("h.csv", "x,y,z,radius\n", "header but no points"),  # IndexError
+        ("b.csv", b"x,y,z,radius\n0,0,0,1\n1\xe9,0,0,1\n", "not UTF-8 text.*line 3"),
+        ("x.csv", "x,y,z,x,radius\n0,0,0,5,1\n10,0,0,6,1\n", r"\['x'\] appear more than once"),
+        ("r.csv", "x,y,z,radius,r\n0,0,0,1,2\n10,0,0,1,2\n", "2 radius columns"),
+        ("l.csv", "x,y,z,radius\n0,0,0,1,99\n10,0,0,1\n", "line 2 has 5 cells"),
+        ("s.csv", "x,y,z,radius\n0,0,0,1\n10,0\n", "line 3 has 2 cells"),
+        ("p.vtp", _vtp().replace("20 0 0<", "20 0<"), "8 numbers, not 3 per point"),
+        ("f.vtp", _vtp(conn="0 1.7 2"), "whole numbers"),  # 1.7 was read as point 1
+        ("o.vtp", _vtp(offs="9"), "offset is 9"),  # past the 3 entries: ignored
+        ("z.vtp", _vtp(offs="0"), "offset is 0"),  # a numpy reduction error
+    ],
+)
+def test_centerline_file_damage_is_one_error_naming_it(tmp_path, name, content, match):
+    path = tmp_path / name
+    if isinstance(content, str):
+        content = content.encode()
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match=f"{name}.*{match}"):
+        read_centerline(path)
+
+
+def test_centerline_file_paths_and_a_bom(tmp_path):
+    # a folder was reported as "does not exist"; a missing file is also a FileNotFoundError
+    with pytest.raises(NotAFileError, match="is a folder"):
+        read_centerline(tmp_path)
+    with pytest.raises(MissingFileError, match="none.csv.*does not exist"):
+        read_centerline(tmp_path / "none.csv")
+    with pytest.raises(FileNotFoundError):
+        read_centerline(tmp_path / "none.csv")
+    # a spreadsheet's byte-order mark: the same vessel as without (gap closed form r - |y|)
+    path = tmp_path / "bom.csv"
+    path.write_bytes(b"\xef\xbb\xbf" + GOOD_CSV.encode())
+    v = read_centerline(path, units="mm")
+    np.testing.assert_allclose(v.gap([[0.005, 0.0004, 0.0]]), [0.6e-3], atol=1e-15)
+
+
+# -- meshes -------------------------------------------------------------------------------------
+trimesh = pytest.importorskip("trimesh")
+
+
+def _cube_stl():
+    return trimesh.creation.box(extents=(2e-3,) * 3).export(file_type="stl")
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "match"),
+    [
+        # a damaged binary STL ended in trimesh's text fallback: "No module named
+        # 'charset_normalizer'"
+        ("t.stl", lambda: _cube_stl()[:300], r"cannot be read as \.stl: not a valid file"),
+        ("g.obj", lambda: bytes(range(256)) * 2, r"cannot be read as \.obj: not a valid file"),
+        ("noext", _cube_stl, "has no extension"),  # "file_type '/tmp/.../noext'"
+        ("c.foo", _cube_stl, r"\.foo is not a mesh format"),
+    ],
+)
+def test_mesh_file_damage_is_one_error_naming_it(tmp_path, name, content, match):
+    path = tmp_path / name
+    path.write_bytes(content())
+    with pytest.raises(ValueError, match=f"{name}.*{match}") as err:
+        MeshVessel.from_file(path)
+    assert "charset" not in str(err.value)
+    with pytest.raises(NotAFileError, match="is a folder"):  # was "does not exist"
+        MeshVessel.from_file(tmp_path)
+
+
+# -- MPEM calibrations --------------------------------------------------------------------------
+SRC0_B = "      - -0.0007771057508049871\n"
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "match"),
+    [
+        # YAML keeps the last of two keys: the source's coefficient silently became 1.0
+        ("    A_Coeff: ~\n", "    A_Coeff: ~\n    B_Coeff: [1.0]\n", "'B_Coeff' is given twice"),
+        # numpy reads true as 1 and '-1e-3' as -1e-3
+        (SRC0_B, "      - true\n", r"B_Coeff must be 1 numbers; got \[True\]"),
+        (SRC0_B, "      - '-1e-3'\n", "B_Coeff must be 1 numbers"),
+        # the same coil twice: two channels driving one coil
+        ("  - Coil_1\n", "  - Coil_0\n", r"Coil_List names coil\(s\) \['Coil_0'\] more than once"),
+        # the same source twice: its moment counted twice
+        ("    - Src_1\n", "    - Src_0\n", r"Source_List names source\(s\) \['Src_0'\] more"),
+    ],
+)
+def test_mpem_file_mistakes_are_errors_not_other_fields(tmp_path, old, new, match):
+    text = _data_file(NAVION_FILE).read_text()
+    assert old in text
+    path = tmp_path / "cal.yaml"
+    path.write_text(text.replace(old, new, 1))
+    with pytest.raises(ValueError, match=f"cal.yaml.*{match}"):
+        MPEM.from_yaml(path)
+
+
+def test_mpem_file_paths_and_bytes(tmp_path):
+    with pytest.raises(ValueError, match="path must be a file name"):  # was a TypeError
+        MPEM.from_yaml(None)
+    with pytest.raises(FileNotFoundError, match="none.yaml.*does not exist"):
+        MPEM.from_yaml(tmp_path / "none.yaml")
+    path = tmp_path / "bin.yaml"
+    path.write_bytes(b"Coil_List: [a]\n\xff\xfe")  # a bare UnicodeDecodeError, no file named
+    with pytest.raises(ValueError, match=r"bin.yaml.*not UTF-8 text \(byte 0xff on line 2\)"):
+        MPEM.from_yaml(path)
