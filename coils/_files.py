@@ -7,9 +7,13 @@ catch a missing file.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import tempfile
+from pathlib import Path
 
 __all__ = [
+    "replacing",
     "MissingFileError",
     "NotAFileError",
     "UnreadableFileError",
@@ -86,3 +90,45 @@ def read_text(path, label: str) -> str:
             f"{label} {path!r} is not UTF-8 text (byte 0x{raw[exc.start]:02x} on line {line}); "
             "is it a binary or damaged file? Save it as UTF-8 text"
         ) from None
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _write_error(path: Path, exc: OSError) -> OSError:
+    """``exc``'s class (PermissionError, IsADirectoryError, ...) with a message naming ``path``."""
+    return type(exc)(f"cannot write {str(path)!r} ({exc.strerror or exc})")
+
+
+@contextlib.contextmanager
+def replacing(path):
+    """Write the file ``path`` whole or not at all.
+
+    Yields a temporary file name next to ``path`` (with its suffix, for writers that read the
+    format from it).  When the block ends without an error, that file replaces ``path`` at
+    once (an existing file is overwritten, never left half-written); on an error it is removed
+    and ``path`` is as before.
+
+    Raises
+    ------
+    OSError
+        Of the class of the failure (PermissionError, IsADirectoryError, FileNotFoundError,
+        ...), its message naming ``path``.
+    """
+    path = Path(path)
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}-", suffix=path.suffix)
+        os.close(fd)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp's 0600 -> what open() would have given
+    except OSError as exc:
+        raise _write_error(path, exc) from None
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise _write_error(path, exc) from None
+    finally:
+        Path(tmp).unlink(missing_ok=True)

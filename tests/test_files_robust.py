@@ -2,6 +2,9 @@
 file (never a traceback from inside a library, never a silently wrong number), and outputs
 written whole or not at all."""
 
+import json
+import os
+
 import numpy as np
 import pytest
 
@@ -128,3 +131,95 @@ def test_mpem_file_paths_and_bytes(tmp_path):
     path.write_bytes(b"Coil_List: [a]\n\xff\xfe")  # a bare UnicodeDecodeError, no file named
     with pytest.raises(ValueError, match=r"bin.yaml.*not UTF-8 text \(byte 0xff on line 2\)"):
         MPEM.from_yaml(path)
+
+
+# -- outputs ------------------------------------------------------------------------------------
+from coilrod.design.sweep_file import SweepFile  # noqa: E402
+from coilrod.scene import parse_scene  # noqa: E402
+from coilrod.scene.outputs import write_rows  # noqa: E402
+from coilrod.scene.parse import SceneError  # noqa: E402
+from coilrod.scene.planner import plan_scene  # noqa: E402
+from coilrod.scene.runner import ModelRun, SceneResult  # noqa: E402
+from coilrod.scene.units import parse_quantity  # noqa: E402
+
+
+def _mode(path):
+    return os.stat(path).st_mode & 0o777
+
+
+def _umask():
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def test_a_failed_table_write_leaves_the_old_file(tmp_path):
+    # csv.DictWriter fails on the second row (an extra key): the old code left the header and
+    # the first row in place of the earlier table
+    path = tmp_path / "tip_path.csv"
+    path.write_text("old table\n")
+    with pytest.raises(ValueError, match="fields not in fieldnames"):
+        write_rows(path, [{"a": 1.0}, {"a": 2.0, "b": 3.0}])
+    assert path.read_text() == "old table\n"
+    assert os.listdir(tmp_path) == ["tip_path.csv"]  # no temporary file left
+    write_rows(path, [{"a": 1.0}, {"a": 2.0}])  # an existing file is replaced
+    assert path.read_text().splitlines() == ["a", "1.0", "2.0"]
+    assert _mode(path) == 0o666 & ~_umask()  # as open() would give, not mkstemp's 0600
+
+
+def _scene_result():
+    """Two rod runs (coil and ideal field) whose tip angle is not defined (NaN)."""
+    data = {
+        "robot": {
+            "length": "40 mm",
+            "diameter": "2 mm",
+            "youngs_modulus": "1 MPa",
+            "magnetization": {"preset": "M1"},
+        },
+        "field": {"type": "uniform", "B": "5 mT"},
+        "load": {"steps": 1},
+        "models": {"run": ["rod"]},
+        "output": {"figures": False},
+    }
+    scene = parse_scene(data)
+    tip = np.array([[0.03, 0.02, 0.0]])
+    runs = [
+        ModelRun("rod", label, np.ones(1), tip, np.array([np.nan]), 0.1)
+        for label in ("coils", "ideal")
+    ]
+    return SceneResult(scene, plan_scene(scene), runs)
+
+
+def test_scene_outputs_are_strict_json_and_unwritable_files_are_named(tmp_path):
+    result = _scene_result()
+    result.write(tmp_path / "a")
+
+    def refuse(name):
+        raise ValueError(f"{name} in summary.json (not JSON)")
+
+    summary = json.loads((tmp_path / "a" / "summary.json").read_text(), parse_constant=refuse)
+    assert summary["shift"][0]["tip_angle_shift_deg"] is None  # was a bare NaN
+    assert summary["shift"][0]["tip_shift_mm"] == 0.0
+    # a folder where the table goes (enforceable as root, unlike a read-only mode): one line
+    # naming the file, not an IsADirectoryError from inside the writer
+    (tmp_path / "b" / "tip_path.csv").mkdir(parents=True)
+    with pytest.raises(SceneError, match=r"cannot write '.*tip_path.csv'"):
+        result.write(tmp_path / "b")
+    assert os.listdir(tmp_path / "b") == ["tip_path.csv"]
+
+
+def test_sweep_table_and_fingerprint_modes(tmp_path):
+    # the table rewritten in grid order was mkstemp's 0600: unreadable to the group
+    table = SweepFile(tmp_path / "sweep.csv", ["point", "x"], {"point": "int", "x": "number"})
+    table.rewrite([{"point": 0, "x": 0.5}])
+    assert (tmp_path / "sweep.csv").read_text() == "point,x\n0,0.5\n"
+    assert _mode(tmp_path / "sweep.csv") == 0o666 & ~_umask()
+
+
+@pytest.mark.parametrize("value", [float("nan"), float("inf")])
+def test_scene_non_finite_number_is_not_offered_a_unit(value):
+    # TOML's nan and inf were answered with "write it as a string with a unit, e.g. 'nan T'"
+    with pytest.raises(
+        ValueError, match=f"field.B: missing unit in {value}, and the number must be finite.*'5 mT'"
+    ):
+        parse_quantity(value, "flux density", "field.B")

@@ -300,6 +300,9 @@ def main(argv: list[str] | None = None) -> int:
         for line in exc.problems:
             _print_err(line)
         return 2
+    except OSError as exc:  # a file that could not be written or read after the checks
+        _print_err(str(exc))
+        return 2
     except KeyboardInterrupt:
         print("coilrod: interrupted", file=sys.stderr)
         return 130
