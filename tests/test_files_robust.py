@@ -223,3 +223,23 @@ def test_scene_non_finite_number_is_not_offered_a_unit(value):
         ValueError, match=f"field.B: missing unit in {value}, and the number must be finite.*'5 mT'"
     ):
         parse_quantity(value, "flux density", "field.B")
+
+
+@pytest.mark.parametrize(
+    ("content", "rows"),
+    [
+        (b"point,x,rod_converged,er", set()),  # killed while writing the header: start again
+        (b"\xef\xbb\xbfpoint,x,rod_converged,error\n0,0.5,True,\n", {0}),  # a spreadsheet's BOM
+        (b"my notes, not a sweep", None),  # was taken for a cut header and overwritten
+    ],
+)
+def test_sweep_resume_reads_only_its_own_table(tmp_path, content, rows):
+    path = tmp_path / "sweep.csv"
+    path.write_bytes(content)
+    kinds = {"point": "int", "x": "number", "rod_converged": "bool", "error": "text"}
+    table = SweepFile(path, list(kinds), kinds)
+    if rows is None:
+        with pytest.raises(SceneError, match="sweep.csv: not a sweep's table"):
+            table.check(resume=True, overwrite=False)
+    else:
+        assert set(table.check(resume=True, overwrite=False)) == rows

@@ -120,9 +120,14 @@ class SweepFile:
             ) from None
         lines = raw.splitlines(keepends=True)
         if not lines or not lines[0].endswith(b"\n"):
-            return {}  # killed before the header was complete: start again
+            if self._line({c: c for c in self.columns}).encode("utf-8").startswith(raw):
+                return {}  # killed before the header was complete: start again
+            raise SceneError(
+                f"{path}: not a sweep's table (its first line is not a header and not the "
+                "start of one); use another folder, or overwrite it"
+            )
         try:
-            header = self._record(lines[0])
+            header = self._record(lines[0].removeprefix(b"\xef\xbb\xbf"))
         except ValueError as exc:
             raise SceneError(f"{path}: line 1 is not a sweep's header ({exc})") from None
         if header != self.columns:
