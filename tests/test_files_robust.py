@@ -243,3 +243,14 @@ def test_sweep_resume_reads_only_its_own_table(tmp_path, content, rows):
             table.check(resume=True, overwrite=False)
     else:
         assert set(table.check(resume=True, overwrite=False)) == rows
+
+
+def test_coils_demo_output_folder_that_is_a_file(tmp_path, capsys):
+    # was a FileExistsError traceback from mkdir
+    from coils.demo import main
+
+    blocker = tmp_path / "maps"
+    blocker.write_text("")
+    assert main([str(blocker)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("coils.demo: error: cannot create the folder") and "maps" in err
