@@ -254,3 +254,19 @@ def test_coils_demo_output_folder_that_is_a_file(tmp_path, capsys):
     assert main([str(blocker)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("coils.demo: error: cannot create the folder") and "maps" in err
+
+
+def test_files_in_the_wrong_unit_are_doubted(tmp_path):
+    # a centreline in mm read as m (a 1 m radius) and a mesh in m read as mm (2 um across):
+    # valid files, absurd vessels; the numbers are kept as given, with a UnitsWarning
+    from coilrod import UnitsWarning
+
+    path = tmp_path / "cl.csv"
+    path.write_text(GOOD_CSV)
+    with pytest.warns(UnitsWarning, match=r"cl.csv.*1 m.*units='mm'"):
+        v = read_centerline(path)
+    assert v.gap([[5.0, 0.0, 0.0]])[0] == pytest.approx(1.0)
+    cube = tmp_path / "cube.stl"
+    cube.write_bytes(_cube_stl())
+    with pytest.warns(UnitsWarning, match=r"cube.stl.*2e-06 m across.*units='m'"):
+        MeshVessel.from_file(cube, units="mm")

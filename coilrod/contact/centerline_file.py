@@ -13,6 +13,7 @@ from __future__ import annotations
 import csv
 import io
 import os
+import warnings
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -20,9 +21,14 @@ import numpy as np
 from coils._files import input_path, read_text
 from coils._validate import as_choice
 
+from ..errors import UnitsWarning
+
 __all__ = ["read_table"]
 
 _UNITS = {"m": 1.0, "mm": 1e-3}
+#: Radii (m) outside which a file's units are doubted (coilrod.UnitsWarning): wider than an
+#: aorta's 15 mm with a margin, narrower than a capillary's 5 um.
+MAX_RADIUS, MIN_RADIUS = 0.05, 2e-6
 _RADIUS_NAMES = ("maximuminscribedsphereradius", "radius", "r")
 
 
@@ -152,4 +158,14 @@ def read_table(path, units: str = "m"):
         k = int(np.flatnonzero(radius <= 0)[0])
         raise ValueError(f"{label}: radius of point {k} is {radius[k]} (<= 0)")
     scale = _UNITS[units]
+    r_min, r_max = scale * float(radius.min()), scale * float(radius.max())
+    if r_max > MAX_RADIUS or r_min < MIN_RADIUS:
+        other = "mm" if units == "m" else "m"
+        warnings.warn(
+            f"{label}: radii from {r_min:.3g} m to {r_max:.3g} m with units={units!r}: no blood "
+            f"vessel is that {'wide' if r_max > MAX_RADIUS else 'narrow'}; is the file in "
+            f"{other} (units={other!r})?",
+            UnitsWarning,
+            stacklevel=3,
+        )
     return pts * scale, radius * scale, label

@@ -48,6 +48,9 @@ from .vessel import Vessel
 __all__ = ["MeshVessel", "tessellate", "phantom_path"]
 
 _UNITS = {"m": 1.0, "mm": 1e-3}
+#: Sizes (m, the largest extent) outside which a mesh file's units are doubted
+#: (coilrod.UnitsWarning): a lumen larger than a body's 3 m, smaller than 0.1 mm.
+MAX_SIZE, MIN_SIZE = 3.0, 1e-4
 
 
 def phantom_path(name: str = "bend") -> str:
@@ -285,6 +288,18 @@ class MeshVessel(Obstacle):
         vertices = np.asarray(loaded.vertices, dtype=float)
         if not np.all(np.isfinite(vertices)):
             raise ValueError(f"mesh file {path!r} has non-finite vertex coordinates")
+        size = _UNITS[units] * float(np.max(np.ptp(vertices, axis=0)))
+        if not MIN_SIZE <= size <= MAX_SIZE:
+            from ..errors import UnitsWarning
+
+            other = "mm" if units == "m" else "m"
+            warnings.warn(
+                f"mesh file {path!r} is {size:.3g} m across with units={units!r}: no vessel "
+                f"lumen is that {'large' if size > MAX_SIZE else 'small'}; is the file in "
+                f"{other} (units={other!r})?",
+                UnitsWarning,
+                stacklevel=2,
+            )
         return cls(
             vertices * _UNITS[units],
             np.asarray(loaded.faces),
