@@ -253,7 +253,8 @@ def test_coils_demo_output_folder_that_is_a_file(tmp_path, capsys):
     blocker.write_text("")
     assert main([str(blocker)]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("coils.demo: error: cannot create the folder") and "maps" in err
+    assert err.startswith("coils.demo: error: cannot create the folder")
+    assert "maps" in err
 
 
 def test_files_in_the_wrong_unit_are_doubted(tmp_path):
@@ -270,3 +271,34 @@ def test_files_in_the_wrong_unit_are_doubted(tmp_path):
     cube.write_bytes(_cube_stl())
     with pytest.warns(UnitsWarning, match=r"cube.stl.*2e-06 m across.*units='m'"):
         MeshVessel.from_file(cube, units="mm")
+
+
+@pytest.mark.parametrize("text", ["", "# only a comment\n\n"])
+def test_empty_scene_file_is_named(tmp_path, text):
+    # was "robot: missing required table ...", not naming the file
+    from coilrod.scene.parse import load_scene
+
+    path = tmp_path / "blank.toml"
+    path.write_text(text)
+    with pytest.raises(SceneError, match="blank.toml: the scene file is empty") as err:
+        load_scene(path)
+    assert len(err.value.problems) == 1
+
+
+def test_cli_write_failure_after_the_checks_is_one_line(monkeypatch, capfd):
+    # an OSError while writing results (a full disk, the folder removed) was a traceback; a
+    # closed pipe (``coilrod scenes | head -1``) was "BrokenPipeError"
+    import coilrod.scene.cli as cli
+
+    def fail(exc):
+        def command(*args):
+            raise exc
+
+        return command
+
+    monkeypatch.setattr(cli, "_command", fail(PermissionError("cannot write 'out/a.csv'")))
+    assert cli.main(["scenes"]) == 2
+    assert capfd.readouterr().err == "coilrod: error: cannot write 'out/a.csv'\n"
+    monkeypatch.setattr(cli, "_command", fail(BrokenPipeError()))
+    assert cli.main(["scenes"]) == 1
+    assert capfd.readouterr().err == ""
