@@ -11,18 +11,26 @@ from pathlib import Path
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    out = Path(argv[0] if argv else "coils-demo")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # a file there, no permission: one line, before any work
+        print(
+            f"coils.demo: error: cannot create the folder {out} ({exc.strerror or exc})",
+            file=sys.stderr,
+        )
+        return 2
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from . import HelmholtzPair, MaxwellPair
+    from ._files import replacing
     from .plot import plot_field_map
     from .region import uniformity
 
-    argv = sys.argv[1:] if argv is None else argv
-    out = Path(argv[0] if argv else "coils-demo")
-    out.mkdir(parents=True, exist_ok=True)
     radius, turns, current = 0.1, 200, 2.0
     helm = HelmholtzPair(radius, turns, current, axis="y")
     maxw = MaxwellPair(radius, turns, current, axis="y")
@@ -38,8 +46,14 @@ def main(argv: list[str] | None = None) -> int:
         fig, ax = plt.subplots(figsize=(6, 5))
         plot_field_map(coil, "xy", half_width=1.2 * radius, ax=ax)
         path = out / f"{name}_field_map.png"
-        fig.savefig(path, dpi=120, bbox_inches="tight")
-        plt.close(fig)
+        try:
+            with replacing(path) as tmp:  # whole or not at all
+                fig.savefig(tmp, dpi=120, bbox_inches="tight")
+        except OSError as exc:
+            print(f"coils.demo: error: {exc}", file=sys.stderr)
+            return 2
+        finally:
+            plt.close(fig)
         print(f"  wrote {path}")
     return 0
 

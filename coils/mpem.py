@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._files import read_text
 from ._immutable import sealed
 from ._validate import _show, as_array, as_bool, as_limits, as_points, as_vector
 from .currents import _fmt_mm
@@ -389,14 +390,11 @@ class MPEM(AccumulatedField):
         """
         import yaml
 
+        text = read_text(path, "MPEM file")
         path = Path(path)
         where = str(path)
         try:
-            text = path.read_text()
-        except OSError as err:
-            raise ValueError(f"cannot read the MPEM file {where}: {err}") from None
-        try:
-            doc = yaml.safe_load(text)
+            doc = yaml.load(text, Loader=_unique_key_loader())  # noqa: S506 - a SafeLoader
         except yaml.YAMLError as err:
             raise ValueError(f"{where} is not valid YAML: {err}") from None
         if not isinstance(doc, dict):
@@ -412,6 +410,9 @@ class MPEM(AccumulatedField):
         coil_list = doc["Coil_List"]
         if not isinstance(coil_list, list) or not coil_list:
             raise ValueError(f"{where}: Coil_List must be a non-empty list of coil keys")
+        twice = sorted({str(n) for n in coil_list if coil_list.count(n) > 1})
+        if twice:
+            raise ValueError(f"{where}: Coil_List names coil(s) {twice} more than once")
         coils = [cls._read_sources(doc, str(name), where, per_ampere=True) for name in coil_list]
         offset = (
             cls._read_sources(doc, "Offset", where, per_ampere=False) if "Offset" in doc else None
@@ -442,6 +443,9 @@ class MPEM(AccumulatedField):
         names = entry["Source_List"]
         if not isinstance(names, list) or not names:
             raise ValueError(f"{where}: {coil}: Source_List must be a non-empty list")
+        twice = sorted({str(n) for n in names if names.count(n) > 1})
+        if twice:
+            raise ValueError(f"{where}: {coil}: Source_List names source(s) {twice} more than once")
         pos, mom = [], []
         for src in names:
             at = f"{where}: {coil}: {src}"
@@ -472,9 +476,47 @@ class MPEM(AccumulatedField):
         return np.array(pos), np.array(mom)
 
 
+def _construct_unique_mapping(loader, node, deep=False):
+    """A YAML mapping; a key given twice is an error (plain YAML keeps the last silently)."""
+    import yaml
+
+    seen = {}
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=True)
+        try:
+            hash(key)
+        except TypeError:
+            continue  # the base constructor reports an unhashable key
+        if key in seen:
+            raise yaml.constructor.ConstructorError(
+                None,
+                None,
+                f"the key {key!r} is given twice (lines {seen[key]} and "
+                f"{key_node.start_mark.line + 1}); keep one",
+            )
+        seen[key] = key_node.start_mark.line + 1
+    return yaml.SafeLoader.construct_mapping(loader, node, deep)
+
+
+def _unique_key_loader():
+    import yaml
+
+    class Loader(yaml.SafeLoader):
+        pass
+
+    Loader.add_constructor(
+        yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
+        lambda loader, node: _construct_unique_mapping(loader, node, deep=True),
+    )
+    return Loader
+
+
 def _numbers(value, size: int, name: str) -> np.ndarray:
     if not isinstance(value, list):
         value = [value]
+    if any(isinstance(v, bool | str) or v is None for v in value):
+        # YAML reads true, 'text' and ~ fine; numpy would take true as 1 and '1e-3' as 1e-3
+        raise ValueError(f"{name} must be {size} numbers; got {_show(value)}")
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError):

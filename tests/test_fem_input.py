@@ -114,6 +114,15 @@ def test_result_api_export_and_plot(rod, field, tmp_path):
     with meshio.xdmf.TimeSeriesReader(xdmf) as reader:
         reader.read_points_cells()
         assert reader.num_steps == 2
+    # bad paths and states: one ValueError or OSError naming them (were meshio's WriteError,
+    # an IndexError, a half-written file), and no temporary file left
+    with pytest.raises(ValueError, match="state.txt.*meshio writes no '.txt'"):
+        res.export(tmp_path / "state.txt")
+    with pytest.raises(ValueError, match="k must be a state index from -2 to 1; got 2"):
+        res.export(tmp_path / "state.vtu", k=2)
+    with pytest.raises(FileNotFoundError, match="cannot write '.*none/state.vtu'"):
+        res.export(tmp_path / "none" / "state.vtu")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["path.xdmf", "state.vtu"]
     ax = res.plot(1)
     assert ax.get_xlabel() == "x (m)"
 

@@ -39,6 +39,7 @@ from importlib import resources
 
 import numpy as np
 
+from coils._files import input_path
 from coils._validate import as_bool, as_choice, as_count, as_points, nonnegative
 
 from .obstacle import Obstacle, _mm
@@ -47,6 +48,9 @@ from .vessel import Vessel
 __all__ = ["MeshVessel", "tessellate", "phantom_path"]
 
 _UNITS = {"m": 1.0, "mm": 1e-3}
+#: Sizes (m, the largest extent) outside which a mesh file's units are doubted
+#: (coilrod.UnitsWarning): a lumen larger than a body's 3 m, smaller than 0.1 mm.
+MAX_SIZE, MIN_SIZE = 3.0, 1e-4
 
 
 def phantom_path(name: str = "bend") -> str:
@@ -244,26 +248,58 @@ class MeshVessel(Obstacle):
         Raises
         ------
         ValueError
-            Missing, unreadable or corrupted files, files without one triangle surface, and
-            the mesh errors of :class:`MeshVessel`; every message names the file.
+            Unreadable or corrupted files, an extension that is not a mesh format, files
+            without one triangle surface, and the mesh errors of :class:`MeshVessel`; every
+            message names the file.  A missing file is
+            :class:`~coils._files.MissingFileError` (a ValueError and a FileNotFoundError), a
+            folder :class:`~coils._files.NotAFileError` (a ValueError and an
+            IsADirectoryError).
         """
         import trimesh
 
         units = as_choice(units, "units", tuple(_UNITS))
-        if not isinstance(path, str | os.PathLike):
-            raise ValueError(f"path must be a file name; got {path!r}")
-        path = os.fspath(path)
-        if not os.path.isfile(path):
-            raise ValueError(f"mesh file {path!r} does not exist")
+        path = input_path(path, "mesh file")
+        ext = os.path.splitext(path)[1].lower().lstrip(".")
+        if not ext:
+            raise ValueError(
+                f"mesh file {path!r} has no extension; the format is read from it (.stl, "
+                ".obj, .ply, ...)"
+            )
+        if ext not in trimesh.available_formats():
+            raise ValueError(
+                f"mesh file {path!r}: the format .{ext} is not a mesh format trimesh reads "
+                "(e.g. .stl, .obj, .ply)"
+            )
         try:
             loaded = trimesh.load(path, force="mesh", process=False)
         except Exception as exc:  # trimesh raises many types for bad files
-            raise ValueError(f"mesh file {path!r} cannot be read: {exc}") from None
+            # (a damaged binary file ends in trimesh's text fallback: a decode or import error)
+            why = (
+                "not a valid file of that format (damaged, truncated, or of another format)"
+                if isinstance(exc, ImportError | UnicodeError)
+                else f"{type(exc).__name__}: {exc}"
+            )
+            raise ValueError(f"mesh file {path!r} cannot be read as .{ext}: {why}") from None
         if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
-            raise ValueError(f"mesh file {path!r} holds no triangle surface")
+            raise ValueError(
+                f"mesh file {path!r} holds no triangle surface (empty, damaged, or of another "
+                "format than its extension says?)"
+            )
         vertices = np.asarray(loaded.vertices, dtype=float)
         if not np.all(np.isfinite(vertices)):
             raise ValueError(f"mesh file {path!r} has non-finite vertex coordinates")
+        size = _UNITS[units] * float(np.max(np.ptp(vertices, axis=0)))
+        if not MIN_SIZE <= size <= MAX_SIZE:
+            from ..errors import UnitsWarning
+
+            other = "mm" if units == "m" else "m"
+            warnings.warn(
+                f"mesh file {path!r} is {size:.3g} m across with units={units!r}: no vessel "
+                f"lumen is that {'large' if size > MAX_SIZE else 'small'}; is the file in "
+                f"{other} (units={other!r})?",
+                UnitsWarning,
+                stacklevel=2,
+            )
         return cls(
             vertices * _UNITS[units],
             np.asarray(loaded.faces),

@@ -13,12 +13,11 @@ import hashlib
 import io
 import json
 import numbers
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from ..scene.outputs import replacing
 from ..scene.parse import SceneError
 
 __all__ = ["SweepFile", "SceneFingerprint", "format_cell", "parse_cell"]
@@ -121,9 +120,14 @@ class SweepFile:
             ) from None
         lines = raw.splitlines(keepends=True)
         if not lines or not lines[0].endswith(b"\n"):
-            return {}  # killed before the header was complete: start again
+            if self._line({c: c for c in self.columns}).encode("utf-8").startswith(raw):
+                return {}  # killed before the header was complete: start again
+            raise SceneError(
+                f"{path}: not a sweep's table (its first line is not a header and not the "
+                "start of one); use another folder, or overwrite it"
+            )
         try:
-            header = self._record(lines[0])
+            header = self._record(lines[0].removeprefix(b"\xef\xbb\xbf"))
         except ValueError as exc:
             raise SceneError(f"{path}: line 1 is not a sweep's header ({exc})") from None
         if header != self.columns:
@@ -203,16 +207,10 @@ class SweepFile:
         """Replace the file by ``rows`` (in their order) at once (a temporary file, renamed);
         :meth:`open` then appends to it."""
         self.close()
-        fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=".sweep-", suffix=".csv")
-        try:
-            with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
-                fh.write(self._line({c: c for c in self.columns}))
-                fh.writelines(self._line(r) for r in rows)
-            os.replace(tmp, self.path)
-            self._keep = self.path.stat().st_size
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        with replacing(self.path) as tmp, tmp.open("w", newline="", encoding="utf-8") as fh:
+            fh.write(self._line({c: c for c in self.columns}))
+            fh.writelines(self._line(r) for r in rows)
+        self._keep = self.path.stat().st_size
 
     def _line(self, row: dict) -> str:
         buf = io.StringIO()
@@ -337,12 +335,6 @@ class SceneFingerprint:
 
     def write(self) -> None:
         """Write the file at once (a temporary file, renamed)."""
-        fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=".sweep-", suffix=".json")
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                json.dump(self.record, fh, sort_keys=True, indent=1, ensure_ascii=False)
-                fh.write("\n")
-            os.replace(tmp, self.path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        with replacing(self.path) as tmp, tmp.open("w", encoding="utf-8") as fh:
+            json.dump(self.record, fh, sort_keys=True, indent=1, ensure_ascii=False)
+            fh.write("\n")

@@ -122,20 +122,47 @@ class FEMResult:
         Returns
         -------
         Path
+
+        Raises
+        ------
+        ValueError
+            An extension meshio does not write, or ``k`` not a state index.
+        OSError
+            The file cannot be written (the message names it).  The file is written whole or
+            not at all (a temporary file, renamed): an existing file is replaced at once.
         """
         import meshio
 
+        from coils._files import replacing
+
         path = Path(path)
+        if path.suffix.lower() not in meshio.extension_to_filetypes:
+            raise ValueError(
+                f"path {str(path)!r}: meshio writes no {path.suffix or 'extensionless'!r} "
+                "files; use .vtu, .vtk or .xdmf"
+            )
+        if k is not None:
+            n = len(self)
+            if isinstance(k, bool) or not isinstance(k, int | np.integer) or not -n <= k < n:
+                raise ValueError(f"k must be a state index from {-n} to {n - 1}; got {k!r}")
+            k = int(k)
         if path.suffix == ".xdmf" and k is None:
             first = self._meshio(0)
             # XML (inline) data: no HDF5 dependency
-            with meshio.xdmf.TimeSeriesWriter(path, data_format="XML") as writer:
+            with (
+                replacing(path) as tmp,
+                meshio.xdmf.TimeSeriesWriter(tmp, data_format="XML") as writer,
+            ):
                 writer.write_points_cells(first.points, first.cells)
                 for j, s in enumerate(self.scales):
                     writer.write_data(float(s), point_data=self._meshio(j).point_data)
             return path
         k = len(self) - 1 if k is None else k
-        self._meshio(k).write(path)
+        if path.suffix.lower() in (".xdmf", ".xmf"):  # its HDF5 side file is named after it
+            self._meshio(k).write(path)
+            return path
+        with replacing(path) as tmp:
+            self._meshio(k).write(tmp)
         return path
 
     def plot(self, k: int = -1, ax=None, **kwargs):

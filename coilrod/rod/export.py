@@ -9,6 +9,8 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from coils._files import replacing
+
 __all__ = ["write_vtk"]
 
 _EXTENSIONS = (".vtu", ".vtk")
@@ -57,7 +59,9 @@ def write_vtk(result, path, states=None, *, frames: bool = True) -> list[Path]:
     ValueError
         A bad extension or state.
     OSError
-        The directory cannot be written (the message names it).
+        The directory or a file cannot be written (the message names it).  Each file is
+        written whole or not at all (a temporary file, renamed): an existing file is replaced
+        at once, never left half-written.
     """
     import meshio
 
@@ -85,10 +89,8 @@ def write_vtk(result, path, states=None, *, frames: bool = True) -> list[Path]:
             data.update(tangent=R[:, :, 0], normal=R[:, :, 1], binormal=R[:, :, 2])
         mesh = meshio.Mesh(pts, cells, point_data=data)
         target = path if single else path.with_name(f"{path.stem}_{k:03d}{path.suffix}")
-        try:
-            mesh.write(target)
-        except OSError as exc:
-            raise OSError(f"cannot write {str(target)!r}: {exc}") from exc
+        with replacing(target) as tmp:  # whole or not at all; OSError naming target
+            mesh.write(tmp)
         written.append(target)
     if not single:
         pvd = path.with_suffix(".pvd")
@@ -101,9 +103,7 @@ def write_vtk(result, path, states=None, *, frames: bool = True) -> list[Path]:
             time = float(scales[k]) if scales is not None else float(k)
             lines.append(f'<DataSet timestep="{time!r}" part="0" file={quoteattr(target.name)}/>')
         lines += ["</Collection>", "</VTKFile>", ""]
-        try:
-            pvd.write_text("\n".join(lines))
-        except OSError as exc:
-            raise OSError(f"cannot write {str(pvd)!r}: {exc}") from exc
+        with replacing(pvd) as tmp:
+            tmp.write_text("\n".join(lines), encoding="utf-8")
         written.append(pvd)
     return written

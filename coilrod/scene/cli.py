@@ -11,6 +11,7 @@ invalid scene, parameters, output folder, scheduler or usage; 130 interrupted.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import textwrap
 import time
@@ -299,6 +300,13 @@ def main(argv: list[str] | None = None) -> int:
     except SceneError as exc:
         for line in exc.problems:
             _print_err(line)
+        return 2
+    except BrokenPipeError:  # the reader of our output went away (``coilrod scenes | head``)
+        # the docs' recipe: no second error when Python flushes stdout at exit
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
+    except OSError as exc:  # a file that could not be written or read after the checks
+        _print_err(str(exc))
         return 2
     except KeyboardInterrupt:
         print("coilrod: interrupted", file=sys.stderr)

@@ -16,7 +16,6 @@ reach).
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -24,7 +23,7 @@ from pathlib import Path
 
 from ..control import ControlResult, solve_currents
 from ..errors import ConvergenceError
-from .outputs import prepare_output_dir, write_rows
+from .outputs import prepare_output_dir, save_figure, write_json, write_rows
 from .parse import Scene
 from .planner import Plan, plan_scene
 
@@ -226,7 +225,7 @@ class ControlSceneResult:
             rows = self.table()
             written.append(write_rows(out / "control.csv", rows))
             path = out / "control.json"
-            path.write_text(json.dumps(_finite(self._json()), indent=2, allow_nan=False))
+            write_json(path, self._json())
             written.append(path)
         if self.scene.outputs.get("figures", True):
             import matplotlib.pyplot as plt
@@ -235,8 +234,10 @@ class ControlSceneResult:
 
             ax = _plot_3d(self) if self.scene.control.spatial else plot_control_shapes(self)
             path = out / "control.png"
-            ax.figure.savefig(path, dpi=120, bbox_inches="tight")
-            plt.close(ax.figure)
+            try:
+                save_figure(ax.figure, path)
+            finally:
+                plt.close(ax.figure)
             written.append(path)
         return written
 
@@ -351,17 +352,6 @@ def _plot_3d(result):
     axes[0].legend(fontsize=7, loc="best")
     fig.suptitle(scene.name, fontsize=10)
     return axes[0]
-
-
-def _finite(obj):
-    """``obj`` with every non-finite float replaced by None (JSON has no NaN)."""
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_finite(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
 
 
 def _column(name: str) -> str:

@@ -21,7 +21,6 @@ push and wall forces against the inserted length).
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass, field
 
@@ -184,7 +183,7 @@ class NavigationSceneResult:
     def write(self, out_dir) -> list:
         """Write ``insertion.csv``, ``summary.json`` and ``navigation.png`` (as the scene's
         outputs ask) to ``out_dir``; returns the paths."""
-        from .outputs import prepare_output_dir, write_rows
+        from .outputs import prepare_output_dir, save_figure, write_json, write_rows
 
         out = prepare_output_dir(out_dir, key="output folder")
         written = []
@@ -207,15 +206,17 @@ class NavigationSceneResult:
                         else 1e3 * float(ins.wall_force_magnitude.max()),
                     }
                 )
-            path.write_text(json.dumps({"scene": self.scene.name, "runs": runs}, indent=2))
+            write_json(path, {"scene": self.scene.name, "runs": runs})
             written.append(path)
         if self.scene.outputs.get("figures", True):
             import matplotlib.pyplot as plt
 
             fig = plot_navigation(self)
             path = out / "navigation.png"
-            fig.savefig(path, dpi=120, bbox_inches="tight")
-            plt.close(fig)
+            try:
+                save_figure(fig, path)
+            finally:
+                plt.close(fig)
             written.append(path)
         return written
 

@@ -869,4 +869,9 @@ def load_scene(path: str | Path) -> Scene:
         data = tomllib.loads(text)
     except ValueError as exc:  # TOMLDecodeError, or an integer too long for Python
         raise SceneError(f"{path}: not valid TOML ({exc})") from None
+    if not data:
+        raise SceneError(
+            f"{path}: the scene file is empty (no keys); see 'coilrod scenes --show NAME' for "
+            "a complete one"
+        )
     return parse_scene(data, source=str(path))

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from dataclasses import dataclass, field
@@ -12,7 +11,7 @@ import numpy as np
 
 from ..errors import ConvergenceError
 from .figures import leaves_plane, plot_scene_shapes, plot_scene_shapes_3d, plot_tip_vs_field
-from .outputs import prepare_output_dir, write_rows
+from .outputs import prepare_output_dir, save_figure, write_json, write_rows
 from .parse import Scene
 from .planner import Plan, plan_scene
 from .strength import field_strength
@@ -191,28 +190,26 @@ class SceneResult:
             written.append(write_rows(out / "tip_path.csv", rows))
             path = out / "summary.json"
             value, kind, number = field_strength(self.scene)
-            path.write_text(
-                json.dumps(
-                    {
-                        "scene": self.scene.name,
-                        "field_kind": self.scene.field_kind,
-                        "reference": {kind: value, "number": number},
-                        "plan": [str(d) for d in self.plan.decisions],
-                        "runs": [
-                            {
-                                "model": r.model,
-                                "field": r.field_label,
-                                "seconds": r.seconds,
-                                "error": r.error,
-                                "scales_reached": len(r.scales),
-                                "tip_mm": (1e3 * r.tip[-1, :3]).tolist() if len(r.scales) else None,
-                            }
-                            for r in self.runs
-                        ],
-                        "shift": self.shift(),
-                    },
-                    indent=2,
-                )
+            write_json(
+                path,
+                {
+                    "scene": self.scene.name,
+                    "field_kind": self.scene.field_kind,
+                    "reference": {kind: value, "number": number},
+                    "plan": [str(d) for d in self.plan.decisions],
+                    "runs": [
+                        {
+                            "model": r.model,
+                            "field": r.field_label,
+                            "seconds": r.seconds,
+                            "error": r.error,
+                            "scales_reached": len(r.scales),
+                            "tip_mm": (1e3 * r.tip[-1, :3]).tolist() if len(r.scales) else None,
+                        }
+                        for r in self.runs
+                    ],
+                    "shift": self.shift(),
+                },
             )
             written.append(path)
         if self.scene.outputs.get("vtk", False):
@@ -232,8 +229,10 @@ class SceneResult:
             for name, fn in figures:
                 ax = fn(self)
                 path = out / name
-                ax.figure.savefig(path, dpi=120, bbox_inches="tight")
-                plt.close(ax.figure)
+                try:
+                    save_figure(ax.figure, path)
+                finally:
+                    plt.close(ax.figure)
                 written.append(path)
         return written
 

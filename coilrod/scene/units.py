@@ -72,6 +72,11 @@ def parse_quantity(value, dimension: str, key: str = "value") -> float:
     if isinstance(value, int | float):
         if dimension == "angle" and value == 0:
             return 0.0
+        if isinstance(value, float) and not math.isfinite(value):  # nan, inf, 1e400
+            raise UnitError(
+                f"{key}: missing unit in {value!r}, and the number must be finite; write a "
+                f"finite number with a unit, e.g. '{_example(dimension)}'"
+            )
         if isinstance(value, int) and abs(value) >= 10**15:
             raise UnitError(
                 f"{key}: missing unit in {short_int(value)}; write it as a string with a "
