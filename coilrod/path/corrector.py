@@ -426,7 +426,8 @@ class _One:
         if not np.isfinite(dU).all():
             self.live = False
             return False
-        x = float(np.asarray(P.step_limit(U, dU), float).reshape(-1)[0])
+        lim = P.step_limit(U, dU)
+        x = float(lim[0] if type(lim) is np.ndarray else np.asarray(lim, float).reshape(-1)[0])
         full = 1.0 if x >= 1.0 else x  # (np.minimum: NaN stays NaN)
         moved = self._line_search(dU, full, chord)
         if moved:

@@ -219,6 +219,8 @@ class SpatialRod(DiscreteRod):
         bend[1:] += self._inv_h
         bend[:-1] += self._inv_h
         self._bend_scale = bend * self._inv_w * float(np.max(self.K))
+        self._bend_max = float(np.max(self._bend_scale))
+        self._bend_column = self._bend_scale[:, None].copy()
         # multipliers of the scaled residual (_scaled): moments and forces per length,
         # position mismatch per length (the clamp rows and the tip force row zeroed there)
         self._row_scale = np.ones((n, 3 if self.uniform else self.nv))
@@ -373,9 +375,10 @@ class SpatialRod(DiscreteRod):
         else:  # the compiled pass (numpy's error model, silent) and band gathers only
             R, R1, ab, sym = self._assemble(U, S, tangent)
         ok = np.logical_and.reduce(np.isfinite(R), axis=1)
-        phi = self.rotations(U)
+        phi = U if self.uniform else self.rotations(U)  # (every unknown a rotation, or (k, n, 3))
         # |phi| <= sqrt(3) max|phi_a|: the norms only where that bound exceeds the limit
         if not _max(np.abs(phi), axis=None) <= self._turn_bound:
+            phi = self.rotations(U)
             with np.errstate(all="ignore"):
                 turned = np.sqrt(np.einsum("kni,kni->kn", phi, phi)).max(axis=1)
             bad_turn = turned > self.max_turn
@@ -393,6 +396,7 @@ class SpatialRod(DiscreteRod):
             tan.blocks = sym  # (diagonal, upper) blocks of the second variation
         lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
         lin.load_rate = R1
+        lin.pair = (self._pair, R, R1)  # (R and R1 views of it: _error_one)
         return lin
 
     @property
@@ -434,9 +438,9 @@ class SpatialRod(DiscreteRod):
         """max over equations of |scaled residual| / (tol + its round-off floor), shape (k,)."""
         # the largest |scaled residual| of each node, divided by the node's tolerance (the
         # same maximum as dividing every equation: a positive divisor keeps the order)
+        if lin.residual.shape[0] == 1:
+            return self._error_one(lin)
         scaled = self._scaled_max(lin.residual)  # (k, n)
-        if scaled.shape[0] == 1:
-            return self._error_one(lin, scaled)
         with np.errstate(all="ignore"):
             size = _max(np.abs(lin.u), axis=1)  # rotations, positions, forces
             size += 1.0
@@ -453,24 +457,50 @@ class SpatialRod(DiscreteRod):
                 out[~np.isfinite(out)] = np.inf
         return out
 
-    def _error_one(self, lin: Linearization, scaled: np.ndarray) -> np.ndarray:
-        """:meth:`error` of one member (scaled: its (1, n) scaled residual maxima), the
-        member-wide numbers as Python floats (the same IEEE operations, fewer numpy calls)."""
-        size = 1.0 + float(_max(np.abs(lin.u), axis=None))
+    def _error_one(self, lin: Linearization) -> np.ndarray:
+        """:meth:`error` of one member: the member-wide numbers as Python floats, and each
+        equation divided by its node's divisor before one maximum over all (the same numbers:
+        for d > 0, max_a(x_a) / d = max_a(x_a / d) and max_a(|x_a|) s = max_a(|x_a| s), as
+        rounding is monotone; a maximum over a node's few equations is a slow numpy
+        reduction)."""
+        pair = getattr(lin, "pair", None)
+        if pair is not None and pair[1] is lin.residual and pair[2] is lin.load_rate:
+            both = np.abs(pair[0])  # (2, 1, n, nv): |R| and |R1| (linearize)
+        else:
+            both = np.abs(np.concatenate((lin.residual, lin.load_rate)))
+            both = both.reshape(2, 1, self.n, self.nv)
+        both *= self._row_scale  # the scaled residual and load rate (_scaled)
+        scaled = both[0]
+        scaled[:, 0, : 3 if self.uniform else 6] = 0.0  # the clamp's rows
+        if not self.uniform:
+            scaled[:, -1, 6:9] = 0.0  # the tip's force row
+        # (the rows _scaled zeroes are zero in R1: the clamp's and the tip force's rows)
+        load = float(_max(both[1], axis=None))
         scale = lin.scale
-        scale = abs(float(scale[0] if isinstance(scale, np.ndarray) else scale))
-        # max over nodes of the scaled load rate (_scaled_max: the largest of |R1| row_scale;
-        # the rows _scaled zeroes are zero in R1: the clamp's and the tip force's rows)
-        load = float(_max(np.abs(lin.load_rate) * self._row_scale.reshape(-1), axis=None))
-        load *= scale
-        with np.errstate(all="ignore"):
-            div = self._bend_scale * size
-            div += load
-            div *= _FLOOR * _EPS
-            div += self.tol
-            scaled /= div
-            out = float(_max(scaled, axis=None))
+        load *= abs(float(scale[0] if isinstance(scale, np.ndarray) else scale))
+        size = 1.0 + float(_max(np.abs(lin.u), axis=None))
+        # no floating-point warning can arise where the divisors are finite (>= tol) and the
+        # quotients below 1e300: then without np.errstate's cost
+        if (
+            size * self._bend_max < 1e300
+            and load < 1e300
+            and float(_max(scaled, axis=None)) < 1e300 * self.tol
+        ):
+            out = self._divided_max(scaled, size, load)
+        else:
+            with np.errstate(all="ignore"):
+                out = self._divided_max(scaled, size, load)
         return np.array([out if out < np.inf else np.inf])
+
+    def _divided_max(self, scaled: np.ndarray, size: float, load: float) -> float:
+        """max of ``scaled / (tol + _FLOOR eps (size bend_scale + load))`` (scaled: (1, n,
+        nv), divided in place by its node's divisor)."""
+        div = self._bend_column * size  # (n, 1)
+        div += load
+        div *= _FLOOR * _EPS
+        div += self.tol
+        scaled /= div
+        return float(_max(scaled, axis=None))
 
     def residual_norm(self, residual) -> np.ndarray:
         """Max-norm of the scaled residual (non-dimensional), shape (k,)."""
@@ -938,8 +968,9 @@ class SpatialRod(DiscreteRod):
             if Hs is not None:
                 Hs = Hs.reshape(k, n, 3, 3, 3)
         frames, blk, m = ws["frames"], ws["blk"], ws["m"]
-        R = np.zeros((k, n, nv))
-        R1 = np.zeros((k, n, nv))
+        # residual and load rate in one array (_maxima; linearize keeps it as lin.pair)
+        pair = self._pair = np.zeros((2, k, n, nv))
+        R, R1 = pair[0], pair[1]
         # (diag and A_ab travel with the tangent: new arrays, every entry written by core)
         diag = np.empty((k, n, 3, 3)) if tangent else ws["diag"]
         A_ab = np.empty((k, n - 1, 3, 3)) if tangent else ws["diag"]
