@@ -40,6 +40,8 @@ CHILD = r"""
 import json, sys, time
 import numpy as np
 import coils
+import coilrod.rod._compiled_spatial as cs
+cs.COMPILE_AFTER = 0  # the compiled pass from the first call (not the numpy twin on a new cache)
 from coilrod import Circle, Magnetization, Rod, solve_rod
 L = 0.04
 rod = Rod(L, 1e6, Circle(2e-3), Magnetization(128e3, 0.3, elevation=0.4), poisson_ratio=0.5)
@@ -105,6 +107,9 @@ def phase_timer(states: int = 200, segments: int = 4):
     from bench_rod3d import _case
 
     from coilrod.path import corrector, stepping
+    from coilrod.rod import _compiled_spatial
+
+    _compiled_spatial.COMPILE_AFTER = 0
     from coilrod.rod import solve as solve_module
     from coilrod.rod.spatial import SpatialRod
 
@@ -112,7 +117,7 @@ def phase_timer(states: int = 200, segments: int = 4):
         ("solve_rod (whole call)", solve_module, "solve_rod"),
         ("  follow_load (path engine)", solve_module, "follow_load"),
         ("    newton (corrector)", stepping, "newton"),
-        ("      line search", corrector._Iteration, "_line_search"),
+        ("      line search (one state)", corrector._One, "_line_search"),
         ("model stability (inertia count)", SpatialRod, "stability"),
         ("  build_spatial_problem", solve_module, "build_spatial_problem"),
         ("model linearize (all)", SpatialRod, "linearize"),

@@ -235,6 +235,9 @@ def newton(
         lin = _final(P, U, S, state, tangent_at_end)
     if fast is not None:
         problem.compiled_newton_rent(state.iters)
+    if k == 1 and single:  # (the one state's numbers as they are: scalars)
+        e = state.e
+        return NewtonResult(U[0], e <= 1.0, e, state.n_iter, _single(lin))
     err = state.err
     ok = np.isfinite(err) & (err <= 1.0)
     if single:

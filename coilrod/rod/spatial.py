@@ -567,7 +567,8 @@ class SpatialRod(DiscreteRod):
     def _largest_rotation(self, du):
         if not (type(du) is np.ndarray and du.dtype == float):
             du = np.asarray(du, float)
-        d = self.rotations(du if du.ndim == 2 else du.reshape(1, -1))
+        k = du.shape[0] if du.ndim == 2 else 1
+        d = du.reshape(k, self.n, 3) if self.uniform else self.rotations(du.reshape(k, -1))
         out = _max(np.einsum("kni,kni->kn", d, d), axis=1)
         return np.sqrt(out, out=out)
 
