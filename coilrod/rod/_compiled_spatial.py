@@ -57,8 +57,8 @@ def _mm(A, B, out):
 
 
 @_inner
-def _exp_and_jl(phi, Q, J, K, K2):
-    """Q = exp(hat(phi)), J = J_l(phi) (K, K2: (3, 3) scratch)."""
+def _exp_and_jl(phi, Q, J, K, K2, with_j):
+    """Q = exp(hat(phi)) and, if ``with_j``, J = J_l(phi) (K, K2: (3, 3) scratch)."""
     theta = math.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
     t2 = theta * theta
     if theta < _SMALL:
@@ -75,7 +75,8 @@ def _exp_and_jl(phi, Q, J, K, K2):
         for j in range(3):
             eye = 1.0 if i == j else 0.0
             Q[i, j] = eye + a * K[i, j] + b * K2[i, j]
-            J[i, j] = eye + b * K[i, j] + c * K2[i, j]
+            if with_j:
+                J[i, j] = eye + b * K[i, j] + c * K2[i, j]
 
 
 @_inner
@@ -198,7 +199,7 @@ def spatial_core(
     p = np.empty((n - 1, 3))
     P = np.empty((n - 1, 3, 3))
     for m in range(k):
-        _frames(phi[m], R0, mu, frames[m], Jl, m_out[m])
+        _frames(phi[m], R0, mu, frames[m], Jl, m_out[m], tangent)
         _bending(frames[m], K, h, tangent, p, P)
         _moment_rows(phi[m], F[m], S[m], B[m], uniform, op, h, w, frames[m], m_out[m], p,
                      R[m], R1[m])  # fmt: skip
@@ -215,13 +216,13 @@ def spatial_core(
 
 
 @_inner
-def _frames(phi, R0, mu, frames, Jl, m_out):
-    """One member's node frames ``exp(hat(phi_i)) R0``, ``J_l(phi_i)`` and the world
-    magnetization ``frames_i mu_i``."""
+def _frames(phi, R0, mu, frames, Jl, m_out, tangent):
+    """One member's node frames ``exp(hat(phi_i)) R0``, with ``tangent`` ``J_l(phi_i)``, and
+    the world magnetization ``frames_i mu_i``."""
     mats = np.empty((3, 3, 3))
     Q, K, K2 = mats[0], mats[1], mats[2]
     for i in range(phi.shape[0]):
-        _exp_and_jl(phi[i], Q, Jl[i], K, K2)
+        _exp_and_jl(phi[i], Q, Jl[i], K, K2, tangent)
         _mm(Q, R0, frames[i])
         for a in range(3):
             acc = 0.0
