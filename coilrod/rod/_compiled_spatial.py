@@ -181,18 +181,22 @@ def spatial_pass(*args):
 @nb.njit(cache=True, error_model="numpy")
 def spatial_core(
     phi, X, F, S, B, G, H, has_h, uniform, tangent, mu, K, h, w, R0, L,
-    frames, R, R1, blk, diag, A_ab, m_out,
+    frames, R, R1, blk, diag, A_ab, m_out, ab, kv, band,
 ):  # fmt: skip
     """Frames (k, n, 3, 3), residual R and R1 (k, n, 9 or 3; moment, position and force
     slots), and with ``tangent``: the Jacobian blocks ``blk`` (k, n, 10, 3, 3) -- 0 m_prev,
     1 m_diag, 2 m_next, 3 p_phiprev, 4 p_phi, 5 m_x, 6 m_Fprev, 7 m_F, 8 f_xnext,
     9 f_phinext, each at the node of its row (m_next, m_F at row j: node j; f_* at row j - 1:
     node j) -- the world-rotation diagonal ``diag`` (k, n, 3, 3) and ``A_ab`` (k, n - 1, 3, 3)
-    of the second variation, and the world magnetization ``m_out`` (k, n, 3).
+    of the second variation, and the world magnetization ``m_out`` (k, n, 3).  With
+    ``band``, ``tangent`` and ``uniform``, the blocks of ``blk`` are also written into the
+    LAPACK band storage ``ab`` (2 kl + ku + 1, k 3 n; Fortran order; ``kv`` = kl + ku; its
+    constant entries already in place): True is returned then (else False; the caller
+    gathers the band from ``blk``).
 
     Member by member: :func:`_frames`, :func:`_bending`, :func:`_moment_rows`, and for a
     non-uniform field :func:`_position_force_rows`; with ``tangent`` :func:`_rotation_blocks`
-    and, for a non-uniform field, :func:`_position_blocks`."""
+    (and :func:`_band_blocks`) and, for a non-uniform field, :func:`_position_blocks`."""
     k, n = phi.shape[0], phi.shape[1]
     op = 0 if uniform else 3
     Jl = np.empty((n, 3, 3))
@@ -213,6 +217,27 @@ def spatial_core(
         if not uniform:
             _position_blocks(S[m], G[m], H[m] if has_h else H[0], has_h, h, w, L, frames[m],
                              m_out[m], Jl, blk[m])  # fmt: skip
+        elif band:
+            _band_blocks(blk[m], ab, kv, 3 * n * m)
+    return band and tangent and uniform
+
+
+@_inner
+def _band_blocks(blk, ab, kv, off):
+    """The uniform layout's moment blocks of one member (``blk`` 0 m_prev, 1 m_diag,
+    2 m_next of node rows 1 .. n - 1) into the band storage ``ab``: entry (r, c) of the
+    stacked Jacobian at ``ab[kv + r - c, c]``, the member's rows and columns from ``off``."""
+    n = blk.shape[0]
+    for i in range(1, n):
+        for s in range(3):
+            j = i - 1 + s  # the column node
+            if j > n - 1:
+                continue
+            for a in range(3):
+                r = off + 3 * i + a
+                for b in range(3):
+                    c = off + 3 * j + b
+                    ab[kv + r - c, c] = blk[i, s, a, b]
 
 
 @_inner

@@ -59,6 +59,10 @@ _LAYOUTS: dict = {}
 #: ``a.max(axis)`` without the method's Python wrapper (the same reduction).
 _max = np.maximum.reduce
 
+#: The band storage argument of the per-node pass where it does not write one (Fortran
+#: order, as the real one: one compiled version of the pass).
+_NO_BAND = np.zeros((2, 2), order="F")
+
 _CS = None  # the module coilrod.rod._compiled_spatial once imported (it imports numba)
 
 
@@ -874,6 +878,15 @@ class SpatialRod(DiscreteRod):
         """LAPACK band storage (as :meth:`_scatter`) of a stack without contact: a template
         with the constant blocks and one gather of the varying entries from the compiled
         pass's ``blk`` (k, n, 10, 3, 3) through precomputed flat indices (cached per k)."""
+        template, dst, src = self._blk_gather(k)
+        ab = template.copy(order="F")
+        ab.ravel(order="K")[dst] = blk.ravel()[src]
+        return ab
+
+    def _blk_gather(self, k: int):
+        """(template, dst, src) of :meth:`_band_from_blk` for a stack of k (cached): the band
+        storage with the constant blocks, and the flat band and ``blk`` indices of the
+        varying entries."""
         key = ("blk", k)
         cached = self._band_cache.get(key)
         if cached is None:
@@ -902,10 +915,7 @@ class SpatialRod(DiscreteRod):
             dst = (np.concatenate(dst)[None] + member).ravel()
             src = (np.concatenate(src)[None] + (np.arange(k) * n * 90)[:, None]).ravel()
             cached = self._band_cache[key] = (template, dst, src)
-        template, dst, src = cached
-        ab = template.copy(order="F")
-        ab.ravel(order="K")[dst] = blk.ravel()[src]
-        return ab
+        return cached
 
     def _scatter(self, k: int, blocks: dict) -> np.ndarray:
         """LAPACK band storage (2 kl + ku + 1, k size) of the stacked Jacobians: a template
@@ -977,10 +987,13 @@ class SpatialRod(DiscreteRod):
         A_ab = np.empty((k, n - 1, 3, 3)) if tangent else ws["diag"]
         has_h = Hs is not None
         S = S if S.dtype == float else np.asarray(S, float)
-        core(
+        # the compiled pass writes the uniform layout's band itself (into the template's copy)
+        direct = band and tangent and self.uniform and not self.nc
+        ab = self._blk_gather(k)[0].copy(order="F") if direct else _NO_BAND
+        wrote = core(
             phi, X, F, S, B, G, Hs if has_h else ws["H"], has_h, self.uniform, tangent,
             self.mu, self.K, self.mesh.h, self.mesh.w, self.R0, self.L, frames, R, R1, blk,
-            diag, A_ab, m,
+            diag, A_ab, m, ab, self.kl + self.ku, direct,
         )  # fmt: skip
         contact = self._contact_rows(V, X, frames, R, tangent) if self.nc else None
         R = R.reshape(k, -1)
@@ -988,7 +1001,8 @@ class SpatialRod(DiscreteRod):
         if not tangent:
             return R, R1, None, None
         if not self.nc:  # every varying block is an entry of blk: one gather into the band
-            ab = self._band_from_blk(k, blk) if band else None
+            if not wrote:
+                ab = self._band_from_blk(k, blk) if band else None
             if self.uniform:
                 return R, R1, ab, (diag[:, 1:], A_ab[:, 1:])
             # the second variation only where a stability count asks for it (lazily; the
@@ -1354,10 +1368,11 @@ def _solve_many(tan: RodTangent, rhs: np.ndarray) -> np.ndarray:
 
 def numpy_core(
     phi, X, F, S, B, G, H, has_h, uniform, tangent, mu, K, h, w, R0, L,
-    frames, R, R1, blk, diag, A_ab, m_out,
+    frames, R, R1, blk, diag, A_ab, m_out, ab=None, kv=0, band=False,
 ):  # fmt: skip
     """:func:`coilrod.rod._compiled_spatial.spatial_core` in numpy, with the same arguments and
-    outputs: the reference the compiled pass is tested against (the equations are in the
+    outputs (the band storage ``ab`` left alone: returns None, the caller gathers it from
+    ``blk``): the reference the compiled pass is tested against (the equations are in the
     module docstring)."""
     op = 0 if uniform else 3
     inv_h = 1.0 / h
