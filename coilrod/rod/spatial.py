@@ -1301,6 +1301,9 @@ class SpatialRod(DiscreteRod):
         """+1 where the second variation is positive definite, minus the number of negative
         eigenvalues where not, 0 where it cannot be evaluated; shape (k,)."""
         neg = self.negative_count(lin)
+        if neg.shape == (1,):  # one member: in Python scalars
+            v = int(neg[0])
+            return np.array([1.0 if v == 0 else -float(v) if v > 0 else 0.0])
         return np.where(neg == 0, 1.0, np.where(neg > 0, -neg.astype(float), 0.0))
 
     def _rotation_rows(self):
