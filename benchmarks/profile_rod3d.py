@@ -14,8 +14,9 @@ time, best of several runs, the two versions' subprocesses alternating over thre
 2. a per-phase timer of this checkout (each model method wrapped by a process-time
    accumulator, no profiler), per state, at 4 segments.
 
-Run:  python benchmarks/profile_rod3d.py [--base PATH]   (PATH: a checkout to compare with,
-e.g. ``git archive <commit> coilrod coils | tar -x -C PATH``; skipped if absent)
+Run:  python benchmarks/profile_rod3d.py [--base PATH] [--rounds N]   (PATH: a checkout to
+compare with, e.g. ``git archive <commit> coilrod coils | tar -x -C PATH``; skipped if
+absent; N: rounds of the two versions alternating, default 3)
 """
 
 from __future__ import annotations
@@ -142,7 +143,7 @@ def phase_timer(states: int = 200, segments: int = 4):
     return rows
 
 
-def main(base: str) -> str:
+def main(base: str, rounds: int = ROUNDS) -> str:
     lines = []
 
     def out(text=""):
@@ -155,13 +156,16 @@ def main(base: str) -> str:
     here = str(HERE.parent)
     have_base = Path(base, "coilrod").is_dir()
     new = old = None
-    for _ in range(ROUNDS):
+    for _ in range(rounds):
         new = _best(new, child(here))
         if have_base:
             old = _best(old, child(base))
     out("# Spatial rod: per-iteration overhead and profile")
     out()
-    out(f"Machine: {machine_info()}. One BLAS thread, process CPU time, best of 7 x 3 rounds.")
+    out(
+        f"Machine: {machine_info()}. One BLAS thread, process CPU time, best of 7 x {rounds} "
+        "rounds."
+    )
     out()
     out("## 1. One 3D state (bench_rod3d.py section 2 case, one mesh, no Richardson)")
     out()
@@ -205,7 +209,9 @@ def main(base: str) -> str:
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--base", default="/tmp/hs/base", help="checkout to compare with")
-    text = main(parser.parse_args().base)
+    parser.add_argument("--rounds", type=int, default=ROUNDS, help="alternating rounds")
+    args = parser.parse_args()
+    text = main(args.base, args.rounds)
     target = HERE / "results" / "rod3d_profile.md"
     target.write_text(text)
     print(f"written to {target}")

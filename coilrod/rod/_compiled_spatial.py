@@ -260,10 +260,10 @@ def _frames(phi, R0, mu, frames, Jl, m_out, tangent):
 def _bending(frames, K, h, tangent, p, P):
     """One member's segments: the moment ``p_i = R_{i+1} J_l^-1(psi_i) K psi_i / h_i`` of
     ``psi_i = log(R_i^T R_{i+1})`` and, with ``tangent``, its Hessian block ``P_i``."""
-    mats = np.empty((8, 3, 3))  # (one allocation each for the 3x3 and 3-vector scratch)
+    mats = np.empty((9, 3, 3))  # (one allocation each for the 3x3 and 3-vector scratch)
     vecs = np.empty((5, 3))
     Delta, Psi, Psi2, Minv = mats[0], mats[1], mats[2], mats[3]
-    Nm, Gh, M1, M2 = mats[4], mats[5], mats[6], mats[7]
+    Nm, Gh, M1, M2, KM = mats[4], mats[5], mats[6], mats[7], mats[8]
     psi, g, tmp, tmp2, Jg = vecs[0], vecs[1], vecs[2], vecs[3], vecs[4]
     for i in range(frames.shape[0] - 1):
         Ra = frames[i]
@@ -308,14 +308,18 @@ def _bending(frames, K, h, tangent, p, P):
         for a in range(3):
             for b in range(3):
                 Nm[a, b] = -0.5 * Gh[a, b] - cc * (M1[a, b] + M2[a, b]) + dc * psi[a] * tmp2[b]
-        # inner = Minv^T diag(K/h) Minv + sym(Minv^T N)
+        # inner = Minv^T diag(K/h) Minv + sym(Minv^T N); KM = diag(K) Minv / h (each entry
+        # once: the same products and quotients as inline)
+        for q in range(3):
+            for a in range(3):
+                KM[q, a] = Minv[q, a] * K[q] / h[i]
         for a in range(3):
             for b in range(3):
                 acc = 0.0
                 acc2 = 0.0
                 acc3 = 0.0
                 for q in range(3):
-                    acc += Minv[q, a] * K[q] / h[i] * Minv[q, b]
+                    acc += KM[q, a] * Minv[q, b]
                     acc2 += Minv[q, a] * Nm[q, b]
                     acc3 += Minv[q, b] * Nm[q, a]
                 M1[a, b] = acc + 0.5 * (acc2 + acc3)
