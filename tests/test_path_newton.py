@@ -198,6 +198,51 @@ class TestBatchedMembers:
                 )
 
 
+class TestOneState:
+    """One state runs a scalar copy of the stacked iteration (``corrector._One``): the same
+    evaluations, iterates and outcome, bitwise, as the stacked iteration on that state."""
+
+    CASES = {
+        "line search": (lambda: arctan_problem(), [2.0], 0.0, {}),
+        "growth": (lambda: arctan_problem(full_step_growth=1.2), [2.0], 0.0, {}),
+        "inadmissible trial": (
+            lambda: smooth_cubic(1.0, 0.0, 1.0, admissible=lambda v, s: v[:, 0] < 10),
+            [0.1], 1.0, {},
+        ),
+        "stagnation": (lambda: linear(tangent_factor=3.0), [1e-6], 0.0, {}),
+        "chord": (lambda: smooth_cubic(1.0, 1.0, 1.0), [3.0], 10.0, {}),
+        "chord start": (lambda: arctan_problem(), [2.0], 0.0, {"chord_start": True}),
+        "failed search": (lambda: arctan_problem(), [10.0], 0.0, {"backtracks": 1}),
+    }  # fmt: skip
+
+    @pytest.mark.parametrize("case", CASES)
+    def test_same_iterates_as_the_stacked_iteration(self, case, monkeypatch):
+        from coilrod.path import corrector
+
+        make, u0, s, kw = self.CASES[case]
+        out = []
+        for one in (True, False):
+            if not one:  # the stacked iteration for the one state
+
+                class Stacked(corrector._Iteration):
+                    def finish(self):  # (the one state's numbers, as _One.finish leaves them)
+                        self.e, self.n_iter = float(self.err[0]), int(self.iters[0])
+                        return self
+
+                monkeypatch.setattr(corrector, "_One", Stacked)
+            toy = make()
+            res = newton(toy, np.array(u0), s, NewtonOptions(**kw))
+            out.append((toy.log, res))
+        (log1, r1), (log2, r2) = out
+        assert [(U.tolist(), S.tolist(), t) for U, S, t in log1] == [
+            (U.tolist(), S.tolist(), t) for U, S, t in log2
+        ]
+        assert (r1.ok, r1.error, r1.iterations, r1.u.tolist()) == (
+            r2.ok, r2.error, r2.iterations, r2.u.tolist()
+        )  # fmt: skip
+        assert r1.lin.residual.tolist() == r2.lin.residual.tolist()
+
+
 class TestChord:
     @BATCHED
     @pytest.mark.parametrize("u0", [0.0, 1.9, 3.0])

@@ -13,6 +13,7 @@ each member with its own step length, backtracking and convergence; converged me
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -225,13 +226,18 @@ def newton(
         return NewtonResult(U, ok, err, iters, lin)
     P = as_batched(problem)
     with np.errstate(all="ignore"):
-        state = _Iteration(P, U, S, opts)
+        state = (_One if k == 1 else _Iteration)(P, U, S, opts)
         for _ in range(opts.max_iter):
             if not state.step():
                 break
+        if k == 1:
+            state.finish()
         lin = _final(P, U, S, state, tangent_at_end)
     if fast is not None:
         problem.compiled_newton_rent(state.iters)
+    if k == 1 and single:  # (the one state's numbers as they are: scalars)
+        e = state.e
+        return NewtonResult(U[0], e <= 1.0, e, state.n_iter, _single(lin))
     err = state.err
     ok = np.isfinite(err) & (err <= 1.0)
     if single:
@@ -293,9 +299,9 @@ class _Iteration:
                 return False
         current = U if act is self.everyone else U[act]
         full = np.minimum(1.0, np.asarray(P.step_limit(current, dU), float))
-        moved, rounds = self._line_search(act, dU, full, chord)
+        moved = self._line_search(act, dU, full, chord)
         if not chord and moved.size:  # the new states carry their own tangent
-            if rounds == 1 and moved.size == act.size:
+            if self.last_members is moved:  # accepted together in one round: its evaluation
                 self.T, self.owners = self.last, moved
             else:  # accepted over several rounds: evaluate them together
                 self.T, self.owners = P.linearize(U[moved], S[moved]), moved
@@ -311,7 +317,9 @@ class _Iteration:
 
     def _line_search(self, act, dU, full, chord):
         """Backtrack each member's step until its error decreases (or a full step raises it
-        by at most ``full_step_growth``); returns the members that moved and the rounds."""
+        by at most ``full_step_growth``); returns the members that moved (``last_members``
+        itself where the latest linearization is theirs: every member of ``act`` accepted in
+        one round)."""
         P, U, S = self.P, self.U, self.S
         growth = P.full_step_growth
         alpha = full
@@ -360,9 +368,8 @@ class _Iteration:
             self.alive[failed] = False
             self.iters[failed] += 1
         if len(moved) == 1:  # (each round's members are in act's sorted order)
-            return moved[0], rounds
-        moved = np.sort(np.concatenate(moved)) if moved else act[:0]
-        return moved, rounds
+            return moved[0]
+        return np.sort(np.concatenate(moved)) if moved else act[:0]
 
     def _set_last(self, lin, members):
         """``lin`` is the latest linearization, of ``members`` at their current states."""
@@ -385,6 +392,99 @@ class _Iteration:
         self.iters[members] += 1
         self.fresh[members] = False
         self.current[members] = False
+
+
+class _One:
+    """:class:`_Iteration` for one state (k = 1): the same iterates, bitwise, with the
+    member's bookkeeping (error, counters, flags) in Python scalars instead of length-1 arrays
+    (most solves are of one state).  After :meth:`finish` it has the attributes
+    :func:`_final` and :func:`newton` read, as arrays of one member."""
+
+    def __init__(self, P, U, S, opts):
+        self.P, self.U, self.S, self.opts = P, U, S, opts
+        self.T = P.linearize(U, S)  # the linearization whose tangent the solves use
+        self.e = _error_one(P, self.T, None)
+        self.live = self.e < math.inf  # (_error_one: inf where not admissible)
+        self.R = np.array(self.T.residual)  # the current residual
+        self.everyone = self.owners = self.last_members = np.arange(1)
+        self.is_fresh = True  # the current state is the state of T
+        self.last = self.T  # the latest linearization
+        self.is_current = True  # the current state is the state of last
+        self.n_iter = 0
+        self.n_slow = 0
+        self.chords = opts.chord > 0 and not P.cheap_tangent
+        self.r = 0.0 if (opts.chord_start and self.chords) else 1.0  # last error contraction
+
+    def step(self) -> bool:
+        """One iteration; False when the state has converged or failed."""
+        P, U, S, opts = self.P, self.U, self.S, self.opts
+        if not (self.live and self.e > 1.0):
+            return False
+        chord = self.chords and self.r <= opts.chord
+        if not chord and not self.is_fresh:  # a new tangent at the current state
+            self.T = self.last = P.linearize(U.copy(), S)
+            self.is_fresh = self.is_current = True
+            self.R[:] = self.T.residual
+        dU = P.solve(self.T, -self.R)
+        if not np.isfinite(dU).all():
+            self.live = False
+            return False
+        lim = P.step_limit(U, dU)
+        x = float(lim[0] if type(lim) is np.ndarray else np.asarray(lim, float).reshape(-1)[0])
+        full = 1.0 if x >= 1.0 else x  # (np.minimum: NaN stays NaN)
+        moved = self._line_search(dU, full, chord)
+        if moved:
+            if not chord:  # the accepted trial's linearization carries its tangent
+                self.T = self.last
+                self.is_fresh = True
+            if self.n_slow >= opts.stagnation and self.e > 1.0:
+                self.live = False
+        return True
+
+    def _line_search(self, dU, full, chord) -> bool:
+        """:meth:`_Iteration._line_search` of the one member: True if it moved."""
+        P, U, S = self.P, self.U, self.S
+        growth = P.full_step_growth
+        alpha = full
+        for _ in range(self.opts.backtracks + 1):
+            step = alpha * dU
+            trial = U + step
+            tlin = P.linearize(trial, S, tangent=not chord)
+            e_new = _error_one(P, tlin, step)
+            e_old = self.e
+            accept = e_new < e_old or e_new <= 1.0  # (then e_new is finite: _error_one)
+            if not accept:
+                accept = alpha == full and e_new <= growth * e_old and e_new < math.inf
+            if accept:
+                self.n_slow = self.n_slow + 1 if e_new > 0.5 * e_old else 0
+                self.r = e_new / e_old if e_old > 0 else 0.0
+                U[:] = trial
+                self.R[:] = tlin.residual
+                self.e = e_new
+                self.n_iter += 1
+                self.is_fresh = False
+                self.last, self.is_current = tlin, True
+                return True
+            alpha = 0.5 * alpha
+        self.live = False
+        self.n_iter += 1
+        return False
+
+    def finish(self):
+        """The arrays of one member that :func:`_final` and :func:`newton` read."""
+        self.err = np.array([self.e])
+        self.iters = np.array([self.n_iter])
+        self.fresh = np.array([self.is_fresh])
+        self.current = np.array([self.is_current])
+        return self
+
+
+def _error_one(P, lin, du) -> float:
+    """:func:`_errors` of a one-member linearization, as a float."""
+    ok, err = lin.ok, P.error(lin, du)
+    ok = bool((ok if isinstance(ok, np.ndarray) else np.asarray(ok)).reshape(-1)[0])
+    e = float((err if isinstance(err, np.ndarray) else np.asarray(err, float)).reshape(-1)[0])
+    return e if ok and math.isfinite(e) else math.inf
 
 
 def _final(P, U, S, it: _Iteration, tangent: bool) -> Linearization:

@@ -57,8 +57,8 @@ def _mm(A, B, out):
 
 
 @_inner
-def _exp_and_jl(phi, Q, J):
-    """Q = exp(hat(phi)), J = J_l(phi)."""
+def _exp_and_jl(phi, Q, J, K, K2, with_j):
+    """Q = exp(hat(phi)) and, if ``with_j``, J = J_l(phi) (K, K2: (3, 3) scratch)."""
     theta = math.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
     t2 = theta * theta
     if theta < _SMALL:
@@ -69,15 +69,14 @@ def _exp_and_jl(phi, Q, J):
         a = math.sin(theta) / theta
         b = (1 - math.cos(theta)) / t2
         c = (theta - math.sin(theta)) / (t2 * theta)
-    K = np.empty((3, 3))
     _hat(phi, K)
-    K2 = np.empty((3, 3))
     _mm(K, K, K2)
     for i in range(3):
         for j in range(3):
             eye = 1.0 if i == j else 0.0
             Q[i, j] = eye + a * K[i, j] + b * K2[i, j]
-            J[i, j] = eye + b * K[i, j] + c * K2[i, j]
+            if with_j:
+                J[i, j] = eye + b * K[i, j] + c * K2[i, j]
 
 
 @_inner
@@ -112,7 +111,8 @@ def _log(R, out):
 
 
 @_inner
-def _c_coefficients(theta):
+def _c_coefficients(theta, with_dc):
+    """c(theta) of J_r^-1 and, if ``with_dc``, dc/dtheta / theta (else 0)."""
     if theta < _C_SMALL:
         t2 = theta * theta
         c = 0.0
@@ -123,8 +123,10 @@ def _c_coefficients(theta):
                 dc = dc * t2 + 2 * k * _C_SERIES[k]
         return c, dc
     cot = math.cos(theta / 2) / math.sin(theta / 2)
-    csc2 = 1.0 / math.sin(theta / 2) ** 2
     c = 1 / theta**2 - cot / (2 * theta)
+    if not with_dc:
+        return c, 0.0
+    csc2 = 1.0 / math.sin(theta / 2) ** 2
     dc = (-2 / theta**3 + cot / (2 * theta**2) + csc2 / (4 * theta)) / theta
     return c, dc
 
@@ -179,25 +181,29 @@ def spatial_pass(*args):
 @nb.njit(cache=True, error_model="numpy")
 def spatial_core(
     phi, X, F, S, B, G, H, has_h, uniform, tangent, mu, K, h, w, R0, L,
-    frames, R, R1, blk, diag, A_ab, m_out,
+    frames, R, R1, blk, diag, A_ab, m_out, ab, kv, band,
 ):  # fmt: skip
     """Frames (k, n, 3, 3), residual R and R1 (k, n, 9 or 3; moment, position and force
     slots), and with ``tangent``: the Jacobian blocks ``blk`` (k, n, 10, 3, 3) -- 0 m_prev,
     1 m_diag, 2 m_next, 3 p_phiprev, 4 p_phi, 5 m_x, 6 m_Fprev, 7 m_F, 8 f_xnext,
     9 f_phinext, each at the node of its row (m_next, m_F at row j: node j; f_* at row j - 1:
     node j) -- the world-rotation diagonal ``diag`` (k, n, 3, 3) and ``A_ab`` (k, n - 1, 3, 3)
-    of the second variation, and the world magnetization ``m_out`` (k, n, 3).
+    of the second variation, and the world magnetization ``m_out`` (k, n, 3).  With
+    ``band``, ``tangent`` and ``uniform``, the blocks of ``blk`` are also written into the
+    LAPACK band storage ``ab`` (2 kl + ku + 1, k 3 n; Fortran order; ``kv`` = kl + ku; its
+    constant entries already in place): True is returned then (else False; the caller
+    gathers the band from ``blk``).
 
     Member by member: :func:`_frames`, :func:`_bending`, :func:`_moment_rows`, and for a
     non-uniform field :func:`_position_force_rows`; with ``tangent`` :func:`_rotation_blocks`
-    and, for a non-uniform field, :func:`_position_blocks`."""
+    (and :func:`_band_blocks`) and, for a non-uniform field, :func:`_position_blocks`."""
     k, n = phi.shape[0], phi.shape[1]
     op = 0 if uniform else 3
     Jl = np.empty((n, 3, 3))
     p = np.empty((n - 1, 3))
     P = np.empty((n - 1, 3, 3))
     for m in range(k):
-        _frames(phi[m], R0, mu, frames[m], Jl, m_out[m])
+        _frames(phi[m], R0, mu, frames[m], Jl, m_out[m], tangent)
         _bending(frames[m], K, h, tangent, p, P)
         _moment_rows(phi[m], F[m], S[m], B[m], uniform, op, h, w, frames[m], m_out[m], p,
                      R[m], R1[m])  # fmt: skip
@@ -211,15 +217,37 @@ def spatial_core(
         if not uniform:
             _position_blocks(S[m], G[m], H[m] if has_h else H[0], has_h, h, w, L, frames[m],
                              m_out[m], Jl, blk[m])  # fmt: skip
+        elif band:
+            _band_blocks(blk[m], ab, kv, 3 * n * m)
+    return band and tangent and uniform
 
 
 @_inner
-def _frames(phi, R0, mu, frames, Jl, m_out):
-    """One member's node frames ``exp(hat(phi_i)) R0``, ``J_l(phi_i)`` and the world
-    magnetization ``frames_i mu_i``."""
-    Q = np.empty((3, 3))
+def _band_blocks(blk, ab, kv, off):
+    """The uniform layout's moment blocks of one member (``blk`` 0 m_prev, 1 m_diag,
+    2 m_next of node rows 1 .. n - 1) into the band storage ``ab``: entry (r, c) of the
+    stacked Jacobian at ``ab[kv + r - c, c]``, the member's rows and columns from ``off``."""
+    n = blk.shape[0]
+    for i in range(1, n):
+        for s in range(3):
+            j = i - 1 + s  # the column node
+            if j > n - 1:
+                continue
+            for a in range(3):
+                r = off + 3 * i + a
+                for b in range(3):
+                    c = off + 3 * j + b
+                    ab[kv + r - c, c] = blk[i, s, a, b]
+
+
+@_inner
+def _frames(phi, R0, mu, frames, Jl, m_out, tangent):
+    """One member's node frames ``exp(hat(phi_i)) R0``, with ``tangent`` ``J_l(phi_i)``, and
+    the world magnetization ``frames_i mu_i``."""
+    mats = np.empty((3, 3, 3))
+    Q, K, K2 = mats[0], mats[1], mats[2]
     for i in range(phi.shape[0]):
-        _exp_and_jl(phi[i], Q, Jl[i])
+        _exp_and_jl(phi[i], Q, Jl[i], K, K2, tangent)
         _mm(Q, R0, frames[i])
         for a in range(3):
             acc = 0.0
@@ -232,19 +260,11 @@ def _frames(phi, R0, mu, frames, Jl, m_out):
 def _bending(frames, K, h, tangent, p, P):
     """One member's segments: the moment ``p_i = R_{i+1} J_l^-1(psi_i) K psi_i / h_i`` of
     ``psi_i = log(R_i^T R_{i+1})`` and, with ``tangent``, its Hessian block ``P_i``."""
-    Delta = np.empty((3, 3))
-    Psi = np.empty((3, 3))
-    Psi2 = np.empty((3, 3))
-    Minv = np.empty((3, 3))
-    Nm = np.empty((3, 3))
-    Gh = np.empty((3, 3))
-    M1 = np.empty((3, 3))
-    M2 = np.empty((3, 3))
-    psi = np.empty(3)
-    g = np.empty(3)
-    tmp = np.empty(3)
-    tmp2 = np.empty(3)
-    Jg = np.empty(3)
+    mats = np.empty((9, 3, 3))  # (one allocation each for the 3x3 and 3-vector scratch)
+    vecs = np.empty((5, 3))
+    Delta, Psi, Psi2, Minv = mats[0], mats[1], mats[2], mats[3]
+    Nm, Gh, M1, M2, KM = mats[4], mats[5], mats[6], mats[7], mats[8]
+    psi, g, tmp, tmp2, Jg = vecs[0], vecs[1], vecs[2], vecs[3], vecs[4]
     for i in range(frames.shape[0] - 1):
         Ra = frames[i]
         Rb = frames[i + 1]
@@ -258,7 +278,7 @@ def _bending(frames, K, h, tangent, p, P):
         for a in range(3):
             g[a] = psi[a] * K[a] / h[i]
         theta = math.sqrt(psi[0] ** 2 + psi[1] ** 2 + psi[2] ** 2)
-        cc, dc = _c_coefficients(theta)
+        cc, dc = _c_coefficients(theta, tangent)
         _cross(psi, g, tmp)  # psi x g
         _cross(psi, tmp, tmp2)
         for a in range(3):
@@ -288,14 +308,18 @@ def _bending(frames, K, h, tangent, p, P):
         for a in range(3):
             for b in range(3):
                 Nm[a, b] = -0.5 * Gh[a, b] - cc * (M1[a, b] + M2[a, b]) + dc * psi[a] * tmp2[b]
-        # inner = Minv^T diag(K/h) Minv + sym(Minv^T N)
+        # inner = Minv^T diag(K/h) Minv + sym(Minv^T N); KM = diag(K) Minv / h (each entry
+        # once: the same products and quotients as inline)
+        for q in range(3):
+            for a in range(3):
+                KM[q, a] = Minv[q, a] * K[q] / h[i]
         for a in range(3):
             for b in range(3):
                 acc = 0.0
                 acc2 = 0.0
                 acc3 = 0.0
                 for q in range(3):
-                    acc += Minv[q, a] * K[q] / h[i] * Minv[q, b]
+                    acc += KM[q, a] * Minv[q, b]
                     acc2 += Minv[q, a] * Nm[q, b]
                     acc3 += Minv[q, b] * Nm[q, a]
                 M1[a, b] = acc + 0.5 * (acc2 + acc3)
@@ -314,10 +338,8 @@ def _moment_rows(phi, F, s_m, B, uniform, op, h, w, frames, m_out, p, R, R1):
     """One member's moment rows (slots ``op:op+3``) of R and R1: bending, the magnetic
     torque, and (non-uniform field) the moments of the internal forces; the clamp row."""
     n = phi.shape[0]
-    tau = np.empty(3)
-    hF = np.empty(3)
-    t = np.empty(3)
-    tmp = np.empty(3)
+    vecs = np.empty((4, 3))
+    tau, hF, t, tmp = vecs[0], vecs[1], vecs[2], vecs[3]
     for i in range(n):
         for a in range(3):
             t[a] = frames[i, a, 0]
@@ -379,9 +401,8 @@ def _rotation_blocks(F, s_m, B, uniform, op, h, w, frames, m_out, p, P, Jl, R, b
     """One member's second-variation blocks ``diag`` and ``A_ab`` and the Jacobian blocks of
     the moment rows with respect to the rotations (``blk`` 0 m_prev, 1 m_diag, 2 m_next)."""
     n = frames.shape[0]
-    t = np.empty(3)
-    hF = np.empty(3)
-    tmp = np.empty(3)
+    vecs = np.empty((3, 3))
+    t, hF, tmp = vecs[0], vecs[1], vecs[2]
     M1 = np.empty((3, 3))
     for i in range(n):
         for a in range(3):
@@ -436,11 +457,10 @@ def _position_blocks(s_m, G, H, has_h, h, w, L, frames, m_out, Jl, blk):
     """One member's Jacobian blocks of a non-uniform field: ``blk`` 3 p_phiprev, 4 p_phi,
     5 m_x, 6 m_Fprev, 7 m_F, 8 f_xnext, 9 f_phinext."""
     n = frames.shape[0]
-    t = np.empty(3)
-    tmp = np.empty(3)
-    M1 = np.empty((3, 3))
-    M2 = np.empty((3, 3))
-    Nm = np.empty((3, 3))
+    vecs = np.empty((2, 3))
+    mats = np.empty((3, 3, 3))
+    t, tmp = vecs[0], vecs[1]
+    M1, M2, Nm = mats[0], mats[1], mats[2]
     for i in range(1, n):
         hh = 0.5 * h[i - 1]
         for a in range(3):

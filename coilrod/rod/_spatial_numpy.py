@@ -205,10 +205,11 @@ def _bending(frames, K, h, tangent):
 
 def spatial_core_numpy(
     phi, X, F, S, B, G, H, has_h, uniform, tangent, mu, K, h, w, R0, L,
-    frames, R, R1, blk, diag, A_ab, m_out,
+    frames, R, R1, blk, diag, A_ab, m_out, ab=None, kv=0, band=False,
 ):  # fmt: skip
     """:func:`coilrod.rod._compiled_spatial.spatial_core` (same arguments, same outputs, the
-    same entries written) in numpy."""
+    same entries written) in numpy, except the band storage: ``ab`` is left alone and False
+    returned (the caller gathers the band from ``blk``)."""
     op = 0 if uniform else 3
     with np.errstate(all="ignore"):
         Q, Jl = _exp_and_jl(phi)
@@ -221,10 +222,11 @@ def spatial_core_numpy(
         if not uniform:
             _position_force_rows(X, F, s, G, h, w, L, frames, t, m_out, R, R1)
         if not tangent:
-            return
+            return False
         _rotation_blocks(F, s, B, uniform, op, h, w, t, m_out, p, P, Jl, R, blk, diag, A_ab)
         if not uniform:
             _position_blocks(s, G, H, has_h, h, w, L, t, m_out, Jl, blk)
+    return False
 
 
 def _half_forces(F, h):

@@ -59,6 +59,10 @@ _LAYOUTS: dict = {}
 #: ``a.max(axis)`` without the method's Python wrapper (the same reduction).
 _max = np.maximum.reduce
 
+#: The band storage argument of the per-node pass where it does not write one (Fortran
+#: order, as the real one: one compiled version of the pass).
+_NO_BAND = np.zeros((2, 2), order="F")
+
 _CS = None  # the module coilrod.rod._compiled_spatial once imported (it imports numba)
 
 
@@ -242,6 +246,8 @@ class SpatialRod(DiscreteRod):
         bend[1:] += self._inv_h
         bend[:-1] += self._inv_h
         self._bend_scale = bend * self._inv_w * float(np.max(self.K))
+        self._bend_max = float(np.max(self._bend_scale))
+        self._bend_column = self._bend_scale[:, None].copy()
         # multipliers of the scaled residual (_scaled): moments and forces per length,
         # position mismatch per length (the clamp rows and the tip force row zeroed there)
         self._row_scale = np.ones((n, 3 if self.uniform else self.nv))
@@ -399,9 +405,10 @@ class SpatialRod(DiscreteRod):
         else:  # the compiled pass (numpy's error model, silent) and band gathers only
             R, R1, ab, sym = self._assemble(U, S, tangent)
         ok = np.logical_and.reduce(np.isfinite(R), axis=1)
-        phi = self.rotations(U)
+        phi = U if self.uniform else self.rotations(U)  # (every unknown a rotation, or (k, n, 3))
         # |phi| <= sqrt(3) max|phi_a|: the norms only where that bound exceeds the limit
         if not _max(np.abs(phi), axis=None) <= self._turn_bound:
+            phi = self.rotations(U)
             with np.errstate(all="ignore"):
                 turned = np.sqrt(np.einsum("kni,kni->kn", phi, phi)).max(axis=1)
             bad_turn = turned > self.max_turn
@@ -419,6 +426,7 @@ class SpatialRod(DiscreteRod):
             tan.blocks = sym  # (diagonal, upper) blocks of the second variation
         lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
         lin.load_rate = R1
+        lin.pair = (self._pair, R, R1)  # (R and R1 views of it: _error_one)
         return lin
 
     @property
@@ -460,9 +468,9 @@ class SpatialRod(DiscreteRod):
         """max over equations of |scaled residual| / (tol + its round-off floor), shape (k,)."""
         # the largest |scaled residual| of each node, divided by the node's tolerance (the
         # same maximum as dividing every equation: a positive divisor keeps the order)
+        if lin.residual.shape[0] == 1:
+            return self._error_one(lin)
         scaled = self._scaled_max(lin.residual)  # (k, n)
-        if scaled.shape[0] == 1:
-            return self._error_one(lin, scaled)
         with np.errstate(all="ignore"):
             size = _max(np.abs(lin.u), axis=1)  # rotations, positions, forces
             size += 1.0
@@ -479,24 +487,50 @@ class SpatialRod(DiscreteRod):
                 out[~np.isfinite(out)] = np.inf
         return out
 
-    def _error_one(self, lin: Linearization, scaled: np.ndarray) -> np.ndarray:
-        """:meth:`error` of one member (scaled: its (1, n) scaled residual maxima), the
-        member-wide numbers as Python floats (the same IEEE operations, fewer numpy calls)."""
-        size = 1.0 + float(_max(np.abs(lin.u), axis=None))
+    def _error_one(self, lin: Linearization) -> np.ndarray:
+        """:meth:`error` of one member: the member-wide numbers as Python floats, and each
+        equation divided by its node's divisor before one maximum over all (the same numbers:
+        for d > 0, max_a(x_a) / d = max_a(x_a / d) and max_a(|x_a|) s = max_a(|x_a| s), as
+        rounding is monotone; a maximum over a node's few equations is a slow numpy
+        reduction)."""
+        pair = getattr(lin, "pair", None)
+        if pair is not None and pair[1] is lin.residual and pair[2] is lin.load_rate:
+            both = np.abs(pair[0])  # (2, 1, n, nv): |R| and |R1| (linearize)
+        else:
+            both = np.abs(np.concatenate((lin.residual, lin.load_rate)))
+            both = both.reshape(2, 1, self.n, self.nv)
+        both *= self._row_scale  # the scaled residual and load rate (_scaled)
+        scaled = both[0]
+        scaled[:, 0, : 3 if self.uniform else 6] = 0.0  # the clamp's rows
+        if not self.uniform:
+            scaled[:, -1, 6:9] = 0.0  # the tip's force row
+        # (the rows _scaled zeroes are zero in R1: the clamp's and the tip force's rows)
+        load = float(_max(both[1], axis=None))
         scale = lin.scale
-        scale = abs(float(scale[0] if isinstance(scale, np.ndarray) else scale))
-        # max over nodes of the scaled load rate (_scaled_max: the largest of |R1| row_scale;
-        # the rows _scaled zeroes are zero in R1: the clamp's and the tip force's rows)
-        load = float(_max(np.abs(lin.load_rate) * self._row_scale.reshape(-1), axis=None))
-        load *= scale
-        with np.errstate(all="ignore"):
-            div = self._bend_scale * size
-            div += load
-            div *= _FLOOR * _EPS
-            div += self.tol
-            scaled /= div
-            out = float(_max(scaled, axis=None))
+        load *= abs(float(scale[0] if isinstance(scale, np.ndarray) else scale))
+        size = 1.0 + float(_max(np.abs(lin.u), axis=None))
+        # no floating-point warning can arise where the divisors are finite (>= tol) and the
+        # quotients below 1e300: then without np.errstate's cost
+        if (
+            size * self._bend_max < 1e300
+            and load < 1e300
+            and float(_max(scaled, axis=None)) < 1e300 * self.tol
+        ):
+            out = self._divided_max(scaled, size, load)
+        else:
+            with np.errstate(all="ignore"):
+                out = self._divided_max(scaled, size, load)
         return np.array([out if out < np.inf else np.inf])
+
+    def _divided_max(self, scaled: np.ndarray, size: float, load: float) -> float:
+        """max of ``scaled / (tol + _FLOOR eps (size bend_scale + load))`` (scaled: (1, n,
+        nv), divided in place by its node's divisor)."""
+        div = self._bend_column * size  # (n, 1)
+        div += load
+        div *= _FLOOR * _EPS
+        div += self.tol
+        scaled /= div
+        return float(_max(scaled, axis=None))
 
     def residual_norm(self, residual) -> np.ndarray:
         """Max-norm of the scaled residual (non-dimensional), shape (k,)."""
@@ -587,7 +621,8 @@ class SpatialRod(DiscreteRod):
     def _largest_rotation(self, du):
         if not (type(du) is np.ndarray and du.dtype == float):
             du = np.asarray(du, float)
-        d = self.rotations(du if du.ndim == 2 else du.reshape(1, -1))
+        k = du.shape[0] if du.ndim == 2 else 1
+        d = du.reshape(k, self.n, 3) if self.uniform else self.rotations(du.reshape(k, -1))
         out = _max(np.einsum("kni,kni->kn", d, d), axis=1)
         return np.sqrt(out, out=out)
 
@@ -939,6 +974,15 @@ class SpatialRod(DiscreteRod):
         """LAPACK band storage (as :meth:`_scatter`) of a stack without contact: a template
         with the constant blocks and one gather of the varying entries from the compiled
         pass's ``blk`` (k, n, 10, 3, 3) through precomputed flat indices (cached per k)."""
+        template, dst, src = self._blk_gather(k)
+        ab = template.copy(order="F")
+        ab.ravel(order="K")[dst] = blk.ravel()[src]
+        return ab
+
+    def _blk_gather(self, k: int):
+        """(template, dst, src) of :meth:`_band_from_blk` for a stack of k (cached): the band
+        storage with the constant blocks, and the flat band and ``blk`` indices of the
+        varying entries."""
         key = ("blk", k)
         cached = self._band_cache.get(key)
         if cached is None:
@@ -967,10 +1011,7 @@ class SpatialRod(DiscreteRod):
             dst = (np.concatenate(dst)[None] + member).ravel()
             src = (np.concatenate(src)[None] + (np.arange(k) * n * 90)[:, None]).ravel()
             cached = self._band_cache[key] = (template, dst, src)
-        template, dst, src = cached
-        ab = template.copy(order="F")
-        ab.ravel(order="K")[dst] = blk.ravel()[src]
-        return ab
+        return cached
 
     def _scatter(self, k: int, blocks: dict) -> np.ndarray:
         """LAPACK band storage (2 kl + ku + 1, k size) of the stacked Jacobians: a template
@@ -1034,17 +1075,21 @@ class SpatialRod(DiscreteRod):
             if Hs is not None:
                 Hs = Hs.reshape(k, n, 3, 3, 3)
         frames, blk, m = ws["frames"], ws["blk"], ws["m"]
-        R = np.zeros((k, n, nv))
-        R1 = np.zeros((k, n, nv))
+        # residual and load rate in one array (_maxima; linearize keeps it as lin.pair)
+        pair = self._pair = np.zeros((2, k, n, nv))
+        R, R1 = pair[0], pair[1]
         # (diag and A_ab travel with the tangent: new arrays, every entry written by core)
         diag = np.empty((k, n, 3, 3)) if tangent else ws["diag"]
         A_ab = np.empty((k, n - 1, 3, 3)) if tangent else ws["diag"]
         has_h = Hs is not None
         S = S if S.dtype == float else np.asarray(S, float)
-        core(
+        # the compiled pass writes the uniform layout's band itself (into the template's copy)
+        direct = band and tangent and self.uniform and not self.nc
+        ab = self._blk_gather(k)[0].copy(order="F") if direct else _NO_BAND
+        wrote = core(
             phi, X, F, S, B, G, Hs if has_h else ws["H"], has_h, self.uniform, tangent,
             self.mu, self.K, self.mesh.h, self.mesh.w, self.R0, self.L, frames, R, R1, blk,
-            diag, A_ab, m,
+            diag, A_ab, m, ab, self.kl + self.ku, direct,
         )  # fmt: skip
         contact = self._contact_rows(V, X, frames, R, tangent) if self.nc else None
         if contact is not None and k == 1:  # the state's gaps for its event tests
@@ -1054,7 +1099,8 @@ class SpatialRod(DiscreteRod):
         if not tangent:
             return R, R1, None, None
         if not self.nc:  # every varying block is an entry of blk: one gather into the band
-            ab = self._band_from_blk(k, blk) if band else None
+            if not wrote:
+                ab = self._band_from_blk(k, blk) if band else None
             if self.uniform:
                 return R, R1, ab, (diag[:, 1:], A_ab[:, 1:])
             # the second variation only where a stability count asks for it (lazily; the
@@ -1365,6 +1411,9 @@ class SpatialRod(DiscreteRod):
         """+1 where the second variation is positive definite, minus the number of negative
         eigenvalues where not, 0 where it cannot be evaluated; shape (k,)."""
         neg = self.negative_count(lin)
+        if neg.shape == (1,):  # one member: in Python scalars
+            v = int(neg[0])
+            return np.array([1.0 if v == 0 else -float(v) if v > 0 else 0.0])
         return np.where(neg == 0, 1.0, np.where(neg > 0, -neg.astype(float), 0.0))
 
     def _rotation_rows(self):
@@ -1432,10 +1481,11 @@ def _solve_many(tan: RodTangent, rhs: np.ndarray) -> np.ndarray:
 
 def numpy_core(
     phi, X, F, S, B, G, H, has_h, uniform, tangent, mu, K, h, w, R0, L,
-    frames, R, R1, blk, diag, A_ab, m_out,
+    frames, R, R1, blk, diag, A_ab, m_out, ab=None, kv=0, band=False,
 ):  # fmt: skip
     """:func:`coilrod.rod._compiled_spatial.spatial_core` in numpy, with the same arguments and
-    outputs: the reference the compiled pass is tested against (the equations are in the
+    outputs (the band storage ``ab`` left alone: returns None, the caller gathers it from
+    ``blk``): the reference the compiled pass is tested against (the equations are in the
     module docstring)."""
     op = 0 if uniform else 3
     inv_h = 1.0 / h
