@@ -65,11 +65,11 @@ def assert_matches_reference(field, point, filaments, tol=1e-12):
 
 # -- far field ------------------------------------------------------------------------------------
 @pytest.mark.parametrize("direction", DIRECTIONS)
-@pytest.mark.parametrize(
-    "distance", [2.0, 3.9, 4.1, 10.0, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e10, 1e15]
-)
+@pytest.mark.parametrize("distance", [2.0, 3.9, 4.1, 10.0, 1e2, 1e3, 1e6, 1e8, 1e10, 1e15])
 def test_loop_far_field_matches_biot_savart(distance, direction):
-    # distance in loop radii; 3.9 and 4.1 straddle the multipole switch (coils.multipole.SWITCH)
+    # distance in loop radii; 3.9 and 4.1 straddle the multipole switch (coils.multipole.SWITCH);
+    # beyond it one distance every two or three decades (the series' truncation error only
+    # falls with the distance; 1e100 ... 1e300 below)
     loop = coils.Coil(A_LOOP, 1, I_LOOP, axis="z")
     d = np.array(DIRECTIONS[direction])
     point = distance * A_LOOP * d / np.linalg.norm(d)

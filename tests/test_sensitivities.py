@@ -65,7 +65,10 @@ def _perturbations(kind, field):
     """(label, build(delta) -> RodResult, step) for every parameter of the case."""
     rod = _rod()
     out = []
-    for j in range(3):
+    # every segment's magnetization in each layout (uniform: "uniform"; mixed, with the force
+    # terms: "linear"); the coil fields, solved in the same mixed layout, add their own
+    # parameters and the tip segment's (their segment rows are the same code as "linear"'s)
+    for j in range(3) if kind in ("uniform", "linear") else (2,):
         for group, base, step in (("magnitudes", MAGS, 2e3), ("angles", ANGLES, 2e-3)):
 
             def build(d, j=j, group=group, base=base):

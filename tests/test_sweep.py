@@ -233,9 +233,11 @@ def test_local_processes_write_the_serial_file(serial_file, tmp_path):
     assert (tmp_path / "sweep.csv").read_text() == serial_file
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="class")
 def dask_cluster(tmp_path_factory):
-    """A ``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1 (torn down after)."""
+    """A ``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1, torn down after
+    the tests of :class:`TestDaskCluster` (an idle cluster left up to the module's end spun
+    ~10 s of CPU in its three processes while the later tests ran)."""
     pytest.importorskip("distributed")
     root = tmp_path_factory.mktemp("dask")
     env = dict(
@@ -290,29 +292,28 @@ def dask_cluster(tmp_path_factory):
 
 
 @pytest.mark.cluster
-def test_a_dask_cluster_writes_the_serial_file(serial_file, dask_cluster, tmp_path):
-    result = sweep(coil_scene(), GRID, client=dask_cluster, out=tmp_path / "address")
-    assert result.executor == f"on the Dask cluster at {dask_cluster}"
-    assert (tmp_path / "address" / "sweep.csv").read_text() == serial_file
-    from distributed import Client
+class TestDaskCluster:
+    def test_a_dask_cluster_writes_the_serial_file(self, serial_file, dask_cluster, tmp_path):
+        result = sweep(coil_scene(), GRID, client=dask_cluster, out=tmp_path / "address")
+        assert result.executor == f"on the Dask cluster at {dask_cluster}"
+        assert (tmp_path / "address" / "sweep.csv").read_text() == serial_file
+        from distributed import Client
 
-    with Client(dask_cluster, set_as_default=False) as client:  # the caller's own client
-        sweep(coil_scene(), GRID, client=client, out=tmp_path / "client")
-        assert client.status == "running"  # not closed by the sweep
-    assert (tmp_path / "client" / "sweep.csv").read_text() == serial_file
+        with Client(dask_cluster, set_as_default=False) as client:  # the caller's own client
+            sweep(coil_scene(), GRID, client=client, out=tmp_path / "client")
+            assert client.status == "running"  # not closed by the sweep
+        assert (tmp_path / "client" / "sweep.csv").read_text() == serial_file
 
-
-@pytest.mark.cluster
-def test_cli_on_a_dask_cluster(serial_file, dask_cluster, coil_file, tmp_path, capsys):
-    args = ["sweep", str(coil_file), "--out", str(tmp_path), "--scheduler", dask_cluster]
-    args += ["--param", "field.coil.0.radius=60mm:120mm:2"]
-    args += ["--param", "robot.magnetization.phi=0.2:1.5:2", "--no-progress"]
-    assert main(args) == 1  # two points failed
-    out = capsys.readouterr().out
-    assert f"4 solved on the Dask cluster at {dask_cluster}" in out
-    assert "2 failed" in out
-    # the scene file's source differs from the dict's, the rows do not
-    assert (tmp_path / "sweep.csv").read_text() == serial_file
+    def test_cli_on_a_dask_cluster(self, serial_file, dask_cluster, coil_file, tmp_path, capsys):
+        args = ["sweep", str(coil_file), "--out", str(tmp_path), "--scheduler", dask_cluster]
+        args += ["--param", "field.coil.0.radius=60mm:120mm:2"]
+        args += ["--param", "robot.magnetization.phi=0.2:1.5:2", "--no-progress"]
+        assert main(args) == 1  # two points failed
+        out = capsys.readouterr().out
+        assert f"4 solved on the Dask cluster at {dask_cluster}" in out
+        assert "2 failed" in out
+        # the scene file's source differs from the dict's, the rows do not
+        assert (tmp_path / "sweep.csv").read_text() == serial_file
 
 
 # -- resume -----------------------------------------------------------------------------------
