@@ -220,6 +220,35 @@ class TestDiscreteProblem:
                 assert np.isnan(x).any()
                 np.testing.assert_array_equal(y, x)
 
+    def test_the_pass_gets_contiguous_field_inputs(self):
+        # _assemble calls the compiled pass directly once its rental is over: strided field
+        # inputs (the magnet pose's Hessian is a view) would compile a second version of it
+        # (2 s on a cold cache); they are made C-contiguous first, with the same numbers
+        from coilrod.rod._spatial_numpy import spatial_core_numpy
+
+        mesh = RodMesh(4)
+        P = SpatialRod(mesh, np.ones((mesh.n, 3)), [0.6, 4.0, 1.0], FIELDS["helmholtz"], L,
+                       np.zeros(3), np.eye(3))  # fmt: skip
+        U, S = np.stack([P.straight()] * 2), np.array([0.5, 1.0])
+        X = np.ascontiguousarray(U.reshape(2, P.n, P.nv)[:, :, 0:3])
+        B, G, H = P._field_by_member(X, True)
+        strided = []
+        for a in (G, H):
+            big = np.zeros(a.shape + (2,))
+            big[..., 0] = a
+            strided.append(big[..., 0])  # the same values, not contiguous
+        seen = []
+
+        def core(*args):
+            seen.append([args[i].flags.c_contiguous for i in (4, 5, 6)])  # B, G, H
+            return spatial_core_numpy(*args)
+
+        out = [P._assemble(U, S, True, core=core, fields=f) for f in ((B, G, H), (B, *strided))]
+        assert all(all(flags) for flags in seen)
+        for a, b in zip(list(out[0][:3]) + list(out[0][3]), list(out[1][:3]) + list(out[1][3]),
+                        strict=True):  # fmt: skip
+            np.testing.assert_array_equal(b, a)
+
     def test_spatial_pass_runs_numpy_until_compiling_pays(self, monkeypatch):
         # spatial_pass: the numpy pass while the estimated cost of the numpy calls so far stays
         # within COMPILE_AFTER, then the compiled pass (here a stand-in: the rule, not numba);

@@ -1071,9 +1071,14 @@ class SpatialRod(DiscreteRod):
             X = np.ascontiguousarray(V[:, :, 0:3])
             F = np.ascontiguousarray(V[:, :, 6:9])
             B, G, Hs = self._field_by_member(X, tangent) if fields is None else fields
-            B, G = np.ascontiguousarray(B.reshape(k, n, 3)), G.reshape(k, n, 3, 3)
+            # C-contiguous field inputs (a copy only of a strided view, e.g. the magnet pose's
+            # Hessian): the compiled pass, called directly here, has one compiled version
+            B, G = (
+                np.ascontiguousarray(B.reshape(k, n, 3)),
+                np.ascontiguousarray(G.reshape(k, n, 3, 3)),
+            )
             if Hs is not None:
-                Hs = Hs.reshape(k, n, 3, 3, 3)
+                Hs = np.ascontiguousarray(Hs.reshape(k, n, 3, 3, 3))
         frames, blk, m = ws["frames"], ws["blk"], ws["m"]
         # residual and load rate in one array (_maxima; linearize keeps it as lin.pair)
         pair = self._pair = np.zeros((2, k, n, nv))
