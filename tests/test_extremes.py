@@ -1,0 +1,62 @@
+"""Extreme and awkward numbers on the public API: far points, points a few ulp from a switch
+between formulas.  Each check has an independent reference (the point dipole, whose field a
+finite magnet's tends to as (size / distance)^2; the closed form on the other side of a
+switch)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import coils
+import coils.magnets
+
+FAR = getattr(coils.magnets, "FAR", 8.0)  # (the switch; absent before it was added)
+
+#: Directions of the far points: the axes and two oblique ones.
+DIRECTIONS = np.array(
+    [[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0], [0.6, -0.48, 0.64], [-0.8, 0.36, 0.48]]
+)
+
+MAGNETS = {
+    "cylinder": coils.CylinderMagnet(10e-3, 10e-3, 1e6, center=(0.01, 0.02, -0.03), axis=(1, 2, 3)),
+    "ring": coils.CylinderMagnet(10e-3, 4e-3, -8e5, inner_diameter=4e-3, axis="x"),
+    "cuboid": coils.CuboidMagnet((10e-3, 6e-3, 3e-3), (2e5, -1e5, 1e6), center=(0.01, 0, 0)),
+}
+
+
+@pytest.mark.parametrize("name", MAGNETS)
+def test_a_magnet_far_away_is_its_dipole_to_rounding(name):
+    """At 1e4 and 1e8 sizes B, gradient and hessian are finite and the dipole's to
+    (size / distance)^2 (plus rounding): the closed forms lost every digit of B there (their
+    nearly equal terms cancel; a cuboid's B was off 2e8 times its size at 1e8 sizes)."""
+    magnet = MAGNETS[name]
+    dipole = magnet.dipole()
+    for dist in (5e-1, 5e5):  # m: 1e2 and 1e8 sizes (5 mm)
+        pts = magnet.center + dist * DIRECTIONS
+        ours, ref = magnet.B_gradient_hessian(pts), dipole.B_gradient_hessian(pts)
+        for a, b in zip(ours, ref, strict=True):
+            assert np.isfinite(a).all()
+            rel = np.abs(a - b).max() / np.abs(b).max()
+            assert rel <= (5e-4 if dist < 1 else 1e-12)
+
+
+@pytest.mark.parametrize("name", MAGNETS)
+def test_a_magnets_field_is_continuous_where_the_far_sum_takes_over(name):
+    """Just inside and just outside the switch to the far sum (FAR half-diagonals) B, the
+    gradient and the hessian agree to 1e-12 relative: the closed form and the quadrature are
+    two independent evaluations of the same field."""
+    magnet = MAGNETS[name]
+    if isinstance(magnet, coils.CylinderMagnet):
+        half = np.hypot(magnet.radius, 0.5 * magnet.height)
+        frame = magnet.rotation
+    else:
+        half = 0.5 * np.linalg.norm(magnet.size)
+        frame = magnet.rotation
+    dirs = DIRECTIONS @ frame.T
+    inside = magnet.center + FAR * half * (1 - 1e-14) * dirs
+    outside = magnet.center + FAR * half * (1 + 1e-14) * dirs
+    for a, b in zip(
+        magnet.B_gradient_hessian(inside), magnet.B_gradient_hessian(outside), strict=True
+    ):
+        assert np.abs(a - b).max() <= 1e-12 * np.abs(b).max()
