@@ -265,8 +265,15 @@ def _cuboid_terms(p, h, want_H=False):
                 hxxx = hxxx - sU * (D + U * U * D2)
                 hxxz = hxxz - sU * U * W * D2
             for sV, V, r in ((-1.0, V1, r1), (1.0, V2, r2)):
+                # in the face's plane (W = 0) the limit from outside the box (W -> sig 0):
+                # B_z, normal to the charged face, is continuous across it
+                UV = U * V
                 with np.errstate(divide="ignore", invalid="ignore"):
-                    t = np.where(W == 0, 0.0, np.arctan(U * V / (W * r)))
+                    t = np.where(
+                        W == 0,
+                        np.where(UV == 0, 0.0, sig * np.copysign(0.5 * math.pi, UV)),
+                        np.arctan(UV / (W * r)),
+                    )
                 bz = bz + sU * sV * t
                 gxy = gxy - sU * sV / r
                 if want_H:
@@ -405,7 +412,7 @@ class CylinderMagnet(OnePassField):
     symmetric and traceless to rounding.  Inside the
     material B includes the polarization (``B = mu0 (H + M)``), as magpylib's.  Points on an
     edge circle are refused; on the side surface B is discontinuous and the value returned
-    is one of its sides.  Far away the field is that of :meth:`dipole`.
+    is the mean of its two sides.  Far away the field is that of :meth:`dipole`.
 
     Examples
     --------
@@ -669,8 +676,9 @@ class CuboidMagnet(OnePassField):
     B and the gradient are exact closed forms (:func:`cuboid_field`, one per magnetisation
     component), inside the material as well (``B = mu0 (H + M)``, as magpylib's), and so is
     the hessian (symmetric and traceless to rounding).  A point on an edge of a charged
-    face (one not parallel to M) is refused; on a face B is discontinuous and one side's value
-    is returned.
+    face (one not parallel to M) is refused; on a face the outside value is returned (B is
+    discontinuous across a face parallel to M; its normal part is continuous across a charged
+    face).
 
     Examples
     --------

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.constants import mu_0
 
 import coils
 import coils.magnets
@@ -60,3 +61,38 @@ def test_a_magnets_field_is_continuous_where_the_far_sum_takes_over(name):
         magnet.B_gradient_hessian(inside), magnet.B_gradient_hessian(outside), strict=True
     ):
         assert np.abs(a - b).max() <= 1e-12 * np.abs(b).max()
+
+
+def test_a_cuboid_on_its_charged_face_gives_the_continuous_normal_field():
+    """Exactly on a face normal to M, B_z is the value one ulp inside and one ulp outside (the
+    normal component is continuous there); it was off by J/2 (the face's atan terms were
+    dropped instead of taking their limit).  Both poles, and one magnetised along x."""
+    for M, axis in (((0.0, 0.0, 1e6), 2), ((8e5, 0.0, 0.0), 0)):
+        cube = coils.CuboidMagnet((1e-2, 8e-3, 6e-3), M)
+        h = 0.5 * cube.size[axis]
+        for face in (h, -h):
+            pts = np.tile([1e-3, 2e-3, -1.5e-3], (3, 1))
+            pts[:, axis] = [np.nextafter(face, 0.0), face, np.nextafter(face, 2 * face)]
+            Bn = cube.B(pts)[:, axis]
+            assert abs(Bn[1] - Bn[0]) <= 1e-12 * abs(Bn[0])
+            assert abs(Bn[1] - Bn[2]) <= 1e-12 * abs(Bn[0])
+
+
+def test_a_dipole_field_that_leaves_float64_is_an_error_not_nan():
+    """1e-150 m from a dipole the field overflows, 1e200 m away the kernel's r^2 does: a
+    ValueError naming the point, not NaN (both were NaN); 1e-20 m and 1e100 m are finite and
+    the closed form's r^-3 law."""
+    dip = coils.Dipole((0.0, 0.0, 1.0))
+    for r in (1e-150, 1e200):
+        with pytest.raises(ValueError, match=r"points\[0\]"):
+            dip.B_gradient_hessian([[r, 0.0, 0.0]])
+    for r in (1e-20, 1e100):
+        B = dip.B([[r, 0.0, 0.0]])
+        assert B[0, 2] == pytest.approx(-mu_0 / (4 * np.pi) / r**3, rel=1e-13)
+
+
+def test_a_grid_box_thinner_than_its_coordinates_can_resolve_is_refused():
+    """A box 5e-324 m thick had a zero spacing and interpolated NaN."""
+    pair = coils.HelmholtzPair(0.08, 100, 1.0, axis="y")
+    with pytest.raises(ValueError, match="box must be wider"):
+        coils.GriddedField(pair, (0.0, 0.0, 0.0), (np.nextafter(0.0, 1.0), 1e-3, 1e-3), shape=3)
