@@ -32,9 +32,11 @@ Definition (what :func:`workspace` approximates, with an error estimate):
   Magnitude steps along which the tip curves bend away from their chords by more than
   ``tolerance`` L (the sharp knee of a nearly antiparallel ramp just past buckling) are
   bisected for every direction (the grid stays a tensor grid).
-* ``area_error``: the difference between the area and that of the same states one resolution
-  coarser: the last bisection undone everywhere (in directions and in magnitudes; on a
-  stretch the refinement left alone, every other point of the initial grid).
+* ``area_error``: the area's difference from that of the same states one resolution coarser
+  in directions plus its difference from that one resolution coarser in magnitudes (the
+  last bisection undone everywhere; on a stretch the refinement left alone, every other
+  point of the initial grid).  Undoing both at once let the two differences cancel (at
+  12 x 3 for M(1) at 6 mT: 0.55 mm^2 against a distance of 5.2 mm^2 to a refined run).
 
 With ``system`` (a coil system with current control) each direction's field is made by the
 currents that give ``b_max`` along that direction at the system centre, and the real
@@ -113,8 +115,9 @@ class Workspace:
         With ``system``: the currents of each direction at ``b_max``, A.
     area_error : float
         Error estimate of ``area``, m^2: its difference from the area of the same states one
-        resolution coarser (the last bisection of every stretch of directions and of
-        magnitudes undone; where none was made, every other point of the initial grid).
+        resolution coarser in directions plus that from one resolution coarser in magnitudes
+        (the last bisection of every stretch undone; where none was made, every other point
+        of the initial grid).
     reference : float
         The direction the field directions are measured from (:func:`reference_direction`),
         rad from +x.
@@ -608,16 +611,21 @@ def _collect(rod, b_max, system, psi, alpha, level, scales, mlevel, got, sol, ev
     polygon, area, boundary = _union(tips[..., :2], cells, rod.length)
     # one level coarser: the last bisection undone everywhere (the leaves of the bisection
     # trees left out; on an unrefined stretch, every other point of the initial grid)
+    # (undone in directions and in magnitudes separately: the two differences, of either
+    # sign, are added in size -- undoing both at once let them cancel)
     keep = ~_leaves(level, cyclic=True)
     mj = np.flatnonzero(~_leaves(np.r_[0, mlevel], cyclic=False))
     mj = np.unique(np.r_[mj, scales.size])
-    coarse_cells, _ = _cells(
-        alpha[keep],
-        cat["theta"][keep][:, mj],
-        cat["stable"][keep][:, mj],
-        _coarse_snaps(cat["snaps"][keep], mj),
-    )
-    coarse_area = _union(tips[keep][:, mj, :2], coarse_cells, rod.length)[1]
+    every = np.arange(scales.size + 1)
+    area_error = 0.0
+    for kd, km in ((keep, every), (np.ones_like(keep), mj)):
+        coarse_cells, _ = _cells(
+            alpha[kd],
+            cat["theta"][kd][:, km],
+            cat["stable"][kd][:, km],
+            _coarse_snaps(cat["snaps"][kd], km),
+        )
+        area_error += abs(area - _union(tips[kd][:, km, :2], coarse_cells, rod.length)[1])
     currents = None if system is None else np.concatenate(got["currents"])[order]
     return Workspace(
         directions=psi + alpha,
@@ -632,7 +640,7 @@ def _collect(rod, b_max, system, psi, alpha, level, scales, mlevel, got, sol, ev
         events=events,
         system=system,
         currents=currents,
-        area_error=abs(area - coarse_area),
+        area_error=area_error,
         reference=psi,
         levels=level,
         _solution=sol,
