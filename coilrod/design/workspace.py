@@ -138,10 +138,19 @@ class Workspace:
     events: list
     system: object = None
     currents: np.ndarray | None = None
-    area_error: float = 0.0
     reference: float = 0.0
     levels: np.ndarray | None = None
     _solution: object = dataclasses.field(default=None, repr=False)
+    _coarse: object = dataclasses.field(default=None, repr=False)
+    _area_error: float | None = dataclasses.field(default=None, repr=False)
+
+    @property
+    def area_error(self) -> float:
+        """Error estimate of :attr:`area`, m^2 (see the class docstring); computed when first
+        read."""
+        if self._area_error is None:
+            self._area_error = 0.0 if self._coarse is None else self._coarse.area_error(self.area)
+        return self._area_error
 
     def plot(self, ax=None, *, color="C0", label=None, grid: bool = False, unit: float = 1e-3):
         """Draw the workspace (filled union) and, with ``grid``, the tip grid.
@@ -609,23 +618,11 @@ def _collect(rod, b_max, system, psi, alpha, level, scales, mlevel, got, sol, ev
     cells, _ = _cells(alpha, cat["theta"], cat["stable"], cat["snaps"])
     tips = cat["tips"]
     polygon, area, boundary = _union(tips[..., :2], cells, rod.length)
-    # one level coarser: the last bisection undone everywhere (the leaves of the bisection
-    # trees left out; on an unrefined stretch, every other point of the initial grid)
-    # (undone in directions and in magnitudes separately: the two differences, of either
-    # sign, are added in size -- undoing both at once let them cancel)
-    keep = ~_leaves(level, cyclic=True)
-    mj = np.flatnonzero(~_leaves(np.r_[0, mlevel], cyclic=False))
-    mj = np.unique(np.r_[mj, scales.size])
-    every = np.arange(scales.size + 1)
-    area_error = 0.0
-    for kd, km in ((keep, every), (np.ones_like(keep), mj)):
-        coarse_cells, _ = _cells(
-            alpha[kd],
-            cat["theta"][kd][:, km],
-            cat["stable"][kd][:, km],
-            _coarse_snaps(cat["snaps"][kd], km),
-        )
-        area_error += abs(area - _union(tips[kd][:, km, :2], coarse_cells, rod.length)[1])
+    # one level coarser, for area_error (computed when first read: its unions cost about as
+    # much as the area's, and optimisation loops read only the area)
+    coarse = _Coarse(
+        alpha, level, mlevel, cat["theta"], cat["stable"], cat["snaps"], tips, rod.length
+    )
     currents = None if system is None else np.concatenate(got["currents"])[order]
     return Workspace(
         directions=psi + alpha,
@@ -640,11 +637,48 @@ def _collect(rod, b_max, system, psi, alpha, level, scales, mlevel, got, sol, ev
         events=events,
         system=system,
         currents=currents,
-        area_error=area_error,
         reference=psi,
         levels=level,
         _solution=sol,
+        _coarse=coarse,
     )
+
+
+@dataclass
+class _Coarse:
+    """What :attr:`Workspace.area_error` needs: the grid's directions (sorted) and their
+    levels, the magnitudes' levels, the states (theta, stable, snaps, tips) and L."""
+
+    alpha: np.ndarray
+    level: np.ndarray
+    mlevel: np.ndarray
+    theta: np.ndarray
+    stable: np.ndarray
+    snaps: np.ndarray
+    tips: np.ndarray
+    length: float
+
+    def area_error(self, area: float) -> float:
+        """``|A - A_d| + |A - A_m|`` (m^2): A_d the area with the last bisection of the
+        directions undone everywhere (the leaves of the bisection trees left out; on an
+        unrefined stretch, every other point of the initial grid), A_m that with the
+        magnitudes' undone.  Undone together, the two differences (of either sign) could
+        cancel."""
+        keep = ~_leaves(self.level, cyclic=True)
+        M = self.mlevel.size
+        mj = np.flatnonzero(~_leaves(np.r_[0, self.mlevel], cyclic=False))
+        mj = np.unique(np.r_[mj, M])
+        every = np.arange(M + 1)
+        error = 0.0
+        for kd, km in ((keep, every), (np.ones_like(keep), mj)):
+            cells, _ = _cells(
+                self.alpha[kd],
+                self.theta[kd][:, km],
+                self.stable[kd][:, km],
+                _coarse_snaps(self.snaps[kd], km),
+            )
+            error += abs(area - _union(self.tips[kd][:, km, :2], cells, self.length)[1])
+        return error
 
 
 def _leaves(level, cyclic: bool):
