@@ -270,12 +270,13 @@ def dipole_sum(pts, pos, mom, tol, B=None, G=None, H=None) -> int:
             G.reshape(n, 9) if G is not None else dummy,
         )
         if closest > tol2:
+            _check_finite(pts, pos, B, G, None)
             return -1
         B = G = None  # only find the point (the caller raises)
     if _KERNEL is None:
         _KERNEL = _build()
     dummy = np.empty((0, 3))
-    return int(
+    hit = int(
         _KERNEL(
             pts,
             pos,
@@ -288,4 +289,28 @@ def dipole_sum(pts, pos, mom, tol, B=None, G=None, H=None) -> int:
             G.reshape(n, 9) if G is not None else dummy,
             H.reshape(n, 27) if H is not None else dummy,
         )
+    )
+    if hit < 0:
+        _check_finite(pts, pos, B, G, H)
+    return hit
+
+
+def _check_finite(pts, pos, B, G, H) -> None:
+    """ValueError naming the first point whose sums are not finite: a distance to a source
+    whose powers (up to ``r^-9``) leave float64 (below about 1e-34 m or beyond 1e154 m; the
+    field itself overflows near a source) -- never a silent NaN or inf."""
+    bad = None
+    for arr in (B, G, H):
+        if arr is not None:
+            row = ~np.isfinite(arr.reshape(arr.shape[0], -1)).all(axis=1)
+            bad = row if bad is None else bad | row
+    if bad is None or not bad.any():
+        return
+    k = int(np.nonzero(bad)[0][0])
+    r = pts[k] - pos
+    d = np.hypot(np.hypot(r[:, 0], r[:, 1]), r[:, 2])  # (no overflow)
+    raise ValueError(
+        f"points[{k}] = {pts[k].tolist()} m: the dipole field is not representable in float64 "
+        f"there (distances to the sources {d.min():.3g} to {d.max():.3g} m; the sums need "
+        f"about 1e-30 m to 1e150 m)"
     )

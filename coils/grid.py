@@ -231,6 +231,17 @@ class GriddedField(Field):
                 f"lower must be below upper on every axis; got lower={self.lower.tolist()}, "
                 f"upper={self.upper.tolist()}"
             )
+        thin = (self.upper - self.lower) <= 1e-9 * np.maximum(
+            np.abs(self.lower), np.abs(self.upper)
+        )
+        with np.errstate(over="ignore", divide="ignore"):
+            thin |= ~np.isfinite(1.0 / (self.upper - self.lower))
+        if thin.any():
+            raise ValueError(
+                f"the box must be wider than 1e-9 of its coordinates on every axis (its "
+                f"spacing must be representable); got lower={self.lower.tolist()}, "
+                f"upper={self.upper.tolist()}"
+            )
         self.outside = as_choice(outside, "outside", ("raise", "direct"))
         self.cross = as_choice(cross, "cross", ("grid", "hessian"))
         if shape is not None and spacing is not None:

@@ -109,6 +109,10 @@ class TestConvergence:
         assert abs(base.area - fine.area) <= base.area_error
         assert base.area == pytest.approx(fine.area, rel=0.06)
         assert fine.area_error < base.area_error
+        # 12 x 3: the two estimates together cover the distance (5.2 mm^2); undoing the
+        # directions' and the magnitudes' bisections at once let them cancel (0.55 mm^2)
+        coarse = workspace(ROD, B, directions=12, magnitudes=3, nodes=12, richardson=False)
+        assert abs(coarse.area - fine.area) <= coarse.area_error + fine.area_error
 
 
 class TestBadInput:

@@ -32,9 +32,11 @@ Definition (what :func:`workspace` approximates, with an error estimate):
   Magnitude steps along which the tip curves bend away from their chords by more than
   ``tolerance`` L (the sharp knee of a nearly antiparallel ramp just past buckling) are
   bisected for every direction (the grid stays a tensor grid).
-* ``area_error``: the difference between the area and that of the same states one resolution
-  coarser: the last bisection undone everywhere (in directions and in magnitudes; on a
-  stretch the refinement left alone, every other point of the initial grid).
+* ``area_error``: the area's difference from that of the same states one resolution coarser
+  in directions plus its difference from that one resolution coarser in magnitudes (the
+  last bisection undone everywhere; on a stretch the refinement left alone, every other
+  point of the initial grid).  Undoing both at once let the two differences cancel (at
+  12 x 3 for M(1) at 6 mT: 0.55 mm^2 against a distance of 5.2 mm^2 to a refined run).
 
 With ``system`` (a coil system with current control) each direction's field is made by the
 currents that give ``b_max`` along that direction at the system centre, and the real
@@ -113,8 +115,9 @@ class Workspace:
         With ``system``: the currents of each direction at ``b_max``, A.
     area_error : float
         Error estimate of ``area``, m^2: its difference from the area of the same states one
-        resolution coarser (the last bisection of every stretch of directions and of
-        magnitudes undone; where none was made, every other point of the initial grid).
+        resolution coarser in directions plus that from one resolution coarser in magnitudes
+        (the last bisection of every stretch undone; where none was made, every other point
+        of the initial grid).
     reference : float
         The direction the field directions are measured from (:func:`reference_direction`),
         rad from +x.
@@ -135,10 +138,19 @@ class Workspace:
     events: list
     system: object = None
     currents: np.ndarray | None = None
-    area_error: float = 0.0
     reference: float = 0.0
     levels: np.ndarray | None = None
     _solution: object = dataclasses.field(default=None, repr=False)
+    _coarse: object = dataclasses.field(default=None, repr=False)
+    _area_error: float | None = dataclasses.field(default=None, repr=False)
+
+    @property
+    def area_error(self) -> float:
+        """Error estimate of :attr:`area`, m^2 (see the class docstring); computed when first
+        read."""
+        if self._area_error is None:
+            self._area_error = 0.0 if self._coarse is None else self._coarse.area_error(self.area)
+        return self._area_error
 
     def plot(self, ax=None, *, color="C0", label=None, grid: bool = False, unit: float = 1e-3):
         """Draw the workspace (filled union) and, with ``grid``, the tip grid.
@@ -606,18 +618,11 @@ def _collect(rod, b_max, system, psi, alpha, level, scales, mlevel, got, sol, ev
     cells, _ = _cells(alpha, cat["theta"], cat["stable"], cat["snaps"])
     tips = cat["tips"]
     polygon, area, boundary = _union(tips[..., :2], cells, rod.length)
-    # one level coarser: the last bisection undone everywhere (the leaves of the bisection
-    # trees left out; on an unrefined stretch, every other point of the initial grid)
-    keep = ~_leaves(level, cyclic=True)
-    mj = np.flatnonzero(~_leaves(np.r_[0, mlevel], cyclic=False))
-    mj = np.unique(np.r_[mj, scales.size])
-    coarse_cells, _ = _cells(
-        alpha[keep],
-        cat["theta"][keep][:, mj],
-        cat["stable"][keep][:, mj],
-        _coarse_snaps(cat["snaps"][keep], mj),
+    # one level coarser, for area_error (computed when first read: its unions cost about as
+    # much as the area's, and optimisation loops read only the area)
+    coarse = _Coarse(
+        alpha, level, mlevel, cat["theta"], cat["stable"], cat["snaps"], tips, rod.length
     )
-    coarse_area = _union(tips[keep][:, mj, :2], coarse_cells, rod.length)[1]
     currents = None if system is None else np.concatenate(got["currents"])[order]
     return Workspace(
         directions=psi + alpha,
@@ -632,11 +637,48 @@ def _collect(rod, b_max, system, psi, alpha, level, scales, mlevel, got, sol, ev
         events=events,
         system=system,
         currents=currents,
-        area_error=abs(area - coarse_area),
         reference=psi,
         levels=level,
         _solution=sol,
+        _coarse=coarse,
     )
+
+
+@dataclass
+class _Coarse:
+    """What :attr:`Workspace.area_error` needs: the grid's directions (sorted) and their
+    levels, the magnitudes' levels, the states (theta, stable, snaps, tips) and L."""
+
+    alpha: np.ndarray
+    level: np.ndarray
+    mlevel: np.ndarray
+    theta: np.ndarray
+    stable: np.ndarray
+    snaps: np.ndarray
+    tips: np.ndarray
+    length: float
+
+    def area_error(self, area: float) -> float:
+        """``|A - A_d| + |A - A_m|`` (m^2): A_d the area with the last bisection of the
+        directions undone everywhere (the leaves of the bisection trees left out; on an
+        unrefined stretch, every other point of the initial grid), A_m that with the
+        magnitudes' undone.  Undone together, the two differences (of either sign) could
+        cancel."""
+        keep = ~_leaves(self.level, cyclic=True)
+        M = self.mlevel.size
+        mj = np.flatnonzero(~_leaves(np.r_[0, self.mlevel], cyclic=False))
+        mj = np.unique(np.r_[mj, M])
+        every = np.arange(M + 1)
+        error = 0.0
+        for kd, km in ((keep, every), (np.ones_like(keep), mj)):
+            cells, _ = _cells(
+                self.alpha[kd],
+                self.theta[kd][:, km],
+                self.stable[kd][:, km],
+                _coarse_snaps(self.snaps[kd], km),
+            )
+            error += abs(area - _union(self.tips[kd][:, km, :2], cells, self.length)[1])
+        return error
 
 
 def _leaves(level, cyclic: bool):
