@@ -124,20 +124,14 @@ def test_refining_the_rod_mesh_converges_monotonically_with_a_breakpoint_off_the
     assert np.all(np.abs(ratios - 4.0) < 0.1), ratios
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="control/currents.py (not h-bnum's): for the unloaded tip as target solve_currents "
-    "returns -1.66 A on the x pair (-3.0 mT along -x, antiparallel, just below buckling: "
-    "lambda 2.44 of 2.47), 3.8 W, instead of zero currents, the minimum power its docstring "
-    "promises",
-)
 def test_the_straight_tip_as_target_needs_no_current():
     """Target = the unloaded tip (L, 0): every field along +x and every one along -x below
     buckling holds it there; the least-power one is zero current (exact)."""
     import coilrod
 
     rod = coilrod.Rod(0.04, 1e6, coilrod.Circle(2e-3), coilrod.Magnetization(128e3, 0.0))
-    sol = coilrod.solve_currents(
-        rod, coils.presets.three_axis_helmholtz(), [0.04, 0.0], model="ideal", steps=2
-    )
-    assert np.abs(sol.currents).max() <= 1e-6
+    system = coils.presets.three_axis_helmholtz()
+    for model in ("ideal", "real"):  # (was: -1.66 A on the x pair, 3.8 W)
+        sol = coilrod.solve_currents(rod, system, [0.04, 0.0], model=model, steps=2)
+        assert np.abs(sol.currents).max() <= 1e-6
+        assert sol.miss <= 1e-7 * rod.length

@@ -177,18 +177,26 @@ def _leaves_plane(system, clamp: np.ndarray, length: float) -> bool:
     return leaves_plane(B, G, length)
 
 
-def _uniform_start(rod, goal, with_angle, steps, opts, b_cap):
+def _uniform_start(rod, goal, with_angle, steps, opts, b_cap, tol: float = 0.0):
     """The in-plane uniform field (2,) T whose tip meets ``goal`` (least squares), and the
     solves used: scipy's trust-region least squares with the exact Jacobian (the tip's
     sensitivity to the field is nearly singular along the rod's own direction, so plain
     Newton steps overshoot), from the weakest state of a coarse workspace grid near the
-    target (the best point the least squares met is returned)."""
+    target (the best point the least squares met is returned).  No field (and no solve)
+    where the unloaded rod's tip already meets ``goal`` within ``tol`` (m; its angle within
+    ``tol / L`` rad): the least power is none (the grid has no zero field, and the least
+    squares would find a field along the rod, e.g. antiparallel just below buckling)."""
     from scipy.optimize import least_squares
 
     L = rod.length
     wts = _weights_for(with_angle, L)
     clamp = np.asarray(opts["clamp_position"], float)
     ang = opts["clamp_angle"]
+    if tol > 0.0:
+        straight = clamp[:2] + L * np.array([math.cos(ang), math.sin(ang)])
+        miss = np.r_[straight, ang][: goal.size] - goal
+        if np.hypot(*miss[:2]) <= tol and (goal.size == 2 or abs(miss[2]) <= tol / L):
+            return np.zeros(2), 0
     # the closest stable state of a coarse (direction, magnitude) grid up to b_cap (all
     # directions followed together, coilrod.workspace): a start on the regular branch, not
     # on a buckled one of a nearly antiparallel field
@@ -262,10 +270,13 @@ def _centre_currents(system, B, weights, limits, Bu, B_fixed):
         return np.clip(sol.unlimited, -limits, limits)
 
 
-def _start(rod, goal, with_angle, steps, opts, Bu, weights, limits, system=None, B_fixed=None):
+def _start(
+    rod, goal, with_angle, steps, opts, Bu, weights, limits, system=None, B_fixed=None, tol=0.0
+):
     """Start currents: the uniform-field answer (within the largest centre field the limits
-    allow in every direction), made at the centre with minimum power (by ``system``'s
-    ``currents_for`` when given, its current-free field subtracted); and the solves used."""
+    allow in every direction; none where the unloaded tip meets the goal within ``tol``, m),
+    made at the centre with minimum power (by ``system``'s ``currents_for`` when given, its
+    current-free field subtracted); and the solves used."""
     from coils.currents import largest_fraction
 
     phis = np.linspace(0.0, 2 * np.pi, 36, endpoint=False)
@@ -275,7 +286,7 @@ def _start(rod, goal, with_angle, steps, opts, Bu, weights, limits, system=None,
         for a in phis
     ]
     b_cap = b_big * float(min(caps))  # the largest centre field (T) in every direction
-    b, solves = _uniform_start(rod, goal, with_angle, steps, opts, b_cap)
+    b, solves = _uniform_start(rod, goal, with_angle, steps, opts, b_cap, tol)
     B = np.array([b[0], b[1], 0.0])
     if system is not None:
         return _centre_currents(system, B, weights, limits, Bu, B_fixed), solves
@@ -974,6 +985,7 @@ def solve_currents(
                 p.limits,
                 p.system,
                 p.B_fixed,
+                p.tol,
             )
         search, I, res, status, edge = _search(p, I, max_iter, max_solves)
         solves, history = solves + search.solves, history + search.history
