@@ -28,7 +28,7 @@ import math
 import numba as nb
 import numpy as np
 
-# the ski rentals' look at numba's cache (one look per kernel and process), shared with coils
+# the ski rental of each compiled kernel (its look at numba's cache: once per process), as coils'
 from coils._numba_cache import Rental
 
 __all__ = ["mixed_assembly", "KL", "KU"]
