@@ -203,7 +203,7 @@ def coil_rows():
     import coils
     import coils.coaxial as cx
 
-    cx._kernel_on_disk = lambda: False
+    cx._rental.held = lambda: False
     pair = coils.HelmholtzPair(0.08, 100, 2.0, axis="y")
     wound = coils.HelmholtzPair(0.08, 100, 2.0, axis="y", winding=(0.01, 0.01), filaments=(3, 3))
     rng = np.random.default_rng(1)
@@ -217,10 +217,10 @@ def coil_rows():
         pts = rng.uniform(-0.02, 0.02, (n, 3))
         times = []
         for ready, after in ((True, 0.0), (False, math.inf)):
-            cx._compiled_ready, cx.COMPILE_AFTER = ready, after
+            cx._rental.ready, cx.COMPILE_AFTER = ready, after
             times.append(best(lambda f=field, p=pts: f.B_gradient_hessian(p)))
         rows.append((name, *times))
-    cx._compiled_ready, cx.COMPILE_AFTER = False, 3.0
+    cx._rental.ready, cx.COMPILE_AFTER = False, 3.0
     return rows
 
 

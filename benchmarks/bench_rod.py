@@ -303,12 +303,12 @@ def uniform_corrector(compiled: bool):
     hold it) or with the engine's numpy corrector, whatever the ski rental would choose."""
     import coilrod.rod._planar_newton as pn
 
-    saved = (pn.compiled_pays, pn._rent)
+    saved = (pn.compiled_pays, pn._rental.spent)
     pn.compiled_pays = lambda: compiled
     try:
         yield
     finally:
-        pn.compiled_pays, pn._rent = saved
+        pn.compiled_pays, pn._rental.spent = saved
 
 
 def solve_with(rod, field, scales, compiled=True):
@@ -327,19 +327,20 @@ def numpy_passes():
     import coils.coaxial as cx
     from coilrod.rod import _compiled as rc
 
-    saved = (cx.COMPILE_AFTER, cx._compiled_ready, cx._kernel_on_disk, cx._rent)
-    saved_rc = (rc.COMPILE_AFTER, rc._compiled_ready, rc._on_disk, rc._rent)
-    saved_odd = (rc.ODD_COMPILE_AFTER, rc._odd_ready, rc._odd_rent)
-    cx.COMPILE_AFTER, cx._compiled_ready, cx._kernel_on_disk = math.inf, False, lambda: False
-    rc.COMPILE_AFTER, rc._compiled_ready, rc._on_disk = math.inf, False, lambda d: False
-    rc.ODD_COMPILE_AFTER, rc._odd_ready = math.inf, False
+    rentals = (cx._rental, rc._rental, rc._odd_rental)
+    saved = (cx.COMPILE_AFTER, rc.COMPILE_AFTER, rc.ODD_COMPILE_AFTER)
+    saved_rentals = [dict(vars(r)) for r in rentals]
+    cx.COMPILE_AFTER = rc.COMPILE_AFTER = rc.ODD_COMPILE_AFTER = math.inf
+    for rental in rentals:
+        rental.ready, rental.held = False, lambda: False
     try:
         with uniform_corrector(False):
             yield
     finally:
-        cx.COMPILE_AFTER, cx._compiled_ready, cx._kernel_on_disk, cx._rent = saved
-        rc.COMPILE_AFTER, rc._compiled_ready, rc._on_disk, rc._rent = saved_rc
-        rc.ODD_COMPILE_AFTER, rc._odd_ready, rc._odd_rent = saved_odd
+        cx.COMPILE_AFTER, rc.COMPILE_AFTER, rc.ODD_COMPILE_AFTER = saved
+        for rental, state in zip(rentals, saved_rentals, strict=True):
+            vars(rental).clear()
+            vars(rental).update(state)
 
 
 def profile_solves(rod, runs, scales, repeat):

@@ -1,13 +1,14 @@
-"""Whether numba's on-disk cache holds a kernel's compiled code: the ski rentals' probe.
+"""Numba's on-disk cache and the ski rental of every compiled kernel.
 
 Every compiled kernel of :mod:`coils` and :mod:`coilrod` runs a numpy twin until compiling
 pays (README "Cold start"), except when numba's cache already holds the compiled code
-(loading it costs ~0.1 s).  This module does not import numba: it only reads the cache path
-a dispatcher carries.
+(loading it costs ~0.1 s): :class:`Rental` keeps that account, :func:`on_disk` looks at the
+cache.  This module does not import numba: it only reads the cache path a dispatcher carries.
 """
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 _seen: dict = {}  # dispatcher -> whether its cache index was on disk at the first look
@@ -26,3 +27,77 @@ def on_disk(dispatcher) -> bool:
             seen = False
         _seen[dispatcher] = seen
     return seen
+
+
+class Rental:
+    """The ski rental of one compiled kernel in this process: run its numpy twin (rent) while
+    the numpy calls' estimated cost stays within the price of compiling, then the compiled
+    kernel (buy) for good.
+
+    Parameters
+    ----------
+    owner : str
+        Name of the module that holds the threshold (``__name__`` of the caller).
+    kernel : callable
+        ``kernel()`` returns the ``numba.njit(cache=True)`` dispatcher; called only when the
+        cache is asked about (so the module that compiles it is imported no earlier).
+    threshold : str
+        Name of the owner's attribute holding the price: the estimated CPU seconds of numpy
+        calls after which the compiled kernel runs (0 compiles at the first call,
+        ``math.inf`` never).  Read at each decision, so that setting ``module.COMPILE_AFTER``
+        (tests, benchmarks) takes effect at once.
+    in_process : bool
+        Also buy when the dispatcher has compiled code in this process already (its
+        ``overloads``).
+
+    Attributes
+    ----------
+    spent : float
+        Estimated CPU seconds of the numpy calls charged so far (:meth:`charge`).
+    ready : bool
+        True once compiling has paid (:meth:`pays` returned True): the compiled kernel runs
+        from then on.  Callers that compile anyway set it.
+    """
+
+    def __init__(self, owner: str, kernel, threshold: str = "COMPILE_AFTER", in_process=False):
+        self._owner, self._kernel, self._threshold = owner, kernel, threshold
+        self._in_process = in_process
+        self.spent = 0.0
+        self.ready = False
+
+    @property
+    def threshold(self) -> float:
+        """The price (s of CPU): the owner module's threshold attribute, read now."""
+        return getattr(sys.modules[self._owner], self._threshold)
+
+    def held(self) -> bool:
+        """Whether compiling costs nothing: numba's cache held the kernel at this process's
+        first look (:func:`on_disk`), or (``in_process``) it is compiled in this process."""
+        kernel = self._kernel()
+        return bool(self._in_process and kernel.overloads) or on_disk(kernel)
+
+    def pays(self, seconds: float = 0.0) -> bool:
+        """True if the compiled kernel should run the next call, whose numpy twin would cost
+        an estimated ``seconds`` of CPU (0 where the cost is known only afterwards and is
+        charged then): it is ready, or the numpy calls charged so far have cost the price or
+        would with this one cost more, or the kernel is :meth:`held` (asked only if not).  A
+        True is for good (:attr:`ready`); after a False the caller runs the numpy twin and
+        :meth:`charge` s it."""
+        if not self.ready:
+            price = self.threshold
+            if self.spent < price and self.spent + seconds <= price and not self.held():
+                return False
+            self.ready = True
+        return True
+
+    def charge(self, seconds: float) -> None:
+        """Add the estimated CPU seconds of one numpy call to :attr:`spent`."""
+        self.spent += seconds
+
+    def expect(self, seconds: float) -> None:
+        """Announce numpy calls to come of an estimated ``seconds`` of CPU in all (a known
+        horizon): if with them the rent would cost more than the price, the compiled kernel
+        runs from the next call on (compiling once is cheaper than renting to the end).
+        The cache is not asked (:meth:`pays` does at the next call)."""
+        if not self.ready and self.spent + seconds > self.threshold:
+            self.ready = True

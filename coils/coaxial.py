@@ -17,7 +17,7 @@ import numpy as np
 from scipy.constants import mu_0
 
 from ._immutable import kernel_input
-from ._numba_cache import on_disk
+from ._numba_cache import Rental
 from ._validate import as_array, as_axis, as_vector
 from .field import Field, FieldSum, ScaledField
 
@@ -39,31 +39,29 @@ _NO_H = np.empty((0, 27))
 COMPILE_AFTER = 3.0
 # measured cost of one numpy pass: per call and per point x filament (B, gradient, hessian)
 _NUMPY_CALL_S, _NUMPY_POINT_S = 5e-4, 1e-6
-_rent = 0.0  # estimated seconds spent in numpy passes so far in this process
-_compiled_ready = False
+
+
+def _kernel():
+    """The compiled pass's dispatcher (imports numba and :mod:`coils._compiled`)."""
+    from . import _compiled
+
+    return _compiled.coaxial_field
+
+
+#: The ski rental of the compiled pass (:class:`coils._numba_cache.Rental`).
+_rental = Rental(__name__, _kernel)
 
 
 def _compiled_pays(work: int) -> bool:
     """True if the compiled pass should evaluate ``work`` = points x filaments: it is compiled
     (or on disk in numba's cache at the first evaluation of the process), or the numpy passes
-    so far plus this one would cost more than :data:`COMPILE_AFTER`."""
-    global _rent, _compiled_ready
-    if _compiled_ready:
-        return True
+    so far plus this one would cost more than :data:`COMPILE_AFTER`; else the numpy pass's
+    estimated cost (s of CPU) is charged."""
     cost = _NUMPY_CALL_S + _NUMPY_POINT_S * work
-    if _rent + cost > COMPILE_AFTER or _kernel_on_disk():
-        _compiled_ready = True
+    if _rental.pays(cost):
         return True
-    _rent += cost
+    _rental.charge(cost)
     return False
-
-
-def _kernel_on_disk() -> bool:
-    """Whether numba's cache held the compiled pass at this process's first look (loading it
-    takes ~0.1 s; :func:`coils._numba_cache.on_disk`)."""
-    from . import _compiled
-
-    return on_disk(_compiled.coaxial_field)
 
 
 def frame_from_axis(axis: np.ndarray) -> np.ndarray:
@@ -213,8 +211,7 @@ class CoaxialCoils(Field):
             center, axis, fil, wind, _, _, params = args
             if near_pass(pts, center, axis, fil, wind, params, flags, factor, B, G, H):
                 return
-        global _compiled_ready
-        _compiled_ready = True  # compiled now anyway: the numpy pass would only cost more
+        _rental.ready = True  # compiled now anyway: the numpy pass would only cost more
         err = np.empty(n_err, dtype=np.int64)
         if kernel(pts, *args, flags, factor, B, G, H, err):
             self._raise_point_error(err)
@@ -256,7 +253,7 @@ class CoaxialCoils(Field):
             G = np.zeros((n, 9))
             H = np.zeros((n, 27)) if hessian else _NO_H
             flags = all3 if hessian else both
-            if _compiled_ready:
+            if _rental.ready:
                 pts.flags.writeable = False  # (one compiled version: read-only inputs)
                 err = np.empty(n_err, dtype=np.int64)
                 if kernel(pts, *args, flags, 1.0, B, G, H, err):

@@ -180,9 +180,9 @@ def force_pass(monkeypatch):
     import coils.coaxial as cx
 
     def force(name):
-        monkeypatch.setattr(cx, "_kernel_on_disk", lambda: False)
-        monkeypatch.setattr(cx, "_rent", 0.0)
-        monkeypatch.setattr(cx, "_compiled_ready", name == "compiled")
+        monkeypatch.setattr(cx._rental, "held", lambda: False)
+        monkeypatch.setattr(cx._rental, "spent", 0.0)
+        monkeypatch.setattr(cx._rental, "ready", name == "compiled")
         monkeypatch.setattr(cx, "COMPILE_AFTER", math.inf)
 
     return force
@@ -238,6 +238,41 @@ def test_numpy_and_compiled_passes_agree(force_pass):
                 assert np.abs(x[0] - r).max() <= 1e-13 * np.abs(r).max(), name
 
 
+def test_rental_decides_as_each_site_did(monkeypatch):
+    # coils._numba_cache.Rental against the rules the six sites spelled out before it (numpy
+    # iff rent + cost <= price and not cached; the planar corrector, charged afterwards: iff
+    # rent < price and not cached; an announced horizon compiles iff rent + calls > price),
+    # at the boundaries (equal, 0, inf); the cache is asked only where the price allows rent
+    import math
+    import types
+
+    import coils._numba_cache as nc
+
+    def probe(answer, asked):  # a cache that holds the kernel or not, and counts the questions
+        return lambda: asked.append(answer) or answer
+
+    owner = types.ModuleType("rental_test_owner")
+    monkeypatch.setitem(sys.modules, owner.__name__, owner)
+    for price in (0.0, 1.0, 2.0, math.inf):
+        owner.COMPILE_AFTER = price
+        for spent in (0.0, 0.5, 1.0, 2.0):
+            for seconds in (0.0, 0.5, 1.0):
+                for held in (False, True):
+                    rental = nc.Rental(owner.__name__, lambda: None)
+                    asked = []
+                    rental.held = probe(held, asked)
+                    rental.charge(spent)
+                    rents = spent < price if seconds == 0.0 else spent + seconds <= price
+                    pays = rental.pays(seconds)
+                    assert pays == (held or not rents)
+                    assert rental.ready == pays
+                    assert asked == ([held] if rents else [])
+                    rental = nc.Rental(owner.__name__, lambda: None)
+                    rental.charge(spent)
+                    rental.expect(seconds)
+                    assert rental.ready == (spent + seconds > price)
+
+
 def test_compiling_starts_when_it_pays(force_pass, monkeypatch):
     # numpy passes until their estimated cost reaches COMPILE_AFTER, then the compiled pass;
     # a point the numpy pass leaves (far zone) goes to the compiled pass at once
@@ -254,14 +289,14 @@ def test_compiling_starts_when_it_pays(force_pass, monkeypatch):
     B0 = pair.B(pts)
     pair.B(pts)
     assert calls == [True, True]
-    assert not cx._compiled_ready
+    assert not cx._rental.ready
     np.testing.assert_allclose(pair.B(pts), B0, rtol=1e-14)  # third call: compiled
     assert calls == [True, True]
-    assert cx._compiled_ready
+    assert cx._rental.ready
     force_pass("numpy")
     B_far = pair.B([[0.0, 0.0, 1.0]])
     assert calls[-1] is False  # and from now on the compiled pass, compiled anyway
-    assert cx._compiled_ready
+    assert cx._rental.ready
     z0, a, current = pair.filaments.T  # on the axis: mu0 I a^2 / (2 ((z - z0)^2 + a^2)^1.5)
     Bz = np.sum(mu_0 * current * a**2 / (2 * ((1.0 - z0) ** 2 + a**2) ** 1.5))
     np.testing.assert_allclose(B_far[0], [0, 0, Bz], rtol=1e-14, atol=0)

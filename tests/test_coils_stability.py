@@ -363,7 +363,7 @@ def test_kernels_compile_once_for_sealed_or_writable_inputs(monkeypatch):
     by_scalar = [loop_invariants(rho[i : i + 1], z[i], 1.0)[0] for i in range(2)]
     assert np.array_equal(loop_invariants(rho, z, 1.0), np.array(by_scalar))
     assert len(_invariants.signatures) == 1
-    monkeypatch.setattr(coaxial, "_compiled_ready", True)  # the compiled pass, not numpy's
+    monkeypatch.setattr(coaxial._rental, "ready", True)  # the compiled pass, not numpy's
     loop = coils.Coil(A_LOOP, 1, I_LOOP, axis="z")
     pts = np.array([[0.01, 0.02, 0.03], [0.02, -0.01, 0.05]])
     sealed = pts.copy()

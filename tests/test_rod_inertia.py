@@ -60,16 +60,16 @@ def test_announced_counts_compile_at_once_only_when_renting_costs_more(monkeypat
     from coilrod.rod import _inertia as mod
 
     monkeypatch.setattr(mod, "COMPILE_AFTER", 1.5)
-    monkeypatch.setattr(mod, "_compiled_ready", False)
-    monkeypatch.setattr(mod, "_rent", 0.0)
+    monkeypatch.setattr(mod._rental, "ready", False)
+    monkeypatch.setattr(mod._rental, "spent", 0.0)
     per_call = mod._NUMPY_CALL_S + (mod._NUMPY_BLOCK_S + mod._NUMPY_BLOCK_ROW_S * 10) * 49
     few = int(1.5 / per_call)  # their cost stays under the purchase price
     mod.expect_counts(few, 49, 10)
-    assert not mod._compiled_ready
-    monkeypatch.setattr(mod, "_rent", 1.5 - 0.5 * per_call)  # rent paid so far tips it
+    assert not mod._rental.ready
+    monkeypatch.setattr(mod._rental, "spent", 1.5 - 0.5 * per_call)  # rent paid so far tips it
     mod.expect_counts(1, 49, 10)
-    assert mod._compiled_ready
-    monkeypatch.setattr(mod, "_compiled_ready", False)
-    monkeypatch.setattr(mod, "_rent", 0.0)
+    assert mod._rental.ready
+    monkeypatch.setattr(mod._rental, "ready", False)
+    monkeypatch.setattr(mod._rental, "spent", 0.0)
     mod.expect_counts(few + 1, 49, 10)
-    assert mod._compiled_ready
+    assert mod._rental.ready

@@ -21,9 +21,9 @@ from coilrod.rod.solve import build_problem, make_mesh
 def numpy_pass(monkeypatch):
     """The coaxial coils' numpy pass (the ski rental before compiling), whatever the process
     has compiled."""
-    monkeypatch.setattr(cx, "_compiled_ready", False)
+    monkeypatch.setattr(cx._rental, "ready", False)
     monkeypatch.setattr(cx, "COMPILE_AFTER", np.inf)
-    monkeypatch.setattr(cx, "_kernel_on_disk", lambda: False)
+    monkeypatch.setattr(cx._rental, "held", lambda: False)
 
 
 def _points(pair, n=7):
@@ -74,7 +74,7 @@ def test_coaxial_evaluator_is_the_public_methods(numpy_pass, monkeypatch):
     _, args, n_err = pair._kernel_args
     fake = pair.replace()  # (a fresh object: its own kernel-argument cache)
     fake._set_cache("_kernel_args", (kernel, args, n_err))
-    monkeypatch.setattr(cx, "_compiled_ready", True)
+    monkeypatch.setattr(cx._rental, "ready", True)
     for hessian in (True, False):
         public = fake.B_gradient_hessian(pts) if hessian else (*fake.B_and_gradient(pts), None)
         got = fake.evaluator()(pts.copy(), hessian)
@@ -141,12 +141,12 @@ def test_compiled_out_of_plane_blocks_are_the_numpy_assembly(numpy_pass, monkeyp
         U = problem.straight() + rng.normal(scale=0.3, size=(2, problem.size))
         lin = problem.linearize(U, np.array([2e5, -6e5]))
         oop = problem.out_of_plane
-        monkeypatch.setattr(rc, "_odd_ready", False)
+        monkeypatch.setattr(rc._odd_rental, "ready", False)
         monkeypatch.setattr(rc, "ODD_COMPILE_AFTER", np.inf)
-        monkeypatch.setattr(rc, "_on_disk", lambda dispatcher: False)
+        monkeypatch.setattr(rc._odd_rental, "held", lambda: False)
         D, E = oop.odd_blocks(lin)
         counts = oop.odd_count(lin)
-        monkeypatch.setattr(rc, "_odd_ready", True)
+        monkeypatch.setattr(rc._odd_rental, "ready", True)
         monkeypatch.setattr(rc, "_odd_blocks_compiled", python_kernel)
         Dc, Ec = oop.odd_blocks(lin)
         # (libm's sin and cos against numpy's: equal, or a last-bit difference on some CPUs)

@@ -298,9 +298,9 @@ def mixed_pass(monkeypatch):
     import coilrod.rod._compiled as rc
 
     def force(name, after=math.inf):
-        monkeypatch.setattr(rc, "_on_disk", lambda dispatcher: False)
-        monkeypatch.setattr(rc, "_rent", 0.0)
-        monkeypatch.setattr(rc, "_compiled_ready", name == "compiled")
+        monkeypatch.setattr(rc._rental, "held", lambda: False)
+        monkeypatch.setattr(rc._rental, "spent", 0.0)
+        monkeypatch.setattr(rc._rental, "ready", name == "compiled")
         monkeypatch.setattr(rc, "COMPILE_AFTER", after)
 
     return force
@@ -322,7 +322,7 @@ def test_numpy_and_compiled_mixed_kernels_agree(mixed_pass):
     for name in ("compiled", "numpy"):
         mixed_pass(name)
         out[name] = (problem.residual(u, 1.3), problem.dense_jacobian(u, 1.3))
-    assert not rc._compiled_ready  # the numpy kernel did run
+    assert not rc._rental.ready  # the numpy kernel did run
     for x, ref in zip(out["numpy"], out["compiled"], strict=True):
         np.testing.assert_array_equal(x, ref)  # bitwise: numbers do not change on compiling
     # an infinite angle is a non-finite residual on both paths (math.cos raised ValueError)
@@ -337,9 +337,9 @@ def test_numpy_and_compiled_mixed_kernels_agree(mixed_pass):
     mixed_pass("numpy", after=2.5 * (rc._NUMPY_CALL_S + rc._NUMPY_NODE_S * problem.n))
     problem.residual(u, 1.3)
     problem.residual(u, 1.3)
-    assert not rc._compiled_ready
+    assert not rc._rental.ready
     np.testing.assert_allclose(problem.residual(u, 1.3), out["compiled"][0], rtol=0, atol=0)
-    assert rc._compiled_ready
+    assert rc._rental.ready
 
 
 def _band_storage(A, kl, ku):

@@ -17,13 +17,12 @@ from coilrod.rod.solve import build_problem, make_mesh
 @pytest.fixture
 def corrector(monkeypatch):
     """``corrector("numpy")`` or ``corrector("compiled")``: which corrector runs from now on."""
-    import coilrod.rod._compiled as rc
     import coilrod.rod._planar_newton as pn
 
     def force(name, after=np.inf):
-        monkeypatch.setattr(rc, "_on_disk", lambda dispatcher: False)
-        monkeypatch.setattr(pn, "_rent", 0.0)
-        monkeypatch.setattr(pn, "_compiled_ready", name == "compiled")
+        monkeypatch.setattr(pn._rental, "held", lambda: False)
+        monkeypatch.setattr(pn._rental, "spent", 0.0)
+        monkeypatch.setattr(pn._rental, "ready", name == "compiled")
         monkeypatch.setattr(pn, "COMPILE_AFTER", after)
 
     return force
@@ -61,7 +60,7 @@ def test_compiled_corrector_matches_numpy(corrector):
         for name in ("numpy", "compiled"):
             corrector(name)
             out[name] = newton(problem, u0, scale, opts)
-        assert pn._compiled_ready
+        assert pn._rental.ready
         a, b = out["numpy"], out["compiled"]
         np.testing.assert_array_equal(b.u, a.u)  # bitwise: numbers do not change on compiling
         np.testing.assert_array_equal(b.error, a.error)
@@ -107,7 +106,7 @@ def test_corrector_compiles_when_it_pays(corrector):
     first = newton(p, p.straight(), 3.0)
     assert first.ok
     assert first.iterations >= 2
-    assert not pn._compiled_ready  # the numpy corrector ran and charged its iterations
+    assert not pn._rental.ready  # the numpy corrector ran and charged its iterations
     again = newton(p, p.straight(), 3.0)
-    assert pn._compiled_ready
+    assert pn._rental.ready
     np.testing.assert_array_equal(again.u, first.u)

@@ -253,8 +253,8 @@ class TestDiscreteProblem:
         # spatial_pass: the numpy pass while the estimated cost of the numpy calls so far stays
         # within COMPILE_AFTER, then the compiled pass (here a stand-in: the rule, not numba);
         # at once if numba's cache holds the kernel or this process compiled it
-        import coilrod.rod._compiled as rc
         import coilrod.rod._compiled_spatial as cs
+        import coils._numba_cache as nc
         from coilrod.rod._spatial_numpy import spatial_core_numpy
 
         calls = []
@@ -278,35 +278,34 @@ class TestDiscreteProblem:
             kernel = Kernel()
             kernel.overloads = overloads
             monkeypatch.setattr(cs, "spatial_core", kernel)
-            monkeypatch.setattr(rc, "_on_disk", lambda dispatcher, seen=on_disk: seen)
-            monkeypatch.setattr(cs, "_rent", 0.0)
-            monkeypatch.setattr(cs, "_compiled_ready", False)
+            monkeypatch.setattr(nc, "on_disk", lambda dispatcher, seen=on_disk: seen)
+            monkeypatch.setattr(cs._rental, "spent", 0.0)
+            monkeypatch.setattr(cs._rental, "ready", False)
             monkeypatch.setattr(cs, "COMPILE_AFTER", after)
             calls.clear()
             for _ in range(3):
                 P._assemble(U, S, True)
             assert len(calls) == 3 - numpy_calls
-            assert cs._compiled_ready == (numpy_calls < 3)
+            assert cs._rental.ready == (numpy_calls < 3)
 
     def test_the_cache_is_looked_at_once_per_kernel(self, monkeypatch, tmp_path):
-        # _on_disk (every ski rental asks it at each call until it compiles) stats numba's
+        # on_disk (every ski rental asks it at each call until it compiles) stats numba's
         # index file at the first question only; another kernel gets its own look
         from types import SimpleNamespace
 
-        import coilrod.rod._compiled as rc
         import coils._numba_cache as nc
 
-        class Kernel:  # what _on_disk reads of a numba dispatcher
+        class Kernel:  # what on_disk reads of a numba dispatcher
             def __init__(self, path):
                 self._cache = SimpleNamespace(_cache_file=SimpleNamespace(_index_path=str(path)))
 
         monkeypatch.setattr(nc, "_seen", {})
         first = Kernel(tmp_path / "first.nbi")
-        assert not rc._on_disk(first)
+        assert not nc.on_disk(first)
         (tmp_path / "first.nbi").write_text("")
-        assert not rc._on_disk(first)  # not looked at again
+        assert not nc.on_disk(first)  # not looked at again
         (tmp_path / "second.nbi").write_text("")
-        assert rc._on_disk(Kernel(tmp_path / "second.nbi"))
+        assert nc.on_disk(Kernel(tmp_path / "second.nbi"))
 
     def test_second_variation_is_symmetric_at_equilibrium(self):
         rod = _rod(Rectangle(3e-3, 1.5e-3), angle=0.3)

@@ -340,7 +340,6 @@ def test_inertia_count_numpy_and_compiled_agree_with_dense_eigenvalues(monkeypat
     # compiled version: the same counts, and the negative eigenvalues of the dense matrix
     # (numpy eigvalsh, independent), also with double eigenvalues (two identical halves: the
     # sign of the determinant does not change); compiling starts when COMPILE_AFTER says so
-    import coilrod.rod._compiled as rc
     import coilrod.rod._inertia as inertia
 
     rng = np.random.default_rng(5)
@@ -354,10 +353,10 @@ def test_inertia_count_numpy_and_compiled_agree_with_dense_eigenvalues(monkeypat
             D[:, :, h:, h:], D[:, :, :h, h:], D[:, :, h:, :h] = D[:, :, :h, :h], 0.0, 0.0
             E[:, :, h:, h:], E[:, :, :h, h:], E[:, :, h:, :h] = E[:, :, :h, :h], 0.0, 0.0
         cases.append((D, E))
-    monkeypatch.setattr(rc, "_on_disk", lambda dispatcher: False)
+    monkeypatch.setattr(inertia._rental, "held", lambda: False)
     for name in ("numpy", "compiled"):
-        monkeypatch.setattr(inertia, "_rent", 0.0)
-        monkeypatch.setattr(inertia, "_compiled_ready", name == "compiled")
+        monkeypatch.setattr(inertia._rental, "spent", 0.0)
+        monkeypatch.setattr(inertia._rental, "ready", name == "compiled")
         monkeypatch.setattr(inertia, "COMPILE_AFTER", np.inf)
         for D, E in cases:
             neg, _ = inertia.block_tridiagonal_inertia(D, E)
@@ -372,8 +371,8 @@ def test_inertia_count_numpy_and_compiled_agree_with_dense_eigenvalues(monkeypat
                 ev = np.linalg.eigvalsh(A)
                 assert np.abs(ev).min() > 1e-9 * np.abs(ev).max()  # no count at a threshold
                 assert neg[m] == np.count_nonzero(ev < 0), name
-        assert inertia._compiled_ready == (name == "compiled")
-    monkeypatch.setattr(inertia, "_compiled_ready", False)
+        assert inertia._rental.ready == (name == "compiled")
+    monkeypatch.setattr(inertia._rental, "ready", False)
     monkeypatch.setattr(inertia, "COMPILE_AFTER", 0.0)
     inertia.block_tridiagonal_inertia(*cases[0])
-    assert inertia._compiled_ready
+    assert inertia._rental.ready

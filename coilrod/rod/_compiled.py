@@ -28,8 +28,8 @@ import math
 import numba as nb
 import numpy as np
 
-# the ski rentals' look at numba's cache (one look per kernel and process), shared with coils
-from coils._numba_cache import on_disk as _on_disk
+# the ski rental of each compiled kernel (its look at numba's cache: once per process), as coils'
+from coils._numba_cache import Rental
 
 __all__ = ["mixed_assembly", "KL", "KU"]
 
@@ -209,8 +209,8 @@ def _tangent(U, s, j, T, h, w, ab):
 COMPILE_AFTER = 2.0
 # measured cost of one numpy assembly (with the Jacobian): per call and per node x member
 _NUMPY_CALL_S, _NUMPY_NODE_S = 5e-4, 1e-6
-_rent = 0.0  # estimated seconds spent in numpy assemblies so far in this process
-_compiled_ready = False
+#: The ski rental of :func:`_mixed_compiled` (:class:`coils._numba_cache.Rental`).
+_rental = Rental(__name__, lambda: _mixed_compiled)
 
 
 def mixed_assembly(U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab, finite):
@@ -225,19 +225,17 @@ def mixed_assembly(U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab
     until its estimated cost reaches :data:`COMPILE_AFTER` or numba's cache holds the
     compiled kernel; the compiled one from then on.
     """
-    global _rent, _compiled_ready
     # the field inputs C-contiguous (a copy only of a strided view, e.g. the magnet pose's
     # Hessian): one compiled version of the kernel, not one per layout
     B, G, H = np.ascontiguousarray(B), np.ascontiguousarray(G), np.ascontiguousarray(H)
     args = (U, S, B, G, H, has_h, L, mu, h, w, theta0, tangent, R, R1, ab, finite)
-    if not _compiled_ready:
+    if not _rental.ready:
         cost = _NUMPY_CALL_S + _NUMPY_NODE_S * U.shape[0] * w.shape[0]
-        if _rent + cost <= COMPILE_AFTER and not _on_disk(_mixed_compiled):
+        if not _rental.pays(cost):
             from ._mixed_numpy import mixed_assembly_numpy
 
-            _rent += cost
+            _rental.charge(cost)
             return mixed_assembly_numpy(*args)
-        _compiled_ready = True
     return _mixed_compiled(*args)
 
 
@@ -412,8 +410,8 @@ def band_solve_transposed(ab, kl, ku, ipiv, b):
 ODD_COMPILE_AFTER = 1.0
 # measured cost of one numpy assembly: per call and per free node x member
 _ODD_CALL_S, _ODD_NODE_S = 1e-4, 3e-7
-_odd_rent = 0.0
-_odd_ready = False
+#: The ski rental of :func:`_odd_blocks_compiled` (:class:`coils._numba_cache.Rental`).
+_odd_rental = Rental(__name__, lambda: _odd_blocks_compiled, "ODD_COMPILE_AFTER")
 
 
 def odd_blocks_pays(k: int, n: int) -> bool:
@@ -421,13 +419,11 @@ def odd_blocks_pays(k: int, n: int) -> bool:
     states of ``n`` nodes: the kernel is compiled (or in numba's cache), or the numpy
     assemblies so far plus this one would cost more than :data:`ODD_COMPILE_AFTER` (then the
     caller's numpy assembly is charged here instead)."""
-    global _odd_rent, _odd_ready
-    if not _odd_ready:
+    if not _odd_rental.ready:
         cost = _ODD_CALL_S + _ODD_NODE_S * k * n
-        if _odd_rent + cost <= ODD_COMPILE_AFTER and not _on_disk(_odd_blocks_compiled):
-            _odd_rent += cost
+        if not _odd_rental.pays(cost):
+            _odd_rental.charge(cost)
             return False
-        _odd_ready = True
     return True
 
 

@@ -19,6 +19,8 @@ import math
 import numba as nb
 import numpy as np
 
+from coils._numba_cache import Rental
+
 from .so3 import _C_SERIES, _C_SMALL, _SMALL  # the same series and switch angles
 
 #: The helpers and member passes are called from compiled code only: no Python or C-callable
@@ -146,8 +148,9 @@ def _sym_term(a, b, scale, out):
 COMPILE_AFTER = 8.0
 # measured cost of one numpy pass: per call and per node x member, without and with the tangent
 _NUMPY_CALL_S, _NUMPY_NODE_S = (4e-4, 6e-4), (1.5e-6, 4.5e-6)
-_rent = 0.0  # estimated seconds spent in numpy passes so far in this process
-_compiled_ready = False
+#: The ski rental of :func:`spatial_core` (:class:`coils._numba_cache.Rental`; compiled in
+#: this process counts as held).
+_rental = Rental(__name__, lambda: spatial_core, in_process=True)
 
 
 def spatial_pass(*args):
@@ -155,26 +158,18 @@ def spatial_pass(*args):
     (:mod:`coilrod.rod._spatial_numpy`, bitwise the same numbers) until its estimated cost
     reaches :data:`COMPILE_AFTER`, numba's cache holds the compiled pass or this process has
     compiled it; by the compiled pass from then on."""
-    global _rent, _compiled_ready
     # the field inputs B, G, H C-contiguous (a copy only of a strided view, e.g. the magnet
     # pose's Hessian): one compiled version of the pass, not one per layout
     args = (*args[:4], *(np.ascontiguousarray(a) for a in args[4:7]), *args[7:])
-    if not _compiled_ready:
-        from ._compiled import _on_disk
-
+    if not _rental.ready:
         phi, tangent = args[0], args[9]
         t = 1 if tangent else 0
         cost = _NUMPY_CALL_S[t] + _NUMPY_NODE_S[t] * phi.shape[0] * phi.shape[1]
-        if (
-            _rent + cost <= COMPILE_AFTER
-            and not spatial_core.overloads
-            and not _on_disk(spatial_core)
-        ):
+        if not _rental.pays(cost):
             from ._spatial_numpy import spatial_core_numpy
 
-            _rent += cost
+            _rental.charge(cost)
             return spatial_core_numpy(*args)
-        _compiled_ready = True
     return spatial_core(*args)
 
 

@@ -15,6 +15,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from coils._numba_cache import Rental
+
 __all__ = ["block_tridiagonal_inertia"]
 
 
@@ -169,8 +171,8 @@ def _inertia_numpy(D, E, out_neg, out_zero, rtol):
 COMPILE_AFTER = 1.5
 # measured cost of the numpy count: per call, and per block of size b: 5e-5 + 1e-5 b
 _NUMPY_CALL_S, _NUMPY_BLOCK_S, _NUMPY_BLOCK_ROW_S = 1e-4, 5e-5, 1e-5
-_rent = 0.0
-_compiled_ready = False
+#: The ski rental of :func:`_inertia` (:class:`coils._numba_cache.Rental`).
+_rental = Rental(__name__, lambda: _inertia)
 
 
 def _numpy_cost(blocks: int, b: int) -> float:
@@ -181,15 +183,11 @@ def _numpy_cost(blocks: int, b: int) -> float:
 def _compiled_pays(blocks: int, b: int) -> bool:
     """True if the compiled count should run: it is compiled (or in numba's cache), or the
     numpy counts so far plus this one would cost more than :data:`COMPILE_AFTER`."""
-    global _rent, _compiled_ready
-    if not _compiled_ready:
-        from ._compiled import _on_disk
-
+    if not _rental.ready:
         cost = _numpy_cost(blocks, b)
-        if _rent + cost <= COMPILE_AFTER and not _on_disk(_inertia):
-            _rent += cost
+        if not _rental.pays(cost):
+            _rental.charge(cost)
             return False
-        _compiled_ready = True
     return True
 
 
@@ -199,11 +197,8 @@ def expect_counts(calls: int, blocks: int, b: int) -> None:
     the announced ones would cost more than :data:`COMPILE_AFTER`, the compiled count runs
     from the next count on (compiling once is cheaper than renting to the end).  The counts
     are the same either way (:func:`_inertia_numpy` is bitwise :func:`_inertia`)."""
-    global _compiled_ready
-    if _compiled_ready or calls <= 0:
-        return
-    if _rent + calls * _numpy_cost(blocks, b) > COMPILE_AFTER:
-        _compiled_ready = True
+    if calls > 0:
+        _rental.expect(calls * _numpy_cost(blocks, b))
 
 
 def block_tridiagonal_inertia(D: np.ndarray, E: np.ndarray, rtol: float = 1e-13):

@@ -23,6 +23,8 @@ import math
 import numba as nb
 import numpy as np
 
+from coils._numba_cache import Rental
+
 __all__ = ["COMPILE_AFTER", "compiled_pays", "charge", "newton_uniform"]
 
 #: Estimated CPU seconds of numpy Newton iterations after which the compiled corrector is used
@@ -30,27 +32,20 @@ __all__ = ["COMPILE_AFTER", "compiled_pays", "charge", "newton_uniform"]
 COMPILE_AFTER = 4.0
 # measured cost of the numpy corrector: per call and per iteration of one member
 _NUMPY_CALL_S, _NUMPY_ITER_S = 5e-5, 1.2e-4
-_rent = 0.0
-_compiled_ready = False
+#: The ski rental of the compiled corrector (:class:`coils._numba_cache.Rental`).
+_rental = Rental(__name__, lambda: _newton)
 
 
 def compiled_pays() -> bool:
     """True if the compiled corrector should run: it is compiled (or in numba's cache), or the
     numpy corrector has cost :data:`COMPILE_AFTER` so far."""
-    global _compiled_ready
-    if not _compiled_ready:
-        from ._compiled import _on_disk
-
-        if _rent < COMPILE_AFTER and not _on_disk(_newton):
-            return False
-        _compiled_ready = True
-    return True
+    return _rental.pays()
 
 
 def charge(iterations) -> None:
-    """Add the estimated cost of a numpy corrector call of ``iterations`` (per member)."""
-    global _rent
-    _rent += _NUMPY_CALL_S + _NUMPY_ITER_S * (float(np.sum(iterations)) + 1.0)
+    """Charge the estimated cost (s of CPU) of a numpy corrector call of ``iterations`` (per
+    member) to the ski rental."""
+    _rental.charge(_NUMPY_CALL_S + _NUMPY_ITER_S * (float(np.sum(iterations)) + 1.0))
 
 
 def newton_uniform(problem, U, S, opts, stability: bool = True):

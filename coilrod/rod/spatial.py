@@ -79,7 +79,7 @@ def _spatial_module():
 def _compiled_core():
     """The compiled per-node pass if this process uses it already (its ski rental is over),
     else None: :meth:`SpatialRod._assemble` then calls it directly."""
-    return _CS.spatial_core if _CS is not None and _CS._compiled_ready else None
+    return _CS.spatial_core if _CS is not None and _CS._rental.ready else None
 
 
 def _matvec(A, v):
