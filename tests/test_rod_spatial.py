@@ -136,6 +136,27 @@ class TestDiscreteProblem:
             assert bool(lin.ok[0]) is admissible
             assert ("rotation chart" in P.last_failure) is not admissible
 
+    def test_mesh_constants_cached_by_value(self):
+        """The set-up's cached mesh constants follow the stiffness, mesh and layout by value
+        (closed form on the uniform mesh: (1/h_{i-1} + 1/h_i) / w_i = 2 N^2 at every node,
+        times max K), and are read-only (a problem cannot spoil another's)."""
+        N, mu = 4, np.zeros((5, 3))
+        K = np.array([0.6, 1.0, 1.0])
+        args = (FIELDS["uniform"], L, np.zeros(3), np.eye(3))
+        first = SpatialRod(RodMesh(N), mu, K, *args)
+        K[0] = 3.0  # the caller's array changed in place: a new key, not a stale hit
+        stiff = SpatialRod(RodMesh(N), mu, K, *args)
+        mixed = SpatialRod(RodMesh(N), mu, K, *args, mixed=True)
+        fine = SpatialRod(RodMesh(2 * N), np.zeros((9, 3)), K, *args)
+        assert first._bend_max == 2 * N**2
+        assert stiff._bend_max == 6 * N**2
+        assert fine._bend_max == 6 * (2 * N) ** 2
+        assert first._row_scale.shape == (5, 3)
+        assert mixed._row_scale.shape == (5, 9)
+        assert np.array_equal(mixed._row_scale[1:, 0:3], np.full((4, 3), float(N)))
+        with pytest.raises(ValueError, match="read-only"):
+            first._bend_scale[0] = 0.0
+
     @pytest.mark.parametrize("name", ["uniform", "helmholtz"])
     def test_band_gather_and_reused_arrays(self, name):
         """The band gathered from the compiled blocks equals the general scatter of the

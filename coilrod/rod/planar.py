@@ -129,13 +129,13 @@ class RodTangent:
         # version of band_lu and band_solve, not one per layout
         ab, n = np.asfortranarray(self.parts), self.size
         diag = self.kl + self.ku
-        if self.bad.any():
+        if np.count_nonzero(self.bad):  # (cheaper than .any() on a few members)
             for j in np.flatnonzero(self.bad):
                 ab[:, j * n : (j + 1) * n] = 0.0
                 ab[diag, j * n : (j + 1) * n] = 1.0
-        band_lu = _compiled().band_lu
         ipiv = np.empty(ab.shape[1], dtype=np.int64)
-        info = band_lu(ab, self.kl, self.ku, ipiv)  # LAPACK's gbtf2, compiled: no per-column calls
+        # LAPACK's gbtf2, compiled: no per-column calls
+        info = (_PC or _compiled()).band_lu(ab, self.kl, self.ku, ipiv)
         lu = ab
         self.parts = None  # factorised in place: the band storage now holds the factors
         if info > 0:
@@ -152,26 +152,28 @@ class RodTangent:
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Solve with every member's Jacobian: rhs (k, size) -> (k, size) (NaN rows for
         singular members)."""
-        lu = self.factor()
+        lu = self._lu if self._lu is not None else self.factor()
         if self._per_member:  # a singular member: solve the others one by one
             out = np.full((self.k, self.size), np.nan)
             for j in np.flatnonzero(~self.bad):
                 out[j] = _take_tangent(self, [j]).solve(rhs[j : j + 1])[0]
             return out
+        bad = self.bad
+        any_bad = np.count_nonzero(bad)  # (cheaper than .any() on a few members)
         if self.uniform:
             b = np.ascontiguousarray(rhs, dtype=float)
-            if self.bad.any():  # (a NaN right-hand side of one would spread to the others)
+            if any_bad:  # (a NaN right-hand side of one would spread to the others)
                 b = b.copy()
-                b[self.bad] = 0.0
+                b[bad] = 0.0
             x, info = dgttrs(*lu, b.reshape(-1))
             if info != 0:
                 raise np.linalg.LinAlgError(f"LAPACK solve failed (info {info})")
         else:
             x = np.array(rhs, dtype=float).reshape(-1, 1)
-            _compiled().band_solve(lu[0], self.kl, self.ku, lu[1], x)
+            (_PC or _compiled()).band_solve(lu[0], self.kl, self.ku, lu[1], x)
         x = x.reshape(self.k, self.size)
-        if self.bad.any():
-            x[self.bad] = np.nan
+        if any_bad:
+            x[bad] = np.nan
         return x
 
     def solve_transposed(self, rhs: np.ndarray) -> np.ndarray:

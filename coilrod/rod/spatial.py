@@ -42,6 +42,7 @@ import numpy as np
 
 from ..path.protocol import Linearization
 from .discrete import DiscreteRod
+from .mesh import _remember
 from .planar import RodTangent, _lowest_from_inverse, _take_tangent, closest_to_zero
 from .so3 import cross, expm, hat, inv_right_jacobian_coefficients, left_jacobian, logm
 
@@ -121,6 +122,47 @@ def _sym_term(a, b):
     out[..., 0, 0] -= d
     out[..., 1, 1] -= d
     out[..., 2, 2] -= d
+    return out
+
+
+#: The mesh- and stiffness-only constants of :class:`SpatialRod` already computed, keyed on
+#: the mesh's h and w, the stiffnesses, the layout and the unknowns per node by value (a
+#: changed input is a new key, never a stale hit); read-only arrays shared by the problems
+#: built from them; at most ``mesh._CACHE_SIZE`` entries, oldest dropped first.
+_MESH_CONSTANTS: dict = {}
+
+
+def _mesh_constants(h, w, K, uniform: bool, nv: int) -> tuple:
+    """1/h, 1/w, the bending round-off scale per node (n,), its maximum, the same as a
+    column (n, 1) and the scaled residual's row multipliers (n, 3 or nv), as
+    :class:`SpatialRod` uses them (read-only: computed once per mesh, stiffness and layout)."""
+    key = (h.tobytes(), w.tobytes(), K.tobytes(), uniform, nv)
+    out = _MESH_CONSTANTS.get(key)
+    if out is None:
+        n = w.size
+        inv_h = 1.0 / h
+        inv_w = 1.0 / w
+        bend = np.zeros(n)
+        bend[1:] += inv_h
+        bend[:-1] += inv_h
+        bend_scale = bend * inv_w * float(np.max(K))
+        bend_max = float(np.max(bend_scale))
+        bend_column = bend_scale[:, None].copy()
+        # multipliers of the scaled residual (_scaled): moments and forces per length,
+        # position mismatch per length (the clamp rows and the tip force row zeroed there)
+        row_scale = np.ones((n, 3 if uniform else nv))
+        if uniform:
+            row_scale[:] = inv_w[:, None]
+        else:
+            row_scale[:, 3:6] = inv_w[:, None]
+            row_scale[1:, 0:3] = inv_h[:, None]
+            row_scale[:-1, 6:9] = inv_w[1:, None]
+        arrays = (inv_h, inv_w, bend_scale, bend_column, row_scale)
+        for a in arrays:
+            a.flags.writeable = False
+        out = _remember(
+            _MESH_CONSTANTS, key, (inv_h, inv_w, bend_scale, bend_max, bend_column, row_scale)
+        )
     return out
 
 
@@ -215,16 +257,18 @@ class SpatialRod(DiscreteRod):
                 self._half = 0.5 * np.array([section.thickness, section.width]) / float(length)
                 self._round = False
         self.nc = len(self.obstacles)  # contact multipliers per node, one per obstacle
-        from ..contact.obstacle import as_friction
+        self.mu_f = np.zeros(0)  # friction coefficient per obstacle
+        if self.obstacles:
+            from ..contact.obstacle import as_friction
 
-        self.mu_f = np.array(
-            [
-                as_friction(getattr(ob, "friction", 0.0), f"obstacles[{i}].friction")
-                for i, ob in enumerate(self.obstacles)
-            ]  # fmt: skip
-        ).reshape(-1)
+            self.mu_f = np.array(
+                [
+                    as_friction(getattr(ob, "friction", 0.0), f"obstacles[{i}].friction")
+                    for i, ob in enumerate(self.obstacles)
+                ]  # fmt: skip
+            ).reshape(-1)
         if friction_rows is None:
-            friction_rows = bool(np.any(self.mu_f > 0))
+            friction_rows = bool(self.nc and np.any(self.mu_f > 0))
         #: Friction unknowns per node (3 per obstacle: tau in the world frame), 0 without.
         self.nt = 3 * self.nc if friction_rows else 0
         if self.nc:  # semi-smooth Newton: a step that switches contacts may raise the residual
@@ -239,24 +283,10 @@ class SpatialRod(DiscreteRod):
         self.n = n = mesh.n
         self.nv = 3 if self.uniform else 9 + self.nc + self.nt
         self.size = self.nv * n
-        h, w = mesh.h, mesh.w
-        self._inv_h = 1.0 / h
-        self._inv_w = 1.0 / w
-        bend = np.zeros(n)
-        bend[1:] += self._inv_h
-        bend[:-1] += self._inv_h
-        self._bend_scale = bend * self._inv_w * float(np.max(self.K))
-        self._bend_max = float(np.max(self._bend_scale))
-        self._bend_column = self._bend_scale[:, None].copy()
-        # multipliers of the scaled residual (_scaled): moments and forces per length,
-        # position mismatch per length (the clamp rows and the tip force row zeroed there)
-        self._row_scale = np.ones((n, 3 if self.uniform else self.nv))
-        if self.uniform:
-            self._row_scale[:] = self._inv_w[:, None]
-        else:
-            self._row_scale[:, 3:6] = self._inv_w[:, None]
-            self._row_scale[1:, 0:3] = self._inv_h[:, None]
-            self._row_scale[:-1, 6:9] = self._inv_w[1:, None]
+        (
+            self._inv_h, self._inv_w, self._bend_scale, self._bend_max, self._bend_column,
+            self._row_scale,
+        ) = _mesh_constants(mesh.h, mesh.w, self.K, self.uniform, self.nv)  # fmt: skip
         self._band_cache: dict = {}
         self._work: dict = {}  # per-call arrays of _assemble (_workspace)
         self._mu0 = None
