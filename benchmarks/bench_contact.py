@@ -27,7 +27,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _machine import machine_info  # noqa: E402
+from _machine import bench_args, machine_info  # noqa: E402
 
 import coils  # noqa: E402
 from coilrod import Circle, Magnetization, Rod, Vessel, Wall, insert, solve_rod  # noqa: E402
@@ -200,4 +200,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    bench_args(__doc__, quick_help="not used: this benchmark has one size")  # --help: the docstring
     main()

@@ -51,7 +51,7 @@ from coilrod import Circle, Magnetization, Rod, presets, solve_rod  # noqa: E402
 from coilrod.rod.elastica import elastica  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _machine import best_wall, clock, clock_name  # noqa: E402
+from _machine import bench_args, best_wall, clock, clock_name  # noqa: E402
 
 REPEAT = 7
 
@@ -508,6 +508,7 @@ def coil_phases(out, rod, pair, scales, repeat=3 * REPEAT):
 
 
 if __name__ == "__main__":
+    bench_args(__doc__, quick_help="not used (--coil: sections 3 and 4 alone)")  # --help: the docstring
     target = Path(__file__).parent / "results" / "rod.md"
     if "--coil" in sys.argv:  # sections 3 and 4 alone, in place of the file's
         # every kernel compiled at its first call, as main()'s earlier sections leave them
