@@ -508,7 +508,7 @@ def coil_phases(out, rod, pair, scales, repeat=3 * REPEAT):
 
 
 if __name__ == "__main__":
-    bench_args(__doc__, quick_help="not used (--coil: sections 3 and 4 alone)")  # --help: the docstring
+    bench_args(__doc__, quick_help="not used (--coil: sections 3 and 4 alone)")  # --help
     target = Path(__file__).parent / "results" / "rod.md"
     if "--coil" in sys.argv:  # sections 3 and 4 alone, in place of the file's
         # every kernel compiled at its first call, as main()'s earlier sections leave them
