@@ -280,9 +280,10 @@ class _Iteration:
         )
         if not chord and not (self.fresh if whole else self.fresh[act]).all():
             # a new tangent at the current states
-            self.T, self.owners = P.linearize(U[act], S[act]), act
-            self.fresh[act] = True
-            self.R[act] = self.T.residual
+            self.T, self.owners = P.linearize(U[act], S[act]), act  # (copies: U is iterated)
+            rows = slice(None) if whole else act
+            self.fresh[rows] = True
+            self.R[rows] = self.T.residual
             self._set_last(self.T, act)
         if self.owners.size == n:  # act is T's members (they only drop out)
             dU = P.solve(self.T, -(self.R if whole else self.R[act]))
@@ -306,7 +307,7 @@ class _Iteration:
             else:  # accepted over several rounds: evaluate them together
                 self.T, self.owners = P.linearize(U[moved], S[moved]), moved
                 self._set_last(self.T, moved)
-            self.fresh[moved] = True
+            self.fresh[slice(None) if moved is self.everyone else moved] = True
         if moved is self.everyone:
             stuck = (self.slow >= opts.stagnation) & (self.err > 1.0)
         else:
@@ -335,7 +336,6 @@ class _Iteration:
                 tlin = P.linearize(trial, S if whole else S[act], tangent=not chord)
                 e_new = _errors(P, tlin, step)
                 e_old = self.err if whole else self.err[act]  # (read before _take writes)
-                first = alpha == full
             else:
                 members = act[pos]
                 step = alpha[:, None] * dU[pos]
@@ -343,9 +343,9 @@ class _Iteration:
                 tlin = P.linearize(trial, S[members], tangent=not chord)
                 e_new = _errors(P, tlin, step)
                 e_old = self.err[members]
-                first = alpha == full[pos]
             accept = (e_new < e_old) | (e_new <= 1.0)  # (then e_new is finite: _errors)
             if not accept.all():
+                first = alpha == (full if rounds == 1 else full[pos])
                 accept |= first & (e_new <= growth * e_old)
                 accept &= np.isfinite(e_new)
             if accept.all():

@@ -141,7 +141,11 @@ class PathProblem(ABC):
     def with_tangent(self, lin: Linearization, other: Linearization) -> Linearization:
         """``lin`` (a state evaluated without tangent) paired with the tangent of ``other``
         (for chord iterations of :func:`~coilrod.path.corrector.newton`); same members."""
-        out = copy.copy(lin)
+        if type(lin) is Linearization:  # copy.copy's result, without its reduce protocol
+            out = object.__new__(Linearization)
+            out.__dict__.update(lin.__dict__)
+        else:
+            out = copy.copy(lin)
         out.tangent = other.tangent
         return out
 

@@ -545,11 +545,11 @@ class _Tracker:
         (point, iterations)."""
         h = cur.scale - prev.scale
         d = targets - cur.scale
-        if h == 0 or cur.rate is None or np.any(d * h <= 0) or np.any(np.diff(d) * h <= 0):
+        if h == 0 or cur.rate is None or (d * h <= 0).any() or ((d[1:] - d[:-1]) * h <= 0).any():
             return []
         curv = (prev.u - cur.u + cur.rate * h) / (h * h)
         preds = cur.u + d[:, None] * cur.rate + (d * d)[:, None] * curv
-        steps = self.P.distance(np.diff(np.vstack([cur.u[None], preds]), axis=0))
+        steps = self.P.distance(_increments(cur.u, preds))
         limit = self.change_limit()
         m = len(targets) if np.all(steps <= limit) else int(np.argmax(steps > limit))
         if m < 2:
@@ -564,7 +564,7 @@ class _Tracker:
         good = res.ok & (correction <= self.P.max_correction)
         tiny = self.negligible
         good &= correction <= self.opts.relative_correction * dist(preds - cur.u) + tiny
-        good &= dist(np.diff(np.vstack([cur.u[None], res.u]), axis=0)) <= 2.0 * steps[:m] + tiny
+        good &= dist(_increments(cur.u, res.u)) <= 2.0 * steps[:m] + tiny
         n_good = m if good.all() else int(np.argmin(good))
         if n_good == 0:
             return []
@@ -576,22 +576,28 @@ class _Tracker:
             last = res.u[n_good - 1] - (res.u[n_good - 2] if n_good > 1 else cur.u)
             self.last_change = float(self.P.distance(last[None])[0])
         run = []
+        # (Python floats and ints of the members' numbers in one conversion each)
+        scales, errors = targets[:n_good].tolist(), res.error[:n_good].tolist()
+        stabs, iters = stab[:n_good].tolist(), res.iterations[:n_good].tolist()
         for j in range(n_good):
             lin = rate = None
             if j == n_good - 1:  # the last accepted state carries on the path
                 lin = take(self.P, res.lin, np.array([j]))
                 rate = self.rate(lin)
             p = PathPoint(
-                res.u[j],
-                float(targets[j]),
-                float(res.error[j]),
-                float(stab[j]),
-                lin,
-                rate,
-                np.array(res.lin.residual[j]),
+                res.u[j], scales[j], errors[j], stabs[j], lin, rate, np.array(res.lin.residual[j])
             )
-            run.append((p, int(res.iterations[j])))
+            run.append((p, iters[j]))
         return run
+
+
+def _increments(u0: np.ndarray, U: np.ndarray) -> np.ndarray:
+    """The increments ``U[0] - u0, U[1] - U[0], ...`` of a stack ``U``, shape (k, size): the
+    values of ``np.diff(np.vstack([u0[None], U]), axis=0)`` without its stacking copy."""
+    out = np.empty_like(U)
+    np.subtract(U[0], u0, out=out[0])
+    np.subtract(U[1:], U[:-1], out=out[1:])
+    return out
 
 
 def follow_load(
