@@ -949,7 +949,9 @@ def solve_currents(
        (status "branch_edge": small steps along one direction of the currents land the rod
        on another branch, again and again; the closest state on the branch is returned);
     4. a warm start (``initial``) that does not reach the target in the real field is followed
-       by a fresh one from the uniform-field start (both searches' solves counted);
+       by a fresh one from the uniform-field start (both searches' solves counted); its step 3
+       also stops where steps that gain leave the rod unstable (the end of the stable part of
+       its branch), where a fresh search creeps on to the stability boundary;
     5. the report (:func:`_finish`): the real-field tip of the currents, and an error or a
        warning when the target is not met.
 
