@@ -492,7 +492,7 @@ def test_a_warm_search_stops_where_the_stable_branch_ends(monkeypatch):
         residual=lambda res: res.I - goal, position_miss=lambda r: float(np.linalg.norm(r)),
         met=lambda r: np.linalg.norm(r) <= 1e-9, jacobian=lambda res: np.eye(2),
     )  # fmt: skip
-    warm, I, _, status, edge = currents._search(p, np.zeros(2), 1, 200, warm=True)
+    warm, I, _, status, edge = currents._search(p, np.zeros(2), 1, 200, fresh_next=True)
     assert (status, edge.unstable, warm.solves) == ("branch_edge", True, 4)
     np.testing.assert_array_equal(I, [0.0, 0.0])  # the closest stable state met
     assert "end of the stable part" in currents._ending(p, SimpleNamespace(I=I), 4, status, edge)

@@ -475,10 +475,11 @@ class _EdgeWatch:
     the remaining miss lies across it, and the steps would alternate a jump with a tiny gain
     until the budget is spent.  Then :meth:`check` raises :class:`_BranchEdge`.
 
-    A warm start's search also watches the end of the branch's stable part (:meth:`lost`):
-    ``EDGE_JUMPS`` trial steps of :func:`_damped` along one direction that gain but leave the
-    rod unstable, the misses not halved between them, raise :class:`_BranchEdge` as well
-    (the steps accepted after them would creep to the stability boundary, a solve each)."""
+    A warm start's search that a fresh one follows also watches the end of the branch's
+    stable part (:meth:`lost`): ``EDGE_JUMPS`` trial steps of :func:`_damped` along one
+    direction that gain but leave the rod unstable, the misses not halved between them, raise
+    :class:`_BranchEdge` as well (the steps accepted after them would creep to the stability
+    boundary, a solve each)."""
 
     jumps: list = field(default_factory=list)  # (unit step, moved, predicted, |r|) per jump
     losses: list = field(default_factory=list)  # the same per step that lost stability
@@ -692,11 +693,13 @@ def _approach(p: _Problem, search: _Search, I, max_iter: int) -> None:
             return
 
 
-def _search(p: _Problem, I, max_iter: int, max_solves: int, warm: bool = False):
+def _search(p: _Problem, I, max_iter: int, max_solves: int, fresh_next: bool = False):
     """One search from the start currents ``I``: Gauss-Newton steps towards the target
     (:func:`_approach`), then, if the target is not met, Levenberg-Marquardt within the limits
-    from the closest state to a local least-squares optimum (:func:`_damped`; for a ``warm``
-    start, stopping at the end of the branch's stable part, :meth:`_EdgeWatch.lost`).
+    from the closest state to a local least-squares optimum (:func:`_damped`).  With
+    ``fresh_next`` (a warm start whose every result off the target is dropped for a fresh
+    start) the damped steps stop at the end of the branch's stable part
+    (:meth:`_EdgeWatch.lost`).
 
     Returns the search (solves, history), the closest currents and their forward solve, the
     status (see :class:`ControlResult`) and the :class:`_BranchEdge` met (or None)."""
@@ -707,7 +710,7 @@ def _search(p: _Problem, I, max_iter: int, max_solves: int, warm: bool = False):
         _approach(p, search, I, max_iter)
         if not p.met(search.best[3]):
             _, I, res, r = search.best
-            watch = search.edge if warm else None
+            watch = search.edge if fresh_next else None
             bounds = _damped(I, res, r, p.jacobian, search.evaluate, p.met, bounds, watch)
     except _BudgetSpent:  # the closest tip found is reported
         stopped = "max_solves"
@@ -949,9 +952,10 @@ def solve_currents(
        (status "branch_edge": small steps along one direction of the currents land the rod
        on another branch, again and again; the closest state on the branch is returned);
     4. a warm start (``initial``) that does not reach the target in the real field is followed
-       by a fresh one from the uniform-field start (both searches' solves counted); its step 3
-       also stops where steps that gain leave the rod unstable (the end of the stable part of
-       its branch), where a fresh search creeps on to the stability boundary;
+       by a fresh one from the uniform-field start (both searches' solves counted); for a
+       position target its step 3 also stops where steps that gain leave the rod unstable
+       (the end of the stable part of its branch), where a fresh search creeps on to the
+       stability boundary;
     5. the report (:func:`_finish`): the real-field tip of the currents, and an error or a
        warning when the target is not met.
 
@@ -1009,7 +1013,8 @@ def solve_currents(
                 p.B_fixed,
                 p.tol,
             )
-        search, I, res, status, edge = _search(p, I, max_iter, max_solves, start == "warm")
+        fresh_next = start == "warm" and p.model == "real" and not p.oriented
+        search, I, res, status, edge = _search(p, I, max_iter, max_solves, fresh_next)
         solves, history = solves + search.solves, history + search.history
         # a warm start led astray (e.g. across a snap-through): start afresh
         astray = min(search.history) > p.tol and (not p.oriented or status != "optimal")
