@@ -469,3 +469,33 @@ def test_a_failed_least_distance_program_falls_back(monkeypatch):
     step = currents._least_power_step(J, r, I, p)
     np.testing.assert_allclose(J @ step, -r, atol=1e-12)
     assert np.all(np.abs(I + step) <= 20.0)
+
+
+def test_a_warm_search_stops_where_the_stable_branch_ends(monkeypatch):
+    """A toy search (misses r = I - (3, 0), exact Jacobian I; the rod stable only for
+    I_0 < 1): its Gauss-Newton step lands on the target, unstable, so Levenberg-Marquardt
+    starts from the closest stable state (the start).  A warm start's search stops after two
+    trials that gain but leave the stable part (a fresh start follows it); a fresh search
+    creeps to the stability boundary I_0 = 1 one solve at a time (the notebook's tip path:
+    the last target's warm search took 39 solves instead of 14)."""
+    from types import SimpleNamespace
+
+    from coilrod.control import currents
+
+    goal = np.array([3.0, 0.0])
+    monkeypatch.setattr(
+        currents, "_forward", lambda rod, I, steps, opts: SimpleNamespace(I=I, stable=[I[0] < 1])
+    )
+    p = SimpleNamespace(
+        rod=None, steps=None, opts=None, length=1.0, limits=np.full(2, 10.0), model="real",
+        resistance=np.ones(2), field_of=lambda I: np.array(I, float),
+        residual=lambda res: res.I - goal, position_miss=lambda r: float(np.linalg.norm(r)),
+        met=lambda r: np.linalg.norm(r) <= 1e-9, jacobian=lambda res: np.eye(2),
+    )  # fmt: skip
+    warm, I, _, status, edge = currents._search(p, np.zeros(2), 1, 200, fresh_next=True)
+    assert (status, edge.unstable, warm.solves) == ("branch_edge", True, 4)
+    np.testing.assert_array_equal(I, [0.0, 0.0])  # the closest stable state met
+    assert "end of the stable part" in currents._ending(p, SimpleNamespace(I=I), 4, status, edge)
+    fresh, I, _, status, _ = currents._search(p, np.zeros(2), 1, 200)
+    assert fresh.solves > 10
+    assert 0.99 < I[0] < 1.0  # crept to the boundary

@@ -451,12 +451,14 @@ EDGE_COS = 0.9
 class _BranchEdge(Exception):
     """The search reached an edge of the rod's branch (:class:`_EdgeWatch`):
     ``direction`` (m,) the unit step of the currents that leaves it, ``jumps`` how often,
-    ``moved`` and ``predicted`` the largest jump of |r| and the change its step predicted."""
+    ``moved`` and ``predicted`` the largest jump of |r| and the change its step predicted;
+    ``unstable``: the steps reached the end of the branch's stable part (they gained, but
+    the rod lost its stability there) rather than jumped."""
 
-    def __init__(self, direction, jumps, moved, predicted):
+    def __init__(self, direction, jumps, moved, predicted, unstable=False):
         super().__init__("branch edge")
         self.direction, self.jumps = direction, jumps
-        self.moved, self.predicted = moved, predicted
+        self.moved, self.predicted, self.unstable = moved, predicted, unstable
 
 
 @dataclass
@@ -471,9 +473,16 @@ class _EdgeWatch:
     ``EDGE_JUMPS`` along the same direction of the currents, with the misses not halved
     between the first's state and the last's, are the edge of the branch the search is on:
     the remaining miss lies across it, and the steps would alternate a jump with a tiny gain
-    until the budget is spent.  Then :meth:`check` raises :class:`_BranchEdge`."""
+    until the budget is spent.  Then :meth:`check` raises :class:`_BranchEdge`.
+
+    A warm start's search that a fresh one follows also watches the end of the branch's
+    stable part (:meth:`lost`): ``EDGE_JUMPS`` trial steps of :func:`_damped` along one
+    direction that gain but leave the rod unstable, the misses not halved between them, raise
+    :class:`_BranchEdge` as well (the steps accepted after them would creep to the stability
+    boundary, a solve each)."""
 
     jumps: list = field(default_factory=list)  # (unit step, moved, predicted, |r|) per jump
+    losses: list = field(default_factory=list)  # the same per step that lost stability
 
     def check(self, r, r_t, predicted, step) -> None:
         """Record the trial (misses ``r_t`` after ``step`` from ``r``; ``predicted`` = J step)
@@ -482,12 +491,22 @@ class _EdgeWatch:
         change = float(np.linalg.norm(predicted))
         if moved <= max(JUMP_RATIO * change, JUMP_MIN) or r_t @ r_t <= r @ r:
             return  # no jump, or one closer to the target (a snap-through that helps)
+        self._record(self.jumps, r, step, moved, change, False)
+
+    def lost(self, r, r_t, predicted, step) -> None:
+        """Record a trial (as :meth:`check`) that gained but left the stable rod unstable,
+        and raise :class:`_BranchEdge` (``unstable``) at the end of the stable part."""
+        moved = float(np.linalg.norm(r_t - r))
+        self._record(self.losses, r, step, moved, float(np.linalg.norm(predicted)), True)
+
+    @staticmethod
+    def _record(events, r, step, moved, change, unstable) -> None:
         u, here = step / np.linalg.norm(step), float(np.linalg.norm(r))
-        self.jumps.append((u, moved, change, here))
-        same = [j for j in self.jumps if abs(float(j[0] @ u)) >= EDGE_COS and here > 0.5 * j[3]]
+        events.append((u, moved, change, here))
+        same = [j for j in events if abs(float(j[0] @ u)) >= EDGE_COS and here > 0.5 * j[3]]
         if len(same) >= EDGE_JUMPS:
             worst = max(same, key=lambda j: j[1])
-            raise _BranchEdge(u, len(same), worst[1], worst[2])
+            raise _BranchEdge(u, len(same), worst[1], worst[2], unstable)
 
 
 @dataclass
@@ -674,10 +693,13 @@ def _approach(p: _Problem, search: _Search, I, max_iter: int) -> None:
             return
 
 
-def _search(p: _Problem, I, max_iter: int, max_solves: int):
+def _search(p: _Problem, I, max_iter: int, max_solves: int, fresh_next: bool = False):
     """One search from the start currents ``I``: Gauss-Newton steps towards the target
     (:func:`_approach`), then, if the target is not met, Levenberg-Marquardt within the limits
-    from the closest state to a local least-squares optimum (:func:`_damped`).
+    from the closest state to a local least-squares optimum (:func:`_damped`).  With
+    ``fresh_next`` (a warm start whose every result off the target is dropped for a fresh
+    start) the damped steps stop at the end of the branch's stable part
+    (:meth:`_EdgeWatch.lost`).
 
     Returns the search (solves, history), the closest currents and their forward solve, the
     status (see :class:`ControlResult`) and the :class:`_BranchEdge` met (or None)."""
@@ -688,7 +710,8 @@ def _search(p: _Problem, I, max_iter: int, max_solves: int):
         _approach(p, search, I, max_iter)
         if not p.met(search.best[3]):
             _, I, res, r = search.best
-            bounds = _damped(I, res, r, p.jacobian, search.evaluate, p.met, bounds)
+            watch = search.edge if fresh_next else None
+            bounds = _damped(I, res, r, p.jacobian, search.evaluate, p.met, bounds, watch)
     except _BudgetSpent:  # the closest tip found is reported
         stopped = "max_solves"
     except _BranchEdge as err:  # the closest state on the branch is reported
@@ -929,7 +952,10 @@ def solve_currents(
        (status "branch_edge": small steps along one direction of the currents land the rod
        on another branch, again and again; the closest state on the branch is returned);
     4. a warm start (``initial``) that does not reach the target in the real field is followed
-       by a fresh one from the uniform-field start (both searches' solves counted);
+       by a fresh one from the uniform-field start (both searches' solves counted); for a
+       position target its step 3 also stops where steps that gain leave the rod unstable
+       (the end of the stable part of its branch), where a fresh search creeps on to the
+       stability boundary;
     5. the report (:func:`_finish`): the real-field tip of the currents, and an error or a
        warning when the target is not met.
 
@@ -987,7 +1013,8 @@ def solve_currents(
                 p.B_fixed,
                 p.tol,
             )
-        search, I, res, status, edge = _search(p, I, max_iter, max_solves)
+        fresh_next = start == "warm" and p.model == "real" and not p.oriented
+        search, I, res, status, edge = _search(p, I, max_iter, max_solves, fresh_next)
         solves, history = solves + search.solves, history + search.history
         # a warm start led astray (e.g. across a snap-through): start afresh
         astray = min(search.history) > p.tol and (not p.oriented or status != "optimal")
@@ -1033,7 +1060,7 @@ def _optimal(J, r, I, bounds, limits) -> bool:
     return not _pinned(I, bounds, limits).any() or _gain(J, r, I, limits) <= GAIN_TOL
 
 
-def _damped(I, res, r, jacobian, evaluate, met, bounds):
+def _damped(I, res, r, jacobian, evaluate, met, bounds, edge=None):
     """Levenberg-Marquardt within the current limits from the state (I, res, r): steps
     ``argmin |r + J s|^2 + mu |D s|^2`` over ``|I + s| <= limits`` (D the column norms of J),
     a step accepted when the misses decrease (and the state stays stable if it was), ``mu``
@@ -1041,7 +1068,9 @@ def _damped(I, res, r, jacobian, evaluate, met, bounds):
     :func:`_gain`), when ``mu`` grows beyond any useful step or three accepted steps in a row
     gain almost nothing, or when ``evaluate`` spends the solve budget or finds the edge of the
     rod's branch (:class:`_EdgeWatch`: its steps along one direction jump to another branch,
-    the remaining miss lies across the edge); the states met are kept by ``evaluate``.
+    the remaining miss lies across the edge) -- or, with ``edge`` (an :class:`_EdgeWatch`),
+    where steps that gain leave the rod unstable (:meth:`_EdgeWatch.lost`); the states met
+    are kept by ``evaluate``.
 
     A channel whose change of sign sent the rod to another branch (a step that raised the
     misses, e.g. the small current that decides to which side a rod in a nearly antiparallel
@@ -1095,6 +1124,8 @@ def _damped(I, res, r, jacobian, evaluate, met, bounds):
             d = np.maximum(d, np.linalg.norm(J, axis=0))
             mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
         else:
+            if edge is not None and rho > 1e-3:  # gained, but the stable rod is unstable there
+                edge.lost(r, r_t, J @ (trial - I), trial - I)
             mu *= 4.0
     return lo, hi
 
@@ -1188,6 +1219,13 @@ def _ending(p: _Problem, res, solves, status, edge) -> str:
     reached = f"the closest tip in {own} is {miss:.4g} m ({miss / p.length:.3g} L) from the target"
     if edge is None:
         return f"{status} after {solves} solves: {reached}"
+    if edge.unstable:
+        return (
+            f"branch_edge after {solves} solves: the search stopped at the end of the stable "
+            f"part of the rod's branch -- {edge.jumps} small steps of the currents along "
+            f"{np.round(edge.direction, 3).tolist()} gained but left the rod unstable; "
+            f"{reached}, the remaining miss lies across the edge"
+        )
     return (
         f"branch_edge after {solves} solves: the search stopped at an edge of the rod's branch "
         f"-- {edge.jumps} small steps of the currents along {np.round(edge.direction, 3).tolist()}"
