@@ -134,6 +134,8 @@ def test_mpem_file_paths_and_bytes(tmp_path):
 
 
 # -- outputs ------------------------------------------------------------------------------------
+from _scenes import scene_with  # noqa: E402
+
 from coilrod.design.sweep_file import SweepFile  # noqa: E402
 from coilrod.scene import parse_scene  # noqa: E402
 from coilrod.scene.outputs import write_rows  # noqa: E402
@@ -169,19 +171,7 @@ def test_a_failed_table_write_leaves_the_old_file(tmp_path):
 
 def _scene_result():
     """Two rod runs (coil and ideal field) whose tip angle is not defined (NaN)."""
-    data = {
-        "robot": {
-            "length": "40 mm",
-            "diameter": "2 mm",
-            "youngs_modulus": "1 MPa",
-            "magnetization": {"preset": "M1"},
-        },
-        "field": {"type": "uniform", "B": "5 mT"},
-        "load": {"steps": 1},
-        "models": {"run": ["rod"]},
-        "output": {"figures": False},
-    }
-    scene = parse_scene(data)
+    scene = parse_scene(scene_with(load__steps=1, output={"figures": False}))
     tip = np.array([[0.03, 0.02, 0.0]])
     runs = [
         ModelRun("rod", label, np.ones(1), tip, np.array([np.nan]), 0.1)
