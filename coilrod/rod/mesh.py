@@ -178,10 +178,11 @@ def node_magnetization(magnetization, mesh: RodMesh, length: float, dim: int = 2
     return out
 
 
-def _remember(cache: dict, key, value):
-    """Store ``value`` under ``key`` in ``cache``, dropping the oldest entry beyond
-    :data:`_CACHE_SIZE`; returns ``value``."""
-    if len(cache) >= _CACHE_SIZE:
+def _remember(cache: dict, key, value, size: int = _CACHE_SIZE):
+    """Store ``value`` under ``key`` in ``cache`` as its most recent entry (a key stored again
+    moves there), dropping the oldest entry beyond ``size`` entries (default
+    :data:`_CACHE_SIZE`); returns ``value``."""
+    if cache.pop(key, None) is None and len(cache) >= size:
         cache.pop(next(iter(cache)), None)
     cache[key] = value
     return value

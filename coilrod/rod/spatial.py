@@ -794,13 +794,8 @@ class SpatialRod(DiscreteRod):
         """Remember the surface gaps (k, n, nc) of states U (k, size) for
         :meth:`_state_gaps` (the last four stacks; a linearization's too: a converged
         state's event test then needs no search), read-only; returns them."""
-        key = (U.shape, U.tobytes())
-        memo = self._gaps_memo
-        if memo.pop(key, None) is None and len(memo) >= 4:
-            del memo[next(iter(memo))]  # the oldest
         gaps.flags.writeable = False
-        memo[key] = gaps  # (re)inserted last: the most recent
-        return gaps
+        return _remember(self._gaps_memo, (U.shape, U.tobytes()), gaps, size=4)
 
     def contact_state(self, U: np.ndarray, frames: np.ndarray | None = None):
         """Contact of states (k, size) at the contact points (:meth:`contact_points`): force
@@ -898,9 +893,7 @@ class SpatialRod(DiscreteRod):
             index = {name: (kl + ku + r - c, c) for name, (r, c) in entries.items()}
             for rows, cols in index.values():
                 rows.flags.writeable = cols.flags.writeable = False
-            if len(_LAYOUTS) >= 8:
-                _LAYOUTS.pop(next(iter(_LAYOUTS)))
-            out = _LAYOUTS[key] = (kl, ku, index)
+            out = _remember(_LAYOUTS, key, (kl, ku, index), size=8)
         return out
 
     def _block_entries(self):
