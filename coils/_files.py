@@ -7,6 +7,7 @@ catch a missing file.
 
 from __future__ import annotations
 
+import codecs
 import contextlib
 import os
 import tempfile
@@ -19,6 +20,7 @@ __all__ = [
     "UnreadableFileError",
     "input_path",
     "read_text",
+    "read_utf8",
 ]
 
 
@@ -64,6 +66,60 @@ def input_path(path, label: str) -> str:
     return path
 
 
+def read_utf8(
+    path,
+    *,
+    unreadable: str,
+    not_utf8: str,
+    unreadable_error: type[Exception] = UnreadableFileError,
+    not_utf8_error: type[Exception] = ValueError,
+    label: str = "file",
+) -> str:
+    """The UTF-8 text of the file ``path`` (a leading byte-order mark dropped), errors worded by
+    the caller.
+
+    The one reader of the file readers here and of the scene files
+    (:func:`coilrod.scene.parse.load_scene`), which word their errors differently.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file (not checked to exist first: a missing file is an unreadable one).
+    unreadable : str
+        The message when the file cannot be opened or read, a :meth:`str.format` template with
+        the fields ``path``, ``label`` and ``reason`` (the system's reason, e.g. ``"Permission
+        denied"``).
+    not_utf8 : str
+        The message when the bytes are not UTF-8, a template with the fields ``path``,
+        ``label``, ``byte`` (the first bad byte, e.g. ``"0xe9"``) and ``line`` (its line, from 1).
+    unreadable_error, not_utf8_error : type
+        The exception classes of the two cases (each called with the message alone).
+    label : str
+        What the file is (the ``label`` field of the templates).
+
+    Raises
+    ------
+    unreadable_error, not_utf8_error
+        With the messages above.
+    """
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read()
+    except OSError as exc:
+        reason = exc.strerror or type(exc).__name__
+        raise unreadable_error(unreadable.format(path=path, label=label, reason=reason)) from None
+    if raw.startswith(codecs.BOM_UTF8):
+        raw = raw[len(codecs.BOM_UTF8) :]  # so that exc.start below counts in these bytes
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        byte = f"0x{raw[exc.start]:02x}"
+        raise not_utf8_error(
+            not_utf8.format(path=path, label=label, byte=byte, line=line)
+        ) from None
+
+
 def read_text(path, label: str) -> str:
     """The UTF-8 text of the file ``path`` (a leading byte-order mark dropped).
 
@@ -74,22 +130,13 @@ def read_text(path, label: str) -> str:
     ValueError
         It is not UTF-8 text (the message names the byte and its line).
     """
-    path = input_path(path, label)
-    try:
-        with open(path, "rb") as fh:
-            raw = fh.read()
-    except OSError as exc:
-        raise UnreadableFileError(
-            f"cannot read the {label} {path!r} ({exc.strerror or type(exc).__name__})"
-        ) from None
-    try:
-        return raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        line = raw[: exc.start].count(b"\n") + 1
-        raise ValueError(
-            f"{label} {path!r} is not UTF-8 text (byte 0x{raw[exc.start]:02x} on line {line}); "
-            "is it a binary or damaged file? Save it as UTF-8 text"
-        ) from None
+    return read_utf8(
+        input_path(path, label),
+        unreadable="cannot read the {label} {path!r} ({reason})",
+        not_utf8="{label} {path!r} is not UTF-8 text (byte {byte} on line {line}); "
+        "is it a binary or damaged file? Save it as UTF-8 text",
+        label=label,
+    )
 
 
 def _umask() -> int:

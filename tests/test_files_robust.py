@@ -133,6 +133,28 @@ def test_mpem_file_paths_and_bytes(tmp_path):
         MPEM.from_yaml(path)
 
 
+def test_scene_files_and_data_files_share_one_utf8_reader(tmp_path, monkeypatch):
+    # load_scene had its own copy of read_text's reading and UTF-8 check; now both call
+    # read_utf8 with their own wording (a path with braces is not taken for template fields).
+    # After a byte-order mark both copies named the wrong byte and line (0x78 on line 1: the
+    # decoder's offset counts from after the mark)
+    import coilrod.scene.parse as parse
+    from coils._files import read_text, read_utf8
+
+    path = tmp_path / "{odd} name.toml"
+    path.write_bytes(b'\xef\xbb\xbfname = "x"\n\xff\n')
+    calls = []
+    monkeypatch.setattr(parse, "read_utf8", lambda p, **kw: calls.append(p) or read_utf8(p, **kw))
+    with pytest.raises(SceneError) as err:
+        parse.load_scene(path)
+    assert calls == [path]
+    assert err.value.problems == [
+        f"{path}: not UTF-8 text (byte 0xff on line 2); save the scene file as UTF-8"
+    ]
+    with pytest.raises(ValueError, match=r"data file '.*\{odd\} name.toml' is not UTF-8 text"):
+        read_text(path, "data file")
+
+
 # -- outputs ------------------------------------------------------------------------------------
 from _scenes import scene_with  # noqa: E402
 

@@ -45,6 +45,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 import coils
+from coils._files import read_utf8
 
 from ..robot import presets
 from ..robot.magnetization import Magnetization
@@ -851,20 +852,14 @@ def load_scene(path: str | Path) -> Scene:
     path = Path(path)
     if path.is_dir():
         raise SceneError(f"{path}: is a directory, not a scene file (give a .toml file)")
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise SceneError(
-            f"{path}: cannot read the scene file ({exc.strerror or type(exc).__name__})"
-        ) from None
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        line = raw[: exc.start].count(b"\n") + 1
-        raise SceneError(
-            f"{path}: not UTF-8 text (byte 0x{raw[exc.start]:02x} on line {line}); save the "
-            "scene file as UTF-8"
-        ) from None
+    text = read_utf8(
+        path,
+        unreadable="{path}: cannot read the scene file ({reason})",
+        not_utf8="{path}: not UTF-8 text (byte {byte} on line {line}); save the scene file as "
+        "UTF-8",
+        unreadable_error=SceneError,
+        not_utf8_error=SceneError,
+    )
     try:
         data = tomllib.loads(text)
     except ValueError as exc:  # TOMLDecodeError, or an integer too long for Python
