@@ -106,11 +106,13 @@ def test_every_mistake_on_its_own_line(tmp_path, capsys, no_solving):
     path = write(tmp_path, THREE_MISTAKES)
     assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 2
     lines = errors(capsys)
-    assert [line.split(":")[0] for line in lines] == [
+    assert [line.split(":")[0] for line in lines[:-1]] == [
         "robot.magnetization.magnitude",
         "field.direction",
         "output.figures",
     ]
+    # the file is named on a line of its own (the problems keep their key first); was absent
+    assert lines[-1] == f"{path}: the scene file with the 3 problems above"
     assert not (tmp_path / "out").exists()  # an invalid scene creates no output folder
 
 
@@ -141,7 +143,8 @@ def test_scene_and_out_problems_reported_together(tmp_path, capsys, no_solving):
     out = write(tmp_path, "", name="out")
     assert main(["run", str(scene), "--out", str(out)]) == 2
     lines = errors(capsys)
-    assert len(lines) == 4
+    assert len(lines) == 5
+    assert lines[3] == f"{scene}: the scene file with the 3 problems above"
     assert lines[-1].startswith("--out: ")
 
 
@@ -218,8 +221,9 @@ def test_check_catches_what_run_would(tmp_path, capsys, no_solving, case):
     assert main(["run", str(scene), "--out", str(tmp_path / "out")]) == 2
     from_run = errors(capsys)
     assert from_check == from_run
-    assert len(from_check) == 1
+    assert len(from_check) == 2
     assert from_check[0].startswith(("field.", "fem."))
+    assert from_check[1] == f"{scene}: the scene file with the problem above"
     assert not (tmp_path / "out").exists()
 
 
@@ -233,8 +237,8 @@ def console_script() -> list[str]:
     ("text", "n_lines"),
     [
         (THREE_MISTAKES, 3),
-        (GOOD.replace("steps = 2", "steps = 1e20"), 1),
-        (GOOD.replace('"40 mm"', '"1e300 m"'), 1),
+        # two numbers too large for any solve (one process for both: they are reported together)
+        (GOOD.replace("steps = 2", "steps = 1e20").replace('"40 mm"', '"1e300 m"'), 2),
     ],
 )
 def test_console_script_exit_2_one_line_per_problem(tmp_path, text, n_lines):
@@ -248,8 +252,9 @@ def test_console_script_exit_2_one_line_per_problem(tmp_path, text, n_lines):
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == n_lines
+    assert len(lines) == n_lines + 1  # and the line naming the file
     assert all(line.startswith("coilrod: error: ") for line in lines)
+    assert lines[-1].endswith(f"{scene}: the scene file with the {n_lines} problems above")
     assert proc.stdout == ""
 
 

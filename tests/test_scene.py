@@ -2,6 +2,7 @@
 
 import copy
 import datetime
+import pickle
 import subprocess
 import sys
 
@@ -131,10 +132,20 @@ def test_cli_invalid_scene_exit_2_one_line(tmp_path, capsys):
         '[robot]\nlength = "-40 mm"\ndiameter = "2 mm"\nyoungs_modulus = "1 MPa"\n'
         'magnetization = { preset = "M1" }\n[field]\ntype = "uniform"\nB = "5 mT"\n'
     )
+    # the problem keeps its key first; the error names the file (it did not), also pickled
+    # (a sweep's workers send errors back)
+    with pytest.raises(SceneError) as exc:
+        load_scene(bad)
+    assert exc.value.problems == ["robot.length: must be positive; got -40 mm"]
+    assert exc.value.source == str(bad)
+    assert str(exc.value).splitlines()[-1] == f"{bad}: the scene file with the problem above"
+    assert pickle.loads(pickle.dumps(exc.value)).lines == exc.value.lines
     assert main(["run", str(bad), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1
-    assert "robot.length: must be positive" in err[0]
+    assert err == [
+        "coilrod: error: robot.length: must be positive; got -40 mm",
+        f"coilrod: error: {bad}: the scene file with the problem above",
+    ]
     assert main(["check", str(tmp_path / "missing.toml")]) == 2
     bad.write_text("[robot\n")
     assert main(["check", str(bad)]) == 2

@@ -126,7 +126,7 @@ def prepare(scene_arg: str, out: Path | None, *, create_out: bool):
     try:
         scene = load_scene(_resolve_scene(scene_arg))
     except SceneError as exc:
-        problems += exc.problems
+        problems += exc.lines
     if out is None and create_out and scene is not None:
         out = _default_out(scene)
     if out is not None:
@@ -298,7 +298,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return _command(args, load_scene, parse_scene)
     except SceneError as exc:
-        for line in exc.problems:
+        for line in exc.lines:
             _print_err(line)
         return 2
     except BrokenPipeError:  # the reader of our output went away (``coilrod scenes | head``)
@@ -401,7 +401,7 @@ def _sweep(args) -> int:
     try:
         scene = load_scene(_resolve_scene(args.scene))
     except SceneError as exc:
-        problems = exc.problems + problems
+        problems = exc.lines + problems
     refused = []
     if scene is not None:
         from ..design.sweep import not_swept

@@ -847,7 +847,9 @@ def load_scene(path: str | Path) -> Scene:
     ------
     SceneError
         If the file cannot be read (missing, a directory, no permission, not UTF-8), is not
-        valid TOML, or fails validation; one line per problem, each naming the file or the key.
+        valid TOML, or fails validation; one line per problem, each naming the file or the key
+        (a validation error's ``source`` is the file, and its message ends with a line naming
+        it).
     """
     path = Path(path)
     if path.is_dir():
@@ -869,4 +871,7 @@ def load_scene(path: str | Path) -> Scene:
             f"{path}: the scene file is empty (no keys); see 'coilrod scenes --show NAME' for "
             "a complete one"
         )
-    return parse_scene(data, source=str(path))
+    try:
+        return parse_scene(data, source=str(path))
+    except SceneError as exc:  # name the file (the key of each problem is relative to it)
+        raise SceneError(exc.problems, source=str(path)) from None

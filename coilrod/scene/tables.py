@@ -33,12 +33,19 @@ class SceneError(ValueError):
     problems : str or list of str
         One problem (``"key: reason"``) or several; each is kept on one line (whitespace runs
         become single spaces, lines beyond 400 characters are cut).
+    source : str, optional
+        The scene file the problems are in (:func:`~coilrod.scene.load_scene` gives it).
 
     Attributes
     ----------
     problems : list of str
-        Every problem found, one line each, in the order of the scene.  The message is these
-        lines joined by newlines.
+        Every problem found, one line each, in the order of the scene.
+    source : str or None
+        The scene file, when the scene was read from one.
+    lines : list of str
+        ``problems`` and, when ``source`` is known, a last line naming the file
+        (``"scene.toml: the scene file with the 2 problems above"``).  The message is these
+        lines joined by newlines; the CLI prints each as one error line.
 
     Examples
     --------
@@ -47,18 +54,26 @@ class SceneError(ValueError):
     'robot.length: must be positive; got -40 mm'
     >>> len(str(err).splitlines())
     2
+    >>> SceneError("robot.length: must be positive; got -40 mm", source="bad.toml").lines[-1]
+    'bad.toml: the scene file with the problem above'
     """
 
-    def __init__(self, problems: str | list[str]):
+    def __init__(self, problems: str | list[str], source: str | None = None):
         if isinstance(problems, str):
             problems = [problems]
         lines = [" ".join(str(p).split()) for p in problems]
         lines = [ln if len(ln) <= _MAX_LINE else ln[: _MAX_LINE - 6] + " [...]" for ln in lines]
         self.problems = list(dict.fromkeys(line for line in lines if line))
-        super().__init__("\n".join(self.problems))
+        self.source = None if source is None else str(source)
+        self.lines = list(self.problems)
+        if self.source is not None:
+            n = len(self.problems)
+            what = "the problem" if n == 1 else f"the {n} problems"
+            self.lines.append(f"{self.source}: the scene file with {what} above")
+        super().__init__("\n".join(self.lines))
 
     def __reduce__(self):
-        return (type(self), (self.problems,))
+        return (type(self), (self.problems, self.source))
 
 
 # -- collecting problems -------------------------------------------------------------------------
