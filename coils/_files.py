@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import codecs
 import contextlib
+import errno
 import os
 import tempfile
 from pathlib import Path
 
 __all__ = [
     "replacing",
+    "replacing_together",
     "MissingFileError",
     "NotAFileError",
     "UnreadableFileError",
@@ -150,14 +152,93 @@ def _write_error(path: Path, exc: OSError) -> OSError:
     return type(exc)(f"cannot write {str(path)!r} ({exc.strerror or exc})")
 
 
+def _through_link(path: Path) -> Path:
+    """Where writing ``path`` goes: the file a symbolic link at ``path`` points to (written
+    through, as ``open(path, "w")`` would, not replaced by a regular file), else ``path``."""
+    return Path(os.path.realpath(path)) if path.is_symlink() else path
+
+
+def _temporary(target: Path, shown: Path) -> Path:
+    """An empty temporary file next to ``target`` (with its suffix, for writers that read the
+    format from it), of the mode ``open()`` would give; errors name ``shown``."""
+    try:
+        if target.is_dir():  # found now, before anything is written, not at the rename
+            raise IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR))
+        fd, tmp = tempfile.mkstemp(
+            dir=target.parent, prefix=f".{target.stem}-", suffix=target.suffix
+        )
+        os.close(fd)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp's 0600 -> what open() would have given
+    except OSError as exc:
+        raise _write_error(shown, exc) from None
+    return Path(tmp)
+
+
+def _publish(staged: list[tuple[Path, Path, Path]]) -> None:
+    """Rename each written temporary file onto its target; if a rename fails, remove the
+    targets this call created (files it replaced already keep their new content)."""
+    created = []
+    for tmp, target, shown in staged:
+        existed = os.path.lexists(target)
+        try:
+            os.replace(tmp, target)
+        except OSError as exc:
+            for done in created:
+                done.unlink(missing_ok=True)
+            raise _write_error(shown, exc) from None
+        if not existed:
+            created.append(target)
+
+
+@contextlib.contextmanager
+def replacing_together():
+    """Write several files all or none.
+
+    Yields ``replacing(path)``, a context manager like :func:`replacing` whose file is
+    published only when this block ends without an error, together with the others.  On an
+    error every temporary file is removed and no target has changed.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> with tempfile.TemporaryDirectory() as root:
+    ...     with replacing_together() as replacing:
+    ...         for name in ("a.txt", "b.txt"):
+    ...             with replacing(pathlib.Path(root) / name) as tmp:
+    ...                 _ = tmp.write_text(name)
+    ...     sorted(p.name for p in pathlib.Path(root).iterdir())
+    ['a.txt', 'b.txt']
+    """
+    staged: list[tuple[Path, Path, Path]] = []
+
+    @contextlib.contextmanager
+    def one(path):
+        shown = Path(path)
+        target = _through_link(shown)
+        tmp = _temporary(target, shown)
+        staged.append((tmp, target, shown))
+        try:
+            yield tmp
+        except OSError as exc:
+            raise _write_error(shown, exc) from None
+
+    try:
+        yield one
+        _publish(staged)
+    finally:
+        for tmp, _, _ in staged:
+            tmp.unlink(missing_ok=True)
+
+
 @contextlib.contextmanager
 def replacing(path):
     """Write the file ``path`` whole or not at all.
 
     Yields a temporary file name next to ``path`` (with its suffix, for writers that read the
     format from it).  When the block ends without an error, that file replaces ``path`` at
-    once (an existing file is overwritten, never left half-written); on an error it is removed
-    and ``path`` is as before.
+    once (an existing file is overwritten, never left half-written; a symbolic link is written
+    through: the file it points to is replaced, the link kept); on an error it is removed and
+    ``path`` is as before.  Several files all or none: :func:`replacing_together`.
 
     Raises
     ------
@@ -165,17 +246,5 @@ def replacing(path):
         Of the class of the failure (PermissionError, IsADirectoryError, FileNotFoundError,
         ...), its message naming ``path``.
     """
-    path = Path(path)
-    try:
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}-", suffix=path.suffix)
-        os.close(fd)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp's 0600 -> what open() would have given
-    except OSError as exc:
-        raise _write_error(path, exc) from None
-    try:
-        yield Path(tmp)
-        os.replace(tmp, path)
-    except OSError as exc:
-        raise _write_error(path, exc) from None
-    finally:
-        Path(tmp).unlink(missing_ok=True)
+    with replacing_together() as one, one(path) as tmp:
+        yield tmp

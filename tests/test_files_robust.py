@@ -191,6 +191,79 @@ def test_a_failed_table_write_leaves_the_old_file(tmp_path):
     assert _mode(path) == 0o666 & ~_umask()  # as open() would give, not mkstemp's 0600
 
 
+class _TwoStates:
+    """The least a ``write_vtk`` result has: two states of a straight 3-node rod."""
+
+    s = np.linspace(0.0, 0.04, 3)
+    scales = [0.5, 1.0]
+
+    def __len__(self):
+        return 2
+
+    def centerline(self, k):
+        return np.column_stack([self.s, 0 * self.s, k * self.s])
+
+    def frames(self, k):
+        return np.broadcast_to(np.eye(3), (3, 3, 3))
+
+
+@pytest.mark.parametrize("old", [False, True])
+def test_vtk_states_are_written_all_or_none(tmp_path, old):
+    # the second state's file cannot be written (a folder in its place): the old code had
+    # written the first state's file (new, or over an earlier run's) before it failed
+    from coilrod.rod.export import write_vtk
+
+    (tmp_path / "rod_001.vtu").mkdir()
+    if old:
+        (tmp_path / "rod_000.vtu").write_text("an earlier run")
+    with pytest.raises(IsADirectoryError, match="cannot write '.*rod_001.vtu'"):
+        write_vtk(_TwoStates(), tmp_path / "rod.vtu")
+    assert sorted(os.listdir(tmp_path)) == ["rod_000.vtu", "rod_001.vtu"][1 - old :]
+    if old:
+        assert (tmp_path / "rod_000.vtu").read_text() == "an earlier run"
+    (tmp_path / "rod_001.vtu").rmdir()
+    files = write_vtk(_TwoStates(), tmp_path / "rod.vtu")
+    assert [f.name for f in files] == ["rod_000.vtu", "rod_001.vtu", "rod.pvd"]
+    assert sorted(os.listdir(tmp_path)) == ["rod.pvd", "rod_000.vtu", "rod_001.vtu"]
+
+
+def test_files_written_together_are_removed_when_a_rename_fails(tmp_path, monkeypatch):
+    # the publishing step of write_vtk's all-or-none: the first file renamed is taken back
+    import coils._files as files
+
+    rename, calls = os.replace, []
+
+    def replace(src, dst):
+        calls.append(dst)
+        if len(calls) == 2:
+            raise PermissionError(13, "Permission denied")
+        rename(src, dst)
+
+    def write_both():
+        with files.replacing_together() as replacing:
+            for name in ("a.txt", "b.txt"):
+                with replacing(tmp_path / name) as tmp:
+                    tmp.write_text(name)
+
+    monkeypatch.setattr(files.os, "replace", replace)
+    with pytest.raises(PermissionError, match=r"cannot write '.*b.txt' \(Permission denied\)"):
+        write_both()
+    assert os.listdir(tmp_path) == []
+
+
+def test_a_symlinked_output_is_written_through(tmp_path):
+    # the link was replaced by a regular file and the file it points to left as it was
+    (tmp_path / "data").mkdir()
+    real = tmp_path / "data" / "tip_path.csv"
+    real.write_text("old table\n")
+    link = tmp_path / "tip_path.csv"
+    link.symlink_to(os.path.join("data", "tip_path.csv"))  # relative, as ln -s makes it
+    write_rows(link, [{"a": 1.0}])
+    assert link.is_symlink()
+    assert real.read_text().splitlines() == ["a", "1.0"]
+    assert sorted(os.listdir(tmp_path / "data")) == ["tip_path.csv"]  # no temporary left
+
+
 def _scene_result():
     """Two rod runs (coil and ideal field) whose tip angle is not defined (NaN)."""
     scene = parse_scene(scene_with(load__steps=1, output={"figures": False}))

@@ -9,7 +9,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from coils._files import replacing
+from coils._files import replacing_together
 
 __all__ = ["write_vtk"]
 
@@ -59,9 +59,10 @@ def write_vtk(result, path, states=None, *, frames: bool = True) -> list[Path]:
     ValueError
         A bad extension or state.
     OSError
-        The directory or a file cannot be written (the message names it).  Each file is
-        written whole or not at all (a temporary file, renamed): an existing file is replaced
-        at once, never left half-written.
+        The directory or a file cannot be written (the message names it).  The files are
+        written all or none (temporary files, renamed together when every one is written: an
+        error part way leaves no state's file, and existing files as they were); a symbolic
+        link is written through.
     """
     import meshio
 
@@ -80,30 +81,33 @@ def write_vtk(result, path, states=None, *, frames: bool = True) -> list[Path]:
     scales = getattr(result, "scales", None)
     if scales is None:
         scales = getattr(result, "scale", None)
-    for k in rows:
-        pts = np.asarray(result.centerline(k), float)
-        cells = [("line", np.column_stack([np.arange(len(pts) - 1), np.arange(1, len(pts))]))]
-        data = {"s": s}
-        if frames:
-            R = np.asarray(result.frames(k), float)
-            data.update(tangent=R[:, :, 0], normal=R[:, :, 1], binormal=R[:, :, 2])
-        mesh = meshio.Mesh(pts, cells, point_data=data)
-        target = path if single else path.with_name(f"{path.stem}_{k:03d}{path.suffix}")
-        with replacing(target) as tmp:  # whole or not at all; OSError naming target
-            mesh.write(tmp)
-        written.append(target)
-    if not single:
-        pvd = path.with_suffix(".pvd")
-        lines = [
-            '<?xml version="1.0"?>',
-            '<VTKFile type="Collection" version="0.1">',
-            "<Collection>",
-        ]
-        for k, target in zip(rows, written, strict=True):
-            time = float(scales[k]) if scales is not None else float(k)
-            lines.append(f'<DataSet timestep="{time!r}" part="0" file={quoteattr(target.name)}/>')
-        lines += ["</Collection>", "</VTKFile>", ""]
-        with replacing(pvd) as tmp:
-            tmp.write_text("\n".join(lines), encoding="utf-8")
-        written.append(pvd)
+    with replacing_together() as replacing:  # every file or none (an error removes them)
+        for k in rows:
+            pts = np.asarray(result.centerline(k), float)
+            cells = [("line", np.column_stack([np.arange(len(pts) - 1), np.arange(1, len(pts))]))]
+            data = {"s": s}
+            if frames:
+                R = np.asarray(result.frames(k), float)
+                data.update(tangent=R[:, :, 0], normal=R[:, :, 1], binormal=R[:, :, 2])
+            mesh = meshio.Mesh(pts, cells, point_data=data)
+            target = path if single else path.with_name(f"{path.stem}_{k:03d}{path.suffix}")
+            with replacing(target) as tmp:  # whole; OSError naming target
+                mesh.write(tmp)
+            written.append(target)
+        if not single:
+            pvd = path.with_suffix(".pvd")
+            lines = [
+                '<?xml version="1.0"?>',
+                '<VTKFile type="Collection" version="0.1">',
+                "<Collection>",
+            ]
+            for k, target in zip(rows, written, strict=True):
+                time = float(scales[k]) if scales is not None else float(k)
+                lines.append(
+                    f'<DataSet timestep="{time!r}" part="0" file={quoteattr(target.name)}/>'
+                )
+            lines += ["</Collection>", "</VTKFile>", ""]
+            with replacing(pvd) as tmp:
+                tmp.write_text("\n".join(lines), encoding="utf-8")
+            written.append(pvd)
     return written
