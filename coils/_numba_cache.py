@@ -8,7 +8,9 @@ cache.  This module does not import numba: it only reads the cache path a dispat
 
 from __future__ import annotations
 
+import pickle
 import sys
+import warnings
 from pathlib import Path
 
 _seen: dict = {}  # dispatcher -> whether its cache index was on disk at the first look
@@ -27,6 +29,43 @@ def on_disk(dispatcher) -> bool:
             seen = False
         _seen[dispatcher] = seen
     return seen
+
+
+def _check_index(dispatcher) -> None:
+    """Before ``dispatcher`` (a ``numba.njit(cache=True)`` function) first compiles or loads:
+    if its index in numba's cache is damaged (numba's own loader would raise from inside the
+    call: it catches only a missing file), remove it with a warning, so that the kernel
+    compiles anew and numba writes a fresh index.  Where it cannot be removed, the cache is
+    off for this kernel in this process.  Reads the index as numba does (a pickled version,
+    then, for this numba's version, the pickled stamp and overloads); compiles nothing."""
+    try:
+        cache = dispatcher._cache
+        path, version = Path(cache._cache_file._index_path), cache._cache_file._version
+    except AttributeError:  # not cached, or numba internals changed: nothing to check
+        return
+    try:
+        with open(path, "rb") as fh:
+            found = pickle.load(fh)
+            rest = fh.read()
+        if found == version:  # another version's index is ignored by numba, not read
+            pickle.loads(rest)
+        return
+    except FileNotFoundError:
+        return
+    except Exception as exc:  # noqa: BLE001 -- any unpickling error: what numba would raise
+        reason = f"{type(exc).__name__}: {exc}"
+    name = getattr(dispatcher, "__name__", "a kernel")
+    try:
+        path.unlink()
+        done = "removed it; the kernel compiles anew and numba writes a fresh one"
+    except OSError as exc:
+        cache.disable()
+        done = f"cannot remove it ({exc.strerror or exc}); numba's cache is off for {name}"
+    warnings.warn(
+        f"numba's cache index of {name} {str(path)!r} is damaged ({reason}); {done}",
+        RuntimeWarning,
+        stacklevel=3,
+    )
 
 
 class Rental:
@@ -87,7 +126,7 @@ class Rental:
             price = self.threshold
             if self.spent < price and self.spent + seconds <= price and not self.held():
                 return False
-            self.ready = True
+            self._buy()
         return True
 
     def charge(self, seconds: float) -> None:
@@ -100,4 +139,10 @@ class Rental:
         runs from the next call on (compiling once is cheaper than renting to the end).
         The cache is not asked (:meth:`pays` does at the next call)."""
         if not self.ready and self.spent + seconds > self.threshold:
-            self.ready = True
+            self._buy()
+
+    def _buy(self) -> None:
+        """The compiled kernel runs from now on; a damaged cache index is removed first
+        (:func:`_check_index`: numba would raise from inside the first call)."""
+        _check_index(self._kernel())
+        self.ready = True

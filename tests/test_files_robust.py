@@ -155,6 +155,41 @@ def test_scene_files_and_data_files_share_one_utf8_reader(tmp_path, monkeypatch)
         read_text(path, "data file")
 
 
+def test_a_damaged_numba_cache_index_is_removed_before_the_kernel_runs(tmp_path, monkeypatch):
+    # numba's loader catches only a missing index: a damaged one raised from inside the
+    # kernel's first call (the ski rental counted it as cached, so it bought at once).  Now
+    # the rental removes it with a warning when it buys, and numba compiles anew.  Nothing is
+    # compiled here: numba's own loader reads the index, before and after
+    import pickle
+    import sys
+    from pathlib import Path
+
+    import numba
+    from numba.core import config
+
+    import coils._numba_cache as nc
+
+    monkeypatch.setattr(config, "CACHE_DIR", str(tmp_path))  # what NUMBA_CACHE_DIR sets
+
+    def twice(x):
+        return 2.0 * x
+
+    kernel = numba.njit(cache=True)(twice)
+    index = Path(kernel._cache._cache_file._index_path)
+    assert tmp_path in index.parents
+    index.parent.mkdir(parents=True, exist_ok=True)
+    index.write_bytes(b"not a pickle")
+    with pytest.raises(pickle.UnpicklingError):  # what the kernel's first call raised
+        kernel._cache._cache_file._load_index()
+    monkeypatch.setattr(sys.modules[__name__], "_PRICE", 0.0, raising=False)
+    rental = nc.Rental(__name__, lambda: kernel, "_PRICE")
+    with pytest.warns(RuntimeWarning, match=r"index of twice '.*' is damaged.*removed it"):
+        assert rental.pays()
+    assert not index.exists()
+    assert kernel._cache._cache_file._load_index() == {}  # numba: an empty cache, compile
+    assert not kernel.overloads  # nothing compiled
+
+
 # -- outputs ------------------------------------------------------------------------------------
 from _scenes import scene_with  # noqa: E402
 
