@@ -195,8 +195,10 @@ def replacing_together():
     """Write several files all or none.
 
     Yields ``replacing(path)``, a context manager like :func:`replacing` whose file is
-    published only when this block ends without an error, together with the others.  On an
-    error every temporary file is removed and no target has changed.
+    published only when this block ends without an error, together with the others (each
+    renamed onto its target).  On an error in the block every temporary file is removed and no
+    target has changed; if a rename fails (after every file was written), the targets this
+    call created are removed too (those it replaced already keep their new content).
 
     Examples
     --------

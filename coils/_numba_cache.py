@@ -59,7 +59,7 @@ def _check_index(dispatcher) -> None:
         path.unlink()
         done = "removed it; the kernel compiles anew and numba writes a fresh one"
     except OSError as exc:
-        cache.disable()
+        getattr(cache, "disable", lambda: None)()
         done = f"cannot remove it ({exc.strerror or exc}); numba's cache is off for {name}"
     warnings.warn(
         f"numba's cache index of {name} {str(path)!r} is damaged ({reason}); {done}",
@@ -79,7 +79,8 @@ class Rental:
         Name of the module that holds the threshold (``__name__`` of the caller).
     kernel : callable
         ``kernel()`` returns the ``numba.njit(cache=True)`` dispatcher; called only when the
-        cache is asked about (so the module that compiles it is imported no earlier).
+        cache is asked about or the compiled kernel is about to run (so the module that
+        compiles it is imported no earlier).
     threshold : str
         Name of the owner's attribute holding the price: the estimated CPU seconds of numpy
         calls after which the compiled kernel runs (0 compiles at the first call,
