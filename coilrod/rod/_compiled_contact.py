@@ -35,9 +35,9 @@ __all__ = ["COMPILE_AFTER", "MODES", "compiled_pays", "contact_core"]
 #: Estimated CPU seconds of numpy contact terms after which the compiled kernel is used (ski
 #: rental: about what compiling it costs on a cold cache, benchmarks/results/contact.md);
 #: 0 compiles at the first call, ``math.inf`` never.
-COMPILE_AFTER = 3.0
+COMPILE_AFTER = 4.0
 #: Measured cost of the numpy twin with the tangent: per call and per node x member, s.
-_NUMPY_CALL_S, _NUMPY_NODE_S = 2.5e-4, 2.0e-6
+_NUMPY_CALL_S, _NUMPY_NODE_S = 3.5e-4, 1.5e-6
 #: The complementarity function's codes: the min function, Fischer-Burmeister, and every
 #: row taken as active (partials 0 in lam and 1 in kappa g: the gap's gradient rows).
 MODES = {"min": 0, "fb": 1, "every": 2}
@@ -60,7 +60,8 @@ def compiled_pays(k: int, n: int) -> bool:
 
 @nb.njit(cache=True, error_model="numpy")
 def contact_core(
-    lam, gaps, normals, hess, frames, phi, blk, cc, om, kappa, L, mode, tangent, R, ab, kv
+    lam, gaps, normals, hess, frames, phi, blk, cc, om, kappa, L, mode, tangent, R, ab, kv,
+    var, m_c, turn,
 ):  # fmt: skip
     """Add the contact terms of a stack to the residual and write the band.
 
@@ -88,12 +89,18 @@ def contact_core(
         block (entry (r, c) of the stacked Jacobian at ``ab[kv + r - c, c]``).
     R : ndarray, shape (k, n, nv)
         The residual, the contact terms added in place (the multipliers' rows set).
+    var, m_c, turn : ndarray, shapes (k, n, 3, 3, 3), (k, n, 3), (k, n, nc, 3)
+        Outputs for the second variation (``SpatialRod._second_variation``; node 0's
+        entries not written): ``var[:, j]`` the force row's block in the world rotation,
+        the symmetric part of the moment row's, the force row's block in x_j (contact
+        included); ``m_c`` the contact moments (rows too); ``turn`` the moment rows'
+        derivatives in the multipliers (transposed).  With ``tangent`` only (``m_c``
+        always).
     """
     k, n, nc = lam.shape
     nv = R.shape[2]
     size = n * nv
     f_c = np.empty((n, 3))
-    m_c = np.empty((n, 3))
     d_lam = np.empty((n, nc))
     d_gap = np.empty((n, nc))
     vecs = np.empty((4, 3))
@@ -115,11 +122,11 @@ def contact_core(
             _cross(t, f_c[j], tmp)
             oc = om[j] * cc[j]
             for a in range(3):
-                m_c[j, a] = -oc * tmp[a]
+                m_c[m, j, a] = -oc * tmp[a]
             if j >= 1:
                 for a in range(3):
                     R[m, j - 1, 6 + a] -= om[j] * f_c[j, a]
-                    R[m, j, 3 + a] += m_c[j, a]
+                    R[m, j, 3 + a] += m_c[m, j, a]
             for o in range(nc):
                 x = lam[m, j, o]
                 g = gaps[m, j, o]
@@ -170,7 +177,9 @@ def contact_core(
             for a in range(3):
                 for b in range(3):
                     M1[a, b] = oc * M1[a, b]
+                    var[m, j, 0, a, b] = M1[a, b]
                     out[a, b] = blk[m, j, 8, a, b] - om[j] * LH[a, b]
+                    var[m, j, 2, a, b] = out[a, b]
             _put(ab, kv, rf, cx, out)  # f_xnext
             _mm(M1, Jl, M2)
             for a in range(3):
@@ -189,11 +198,13 @@ def contact_core(
                     S[a, b] = 0.0
             _sym_term(t, f_c[j], 1.0, S)
             _mm(M1, That, M2)  # That LH That
-            _hat(m_c[j], K)
+            _hat(m_c[m, j], K)
             occ = oc * cc[j]
             for a in range(3):
                 for b in range(3):
-                    mc_d[a, b] = -oc * S[a, b] + occ * M2[a, b] - 0.5 * K[a, b]
+                    sym = -oc * S[a, b] + occ * M2[a, b]
+                    var[m, j, 1, a, b] = sym
+                    mc_d[a, b] = sym - 0.5 * K[a, b]
             _mm(mc_d, Jl, M1)
             for a in range(3):
                 for b in range(3):
@@ -207,7 +218,8 @@ def contact_core(
                 ck = d_gap[j, o] * kappa
                 for a in range(3):
                     ab[kv + rf + a - (cl + o), cl + o] = -om[j] * tmp[a]  # f_lamnext
-                    ab[kv + rp + a - (cl + o), cl + o] = -oc * tn[a]  # m_lam
+                    turn[m, j, o, a] = -oc * tn[a]
+                    ab[kv + rp + a - (cl + o), cl + o] = turn[m, j, o, a]  # m_lam
                     gd[a] = ck * (cc[j] * tn[a])
                 rc = cl + o
                 for b in range(3):

@@ -65,6 +65,8 @@ _max = np.maximum.reduce
 _NO_BAND = np.zeros((2, 2), order="F")
 #: The gap hessians' argument of the compiled contact terms without the tangent.
 _NO_HESS = np.zeros((1, 1, 1, 3, 3))
+#: The second variation's outputs of the compiled contact terms without the tangent.
+_NO_VAR, _NO_TURN = np.zeros((1, 1, 3, 3, 3)), np.zeros((1, 1, 1, 3))
 
 _CS = None  # the module coilrod.rod._compiled_spatial once imported (it imports numba)
 
@@ -651,7 +653,7 @@ class SpatialRod(DiscreteRod):
         if blocks is None:  # the compiled kernel's inputs (_compiled_contact): run it again
             terms, frames, phi, blk = c_x
             scratch = np.zeros((1, self.n, self.nv))
-            return self._contact_band(terms, frames, phi, blk, scratch, True, every=True), R1
+            return self._contact_band(terms, frames, phi, blk, scratch, True, every=True)[0], R1
         c_lam = np.zeros_like(blocks["c_lam"])
         every = {**blocks, "c_x": c_x, "c_phi": c_phi, "c_lam": c_lam}
         return self._scatter(1, every), R1
@@ -1272,21 +1274,27 @@ class SpatialRod(DiscreteRod):
 
     def _contact_band(self, terms, frames, phi, blk, R, tangent, every=False):
         """Run the compiled contact kernel (:func:`~coilrod.rod._compiled_contact.contact_core`)
-        on a stack: the contact terms added to R (k, n, nv) in place; with ``tangent`` the
-        band storage (a new array) returned, else None.  ``terms``: (lam, gaps, normals,
-        hess) of :meth:`_contact_terms`, C-contiguous; ``every``: every contact row the
-        gap's (:meth:`_every_active_band`)."""
+        on a stack: the contact terms added to R (k, n, nv) in place; with ``tangent``
+        returns the band storage (a new array) and the second variation's pieces
+        (:meth:`_contact_variation`), else None.  ``terms``: (lam, gaps, normals, hess) of
+        :meth:`_contact_terms`, C-contiguous; ``every``: every contact row the gap's
+        (:meth:`_every_active_band`)."""
         cmod = _contact_module()
         lam, gaps, normals, hess = terms
-        k = lam.shape[0]
-        ab = self._scatter(k, self._constant_blocks()) if tangent else _NO_BAND
+        k, n, nc = lam.shape
         mode = cmod.MODES["every" if every or self._every_rows else self.ncp]
         cc, om = self._contact_geometry()
+        m_c = np.zeros((k, n, 3))
+        if tangent:
+            ab = self._scatter(k, self._constant_blocks())
+            var, turn = np.empty((k, n, 3, 3, 3)), np.empty((k, n, nc, 3))
+        else:
+            ab, var, turn = _NO_BAND, _NO_VAR, _NO_TURN
         cmod.contact_core(
             lam, gaps, normals, _NO_HESS if hess is None else hess, frames, phi, blk, cc, om,
-            self.kappa, self.L, mode, tangent, R, ab, self.kl + self.ku,
+            self.kappa, self.L, mode, tangent, R, ab, self.kl + self.ku, var, m_c, turn,
         )  # fmt: skip
-        return ab if tangent else None
+        return (ab, (var, m_c, turn)) if tangent else None
 
     def _compiled_contact(self, U, S, V, X, frames, phi, blk, m, G, pair, diag, A_ab, tangent):
         """The end of :meth:`_assemble` for a contact problem with the contact terms by the
@@ -1298,32 +1306,26 @@ class SpatialRod(DiscreteRod):
         if k == 1:  # the state's gaps for its event tests
             self._remember_gaps(U, gaps.copy())
         terms = (np.ascontiguousarray(lam), gaps, normals, hess)
-        ab = self._contact_band(terms, frames, phi, blk, pair[0], tangent)
+        out = self._contact_band(terms, frames, phi, blk, pair[0], tangent)
         R, R1 = pair[0].reshape(k, -1), pair[1].reshape(k, -1)
         if not tangent:
             return R, R1, None, None
-        # (frames and blk are the workspace's, overwritten by the next call)
-        frames, blk = frames.copy(), blk.copy()
+        ab, pieces = out
+        frames = frames.copy()  # (the workspace's, overwritten by the next call)
         if k == 1:
-            self._kept = (U.tobytes(), S.tobytes(), None, (terms, frames, phi, blk), R1, R)
-        args = (S, G, m.copy(), frames, phi, blk, terms, diag, A_ab)
+            self._kept = (U.tobytes(), S.tobytes(), None, (terms, frames, phi, blk.copy()), R1, R)
+        args = (S, G, m.copy(), frames, pieces, lam, gaps, normals, diag, A_ab)
         return R, R1, ab, _Deferred(self._contact_variation, args)
 
-    def _contact_variation(self, S, G, m, frames, phi, blk, terms, diag, A_ab):
+    def _contact_variation(self, S, G, m, frames, pieces, lam, gaps, normals, diag, A_ab):
         """The second variation (:meth:`_second_variation`) of a linearization whose contact
-        terms the compiled kernel formed: the contact pieces by the numpy twin
-        (:meth:`_contact_blocks`) from the kept terms (no search)."""
-        lam, gaps, normals, hess = terms
-        with np.errstate(all="ignore"):
-            f_c, m_c = self._normal_force(lam, normals, frames[:, :, :, 0])
-            contact = {
-                "lam": lam, "gaps": gaps, "normals": normals, "hess": hess, "arm": None,
-                "f_c": f_c, "m_c": m_c, "ncp": self._ncp(lam, gaps),
-            }  # fmt: skip
-            blocks = {"m_x": blk[:, 1:, 5], "m_diag": blk[:, 1:, 1], "f_xnext": blk[:, 1:, 8],
-                      "f_phinext": blk[:, 1:, 9]}  # fmt: skip
-            sym = self._contact_blocks(contact, frames, phi, blocks)
-            return self._second_variation(S, G, m, frames, blocks["f_xnext"], diag, A_ab, sym)
+        terms the compiled kernel formed, from its ``pieces`` (the ones
+        :meth:`_contact_blocks` returns, to rounding)."""
+        var, m_c, turn = pieces
+        act = (self.kappa * gaps < lam)[:, 1:]
+        n_t = np.swapaxes(normals[:, 1:], -1, -2)
+        sym = (var[:, 1:, 0], var[:, 1:, 1], m_c, act, n_t, np.swapaxes(turn[:, 1:], -1, -2))
+        return self._second_variation(S, G, m, frames, var[:, 1:, 2], diag, A_ab, sym)
 
     def _friction_rows(self, V, X, frames, lam, normals, hess):
         """Coulomb friction at the contact points: ``(Phi, tau, derivatives)``.
