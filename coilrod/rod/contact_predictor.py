@@ -186,6 +186,7 @@ def active_set_start(problem, u: np.ndarray, scale: float = 1.0, max_rounds: int
     n, nv, nc = problem.n, problem.nv, problem.nc
     if not nc or problem.uniform or problem.nt:
         return None
+    u = np.asarray(u, float)  # (the state's gaps below are the linearization's, remembered)
     lin = _every_rows_linearization(problem, u, scale)
     if not bool(lin.ok[0]):
         return None
