@@ -7,7 +7,9 @@
    Contact is at the corners of the rod's polygon and the tip (coilrod.rod.spatial).
 2. Newton iterations of a contact state against the free state in the same (mixed) layout
    at 16-128 segments (tip on a wall, the flat support, a catheter in a vessel bend), and an
-   insertion through a bend (50 steps, 48 segments).
+   insertion through a bend (50 steps, 48 segments); the spatial and contact kernels
+   compiled (compiled at the start if numba's cache does not hold them), and the contact
+   kernel's cold compile cost (a fresh process on an empty cache).
 
 Run: ``python benchmarks/bench_contact.py`` (prints markdown tables; ~1 min).
 """
@@ -151,8 +153,45 @@ def insertion():
     return cpu, int(ins.substeps.sum()), count[0]
 
 
+_COMPILE_SCRIPT = """
+import time
+import numpy as np
+t0 = time.process_time()
+from coilrod.rod._compiled_contact import contact_core
+t1 = time.process_time()
+k, n, nc, nv = 1, 3, 1, 10
+ab = np.zeros((4, n * nv), order="F")
+contact_core(np.ones((k, n, nc)), np.zeros((k, n, nc)), np.ones((k, n, nc, 3)),
+             np.zeros((k, n, nc, 3, 3)), np.zeros((k, n, 3, 3)), np.zeros((k, n, 3)),
+             np.zeros((k, n, 10, 3, 3)), np.ones(n), np.ones(n), 1.0, 1.0, 0, True,
+             np.zeros((k, n, nv)), ab, 1, np.zeros((k, n, 3, 3, 3)), np.zeros((k, n, 3)),
+             np.zeros((k, n, nc, 3)))
+print(time.process_time() - t1)
+"""
+
+
+def contact_compile_cost() -> float:
+    """CPU s of compiling the contact kernel (coilrod.rod._compiled_contact) on an empty numba
+    cache (a fresh process; the helpers it shares with the spatial kernel included)."""
+    import subprocess
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+        out = subprocess.run([sys.executable, "-c", _COMPILE_SCRIPT], env=env, check=True,
+                             capture_output=True, text=True).stdout  # fmt: skip
+    return float(out.split()[-1])
+
+
 def main() -> None:
     warnings.simplefilter("ignore")
+    # the compiled spatial and contact kernels from the first call (compiled now if numba's
+    # cache does not hold them): the tables measure compiled code
+    import coilrod.rod._compiled_contact as contact_kernel
+    import coilrod.rod._compiled_spatial as spatial_kernel
+
+    price = contact_kernel.COMPILE_AFTER
+    spatial_kernel.COMPILE_AFTER = contact_kernel.COMPILE_AFTER = 0.0
     print("# Contact: convergence and cost")
     print()
     print(f"Machine: {machine_info()}; CPU time, one run.")
@@ -196,6 +235,9 @@ def main() -> None:
     cpu, solves, iterations = insertion()
     print(f"Insertion through a bend, 50 steps, 48 segments: {cpu:.2f} s CPU (best of three), "
           f"{solves} solves, {iterations} Newton iterations.")  # fmt: skip
+    print()
+    print(f"Compiling the contact kernel on an empty numba cache: {contact_compile_cost():.1f} s "
+          f"CPU (its ski rental's price: {price:.1f} s).")  # fmt: skip
     print()
 
 

@@ -406,11 +406,9 @@ def test_richardson_keeps_the_rod_admissible():
     np.testing.assert_allclose(res.gaps(0)[:-1, 0], wall.gap(corners) - r, atol=1e-15)
 
 
-@pytest.mark.parametrize("section", [Circle(2e-3), coilrod.Rectangle(3e-3, 1e-3)])
-def test_contact_jacobian_against_finite_differences(section):
-    # the corner contact's blocks (force, moment and complementarity rows in a node's
-    # positions, rotations and multipliers) against central differences of the residual,
-    # at a random state touching a tilted wall and a curved vessel wall
+def _wall_and_bend_problem(section):
+    """A spatial contact problem of 5 segments against a tilted wall and a curved vessel
+    wall (a gap hessian), and a random state touching both (off equilibrium)."""
     from coilrod.rod.solve import build_spatial_problem, make_mesh
 
     rod = Rod(L, 1e6, section, Magnetization(128e3, 0.0))
@@ -426,7 +424,15 @@ def test_contact_jacobian_against_finite_differences(section):
     u[:, 0:3] += 0.01 * rng.standard_normal((P.n, 3))
     u[:, 3:6] += 0.2 * rng.standard_normal((P.n, 3))
     u[:, 6:] = rng.standard_normal((P.n, P.nv - 6))
-    u = u.ravel()
+    return P, u.ravel(), rng
+
+
+@pytest.mark.parametrize("section", [Circle(2e-3), coilrod.Rectangle(3e-3, 1e-3)])
+def test_contact_jacobian_against_finite_differences(section):
+    # the corner contact's blocks (force, moment and complementarity rows in a node's
+    # positions, rotations and multipliers) against central differences of the residual,
+    # at a random state touching a tilted wall and a curved vessel wall
+    P, u, rng = _wall_and_bend_problem(section)
     J = P.dense_jacobian(u, 0.7)
 
     def residual(v):
@@ -447,6 +453,59 @@ def test_contact_jacobian_against_finite_differences(section):
     P.linearize(u[None] + 0.01 * rng.standard_normal(P.size), np.array([0.3]))
     for x, y in zip(lazy.tangent.blocks, (D, E), strict=True):
         np.testing.assert_array_equal(x, y)
+
+
+def test_compiled_contact_terms_are_the_numpy_twins(monkeypatch):
+    # the compiled contact kernel (coilrod.rod._compiled_contact, run as Python through its
+    # .py_func: nothing compiles) against its numpy twin (SpatialRod._contact_rows,
+    # _contact_blocks, _scatter) on the state of the test above and a perturbed one as a
+    # stack of two, for both complementarity functions and every row the gap's: the same
+    # residual, the band to rounding, the same second variation; and a load step's
+    # prediction band from the kept kernel inputs is the every-rows linearization's
+    import coilrod.rod._compiled_contact as cc
+    import coilrod.rod._compiled_spatial as cs
+
+    P, u, rng = _wall_and_bend_problem(Circle(2e-3))
+    U = np.stack([u, u + 1e-3 * rng.standard_normal(P.size)])
+    S = np.array([0.7, 0.5])
+    twin = {}
+    for ready in (False, True):
+        monkeypatch.setattr(cc._rental, "ready", ready)
+        monkeypatch.setattr(cc, "COMPILE_AFTER", np.inf)
+        monkeypatch.setattr(cc._rental, "held", lambda: False)
+        if ready:  # the kernel and its helpers as Python
+            for mod, names in ((cc, ("_cross", "_hat", "_mm", "_sym_term", "_exp_and_jl",
+                                     "_put", "contact_core")), (cs, ("_hat", "_mm"))):  # fmt: skip
+                for name in names:
+                    monkeypatch.setattr(mod, name, getattr(mod, name).py_func)
+        for mode in ("min", "fb", "every"):
+            P.ncp, P._every_rows = ("min", True) if mode == "every" else (mode, False)
+            lin = P.linearize(U, S)
+            rows = P.linearize(U, S, tangent=False).residual
+            D, E = lin.tangent.blocks
+            counts = P.negative_count(lin)
+            twin.setdefault(mode, []).append((lin.residual, rows, lin.tangent.parts, D, E, counts))
+        P._every_rows = False
+        P.ncp = "min"
+        lin = P.linearize(u[None], np.array([0.7]))  # (a one-state tangent: its inputs kept)
+        twin.setdefault("kept", []).append(P._every_active_band(u, 0.7))
+        assert (P._kept[2] is None) == ready  # (the kernel's inputs kept, not numpy's blocks)
+    for mode in ("min", "fb", "every"):
+        (R, rows, ab, D, E, counts), (Rc, rows_c, abc, Dc, Ec, counts_c) = twin[mode]
+        np.testing.assert_array_equal(counts_c, counts)
+        scale = np.abs(ab).max()
+        np.testing.assert_allclose(Rc, R, rtol=1e-14, atol=1e-14 * np.abs(R).max())
+        np.testing.assert_array_equal(rows_c, rows)
+        np.testing.assert_allclose(abc, ab, rtol=0, atol=1e-14 * scale)
+        np.testing.assert_array_equal(abc != 0, ab != 0)
+        np.testing.assert_allclose(Dc, D, rtol=0, atol=1e-14 * np.abs(D).max())
+        np.testing.assert_array_equal(Ec, E)  # (no contact terms)
+    assert (twin["min"][0][2] != 0).sum() < (twin["fb"][0][2] != 0).sum()  # (min: 0 or 1)
+    (band, rate), (band_c, rate_c) = twin["kept"]
+    np.testing.assert_allclose(band_c, band, rtol=0, atol=1e-14 * np.abs(band).max())
+    np.testing.assert_array_equal(rate_c, rate)
+    every = twin["every"][1][2][:, : P.size]  # the kernel's every-rows band, member 0
+    np.testing.assert_array_equal(band_c, every)
 
 
 class TestSurface:
@@ -594,14 +653,12 @@ def test_piecewise_prediction_across_the_tip_closing():
     # the prediction above linearized at u0 with every contact row the gap's; after a tangent
     # at u0 (``lin``) it reuses that one's blocks: the same band as a fresh linearization with
     # every row active (bitwise), so the same prediction
-    from coilrod.rod.contact_predictor import _all_active
-
     kept = P._every_active_band(u0, 0.05)
     assert kept is not None
     assert P._every_active_band(u0, 0.15) is None  # another scale: not the kept tangent's
-    P._ncp = _all_active
+    P._every_rows = True
     every = P.linearize(u0[None], np.array([0.05]))
-    del P._ncp
+    del P._every_rows
     np.testing.assert_array_equal(kept[0], every.tangent.parts)
     np.testing.assert_array_equal(kept[1], every.load_rate)
     np.testing.assert_array_equal(P.piecewise_prediction(u0, 0.05, 0.1), pred)

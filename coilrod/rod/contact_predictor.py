@@ -51,11 +51,16 @@ def event_fraction(problem, U: np.ndarray, dU: np.ndarray) -> np.ndarray:
     return np.minimum(frac, release.min(axis=(1, 2)))
 
 
-def _all_active(lam: np.ndarray, gaps: np.ndarray):
-    """The min complementarity function with every row taken as active: the value ``kappa
-    g`` is not used, its partials in lam (0) and in kappa g (1) make the contact rows the
-    gap's gradient (:meth:`~coilrod.rod.spatial.SpatialRod._ncp`'s interface)."""
-    return np.minimum(lam, gaps), np.zeros_like(lam), np.ones_like(lam)
+def _every_rows_linearization(problem, u: np.ndarray, scale: float):
+    """The linearization of ``problem`` at the state ``u`` (size,) and ``scale`` with every
+    contact row the gap's (kappa times its gradient: ``SpatialRod._every_rows``, set on the
+    instance for this call only); it remembers the state's surface gaps
+    (``SpatialRod._state_gaps``)."""
+    problem._every_rows = True
+    try:
+        return problem.linearize(u[None], np.array([scale]))
+    finally:
+        del problem._every_rows
 
 
 _ENTRIES: dict = {}  # (n, nv, nc, kl + ku) -> _contact_entries (read-only arrays), bounded
@@ -99,11 +104,7 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     # tangent serves every switch.
     kept = problem._every_active_band(u, scale)  # the converged step's blocks, if at u
     if kept is None:
-        problem._ncp = _all_active  # (an instance attribute: the class's method is untouched)
-        try:
-            every = problem.linearize(u[None], np.array([scale]))
-        finally:
-            del problem._ncp
+        every = _every_rows_linearization(problem, u, scale)
         if not bool(every.ok[0]):
             return None
         kept = every.tangent.parts, every.load_rate
@@ -185,22 +186,12 @@ def active_set_start(problem, u: np.ndarray, scale: float = 1.0, max_rounds: int
     n, nv, nc = problem.n, problem.nv, problem.nc
     if not nc or problem.uniform or problem.nt:
         return None
-    seen = {}
-
-    def every_active(lam, gaps):  # _all_active, keeping the gaps of all points
-        if lam.shape[1] == n:
-            seen["g"] = gaps
-        return _all_active(lam, gaps)
-
-    problem._ncp = every_active  # (an instance attribute: the class's method is untouched)
-    try:
-        lin = problem.linearize(u[None], np.array([scale]))
-    finally:
-        del problem._ncp
-    if not bool(lin.ok[0]) or "g" not in seen:
+    u = np.asarray(u, float)  # (the state's gaps below are the linearization's, remembered)
+    lin = _every_rows_linearization(problem, u, scale)
+    if not bool(lin.ok[0]):
         return None
     kappa = problem.kappa
-    kg = kappa * seen["g"][0, 1:]  # (n - 1, nc)
+    kg = kappa * problem._state_gaps(u[None])[0, 1:]  # (n - 1, nc): the linearization's own
     lam = u.reshape(n, nv)[1:, 9 : 9 + nc]
     active = (lam > 0.0) & (kg < 1e-2 * lam)
     bi, ci = _contact_entries(problem)

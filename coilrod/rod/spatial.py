@@ -63,6 +63,10 @@ _max = np.maximum.reduce
 #: The band storage argument of the per-node pass where it does not write one (Fortran
 #: order, as the real one: one compiled version of the pass).
 _NO_BAND = np.zeros((2, 2), order="F")
+#: The gap hessians' argument of the compiled contact terms without the tangent.
+_NO_HESS = np.zeros((1, 1, 1, 3, 3))
+#: The second variation's outputs of the compiled contact terms without the tangent.
+_NO_VAR, _NO_TURN = np.zeros((1, 1, 3, 3, 3)), np.zeros((1, 1, 1, 3))
 
 _CS = None  # the module coilrod.rod._compiled_spatial once imported (it imports numba)
 
@@ -75,6 +79,19 @@ def _spatial_module():
 
         _CS = _compiled_spatial
     return _CS
+
+
+_CC = None  # the module coilrod.rod._compiled_contact once imported (it imports numba)
+
+
+def _contact_module():
+    """:mod:`coilrod.rod._compiled_contact`, imported on first use (not at import time)."""
+    global _CC
+    if _CC is None:
+        from . import _compiled_contact
+
+        _CC = _compiled_contact
+    return _CC
 
 
 def _compiled_core():
@@ -622,7 +639,8 @@ class SpatialRod(DiscreteRod):
         kept = self._kept
         if kept is None:
             return None
-        key, skey, blocks, (c_x, c_phi), R1, R = kept
+        key, skey, blocks, every, R1, R = kept
+        c_x, c_phi = every if blocks is not None else (every, None)
         if not (
             skey == np.array([scale], float).tobytes()
             and key == np.asarray(u, float)[None].tobytes()
@@ -632,6 +650,10 @@ class SpatialRod(DiscreteRod):
         turned = np.sqrt(np.einsum("ni,ni->n", phi, phi)).max()
         if not (np.isfinite(R).all() and turned <= self.max_turn):  # (linearize's ok)
             return None
+        if blocks is None:  # the compiled kernel's inputs (_compiled_contact): run it again
+            terms, frames, phi, blk = c_x
+            scratch = np.zeros((1, self.n, self.nv))
+            return self._contact_band(terms, frames, phi, blk, scratch, True, every=True)[0], R1
         c_lam = np.zeros_like(blocks["c_lam"])
         every = {**blocks, "c_x": c_x, "c_phi": c_phi, "c_lam": c_lam}
         return self._scatter(1, every), R1
@@ -680,9 +702,17 @@ class SpatialRod(DiscreteRod):
     #: rows and releases it over several iterations) or "fb" (Fischer-Burmeister).
     ncp = "min"
 
+    #: Every contact row the gap's (a linearization for the contact predictor,
+    #: :mod:`coilrod.rod.contact_predictor`, sets it on the instance): :meth:`_ncp`'s
+    #: partials are 0 in lam and 1 in kappa g at every point (its value, min(lam, g), unused).
+    _every_rows = False
+
     def _ncp(self, lam: np.ndarray, gaps: np.ndarray):
         """Complementarity function of (lam, kappa g) and its partial derivatives in lam and
-        in kappa g (semismooth; zero iff lam >= 0, g >= 0, lam g = 0)."""
+        in kappa g (semismooth; zero iff lam >= 0, g >= 0, lam g = 0); with
+        :attr:`_every_rows` the gap's rows at every point."""
+        if self._every_rows:
+            return np.minimum(lam, gaps), np.zeros_like(lam), np.ones_like(lam)
         a, b = lam, self.kappa * gaps
         if self.ncp == "min":
             pick = b < a
@@ -1119,6 +1149,9 @@ class SpatialRod(DiscreteRod):
             self.mu, self.K, self.mesh.h, self.mesh.w, self.R0, self.L, frames, R, R1, blk,
             diag, A_ab, m, ab, self.kl + self.ku, direct,
         )  # fmt: skip
+        if self.nc and self._contact_kernel(k, tangent, band):
+            return self._compiled_contact(U, S, V, X, frames, phi, blk, m, G, pair, diag, A_ab,
+                                          tangent)  # fmt: skip
         contact = self._contact_rows(V, X, frames, R, tangent) if self.nc else None
         if contact is not None and k == 1:  # the state's gaps for its event tests
             self._remember_gaps(U, contact["gaps"].copy())
@@ -1180,12 +1213,10 @@ class SpatialRod(DiscreteRod):
         cc, om = self._contact_geometry()
         tt = frames[:, :, :, 0]
         lam, gaps, normals, hess, arm = self._contact_terms(V, X, frames, tangent)
-        f_c = np.einsum("kno,knoi->kni", lam, normals)  # (k, n, 3)
         friction = None
         if self.nt:  # tangential forces per length tau (k, n, nc, 3), applied at p_j
             friction = self._friction_rows(V, X, frames, lam, normals, hess)
-            f_c = f_c + friction[1].sum(axis=2)
-        m_c = -(om * cc)[:, None] * cross(tt, f_c)  # contact moments (world)
+        f_c, m_c = self._normal_force(lam, normals, tt, friction)
         m_arm = 0.0
         if arm is not None:  # the normal force acts at the rectangle's corner, p - arm
             m_arm = om[:, None] * np.einsum("kno,knoi->kni", lam, cross(arm, normals))
@@ -1203,6 +1234,98 @@ class SpatialRod(DiscreteRod):
             "lam": lam, "gaps": gaps, "normals": normals, "hess": hess, "arm": arm,
             "f_c": f_c, "m_c": m_c, "m_arm": m_arm, "friction": friction, "ncp": ncp,
         }  # fmt: skip
+
+    def _normal_force(self, lam, normals, tt, friction=None):
+        """The contact force per length f_c (k, n, 3) at the contact points (the normal
+        forces, plus the friction forces ``friction[1]`` (k, n, nc, 3) if given) and its
+        moment about the nodes m_c (k, n, 3) (world), from the multipliers (k, n, nc), the
+        normals (k, n, nc, 3) and the node tangents tt (k, n, 3)."""
+        cc, om = self._contact_geometry()
+        f_c = np.einsum("kno,knoi->kni", lam, normals)  # (k, n, 3)
+        if friction is not None:
+            f_c = f_c + friction[1].sum(axis=2)
+        return f_c, -(om * cc)[:, None] * cross(tt, f_c)
+
+    # -- the contact terms by the compiled kernel ------------------------------------------------
+    def _contact_kernel(self, k: int, tangent: bool, band: bool) -> bool:
+        """Whether :meth:`_assemble` adds the contact terms of a stack of k by the compiled
+        kernel (:mod:`coilrod.rod._compiled_contact`): a frictionless round section with the
+        class's complementarity function, rows alone or with the band, once compiling pays
+        (its ski rental; else the numpy twin, :meth:`_contact_rows` and
+        :meth:`_contact_blocks`, runs and is charged)."""
+        return (
+            not self.nt and self._round and self.ncp in ("min", "fb")
+            and "_ncp" not in self.__dict__ and (band or not tangent)
+            and _contact_module().compiled_pays(k, self.n)
+        )  # fmt: skip
+
+    def _constant_blocks(self) -> dict:
+        """The contact layout's state-independent blocks (the clamp's rows and the
+        identities of the position and force rows): the band template of the compiled
+        contact terms (:meth:`_scatter` caches it per stack size)."""
+        out = self.__dict__.get("_constants")
+        if out is None:
+            I3 = np.eye(3)
+            out = self.__dict__["_constants"] = {
+                "clamp_phi": I3, "clamp_x": I3, "p_x": I3, "p_xprev": -I3, "f_F": I3,
+                "f_Fnext": -I3, "clamp_lam": np.eye(self.nc),
+            }  # fmt: skip
+        return out
+
+    def _contact_band(self, terms, frames, phi, blk, R, tangent, every=False):
+        """Run the compiled contact kernel (:func:`~coilrod.rod._compiled_contact.contact_core`)
+        on a stack: the contact terms added to R (k, n, nv) in place; with ``tangent``
+        returns the band storage (a new array) and the second variation's pieces
+        (:meth:`_contact_variation`), else None.  ``terms``: (lam, gaps, normals, hess) of
+        :meth:`_contact_terms`, C-contiguous; ``every``: every contact row the gap's
+        (:meth:`_every_active_band`)."""
+        cmod = _contact_module()
+        lam, gaps, normals, hess = terms
+        k, n, nc = lam.shape
+        mode = cmod.MODES["every" if every or self._every_rows else self.ncp]
+        cc, om = self._contact_geometry()
+        m_c = np.zeros((k, n, 3))
+        if tangent:
+            ab = self._scatter(k, self._constant_blocks())
+            var, turn = np.empty((k, n, 3, 3, 3)), np.empty((k, n, nc, 3))
+        else:
+            ab, var, turn = _NO_BAND, _NO_VAR, _NO_TURN
+        cmod.contact_core(
+            lam, gaps, normals, _NO_HESS if hess is None else hess, frames, phi, blk, cc, om,
+            self.kappa, self.L, mode, tangent, R, ab, self.kl + self.ku, var, m_c, turn,
+        )  # fmt: skip
+        return (ab, (var, m_c, turn)) if tangent else None
+
+    def _compiled_contact(self, U, S, V, X, frames, phi, blk, m, G, pair, diag, A_ab, tangent):
+        """The end of :meth:`_assemble` for a contact problem with the contact terms by the
+        compiled kernel (:meth:`_contact_band`): the same outputs (the residual, load rate,
+        band and the second variation, lazily, by :meth:`_contact_variation`), the state's
+        gaps remembered and a one-state tangent's inputs kept (:meth:`_every_active_band`)."""
+        k = U.shape[0]
+        lam, gaps, normals, hess, _ = self._contact_terms(V, X, frames, tangent)
+        if k == 1:  # the state's gaps for its event tests
+            self._remember_gaps(U, gaps.copy())
+        terms = (np.ascontiguousarray(lam), gaps, normals, hess)
+        out = self._contact_band(terms, frames, phi, blk, pair[0], tangent)
+        R, R1 = pair[0].reshape(k, -1), pair[1].reshape(k, -1)
+        if not tangent:
+            return R, R1, None, None
+        ab, pieces = out
+        frames = frames.copy()  # (the workspace's, overwritten by the next call)
+        if k == 1:
+            self._kept = (U.tobytes(), S.tobytes(), None, (terms, frames, phi, blk.copy()), R1, R)
+        args = (S, G, m.copy(), frames, pieces, lam, gaps, normals, diag, A_ab)
+        return R, R1, ab, _Deferred(self._contact_variation, args)
+
+    def _contact_variation(self, S, G, m, frames, pieces, lam, gaps, normals, diag, A_ab):
+        """The second variation (:meth:`_second_variation`) of a linearization whose contact
+        terms the compiled kernel formed, from its ``pieces`` (the ones
+        :meth:`_contact_blocks` returns, to rounding)."""
+        var, m_c, turn = pieces
+        act = (self.kappa * gaps < lam)[:, 1:]
+        n_t = np.swapaxes(normals[:, 1:], -1, -2)
+        sym = (var[:, 1:, 0], var[:, 1:, 1], m_c, act, n_t, np.swapaxes(turn[:, 1:], -1, -2))
+        return self._second_variation(S, G, m, frames, var[:, 1:, 2], diag, A_ab, sym)
 
     def _friction_rows(self, V, X, frames, lam, normals, hess):
         """Coulomb friction at the contact points: ``(Phi, tau, derivatives)``.

@@ -1,0 +1,240 @@
+"""Compiled contact terms of the spatial rod's linearization (numba, cached on disk).
+
+One pass over the members of a stack and the nodes of the mesh adds what the contact at the
+corners of the rod's polygon contributes to a linearization of
+:class:`coilrod.rod.spatial.SpatialRod` (mixed layout, frictionless, round section): the
+force and moment rows of the normal forces, the complementarity rows of the multipliers,
+their Jacobian blocks (the gap's hessian terms, times ``J_l(phi)``), and writes every
+state-dependent block of the band storage (the free rod's blocks of the spatial pass's
+``blk`` with the contact terms added, and the contact rows' own) in the same call.  The
+nearest-point search stays outside: the kernel takes the multipliers, the surface gaps, the
+normals and the gap hessians at the contact points as arrays.
+
+The numpy twin is :meth:`SpatialRod._contact_rows`, :meth:`SpatialRod._contact_blocks` and
+:meth:`SpatialRod._scatter` (the same arithmetic; the band agrees to rounding, ~1e-16
+relative): it runs until compiling pays (:data:`COMPILE_AFTER`, ski rental) or numba's cache
+holds the kernel.  Compiled with numba's numpy error model (inf and NaN as in numpy).
+
+Note: the small helpers come from :mod:`coilrod.rod._compiled_spatial`; numba's cache checks
+only this file's time stamp, so a change of those helpers needs this cache cleared too.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from coils._numba_cache import Rental
+
+from ._compiled_spatial import _cross, _exp_and_jl, _hat, _inner, _mm, _sym_term
+
+__all__ = ["COMPILE_AFTER", "MODES", "compiled_pays", "contact_core"]
+
+#: Estimated CPU seconds of numpy contact terms after which the compiled kernel is used (ski
+#: rental: about what compiling it costs on a cold cache, benchmarks/results/contact.md);
+#: 0 compiles at the first call, ``math.inf`` never.
+COMPILE_AFTER = 4.0
+#: Measured cost of the numpy twin with the tangent: per call and per node x member, s.
+_NUMPY_CALL_S, _NUMPY_NODE_S = 3.5e-4, 1.5e-6
+#: The complementarity function's codes: the min function, Fischer-Burmeister, and every
+#: row taken as active (partials 0 in lam and 1 in kappa g: the gap's gradient rows).
+MODES = {"min": 0, "fb": 1, "every": 2}
+#: The ski rental of :func:`contact_core` (compiled in this process counts as held).
+_rental = Rental(__name__, lambda: contact_core, in_process=True)
+
+
+def compiled_pays(k: int, n: int) -> bool:
+    """Whether the compiled kernel should add the contact terms of a stack of ``k`` states
+    of ``n`` nodes (with the tangent): True once compiling pays (:class:`Rental`), else the
+    numpy twin's estimated cost is charged and False is returned (the caller runs it)."""
+    if _rental.ready:
+        return True
+    cost = _NUMPY_CALL_S + _NUMPY_NODE_S * k * n
+    if _rental.pays(cost):
+        return True
+    _rental.charge(cost)
+    return False
+
+
+@nb.njit(cache=True, error_model="numpy")
+def contact_core(
+    lam, gaps, normals, hess, frames, phi, blk, cc, om, kappa, L, mode, tangent, R, ab, kv,
+    var, m_c, turn,
+):  # fmt: skip
+    """Add the contact terms of a stack to the residual and write the band.
+
+    Parameters
+    ----------
+    lam, gaps : ndarray, shape (k, n, nc)
+        Multipliers (force per length, EI_z / L^3 units) and surface gaps (units of L).
+    normals : ndarray, shape (k, n, nc, 3)
+        Unit normals (the gap gradients) at the contact points.
+    hess : ndarray, shape (k, n, nc, 3, 3)
+        Gap hessians (1/m; per unit of L after the factor ``L``); unused without tangent.
+    frames : ndarray, shape (k, n, 3, 3)
+        Node frames; ``phi`` (k, n, 3) the rotation vectors (rad).
+    blk : ndarray, shape (k, n, 10, 3, 3)
+        The free rod's Jacobian blocks of the spatial pass (read only).
+    cc, om : ndarray, shape (n,)
+        Offsets of the contact points along the tangents and their weights (units of L).
+    kappa, L : float
+        Gap scale of the complementarity function; the rod's length, m.
+    mode : int
+        :data:`MODES`: 0 min, 1 Fischer-Burmeister, 2 every row the gap's.
+    tangent : bool
+        Also the Jacobian: the band storage ``ab`` (2 kl + ku + 1, k size; Fortran order;
+        ``kv`` = kl + ku; its constant blocks already in place) gets every state-dependent
+        block (entry (r, c) of the stacked Jacobian at ``ab[kv + r - c, c]``).
+    R : ndarray, shape (k, n, nv)
+        The residual, the contact terms added in place (the multipliers' rows set).
+    var, m_c, turn : ndarray, shapes (k, n, 3, 3, 3), (k, n, 3), (k, n, nc, 3)
+        Outputs for the second variation (``SpatialRod._second_variation``; node 0's
+        entries not written): ``var[:, j]`` the force row's block in the world rotation,
+        the symmetric part of the moment row's, the force row's block in x_j (contact
+        included); ``m_c`` the contact moments (rows too); ``turn`` the moment rows'
+        derivatives in the multipliers (transposed).  With ``tangent`` only (``m_c``
+        always).
+    """
+    k, n, nc = lam.shape
+    nv = R.shape[2]
+    size = n * nv
+    f_c = np.empty((n, 3))
+    d_lam = np.empty((n, nc))
+    d_gap = np.empty((n, nc))
+    vecs = np.empty((4, 3))
+    t, tmp, tn, gd = vecs[0], vecs[1], vecs[2], vecs[3]
+    mats = np.empty((11, 3, 3))
+    Q, Jl, K, K2, That, LH, M1, M2, mc_d, out, S = (
+        mats[0], mats[1], mats[2], mats[3], mats[4], mats[5], mats[6], mats[7], mats[8],
+        mats[9], mats[10],
+    )  # fmt: skip
+    for m in range(k):
+        # -- the rows
+        for j in range(n):
+            for a in range(3):
+                acc = 0.0
+                for o in range(nc):
+                    acc += lam[m, j, o] * normals[m, j, o, a]
+                f_c[j, a] = acc
+                t[a] = frames[m, j, a, 0]
+            _cross(t, f_c[j], tmp)
+            oc = om[j] * cc[j]
+            for a in range(3):
+                m_c[m, j, a] = -oc * tmp[a]
+            if j >= 1:
+                for a in range(3):
+                    R[m, j - 1, 6 + a] -= om[j] * f_c[j, a]
+                    R[m, j, 3 + a] += m_c[m, j, a]
+            for o in range(nc):
+                x = lam[m, j, o]
+                g = gaps[m, j, o]
+                y = kappa * g
+                if mode == 1:  # Fischer-Burmeister
+                    r = math.hypot(x, y)
+                    if r > 0:
+                        val, dl, dg = x + y - r, 1.0 - x / r, 1.0 - y / r
+                    else:
+                        val, dl, dg = x + y - r, 1.0 - 2**-0.5, 1.0 - 2**-0.5
+                elif mode == 0:  # min (NaN propagates, as np.minimum)
+                    pick = y < x
+                    val = y if (pick or y != y) else x
+                    dl, dg = (0.0, 1.0) if pick else (1.0, 0.0)
+                else:  # every row the gap's (the value unused: min(lam, g))
+                    val = g if (g < x or g != g) else x
+                    dl, dg = 0.0, 1.0
+                d_lam[j, o], d_gap[j, o] = dl, dg
+                R[m, j, 9 + o] = val if j >= 1 else x
+        if not tangent:
+            continue
+        # -- the band: the clamp's and the constant blocks are the template's
+        off = m * size
+        for j in range(1, n):
+            for a in range(3):
+                t[a] = frames[m, j, a, 0]
+            _exp_and_jl(phi[m, j], Q, Jl, K, K2, True)
+            _hat(t, That)
+            for a in range(3):
+                for b in range(3):
+                    acc = 0.0
+                    for o in range(nc):
+                        acc += lam[m, j, o] * hess[m, j, o, a, b]
+                    LH[a, b] = L * acc
+            oc = om[j] * cc[j]
+            r0, rp, rf = off + nv * j, off + nv * j + 3, off + nv * (j - 1) + 6
+            cx, cp, cf, cl = off + nv * j, off + nv * j + 3, off + nv * j + 6, off + nv * j + 9
+            # the free rod's blocks of this node, unchanged
+            _put(ab, kv, rp, cp - nv, blk[m, j, 0])  # m_prev
+            if j <= n - 2:
+                _put(ab, kv, rp, cp + nv, blk[m, j, 2])  # m_next
+                _put(ab, kv, rp, cf, blk[m, j, 7])  # m_F
+            _put(ab, kv, r0, cp - nv, blk[m, j, 3])  # p_phiprev
+            _put(ab, kv, r0, cp, blk[m, j, 4])  # p_phi
+            _put(ab, kv, rp, cf - nv, blk[m, j, 6])  # m_Fprev
+            # force row j - 1 wrt x_j and phi_j: - om LH; + oc (LH That) J_l
+            _mm(LH, That, M1)  # fc_d / oc
+            for a in range(3):
+                for b in range(3):
+                    M1[a, b] = oc * M1[a, b]
+                    var[m, j, 0, a, b] = M1[a, b]
+                    out[a, b] = blk[m, j, 8, a, b] - om[j] * LH[a, b]
+                    var[m, j, 2, a, b] = out[a, b]
+            _put(ab, kv, rf, cx, out)  # f_xnext
+            _mm(M1, Jl, M2)
+            for a in range(3):
+                for b in range(3):
+                    out[a, b] = blk[m, j, 9, a, b] + M2[a, b]
+            _put(ab, kv, rf, cp, out)  # f_phinext
+            # moment row j wrt x_j: - oc That LH
+            _mm(That, LH, M1)
+            for a in range(3):
+                for b in range(3):
+                    out[a, b] = blk[m, j, 5, a, b] - oc * M1[a, b]
+            _put(ab, kv, rp, cx, out)  # m_x
+            # moment row j wrt phi_j: (-oc sym(t, f_c) + oc c That LH That - hat(m_c)/2) J_l
+            for a in range(3):
+                for b in range(3):
+                    S[a, b] = 0.0
+            _sym_term(t, f_c[j], 1.0, S)
+            _mm(M1, That, M2)  # That LH That
+            _hat(m_c[m, j], K)
+            occ = oc * cc[j]
+            for a in range(3):
+                for b in range(3):
+                    sym = -oc * S[a, b] + occ * M2[a, b]
+                    var[m, j, 1, a, b] = sym
+                    mc_d[a, b] = sym - 0.5 * K[a, b]
+            _mm(mc_d, Jl, M1)
+            for a in range(3):
+                for b in range(3):
+                    out[a, b] = blk[m, j, 1, a, b] + M1[a, b]
+            _put(ab, kv, rp, cp, out)  # m_diag
+            # the multipliers' columns and the contact rows
+            for o in range(nc):
+                for a in range(3):
+                    tmp[a] = normals[m, j, o, a]
+                _cross(t, tmp, tn)
+                ck = d_gap[j, o] * kappa
+                for a in range(3):
+                    ab[kv + rf + a - (cl + o), cl + o] = -om[j] * tmp[a]  # f_lamnext
+                    turn[m, j, o, a] = -oc * tn[a]
+                    ab[kv + rp + a - (cl + o), cl + o] = turn[m, j, o, a]  # m_lam
+                    gd[a] = ck * (cc[j] * tn[a])
+                rc = cl + o
+                for b in range(3):
+                    ab[kv + rc - (cx + b), cx + b] = ck * tmp[b]  # c_x
+                    acc = 0.0
+                    for q in range(3):
+                        acc += gd[q] * Jl[q, b]
+                    ab[kv + rc - (cp + b), cp + b] = acc  # c_phi
+                for p in range(nc):
+                    ab[kv + rc - (cl + p), cl + p] = d_lam[j, o] if p == o else 0.0  # c_lam
+
+
+@_inner
+def _put(ab, kv, r0, c0, M):
+    """The 3x3 block M at rows r0.., columns c0.. of the stacked Jacobian into band storage."""
+    for a in range(3):
+        for b in range(3):
+            ab[kv + r0 + a - (c0 + b), c0 + b] = M[a, b]
