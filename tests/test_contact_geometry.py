@@ -303,11 +303,10 @@ def test_compiled_search_is_the_numpy_search():
     """The compiled search and evaluation (run here as plain Python: ``py_func``, nothing is
     compiled) against its numpy twin (the all-pairs search, the generic derivatives): the
     same piece and parameter, gaps, gradients and hessians to rounding (of the points'
-    coordinates, and for the normal over the distance to the centreline); on the axis (normal undefined), the gap, piece and parameter; and through
-    the vessel (its memory of searches too) with the compiled path taken."""
-    from coils._immutable import kernel_input
-
+    coordinates, and for the normal over the distance to the centreline); on the axis
+    (normal undefined), the gap, piece and parameter."""
     from coilrod.contact import _compiled_search as cs
+    from coils._immutable import kernel_input
 
     rng = np.random.default_rng(7)
     for v in _twin_cases():

@@ -247,4 +247,3 @@ def closed_form_search(p, order, kind, geom, scale, on_line):
                 for f in range(3):
                     hess[i, e, f] -= w[e] * w[f] / den
     return g, col, u, x, xu, xuu, grad, hess
-

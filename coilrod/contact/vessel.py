@@ -712,12 +712,10 @@ class Vessel(Obstacle):
         if data is None:
             pcs, ball = self._pieces, self._ball
             j = np.concatenate([np.arange(self._m), self._extra])
-            geom = np.column_stack(
-                [
-                    pcs.lo[j], pcs.hi[j], pcs.ref[j], pcs.a[j], pcs.b[j], pcs.c[j], pcs.rho[j],
-                    self._cone_slope[j], ball.value[j], ball.slope[j], ball.anchor[j],
-                ]
-            )  # fmt: skip  (the columns of _compiled_search.FIELDS)
+            # the columns of _compiled_search.FIELDS
+            fields = (pcs.lo, pcs.hi, pcs.ref, pcs.a, pcs.b, pcs.c, pcs.rho, self._cone_slope)
+            fields += (ball.value, ball.slope, ball.anchor)
+            geom = np.column_stack([f[j] for f in fields])
             data = (j, kernel_input(pcs.kind[j], np.int64), kernel_input(geom))
             self._set_cache("_search_data", data)
         return data
