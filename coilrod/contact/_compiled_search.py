@@ -27,16 +27,19 @@ from coils._numba_cache import Rental
 __all__ = ["closed_form_search", "search_pays", "COMPILE_AFTER"]
 
 #: Estimated CPU seconds of numpy searches after which the compiled search is used (ski
-#: rental: about what compiling it costs on a cold cache, ~3 s measured, README "Cold
+#: rental: about what compiling it costs on a cold cache, 1.6-2.3 s measured, README "Cold
 #: start"); 0 compiles at the first call, ``math.inf`` never.
-COMPILE_AFTER = 3.0
+COMPILE_AFTER = 2.0
 # measured cost of one numpy search and evaluation: per call and per point x candidate piece
 _NUMPY_CALL_S, _NUMPY_PAIR_S = 1.2e-4, 2e-7
 
 
-#: The columns of the compiled search's ``geom`` (one row per candidate piece); ``a``, ``b``,
-#: ``c`` take three columns each.
-FIELDS = ("lo", "hi", "ref", "a", "b", "c", "arc", "cone", "value", "slope", "anchor")
+#: The columns of the compiled search's ``geom`` (one row per candidate piece): the parameter
+#: range and local origin, the vectors ``a``, ``b``, ``c`` (three columns each), the arc
+#: radius, the round cone's slope and the ball radius ``value + slope (u - anchor)``.
+LO, HI, REF, A, B, C, ARC, CONE, VALUE, SLOPE, ANCHOR = 0, 1, 2, 3, 6, 9, 12, 13, 14, 15, 16
+#: Number of columns of ``geom``.
+WIDTH = 17
 
 
 def _kernel():
@@ -63,9 +66,10 @@ def search_pays(points: int, pieces: int) -> bool:
 
 
 @nb.njit(cache=True, error_model="numpy")
-def closed_form_search(p, order, kind, geom, scale, on_line):
+def closed_form_search(p, order, kind, geom, scale, on_line, g, col, u, grad, hess):
     """Nearest-point search and gap evaluation of points against candidate pieces in closed
-    form, compiled (``closed_form_search.py_func``: the same in plain Python).
+    form, compiled (``closed_form_search.py_func``: the same in plain Python); the results
+    are written into ``g``, ``col``, ``u``, ``grad`` and ``hess``.
 
     Parameters
     ----------
@@ -76,90 +80,75 @@ def closed_form_search(p, order, kind, geom, scale, on_line):
     kind : ndarray of int64, shape (K,)
         The candidates' kinds (``LINE`` 0 or ``ARC`` 1), in the candidates' order (ties go to
         the first).
-    geom : ndarray, shape (K, 17)
-        Each candidate's fields (:data:`FIELDS`): the parameter range ``lo``, ``hi`` (m; +-inf
-        at a half-line's open side) and local origin ``ref``; ``a``, ``b``, ``c`` (3 each;
-        line: point and unit tangent, ``c`` unused; arc: centre and the unit vectors to
-        angle 0 and along the tangent there, :class:`coilrod.contact.centerline.Pieces`);
-        the arc radius (m; unused for lines); the slope of a line's linear ball radius (the
-        round cone's closed form, |slope| < 1); the ball radius ``value + slope (u -
-        anchor)`` (m, 1, m).
+    geom : ndarray, shape (K, WIDTH)
+        Each candidate's fields, columns :data:`LO` ... :data:`ANCHOR`: the parameter range
+        (m; +-inf at a half-line's open side) and local origin; ``a``, ``b``, ``c`` (line:
+        point and unit tangent, ``c`` unused; arc: centre and the unit vectors to angle 0
+        and along the tangent there, :class:`coilrod.contact.centerline.Pieces`); the arc
+        radius (m; unused for lines); the slope of a line's linear ball radius (the round
+        cone's closed form, |slope| < 1); the ball radius ``value + slope (u - anchor)``
+        (m, 1, m).
     scale : float
         The vessel's largest ball radius (m; the ranking's rounding tolerance).
     on_line : float
         Below this distance (m) a point is on the centreline (any unit normal is a gradient).
-
-    Returns
-    -------
     g : ndarray, shape (n,)
-        Gaps, m.
+        Out: gaps, m.
     col : ndarray of int64, shape (n,)
-        The chosen candidate of each point.
+        Out: the chosen candidate of each point.
     u : ndarray, shape (n,)
-        Its parameter, m.
-    x, xu, xuu : ndarray, shape (n, 3)
-        The centreline's point and derivatives there.
-    grad : ndarray, shape (n, 3) (order >= 1; else (0, 3))
-    hess : ndarray, shape (n, 3, 3) (order 2; else (0, 3, 3))
+        Out: its parameter, m.
+    grad : ndarray, shape (n, 3)
+        Out (order >= 1): the gap's gradient.
+    hess : ndarray, shape (n, 3, 3)
+        Out (order 2): the gap's hessian, 1/m.
     """
-    lo, hi, ref = geom[:, 0], geom[:, 1], geom[:, 2]
-    a, b, c = geom[:, 3:6], geom[:, 6:9], geom[:, 9:12]
-    arc, cone = geom[:, 12], geom[:, 13]
-    value, slope, anchor = geom[:, 14], geom[:, 15], geom[:, 16]
     n, K = p.shape[0], kind.shape[0]
     eps = 2.220446049250313e-16
     two_pi = 2.0 * math.pi
-    g = np.empty(n)
-    col = np.empty(n, dtype=np.int64)
-    u = np.empty(n)
-    x = np.empty((n, 3))
-    xu = np.empty((n, 3))
-    xuu = np.empty((n, 3))
-    grad = np.empty((n if order >= 1 else 0, 3))
-    hess = np.empty((n if order >= 2 else 0, 3, 3))
     G = np.empty(K)
     U = np.empty(K)
-    q = np.empty(3)
-    r = np.empty(3)
+    x = np.empty(3)  # the centreline's point and derivatives at the chosen pair
+    xu = np.empty(3)
+    xuu = np.empty(3)
     rh = np.empty(3)
     w = np.empty(3)
     for i in range(n):
+        p0, p1, p2 = p[i, 0], p[i, 1], p[i, 2]
         # every candidate's maximiser and gap (the closed forms of Pieces.start_guess)
         for k in range(K):
-            q[0] = p[i, 0] - a[k, 0]
-            q[1] = p[i, 1] - a[k, 1]
-            q[2] = p[i, 2] - a[k, 2]
+            q0, q1, q2 = p0 - geom[k, A], p1 - geom[k, A + 1], p2 - geom[k, A + 2]
+            b0, b1, b2 = geom[k, B], geom[k, B + 1], geom[k, B + 2]
             if kind[k] == 0:
-                along = q[0] * b[k, 0] + q[1] * b[k, 1] + q[2] * b[k, 2]
-                if cone[k] != 0.0:
-                    r0 = q[0] - along * b[k, 0]
-                    r1 = q[1] - along * b[k, 1]
-                    r2 = q[2] - along * b[k, 2]
+                along = q0 * b0 + q1 * b1 + q2 * b2
+                cone = geom[k, CONE]
+                if cone != 0.0:
+                    r0, r1, r2 = q0 - along * b0, q1 - along * b1, q2 - along * b2
                     across = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
-                    along = along + cone[k] * across / math.sqrt(1.0 - cone[k] * cone[k])
-                uk = min(max(ref[k] + along, lo[k]), hi[k])
-                t = uk - ref[k]
-                d0 = p[i, 0] - (a[k, 0] + b[k, 0] * t)
-                d1 = p[i, 1] - (a[k, 1] + b[k, 1] * t)
-                d2 = p[i, 2] - (a[k, 2] + b[k, 2] * t)
+                    along = along + cone * across / math.sqrt(1.0 - cone * cone)
+                uk = min(max(geom[k, REF] + along, geom[k, LO]), geom[k, HI])
+                t = uk - geom[k, REF]
+                d0 = p0 - (geom[k, A] + b0 * t)
+                d1 = p1 - (geom[k, A + 1] + b1 * t)
+                d2 = p2 - (geom[k, A + 2] + b2 * t)
             else:
-                rho = arc[k]
-                x1 = q[0] * b[k, 0] + q[1] * b[k, 1] + q[2] * b[k, 2]
-                x2 = q[0] * c[k, 0] + q[1] * c[k, 1] + q[2] * c[k, 2]
-                phi = math.atan2(x2, x1)
+                c0, c1, c2 = geom[k, C], geom[k, C + 1], geom[k, C + 2]
+                rho = geom[k, ARC]
+                phi = math.atan2(q0 * c0 + q1 * c1 + q2 * c2, q0 * b0 + q1 * b1 + q2 * b2)
                 if phi < 0.0:
                     phi = phi + two_pi
-                span = (hi[k] - lo[k]) / rho
-                if phi > span:
+                span = (geom[k, HI] - geom[k, LO]) / rho
+                if phi > span:  # outside the arc's angles: the end nearer along the circle
                     phi = 0.0 if two_pi - phi < phi - span else span
-                uk = min(max(lo[k] + rho * phi, lo[k]), hi[k])
-                ang = (uk - ref[k]) / rho
+                uk = min(max(geom[k, LO] + rho * phi, geom[k, LO]), geom[k, HI])
+                ang = (uk - geom[k, REF]) / rho
                 cs, sn = math.cos(ang), math.sin(ang)
-                d0 = p[i, 0] - (a[k, 0] + rho * (cs * b[k, 0] + sn * c[k, 0]))
-                d1 = p[i, 1] - (a[k, 1] + rho * (cs * b[k, 1] + sn * c[k, 1]))
-                d2 = p[i, 2] - (a[k, 2] + rho * (cs * b[k, 2] + sn * c[k, 2]))
+                d0 = p0 - (geom[k, A] + rho * (cs * b0 + sn * c0))
+                d1 = p1 - (geom[k, A + 1] + rho * (cs * b1 + sn * c1))
+                d2 = p2 - (geom[k, A + 2] + rho * (cs * b2 + sn * c2))
             U[k] = uk
-            G[k] = value[k] + slope[k] * (uk - anchor[k]) - math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            rho_k = geom[k, VALUE] + geom[k, SLOPE] * (uk - geom[k, ANCHOR])
+            G[k] = rho_k - math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
         # the ranking: a piece whose maximiser is interior, within rounding; else the best
         best = G[0]
         first = 0
@@ -167,11 +156,10 @@ def closed_form_search(p, order, kind, geom, scale, on_line):
             if G[k] > best:
                 best = G[k]
                 first = k
-        big = max(abs(p[i, 0]), abs(p[i, 1]), abs(p[i, 2]))
-        tol = 64 * eps * (abs(best) + scale + big)
+        tol = 64 * eps * (abs(best) + scale + max(abs(p0), abs(p1), abs(p2)))
         kb = -1
         for k in range(K):
-            if U[k] > lo[k] and U[k] < hi[k] and G[k] >= best - tol:
+            if U[k] > geom[k, LO] and U[k] < geom[k, HI] and G[k] >= best - tol:
                 if kb < 0 or G[k] > G[kb]:
                     kb = k
         if kb < 0:
@@ -180,70 +168,60 @@ def closed_form_search(p, order, kind, geom, scale, on_line):
         g[i] = G[kb]
         col[i] = kb
         u[i] = uk
-        # the centreline's point and derivatives at the chosen pair (Pieces.curve)
-        if kind[kb] == 0:
-            t = uk - ref[kb]
-            for e in range(3):
-                x[i, e] = a[kb, e] + b[kb, e] * t
-                xu[i, e] = b[kb, e]
-                xuu[i, e] = 0.0
-        else:
-            rho = arc[kb]
-            ang = (uk - ref[kb]) / rho
-            cs, sn = math.cos(ang), math.sin(ang)
-            for e in range(3):
-                radial = cs * b[kb, e] + sn * c[kb, e]
-                x[i, e] = a[kb, e] + rho * radial
-                xu[i, e] = cs * c[kb, e] - sn * b[kb, e]
-                xuu[i, e] = -radial / rho
         if order == 0:
             continue
+        # the centreline's point and derivatives at the chosen pair (Pieces.curve)
+        if kind[kb] == 0:
+            t = uk - geom[kb, REF]
+            for e in range(3):
+                x[e] = geom[kb, A + e] + geom[kb, B + e] * t
+                xu[e] = geom[kb, B + e]
+                xuu[e] = 0.0
+        else:
+            rho = geom[kb, ARC]
+            ang = (uk - geom[kb, REF]) / rho
+            cs, sn = math.cos(ang), math.sin(ang)
+            for e in range(3):
+                radial = cs * geom[kb, B + e] + sn * geom[kb, C + e]
+                x[e] = geom[kb, A + e] + rho * radial
+                xu[e] = cs * geom[kb, C + e] - sn * geom[kb, B + e]
+                xuu[e] = -radial / rho
         # the gradient: minus the unit normal from the centreline (Vessel._evaluate)
-        for e in range(3):
-            r[e] = p[i, e] - x[i, e]
-        d = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
-        if d < on_line:  # on the centreline: a unit normal to the tangent
-            v0, v1, v2 = abs(xu[i, 0]), abs(xu[i, 1]), abs(xu[i, 2])
-            ax = 0
-            if v1 < v0:
-                ax = 1
-            if v2 < (v1 if ax == 1 else v0):
-                ax = 2
-            # w = xu x e_ax
-            if ax == 0:
-                w[0], w[1], w[2] = 0.0, xu[i, 2], -xu[i, 1]
-            elif ax == 1:
-                w[0], w[1], w[2] = -xu[i, 2], 0.0, xu[i, 0]
+        r0, r1, r2 = p0 - x[0], p1 - x[1], p2 - x[2]
+        d = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+        if d < on_line:  # on the centreline: a unit normal to the tangent, xu x e_axis
+            v0, v1, v2 = abs(xu[0]), abs(xu[1]), abs(xu[2])
+            if v0 <= v1 and v0 <= v2:
+                w[0], w[1], w[2] = 0.0, xu[2], -xu[1]
+            elif v1 <= v2:
+                w[0], w[1], w[2] = -xu[2], 0.0, xu[0]
             else:
-                w[0], w[1], w[2] = xu[i, 1], -xu[i, 0], 0.0
+                w[0], w[1], w[2] = xu[1], -xu[0], 0.0
             nw = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
             for e in range(3):
                 rh[e] = w[e] / nw
         else:
-            for e in range(3):
-                rh[e] = r[e] / d
+            rh[0], rh[1], rh[2] = r0 / d, r1 / d, r2 / d
         for e in range(3):
             grad[i, e] = -rh[e]
         if order == 1:
             continue
         # the hessian: the cone point's -P/d, and the curvature term where the maximiser is
         # interior and the gap concave in u
-        rho_b = value[kb] + slope[kb] * (uk - anchor[kb])
-        ds = max(d, 1e-15 * rho_b)
+        ds = max(d, 1e-15 * (geom[kb, VALUE] + geom[kb, SLOPE] * (uk - geom[kb, ANCHOR])))
         for e in range(3):
             for f in range(3):
                 hess[i, e, f] = -((1.0 if e == f else 0.0) - rh[e] * rh[f]) / ds
         for e in range(3):
             w[e] = (
-                ((1.0 if e == 0 else 0.0) - rh[e] * rh[0]) * xu[i, 0]
-                + ((1.0 if e == 1 else 0.0) - rh[e] * rh[1]) * xu[i, 1]
-                + ((1.0 if e == 2 else 0.0) - rh[e] * rh[2]) * xu[i, 2]
+                ((1.0 if e == 0 else 0.0) - rh[e] * rh[0]) * xu[0]
+                + ((1.0 if e == 1 else 0.0) - rh[e] * rh[1]) * xu[1]
+                + ((1.0 if e == 2 else 0.0) - rh[e] * rh[2]) * xu[2]
             )
-        curv = rh[0] * xuu[i, 0] + rh[1] * xuu[i, 1] + rh[2] * xuu[i, 2]
-        dguu = ds * curv - (xu[i, 0] * w[0] + xu[i, 1] * w[1] + xu[i, 2] * w[2])
-        if uk > lo[kb] and uk < hi[kb] and dguu < 0.0:
+        curv = rh[0] * xuu[0] + rh[1] * xuu[1] + rh[2] * xuu[2]
+        dguu = ds * curv - (xu[0] * w[0] + xu[1] * w[1] + xu[2] * w[2])
+        if uk > geom[kb, LO] and uk < geom[kb, HI] and dguu < 0.0:
             den = ds * dguu
             for e in range(3):
                 for f in range(3):
                     hess[i, e, f] -= w[e] * w[f] / den
-    return g, col, u, x, xu, xuu, grad, hess

@@ -712,7 +712,7 @@ class Vessel(Obstacle):
         if data is None:
             pcs, ball = self._pieces, self._ball
             j = np.concatenate([np.arange(self._m), self._extra])
-            # the columns of _compiled_search.FIELDS
+            # the columns of _compiled_search.geom: LO, HI, REF, A, B, C, ARC, CONE, VALUE, ...
             fields = (pcs.lo, pcs.hi, pcs.ref, pcs.a, pcs.b, pcs.c, pcs.rho, self._cone_slope)
             fields += (ball.value, ball.slope, ball.anchor)
             geom = np.column_stack([f[j] for f in fields])
@@ -723,21 +723,24 @@ class Vessel(Obstacle):
     def _evaluate_compiled(self, points: np.ndarray, order: int):
         """:meth:`_evaluate` by the compiled all-pairs search and evaluation
         (:mod:`coilrod.contact._compiled_search`; the numpy search is its twin), remembered
-        like :meth:`_located`'s (gap, piece, parameter, centreline, gradient, hessian)."""
+        like :meth:`_located`'s: (gap, piece, parameter, gradient, hessian)."""
         key = points.tobytes()
         memo = self._memo()
         hit = memo.get(key)
-        if hit is None or len(hit) != 8:  # (not the numpy search's)
+        if hit is None or len(hit) != 5:  # (not the numpy search's)
             j, kind, geom = self._search_inputs()
-            g, col, u, x, xu, xuu, grad, hess = _compiled().closed_form_search(
-                kernel_input(points), 2, kind, geom, self._rho_scale, ON_LINE
+            n = len(points)
+            g, col, u = np.empty(n), np.empty(n, dtype=np.int64), np.empty(n)
+            grad, hess = np.empty((n, 3)), np.empty((n, 3, 3))
+            _compiled().closed_form_search(
+                kernel_input(points), 2, kind, geom, self._rho_scale, ON_LINE, g, col, u, grad, hess
             )
-            hit = (g, j[col], u, x, xu, xuu, grad, hess)
+            hit = (g, j[col], u, grad, hess)
         remember(memo, key, hit, _LOCATED_KEPT)
         return (
             hit[0].copy(),
-            hit[6].copy() if order >= 1 else None,
-            hit[7].copy() if order >= 2 else None,
+            hit[3].copy() if order >= 1 else None,
+            hit[4].copy() if order >= 2 else None,
         )
 
     def _evaluate(self, points: np.ndarray, order: int):
