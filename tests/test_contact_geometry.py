@@ -376,6 +376,21 @@ def test_vessel_takes_the_compiled_search_when_it_pays(monkeypatch):
     assert calls == [9]
 
 
+def test_compiled_search_is_rented_until_compiling_pays(monkeypatch):
+    """Ski rental: numpy searches are charged their estimated cost until the next would
+    pass the price (here 2.5 searches of 65 points x 5 pieces), then the compiled search runs
+    for good (numba's cache not looked at; nothing is compiled)."""
+    from coilrod.contact import _compiled_search as cs
+    from coils._numba_cache import Rental
+
+    cost = cs._NUMPY_CALL_S + cs._NUMPY_PAIR_S * 65 * 5
+    monkeypatch.setattr(cs, "COMPILE_AFTER", 2.5 * cost)
+    monkeypatch.setattr(cs, "_rental", Rental(cs.__name__, cs._kernel))
+    monkeypatch.setattr(cs._rental, "held", lambda: False)
+    assert [cs.search_pays(65, 5) for _ in range(4)] == [False, False, True, True]
+    assert cs._rental.spent == pytest.approx(2 * cost)
+
+
 # -- continuity ---------------------------------------------------------------------------------
 class TestContinuity:
     @pytest.mark.parametrize("name", list(obstacles()) + ["network", "wall"])
