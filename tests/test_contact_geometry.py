@@ -287,6 +287,110 @@ class TestClosedForms:
             np.testing.assert_array_equal(b, a)
 
 
+def _twin_cases():
+    """Vessels whose search is the all-pairs closed form (a bend: lines, an arc and the two
+    extension half-lines; a tapered polyline with round ends: round cones; a branch's two
+    tubes, the side one with a round root), and points: random near the centreline, at the
+    pieces' junctions (ties), on the axis at junctions and inside pieces, beyond the ends."""
+    bend = Vessel.bend(bend_radius=0.02, angle=np.pi / 2, radius=R,
+                       straight_before=0.01, straight_after=0.01)  # fmt: skip
+    tapered = Vessel([[0, 0, 0], [0.01, 0, 0], [0.02, 0.005, 0.002]], [R, 0.8 * R, 1.2 * R],
+                     ends="round")  # fmt: skip
+    return [bend, tapered, *Vessel.branch(0.04, 2e-3, 0.02, 1.5e-3, math.pi / 3).vessels]
+
+
+def test_compiled_search_is_the_numpy_search():
+    """The compiled search and evaluation (run here as plain Python: ``py_func``, nothing is
+    compiled) against its numpy twin (the all-pairs search, the generic derivatives): the
+    same piece and parameter, gaps, gradients and hessians to rounding (of the points'
+    coordinates, and for the normal over the distance to the centreline); on the axis
+    (normal undefined), the gap, piece and parameter."""
+    from coilrod.contact import _compiled_search as cs
+    from coils._immutable import kernel_input
+
+    rng = np.random.default_rng(7)
+    for v in _twin_cases():
+        assert v._all_pairs(64)
+        m = v._m
+        joints = np.concatenate([v._pieces.lo[:m], [v.length]])
+        s = np.concatenate([joints, rng.uniform(-0.005, v.length + 0.005, 12)])
+        on_axis = v.position(s)
+        near = on_axis + rng.normal(size=on_axis.shape) * 0.7 * v.min_radius
+        normal = np.cross(v.tangent(joints), rng.normal(size=3))  # at the junctions
+        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+        p = np.concatenate([near, v.position(joints) + 0.5 * v.min_radius * normal, on_axis])
+        j, kind, geom = v._search_inputs()
+        n, searched = len(p), []
+        for order in (0, 2):
+            g, col, u = np.zeros(n), np.zeros(n, dtype=np.int64), np.zeros(n)
+            grad, hess = np.zeros((n, 3)), np.zeros((n, 3, 3))
+            cs.closed_form_search.py_func(
+                kernel_input(p), order, kind, geom, v._rho_scale, vessel_module.ON_LINE,
+                g, col, u, grad, hess,
+            )  # fmt: skip
+            assert (np.abs(grad).max() > 0) == (order > 0)
+            searched.append((g, col, u))
+        for a, b in zip(*searched, strict=True):  # the search is the same at every order
+            np.testing.assert_array_equal(a, b)
+        g0, j0, u0, x0 = v._locate_closed_form(p)[:4]
+        _, grad0, hess0 = v._evaluate_numpy(p, 2)
+        np.testing.assert_array_equal(j[col], j0)
+        np.testing.assert_allclose(u, u0, rtol=0, atol=1e-15 * v.length)
+        np.testing.assert_allclose(g, g0, rtol=0, atol=16 * np.finfo(float).eps * np.abs(p).max())
+        off = slice(0, len(p) - len(on_axis))  # the normal is defined: to the rounding of
+        # the centreline point (coordinates up to |p|) over the distance d to it
+        tol = 16 * np.finfo(float).eps * np.abs(p).max() / np.linalg.norm(p - x0, axis=1)[off]
+        assert np.all(np.abs(grad - grad0)[off].max(axis=1) <= tol)
+        size = np.abs(hess0[off]).max(axis=(1, 2))
+        assert np.all(np.abs(hess - hess0)[off].max(axis=(1, 2)) <= tol * size)
+        np.testing.assert_allclose(np.linalg.norm(grad, axis=1), 1.0, rtol=0, atol=1e-15)
+        exact = np.all(p == x0, axis=1)  # on the axis exactly: the same unit normal
+        np.testing.assert_array_equal(grad[exact], grad0[exact])
+
+
+def test_vessel_takes_the_compiled_search_when_it_pays(monkeypatch):
+    """Once compiling has paid, a vessel evaluates by the compiled search (here its plain
+    Python ``py_func``) and remembers it: the numbers of the numpy path to rounding, the
+    same pieces; a vessel needing Newton (a spline) keeps the numpy search."""
+    eps = np.finfo(float).eps
+    from coilrod.contact import _compiled_search as cs
+
+    calls, plain = [], cs.closed_form_search.py_func
+
+    def kernel(*args):
+        calls.append(len(args[0]))
+        return plain(*args)
+
+    monkeypatch.setattr(cs._rental, "ready", True)
+    monkeypatch.setattr(cs, "closed_form_search", kernel)
+    v, twin = _twin_cases()[0], _twin_cases()[0]
+    p = v.position(np.linspace(-0.002, v.length + 0.002, 9)) + 4e-4  # 0.69 mm off the axis
+    tol = 16 * eps * np.abs(p).max() / 6.9e-4  # the normal's rounding (see above)
+    for order in (2, 0, 1, 2):  # one search, then remembered
+        got, want = v.evaluate(p, order), twin._evaluate_numpy(p, order)
+        np.testing.assert_allclose(got.gap, want[0], rtol=0, atol=16 * eps * np.abs(p).max())
+        for a, b in zip(got[1:], want[1:], strict=True):
+            assert (a is None and b is None) or np.allclose(a, b, 0, tol * np.abs(b).max())
+    assert calls == [9]
+    obstacles()["spline"].evaluate(p, 2)
+    assert calls == [9]
+
+
+def test_compiled_search_is_rented_until_compiling_pays(monkeypatch):
+    """Ski rental: numpy searches are charged their estimated cost until the next would
+    pass the price (here 2.5 searches of 65 points x 5 pieces), then the compiled search runs
+    for good (numba's cache not looked at; nothing is compiled)."""
+    from coilrod.contact import _compiled_search as cs
+    from coils._numba_cache import Rental
+
+    cost = cs._NUMPY_CALL_S + cs._NUMPY_PAIR_S * 65 * 5
+    monkeypatch.setattr(cs, "COMPILE_AFTER", 2.5 * cost)
+    monkeypatch.setattr(cs, "_rental", Rental(cs.__name__, cs._kernel))
+    monkeypatch.setattr(cs._rental, "held", lambda: False)
+    assert [cs.search_pays(65, 5) for _ in range(4)] == [False, False, True, True]
+    assert cs._rental.spent == pytest.approx(2 * cost)
+
+
 # -- continuity ---------------------------------------------------------------------------------
 class TestContinuity:
     @pytest.mark.parametrize("name", list(obstacles()) + ["network", "wall"])
@@ -476,7 +580,7 @@ class TestNumericalStability:
         pts = np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)]) * 1e-3
         v = Vessel(pts, 0.1e-3, ends="round")
         assert v._tree is not None
-        p = rng.uniform(v.bounds[0], v.bounds[1], (5000, 3))
+        p = rng.uniform(v.bounds[0], v.bounds[1], (3000, 3))  # (far points widen the search)
         p[:1000] = pts[rng.integers(0, 401, 1000)] + rng.normal(size=(1000, 3)) * 2e-4
         np.testing.assert_allclose(v.gap(p), 0.1e-3 - polyline_distance(p, pts), atol=ATOL)
 

@@ -90,6 +90,8 @@ import math
 
 import numpy as np
 
+from coils._immutable import kernel_input
+from coils._memo import remember
 from coils._validate import as_bool, as_choice, as_points
 
 from ._lumens import _draw_lumens
@@ -139,6 +141,19 @@ def _unit_normal_to(v: np.ndarray) -> np.ndarray:
     axis[np.arange(len(v)), np.argmin(np.abs(v), axis=1)] = 1.0
     w = np.cross(v, axis)
     return w / np.linalg.norm(w, axis=1, keepdims=True)
+
+
+_COMPILED = []
+
+
+def _compiled():
+    """:mod:`coilrod.contact._compiled_search` (imports numba), imported at the first
+    all-pairs evaluation."""
+    if not _COMPILED:
+        from . import _compiled_search
+
+        _COMPILED.append(_compiled_search)
+    return _COMPILED[0]
 
 
 #: Point sets whose nearest-point search a vessel remembers (:meth:`Vessel._located`).
@@ -197,7 +212,7 @@ class Vessel(Obstacle):
 
     _outside = "outside the vessel"
     _immutable = True
-    _caches = ("_located_memo",)
+    _caches = ("_located_memo", "_search_data")
 
     def __init__(self, centerline, radius, *, smooth: bool = False, ends="extend", friction=0.0):
         self.friction = as_friction(friction)
@@ -279,6 +294,8 @@ class Vessel(Obstacle):
         # closed-form round cones on lines whose ball radius is linear
         self._cone_slope = np.where((pcs.kind == LINE) & ~ball.smooth_mask, ball.slope, 0.0)
         self._bounding()
+        # the all-pairs closed-form search applies (few pieces, all lines or constant arcs)
+        self._closed_form = self._tree is None and not bool(self._needs_newton.any())
         self._check_geometry(corners)
 
     def _bounding(self) -> None:
@@ -667,24 +684,79 @@ class Vessel(Obstacle):
         the search is most of an evaluation.  The geometry never changes after
         construction, so a remembered search is the search (the key is the points' bytes)."""
         key = points.tobytes()
+        memo = self._memo()
+        hit = memo.get(key)
+        if hit is None or len(hit) != 6:  # (not the compiled search's)
+            if self._all_pairs(len(points)):
+                hit = self._locate_closed_form(points)
+            else:
+                hit = (*self._locate(points), None, None, None)
+        return remember(memo, key, hit, _LOCATED_KEPT)
+
+    def _memo(self) -> dict:
         memo = self.__dict__.get("_located_memo")
         if memo is None:  # (a cache: a pickled or evolved copy starts without it)
             memo = {}
             self._set_cache("_located_memo", memo)
-        hit = memo.pop(key, None)
-        if hit is None:
-            K = self._m + len(self._extra)
-            if (self._tree is None and not self._needs_newton.any()
-                    and len(points) * K <= PAIR_CHUNK):  # fmt: skip
-                hit = self._locate_closed_form(points)
-            else:
-                hit = (*self._locate(points), None, None, None)
-            if len(memo) >= _LOCATED_KEPT:
-                del memo[next(iter(memo))]  # the oldest
-        memo[key] = hit  # (re)inserted last: the most recent
-        return hit
+        return memo
+
+    def _all_pairs(self, n: int) -> bool:
+        """Whether the search of ``n`` points is the all-pairs closed form (few pieces, no
+        KD-tree, every piece a line or an arc in closed form)."""
+        return self._closed_form and n * (self._m + len(self._extra)) <= PAIR_CHUNK
+
+    def _search_inputs(self):
+        """The candidate pieces (in the candidates' order) and the compiled search's inputs
+        describing them (read-only, C-contiguous: one compiled version), cached."""
+        data = self.__dict__.get("_search_data")
+        if data is None:
+            pcs, ball = self._pieces, self._ball
+            j = np.concatenate([np.arange(self._m), self._extra])
+            # the columns of _compiled_search.geom: LO, HI, REF, A, B, C, ARC, CONE, VALUE, ...
+            fields = (pcs.lo, pcs.hi, pcs.ref, pcs.a, pcs.b, pcs.c, pcs.rho, self._cone_slope)
+            fields += (ball.value, ball.slope, ball.anchor)
+            geom = np.column_stack([f[j] for f in fields])
+            data = (j, kernel_input(pcs.kind[j], np.int64), kernel_input(geom))
+            self._set_cache("_search_data", data)
+        return data
+
+    def _evaluate_compiled(self, points: np.ndarray, order: int):
+        """:meth:`_evaluate` by the compiled all-pairs search and evaluation
+        (:mod:`coilrod.contact._compiled_search`; the numpy search is its twin), remembered
+        like :meth:`_located`'s: (gap, piece, parameter, gradient, hessian)."""
+        key = points.tobytes()
+        memo = self._memo()
+        hit = memo.get(key)
+        if hit is None or len(hit) != 5:  # (not the numpy search's)
+            j, kind, geom = self._search_inputs()
+            n = len(points)
+            g, col, u = np.empty(n), np.empty(n, dtype=np.int64), np.empty(n)
+            grad, hess = np.empty((n, 3)), np.empty((n, 3, 3))
+            _compiled().closed_form_search(
+                kernel_input(points), 2, kind, geom, self._rho_scale, ON_LINE, g, col, u, grad, hess
+            )
+            hit = (g, j[col], u, grad, hess)
+        remember(memo, key, hit, _LOCATED_KEPT)
+        return (
+            hit[0].copy(),
+            hit[3].copy() if order >= 1 else None,
+            hit[4].copy() if order >= 2 else None,
+        )
 
     def _evaluate(self, points: np.ndarray, order: int):
+        """Gap, gradient and hessian (up to ``order``) of validated points: by the compiled
+        all-pairs search (:meth:`_evaluate_compiled`) where it applies and compiling has paid
+        (:func:`coilrod.contact._compiled_search.search_pays`), else by numpy."""
+        if self._all_pairs(len(points)) and _compiled().search_pays(
+            len(points), self._m + len(self._extra)
+        ):
+            return self._evaluate_compiled(points, order)
+        return self._evaluate_numpy(points, order)
+
+    def _evaluate_numpy(self, points: np.ndarray, order: int):
+        """:meth:`_evaluate` by the numpy search (:meth:`_located`) and derivatives: the
+        compiled evaluation's twin, and the search of every vessel the compiled one does not
+        cover (many pieces, splines, smooth radii)."""
         g, j, u, x, xu, xuu = self._located(points)
         g = g.copy()  # (the remembered search stays the caller's to keep)
         if order == 0:

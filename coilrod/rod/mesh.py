@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from coils._memo import remember
+
 __all__ = ["RodMesh", "node_magnetization", "segment_weights", "MERGE_BREAKS"]
 
 #: Breakpoints closer than this (fraction of L) to each other or to an end are merged: a
@@ -179,13 +181,10 @@ def node_magnetization(magnetization, mesh: RodMesh, length: float, dim: int = 2
 
 
 def _remember(cache: dict, key, value, size: int = _CACHE_SIZE):
-    """Store ``value`` under ``key`` in ``cache`` as its most recent entry (a key stored again
-    moves there), dropping the oldest entry beyond ``size`` entries (default
+    """:func:`coils._memo.remember` (the package's one bounded-cache rule: ``value`` stored
+    under ``key`` as the most recent entry, the oldest dropped beyond ``size``, default
     :data:`_CACHE_SIZE`); returns ``value``."""
-    if cache.pop(key, None) is None and len(cache) >= size:
-        cache.pop(next(iter(cache)), None)
-    cache[key] = value
-    return value
+    return remember(cache, key, value, size)
 
 
 def _constant_key(magnetization, mesh: RodMesh, length: float, dim: int):
