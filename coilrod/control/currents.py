@@ -192,6 +192,8 @@ def _uniform_start(rod, goal, with_angle, steps, opts, b_cap, tol: float = 0.0):
     wts = _weights_for(with_angle, L)
     clamp = np.asarray(opts["clamp_position"], float)
     ang = opts["clamp_angle"]
+    if not b_cap > 0.0:  # limits too small for any field in some direction (rounded to 0)
+        return np.zeros(2), 0
     if tol > 0.0:
         straight = clamp[:2] + L * np.array([math.cos(ang), math.sin(ang)])
         miss = np.r_[straight, ang][: goal.size] - goal
@@ -651,7 +653,7 @@ def _approach(p: _Problem, search: _Search, I, max_iter: int) -> None:
        the rod's branch (trial steps along one direction jumping to another branch,
        :class:`_EdgeWatch`).
     """
-    res, r, miss = search.evaluate(I)
+    res, r, miss, I = _first_state(search, I)
     far = FAR * p.length
     restore_next, trust, rcond = False, 1.0, STEP_RCOND
     for _ in range(max_iter):
@@ -691,6 +693,27 @@ def _approach(p: _Problem, search: _Search, I, max_iter: int) -> None:
                 break
         if not moved:
             return
+
+
+#: Fractions of the start currents tried, in turn, when the forward solve at the start fails.
+START_BACKOFF = (0.5, 0.25, 0.125)
+
+
+def _first_state(search: _Search, I):
+    """The forward solve at the start currents ``I``: (result, misses, position miss, the
+    currents).  Where its load path cannot be followed (a fold on the way, e.g. a start
+    field nearly antiparallel to the rod), the start moved towards zero current
+    (:data:`START_BACKOFF`; the unloaded rod is always an equilibrium) so the search has a
+    state to report; the first failure is raised if none of them can be followed either."""
+    try:
+        return (*search.evaluate(I), I)
+    except ConvergenceError as first:
+        for f in START_BACKOFF:
+            try:
+                return (*search.evaluate(f * I), f * I)
+            except ConvergenceError:
+                continue
+        raise first from first.__cause__
 
 
 def _search(p: _Problem, I, max_iter: int, max_solves: int, fresh_next: bool = False):
@@ -813,10 +836,12 @@ def _problem(
             f"B_z) at its centre; its centre field per ampere has rank "
             f"{np.linalg.matrix_rank(Bu, tol=rank_tol)}"
         )
-    if np.linalg.norm(goal - clamp[: goal.size]) > L * (1 + 1e-12):
+    distance = float(np.linalg.norm(goal - clamp[: goal.size]))
+    if distance > L * (1 + 1e-12):
+        units = " (target is in m: was it given in mm?)" if distance > 100 * L else ""
         raise ConvergenceError(
-            f"the target {goal.tolist()} m is {np.linalg.norm(goal - clamp[: goal.size]):.4g} m "
-            f"from the clamp, beyond the rod's length {L:g} m: unreachable",
+            f"the target {goal.tolist()} m is {distance:.4g} m from the clamp, beyond the "
+            f"rod's length {L:g} m: unreachable{units}",
             reached=0.0,
             target=1.0,
         )

@@ -15,7 +15,7 @@ from ..path.stepping import PathOptions, follow_load
 from ..rod.model import clamp_frame, planar_reasons
 from .assembly import Assembler
 from .material import moduli
-from .mesh import check_elements, check_mesh, default_elements, rod_mesh
+from .mesh import check_elements, check_memory, check_mesh, default_elements, rod_mesh
 from .problem import FEMProblem
 from .result import FEMResult
 
@@ -27,7 +27,12 @@ DEFAULT_POISSON_RATIO = 0.4995
 
 
 def _scales(scales) -> np.ndarray:
-    arr = np.atleast_1d(np.asarray(scales, dtype=float))
+    if isinstance(scales, str | bytes):
+        raise ValueError(f"scales must be a sequence of numbers; got {scales!r}")
+    try:
+        arr = np.atleast_1d(np.asarray(scales, dtype=float))
+    except (TypeError, ValueError):
+        raise ValueError(f"scales must be a sequence of numbers; got {scales!r}") from None
     if arr.ndim != 1 or arr.size == 0:
         raise ValueError(f"scales must be a non-empty 1D sequence; got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
@@ -74,7 +79,9 @@ def _assembler(rod, field, mesh, elements, dim, order, nu, plane, formulation) -
     if mesh is None:
         if elements is None:
             elements = default_elements(rod, dim)
-        mesh = rod_mesh(rod, dim, check_elements(elements, dim), order)
+        elements = check_elements(elements, dim)
+        check_memory(rod.section, dim, order, elements)
+        mesh = rod_mesh(rod, dim, elements, order)
     elif getattr(getattr(mesh, "p", None), "shape", (dim,))[0] != dim:
         raise ValueError(f"mesh must be {dim}-dimensional for dim={dim}; got {mesh.p.shape[0]}")
     else:

@@ -1,0 +1,98 @@
+"""Awkward input to the FEM and the current controller, found by trying to break them
+(tests/test_files_robust.py covers files, tests/test_extremes.py far and ulp-close numbers).
+
+Each test failed on the code before its fix.  References: the element count times the
+per-element memory (arithmetic), a direct ``solve_rod`` at the returned currents (an
+independent forward solve), the unloaded straight rod (tip at (L, 0)).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import coilrod
+import coilrod.control.currents as control
+import coilrod.fem.mesh as fem_mesh
+import coils
+from coilrod import ConvergenceError, presets, solve_currents, solve_rod
+
+L = 0.04
+ROD = coilrod.Rod(L, 1e6, coilrod.Rectangle(2e-3, 2e-3), presets.M1())
+FIELD = coils.UniformField((0.0, 5e-3, 0.0))
+
+
+def test_fem_elements_beyond_the_machines_memory_raise_before_meshing(monkeypatch):
+    """(20000, 1) quadratic 2D elements need about 20000 x 70 kB = 1.4 GB: on a machine of
+    1 GB that is a ValueError naming ``elements`` (was: meshed and solved until the operating
+    system killed the process, e.g. for elements=(10**9, 1))."""
+    monkeypatch.setattr(fem_mesh, "physical_memory", lambda: 1e9)
+    with pytest.raises(ValueError, match=r"elements \(20000, 1\): 20,000 elements .* 1\.4 GB"):
+        coilrod.solve_fem(ROD, FIELD, [1.0], dim=2, elements=(20000, 1))
+    assert fem_mesh.element_count(coilrod.Circle(2e-3), 3, (5, 2, 3)) == 5 * (4 + 24)
+
+
+@pytest.mark.parametrize("scales", ["1", b"1", ["a"]])
+def test_fem_scales_that_are_not_numbers_name_scales(scales):
+    """A string was read as the number it spells ("1" -> scale 1) or failed inside numpy
+    without naming the argument."""
+    with pytest.raises(ValueError, match="scales must be a sequence of numbers"):
+        coilrod.solve_fem(ROD, FIELD, scales, dim=2, elements=(2, 1))
+
+
+def test_control_limits_too_small_for_any_field_say_so():
+    """Limits of 1e-12 A make a centre field that rounds to zero in some direction: the
+    uniform start then asked the workspace for a field bound of -0.0 T and raised "b_max must
+    be positive" (an argument the caller never gave).  Now the search starts at zero current
+    and reports the limits, with the closest tip: the straight rod (lambda ~ 1e-12)."""
+    rod = presets.seed_rod(presets.M1())
+    system = coils.presets.three_axis_helmholtz()
+    with pytest.raises(ConvergenceError, match="beyond the current limits") as err:
+        solve_currents(
+            rod, system, (0.029, 0.025), max_current=1e-12, steps=1, nodes=8, max_solves=2
+        )
+    tip = err.value.result.tip
+    np.testing.assert_allclose(tip[:2], [rod.length, 0.0], rtol=0, atol=1e-9 * rod.length)
+
+
+def test_control_target_in_millimetres_is_called_so():
+    """A target given in mm (1000 times too far) is unreachable, and the message says that
+    the target is read in metres."""
+    rod = presets.seed_rod(presets.M1())
+    system = coils.presets.three_axis_helmholtz()
+    with pytest.raises(ConvergenceError, match=r"unreachable \(target is in m: .* mm\?\)"):
+        solve_currents(rod, system, (29.0, 25.0))
+    with pytest.raises(ConvergenceError, match=r"unreachable$"):  # just beyond: no hint
+        solve_currents(rod, system, (rod.length * 1.01, 0.0))
+
+
+def test_control_start_whose_path_cannot_be_followed_backs_off(monkeypatch):
+    """Where the forward solve at the start currents fails (a fold on its load path: the
+    seed rod at a start of [-10, -4.5e-5, 0] A in a three-axis Helmholtz system with 10 load
+    steps, for the target (-20, 0) mm), the whole solve_currents raised that solve's error
+    and said nothing of the target; now the start is moved towards zero current and the
+    search goes on from there.  Stand-in for the fold: forward solves beyond 6 A fail."""
+    rod = presets.seed_rod(presets.M1())
+    system = coils.presets.three_axis_helmholtz()
+    forward = control._forward
+    fold = [6.0]
+
+    def folding(rod, field, steps, opts):
+        if np.abs(field.currents).max() > fold[0]:
+            raise ConvergenceError("fold", reached=0.5, target=1.0)
+        return forward(rod, field, steps, opts)
+
+    monkeypatch.setattr(control, "_forward", folding)
+    p = control._problem(rod, system, (-0.02, 0.0), None, "real", None, 2, (0, 0, 0), 0.0, 8, None)
+    start = np.array([-10.0, -4.5e-5, 0.0])
+    search, I, res, status, _ = control._search(p, start, max_iter=15, max_solves=2)
+    assert search.solves == 2
+    assert status == "max_solves"
+    # the first state is half the start; the reported one is a solved state, checked against
+    # a direct forward solve at its currents
+    assert np.abs(I).max() <= 6.0
+    direct = solve_rod(rod, system.with_currents(I), [0.5, 1.0], nodes=8)
+    np.testing.assert_allclose(res.tip[-1], direct.tip[-1], rtol=0, atol=1e-12 * L)
+    fold[0] = 1.0  # no state at all: the first error
+    with pytest.raises(ConvergenceError, match="fold"):
+        control._search(p, start, max_iter=15, max_solves=5)
