@@ -96,3 +96,20 @@ def test_control_start_whose_path_cannot_be_followed_backs_off(monkeypatch):
     fold[0] = 1.0  # no state at all: the first error
     with pytest.raises(ConvergenceError, match="fold"):
         control._search(p, start, max_iter=15, max_solves=5)
+
+
+def test_calibration_data_beyond_the_rods_reach_name_measured():
+    """Tip data in mm (1000 times too far): no state of the rod puts its tip beyond its
+    length from the clamp, and the fit drove E to 1 Pa (with warnings only) and reported it.
+    Now a ValueError naming ``measured``; data within reach still fit (the truth, E = 0.9 MPa,
+    from solve_rod itself)."""
+    rod = coilrod.Rod(
+        0.0172, 9e5, coilrod.Rectangle(5e-3, 0.84e-3), coilrod.Magnetization(114e3, 0)
+    )
+    fields = np.array([[0.0, b, 0.0] for b in (5e-3, 10e-3)])
+    truth = solve_rod(rod, coils.UniformField(B=(0, 10e-3, 0)), [0.5, 1.0]).tip[:, 1]
+    start = coilrod.Rod(0.0172, 2e6, rod.section, rod.magnetization)
+    with pytest.raises(ValueError, match=r"measured\[1\] = .* beyond the rod's length"):
+        coilrod.calibrate(start, fields, 1e3 * truth)
+    cal = coilrod.calibrate(start, fields, truth)
+    assert cal.values["youngs_modulus"] == pytest.approx(9e5, rel=1e-8)
