@@ -113,3 +113,22 @@ def test_calibration_data_beyond_the_rods_reach_name_measured():
         coilrod.calibrate(start, fields, 1e3 * truth)
     cal = coilrod.calibrate(start, fields, truth)
     assert cal.values["youngs_modulus"] == pytest.approx(9e5, rel=1e-8)
+
+
+@pytest.mark.parametrize(
+    "magnet",
+    [
+        coils.Dipole((0.0, 0.0, 0.0), center=(0.0, -0.06, 0.0)),
+        coils.CylinderMagnet(20e-3, 20e-3, 0.0, center=(0.0, -0.06, 0.0), axis="y"),
+        coils.CuboidMagnet((2e-2, 2e-2, 2e-2), (0.0, 0.0, 0.0), center=(0.0, -0.06, 0.0)),
+    ],
+    ids=["dipole", "cylinder", "cuboid"],
+)
+def test_magnet_pose_of_a_magnet_without_magnetization_is_refused(magnet):
+    """A magnet of zero magnetization has no field (its B is zero everywhere, e.g. at the
+    tip): the search spent its budget and reported an "optimal" pose; now a ValueError before
+    any solve."""
+    assert not np.any(magnet.B([[0.04, 0.0, 0.0]]))
+    rod = presets.seed_rod(presets.M1())
+    with pytest.raises(ValueError, match="magnetization .* is zero"):
+        coilrod.solve_magnet_pose(rod, magnet, (0.03, 0.02), nodes=8, max_solves=2)
