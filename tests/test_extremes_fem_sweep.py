@@ -132,3 +132,25 @@ def test_magnet_pose_of_a_magnet_without_magnetization_is_refused(magnet):
     rod = presets.seed_rod(presets.M1())
     with pytest.raises(ValueError, match="magnetization .* is zero"):
         coilrod.solve_magnet_pose(rod, magnet, (0.03, 0.02), nodes=8, max_solves=2)
+
+
+def test_fem_result_states_out_of_range_and_a_quiet_2d_export(tmp_path, capfd):
+    """``displacement``, ``deformed_nodes`` and ``plot`` of a state that does not exist raised
+    IndexError "list index out of range" (``export`` named ``k``); a 2D state written to VTU
+    printed meshio's "VTU requires 3D points" warning.  The file's points are the mesh's
+    nodes with z = 0 (the reference: the mesh itself), its displacement the state's."""
+    import meshio
+
+    res = coilrod.solve_fem(ROD, FIELD, [1.0], dim=2, elements=(2, 1))
+    for call in (res.displacement, res.deformed_nodes, res.plot):
+        with pytest.raises(ValueError, match="k must be a state index from -1 to 0; got 1"):
+            call(1)
+    capfd.readouterr()
+    back = meshio.read(res.export(tmp_path / "state.vtu"))
+    out, err = capfd.readouterr()
+    assert out == err == ""
+    nv = res.mesh.p.shape[1]
+    np.testing.assert_array_equal(back.points, np.c_[res.mesh.p.T, np.zeros(nv)])
+    np.testing.assert_array_equal(
+        back.point_data["displacement"][:, :2], res.displacement(0)[:, :nv].T
+    )
