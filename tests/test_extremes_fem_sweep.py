@@ -154,3 +154,18 @@ def test_fem_result_states_out_of_range_and_a_quiet_2d_export(tmp_path, capfd):
     np.testing.assert_array_equal(
         back.point_data["displacement"][:, :2], res.displacement(0)[:, :nv].T
     )
+
+
+def test_control_a_channel_a_few_nanoamperes_short_of_its_limit_is_at_it():
+    """The search for the target (-20, 0) mm (the seed rod, three-axis Helmholtz, 10 A)
+    stalls at -9.999999996 A on channel 0: the error said "no current limit is active" next
+    to currents [-10.0, 0.2176, 0.0] A.  A channel within LIMIT_RTOL of its limit is active
+    (the reference: the limit itself)."""
+    rod = presets.seed_rod(presets.M1())
+    system = coils.presets.three_axis_helmholtz()
+    p = control._problem(rod, system, (-0.02, 0.0), None, "real", None, 2, (0, 0, 0), 0.0, 8, None)
+    I = np.array([-10.0 + 4e-9, 0.2176, 0.0])
+    res = control._forward(p.rod, p.field_of(I), p.steps, p.opts)
+    with pytest.raises(ConvergenceError, match=r"beyond the current limits.*channels 0 at") as err:
+        control._finish(p, I, res, 1, 0, [1.0], "stalled")
+    assert err.value.result.active == [0]

@@ -106,7 +106,7 @@ class ControlResult:
         ``status`` is "converged" or "optimal".  A result that is not is returned with a
         :class:`ControlWarning` (or, for an unreachable position target, said in the error).
     active : list of int
-        Channels at their current limit (within 1e-9 of it) in ``currents``.
+        Channels at their current limit in ``currents`` (within ``LIMIT_RTOL`` of it).
     tip_direction : ndarray, shape (3,)
         Unit tangent at the tip in the real field (the first column of
         ``result.frames(-1)[-1]``).
@@ -1288,7 +1288,7 @@ def _finish(p: _Problem, I, res, solves, start_solves, history, status, edge=Non
         history=history,
         status=status,
         optimal=status in ("converged", "optimal"),
-        active=np.flatnonzero(np.abs(I) >= p.limits - 1e-9).tolist(),
+        active=np.flatnonzero(np.abs(I) >= p.limits * (1.0 - LIMIT_RTOL)).tolist(),
         tip_direction=tangent,
         direction_miss=(
             float(np.arctan2(np.linalg.norm(np.cross(tangent, p.direction)), tangent @ p.direction))
@@ -1299,6 +1299,12 @@ def _finish(p: _Problem, I, res, solves, start_solves, history, status, edge=Non
     )
     _report(p, out, history)
     return out
+
+
+#: A channel within this fraction of its limit is reported at its limit (``active``): the
+#: bounded least-squares steps end a few 1e-10 of the limit short of it (-9.999999996 A of a
+#: 10 A limit was reported as "no current limit is active").
+LIMIT_RTOL = 1e-6
 
 
 #: A closest state whose tip is within this fraction of L of the straight rod's is "nearly
