@@ -169,3 +169,20 @@ def test_control_a_channel_a_few_nanoamperes_short_of_its_limit_is_at_it():
     with pytest.raises(ConvergenceError, match=r"beyond the current limits.*channels 0 at") as err:
         control._finish(p, I, res, 1, 0, [1.0], "stalled")
     assert err.value.result.active == [0]
+
+
+def test_fem_given_mesh_with_a_degenerate_element_or_a_nan_node_is_named():
+    """A given mesh with an element of zero length raised scikit-fem's bare
+    Exception("Zero Jacobian determinant"); one with a NaN node was reported as a mesh
+    "height nan, nan % of the section's".  Both are ValueErrors saying what is wrong."""
+    from skfem import MeshQuad1
+
+    mesh = MeshQuad1.init_tensor(np.linspace(0, L, 5), np.linspace(-1e-3, 1e-3, 2))
+    p = mesh.p.copy()
+    p[0, np.isclose(p[0], L / 4)] = L / 2  # the second element collapses to zero length
+    with pytest.raises(ValueError, match="mesh has a degenerate element"):
+        coilrod.solve_fem(ROD, FIELD, [1.0], dim=2, order=1, mesh=MeshQuad1(p, mesh.t))
+    p = mesh.p.copy()
+    p[1, 3] = np.nan
+    with pytest.raises(ValueError, match=r"mesh nodes must be finite; node 3 is \[.*nan\]"):
+        coilrod.solve_fem(ROD, FIELD, [1.0], dim=2, order=1, mesh=MeshQuad1(p, mesh.t))

@@ -426,6 +426,9 @@ def check_mesh(mesh, rod, dim: int, order: int) -> None:
         )
     L = float(rod.length)
     x = mesh.doflocs
+    if not np.all(np.isfinite(x)):
+        bad = int(np.nonzero(~np.all(np.isfinite(x), axis=0))[0][0])
+        raise ValueError(f"mesh nodes must be finite; node {bad} is {x[:, bad].tolist()}")
     lo, hi = float(x[0].min()), float(x[0].max())
     if abs(lo) > MESH_END_TOL * L or abs(hi - L) > MESH_END_TOL * L:
         raise ValueError(
@@ -450,7 +453,12 @@ def check_mesh(mesh, rod, dim: int, order: int) -> None:
                 f"section {sec!r}{' as the 2D strip' if dim == 2 else ''} is centred on the x "
                 "axis)"
             )
-    area = float(skfem.Basis(mesh, mesh.elem(), intorder=5).dx.sum()) / L
+    try:
+        area = float(skfem.Basis(mesh, mesh.elem(), intorder=5).dx.sum()) / L
+    except Exception as exc:  # scikit-fem raises a bare Exception("Zero Jacobian determinant")
+        raise ValueError(
+            f"mesh has a degenerate element (of zero area or volume; scikit-fem: {exc})"
+        ) from None
     nominal = equivalent_height(sec) if dim == 2 else sec.area
     ratio = area / nominal
     if isinstance(sec, Circle) and dim == 3:
