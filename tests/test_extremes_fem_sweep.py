@@ -186,3 +186,18 @@ def test_fem_given_mesh_with_a_degenerate_element_or_a_nan_node_is_named():
     p[1, 3] = np.nan
     with pytest.raises(ValueError, match=r"mesh nodes must be finite; node 3 is \[.*nan\]"):
         coilrod.solve_fem(ROD, FIELD, [1.0], dim=2, order=1, mesh=MeshQuad1(p, mesh.t))
+
+
+def test_fem_poisson_ratios_at_the_ends_of_the_range():
+    """nu = 0.5 - 1e-11 (K/G = 5e10) stalled at scale 0 with a ConvergenceError; it is a
+    ValueError now (the tips are the same to 1e-8 from 0.5 - 1e-7 to 0.5 - 1e-10).  nu < -0.5
+    warns: the elements lock as G >> K.  The reference: in plane stress the bending stiffness
+    is E I whatever nu, so nu = -0.9 must give nu = 0's tip -- it is 10 % short on this mesh."""
+    with pytest.raises(ValueError, match="poisson_ratio = 0.49999999999 is within 1e-10 of 0.5"):
+        coilrod.solve_fem(ROD, FIELD, [1.0], dim=2, elements=(2, 1), poisson_ratio=0.5 - 1e-11)
+    weak = coils.UniformField((0.0, ROD.field_for_lambda(0.01), 0.0))
+    zero = coilrod.solve_fem(ROD, weak, [1.0], dim=2, elements=(8, 1), poisson_ratio=0.0)
+    with pytest.warns(UserWarning, match="poisson_ratio = -0.9 < -0.5: the elements lock"):
+        auxetic = coilrod.solve_fem(ROD, weak, [1.0], dim=2, elements=(8, 1), poisson_ratio=-0.9)
+    assert auxetic.tip[0, 1] < 0.95 * zero.tip[0, 1]
+    assert zero.tip[0, 1] == pytest.approx(0.01 / 3 * L, rel=1e-3)
