@@ -201,3 +201,19 @@ def test_fem_poisson_ratios_at_the_ends_of_the_range():
         auxetic = coilrod.solve_fem(ROD, weak, [1.0], dim=2, elements=(8, 1), poisson_ratio=-0.9)
     assert auxetic.tip[0, 1] < 0.95 * zero.tip[0, 1]
     assert zero.tip[0, 1] == pytest.approx(0.01 / 3 * L, rel=1e-3)
+
+
+def test_point_dipole_sums_at_no_points_and_mpem_channel_names():
+    """A Dipole's or an MPEM's field at no points (shape (0, 3)) raised numpy's "cannot
+    reshape array of size 0" (a magnet's and a coil pair's give empty arrays, the reference);
+    two MPEM channels of one name were accepted (``names`` name the channels in messages and
+    results)."""
+    none = np.zeros((0, 3))
+    mpem = coils.MPEM([([[0.0, 0.0, -0.1]], [[0.0, 0.0, 1e-7]])], currents=[1.0])
+    for source in (coils.Dipole((0.0, 0.0, 1.0)), mpem, coils.CylinderMagnet(1e-2, 1e-2, 1e6)):
+        B, G, H = source.B_gradient_hessian(none)
+        assert (B.shape, G.shape, H.shape) == ((0, 3), (0, 3, 3), (0, 3, 3, 3))
+    assert [a.shape for a in mpem.unit_fields(none)] == [(0, 3, 1), (0, 3, 3, 1)]
+    pair = [([[0.0, 0.0, -0.1]], [[0.0, 0.0, 1e-7]]), ([[0.0, 0.0, 0.1]], [[0.0, 0.0, 1e-7]])]
+    with pytest.raises(ValueError, match=r"names must be distinct .* \['x'\] repeat"):
+        coils.MPEM(pair, names=["x", "x"])
