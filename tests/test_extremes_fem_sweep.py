@@ -44,7 +44,9 @@ def test_control_limits_too_small_for_any_field_say_so():
     """Limits of 1e-12 A make a centre field that rounds to zero in some direction: the
     uniform start then asked the workspace for a field bound of -0.0 T and raised "b_max must
     be positive" (an argument the caller never gave).  Now the search starts at zero current
-    and reports the limits, with the closest tip: the straight rod (lambda ~ 1e-12)."""
+    and reports the limits, with the closest tip: the straight rod (lambda ~ 1e-12).  (No
+    channel is at its limit there -- no step within them gains -- and the error first said
+    "outside the robot's reachable set": with 10 A limits it is met at [0.31, 3.57, 0] A.)"""
     rod = presets.seed_rod(presets.M1())
     system = coils.presets.three_axis_helmholtz()
     with pytest.raises(ConvergenceError, match="beyond the current limits") as err:

@@ -1333,6 +1333,19 @@ def _stalled_where(p: _Problem, out: ControlResult) -> str:
     return text
 
 
+def _held_by_limits(p: _Problem, out: ControlResult) -> bool:
+    """A local optimum within the limits with no channel at its limit, where a step beyond
+    them would still gain at least half of the squared misses: limits so tight that no
+    step within them moves the tip (e.g. 1e-12 A), not a target out of the robot's reach
+    (there the misses' gradient vanishes, and no step gains, whatever its size: the misses
+    lie off the combinations the currents move)."""
+    r = p.residual(out.result)
+    # the misses on the output combinations the currents move (singular values above
+    # STEP_RCOND of the largest, not round-off ones): an unbounded step removes them all
+    _, moved = _moved(p.jacobian(out.result), r)
+    return float(moved @ moved) > 0.5 * float(r @ r)
+
+
 def _report(p: _Problem, out: ControlResult, history) -> None:
     """Raise ConvergenceError for a position target the real controller did not reach --
     telling the current limits (naming the channels at theirs) from a target outside the
@@ -1344,6 +1357,11 @@ def _report(p: _Problem, out: ControlResult, history) -> None:
             why = (
                 "beyond the current limits: not reachable within them (channels "
                 f"{', '.join(map(str, out.active))} at their limit)"
+            )
+        elif out.optimal and _held_by_limits(p, out):
+            why = (
+                "beyond the current limits: within them the currents barely move the tip (the "
+                "best step within the limits gains almost nothing, one beyond them much)"
             )
         elif out.optimal:
             why = (
