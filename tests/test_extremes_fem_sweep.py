@@ -219,3 +219,14 @@ def test_point_dipole_sums_at_no_points_and_mpem_channel_names():
     pair = [([[0.0, 0.0, -0.1]], [[0.0, 0.0, 1e-7]]), ([[0.0, 0.0, 0.1]], [[0.0, 0.0, 1e-7]])]
     with pytest.raises(ValueError, match=r"names must be distinct .* \['x'\] repeat"):
         coils.MPEM(pair, names=["x", "x"])
+
+
+def test_cli_version(capsys):
+    """``coilrod --version`` was an unrecognised argument (exit 2); it prints the installed
+    package's version (the reference: importlib.metadata) and exits 0."""
+    from importlib.metadata import version
+
+    from coilrod.scene.cli import main
+
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out == f"coilrod {version('coilrod')}\n"
