@@ -230,3 +230,25 @@ def test_cli_version(capsys):
 
     assert main(["--version"]) == 0
     assert capsys.readouterr().out == f"coilrod {version('coilrod')}\n"
+
+
+def test_a_scene_whose_fem_refuses_an_input_reports_that_model_failed():
+    """A Poisson ratio the scene parser accepts but solve_fem refuses (within 1e-10 of 0.5)
+    was a traceback out of ``coilrod run`` (before, a ConvergenceError at scale 0); it is that
+    model's error, the other models still run."""
+    from _scenes import scene_with
+
+    from coilrod.scene import parse_scene
+    from coilrod.scene.runner import run_scene
+
+    data = scene_with(
+        robot__poisson_ratio=0.5 - 1e-11,
+        models__run=["rod", "fem2d"],
+        fem={"elements2d": [2, 1]},
+        load__steps=1,
+        rod={"nodes": 8},
+    )
+    rod_run, fem_run = run_scene(parse_scene(data), progress=False).runs
+    assert rod_run.error == ""
+    assert fem_run.error.startswith("fem2d: poisson_ratio = 0.49999999999 is within 1e-10")
+    assert fem_run.scales.size == 0
