@@ -252,6 +252,8 @@ def dipole_sum(pts, pos, mom, tol, B=None, G=None, H=None) -> int:
     # read-only views: one compiled version whether the caller's arrays are sealed or not
     pts, pos, mom = kernel_input(pts), kernel_input(pos), kernel_input(mom)
     n = pts.shape[0]
+    if n == 0:  # nothing to add (and no row to check)
+        return -1
     if H is None and n >= 64:
         # B and/or G: the vectorised kernel; the exact kernel only to name a point on a source
         if _FAST is None:

@@ -146,6 +146,9 @@ class MPEM(AccumulatedField):
             or not all(isinstance(n, str) for n in names)
         ):
             raise ValueError(f"names must be a sequence of {m} strings; got {_show(names)}")
+        twice = sorted({n for n in names if list(names).count(n) > 1})
+        if twice:
+            raise ValueError(f"names must be distinct (they name the channels); {twice} repeat")
         return tuple(names)
 
     def _where(self) -> str:

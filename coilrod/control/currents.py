@@ -106,7 +106,7 @@ class ControlResult:
         ``status`` is "converged" or "optimal".  A result that is not is returned with a
         :class:`ControlWarning` (or, for an unreachable position target, said in the error).
     active : list of int
-        Channels at their current limit (within 1e-9 of it) in ``currents``.
+        Channels at their current limit in ``currents`` (within ``LIMIT_RTOL`` of it).
     tip_direction : ndarray, shape (3,)
         Unit tangent at the tip in the real field (the first column of
         ``result.frames(-1)[-1]``).
@@ -192,6 +192,8 @@ def _uniform_start(rod, goal, with_angle, steps, opts, b_cap, tol: float = 0.0):
     wts = _weights_for(with_angle, L)
     clamp = np.asarray(opts["clamp_position"], float)
     ang = opts["clamp_angle"]
+    if not b_cap > 0.0:  # limits too small for any field in some direction (rounded to 0)
+        return np.zeros(2), 0
     if tol > 0.0:
         straight = clamp[:2] + L * np.array([math.cos(ang), math.sin(ang)])
         miss = np.r_[straight, ang][: goal.size] - goal
@@ -651,7 +653,7 @@ def _approach(p: _Problem, search: _Search, I, max_iter: int) -> None:
        the rod's branch (trial steps along one direction jumping to another branch,
        :class:`_EdgeWatch`).
     """
-    res, r, miss = search.evaluate(I)
+    res, r, miss, I = _first_state(search, I)
     far = FAR * p.length
     restore_next, trust, rcond = False, 1.0, STEP_RCOND
     for _ in range(max_iter):
@@ -691,6 +693,27 @@ def _approach(p: _Problem, search: _Search, I, max_iter: int) -> None:
                 break
         if not moved:
             return
+
+
+#: Fractions of the start currents tried, in turn, when the forward solve at the start fails.
+START_BACKOFF = (0.5, 0.25, 0.125)
+
+
+def _first_state(search: _Search, I):
+    """The forward solve at the start currents ``I``: (result, misses, position miss, the
+    currents).  Where its load path cannot be followed (a fold on the way, e.g. a start
+    field nearly antiparallel to the rod), the start moved towards zero current
+    (:data:`START_BACKOFF`; the unloaded rod is always an equilibrium) so the search has a
+    state to report; the first failure is raised if none of them can be followed either."""
+    try:
+        return (*search.evaluate(I), I)
+    except ConvergenceError as first:
+        for f in START_BACKOFF:
+            try:
+                return (*search.evaluate(f * I), f * I)
+            except ConvergenceError:
+                continue
+        raise first from first.__cause__
 
 
 def _search(p: _Problem, I, max_iter: int, max_solves: int, fresh_next: bool = False):
@@ -813,10 +836,12 @@ def _problem(
             f"B_z) at its centre; its centre field per ampere has rank "
             f"{np.linalg.matrix_rank(Bu, tol=rank_tol)}"
         )
-    if np.linalg.norm(goal - clamp[: goal.size]) > L * (1 + 1e-12):
+    distance = float(np.linalg.norm(goal - clamp[: goal.size]))
+    if distance > L * (1 + 1e-12):
+        units = " (target is in m: was it given in mm?)" if distance > 100 * L else ""
         raise ConvergenceError(
-            f"the target {goal.tolist()} m is {np.linalg.norm(goal - clamp[: goal.size]):.4g} m "
-            f"from the clamp, beyond the rod's length {L:g} m: unreachable",
+            f"the target {goal.tolist()} m is {distance:.4g} m from the clamp, beyond the "
+            f"rod's length {L:g} m: unreachable{units}",
             reached=0.0,
             target=1.0,
         )
@@ -1263,7 +1288,7 @@ def _finish(p: _Problem, I, res, solves, start_solves, history, status, edge=Non
         history=history,
         status=status,
         optimal=status in ("converged", "optimal"),
-        active=np.flatnonzero(np.abs(I) >= p.limits - 1e-9).tolist(),
+        active=np.flatnonzero(np.abs(I) >= p.limits * (1.0 - LIMIT_RTOL)).tolist(),
         tip_direction=tangent,
         direction_miss=(
             float(np.arctan2(np.linalg.norm(np.cross(tangent, p.direction)), tangent @ p.direction))
@@ -1274,6 +1299,12 @@ def _finish(p: _Problem, I, res, solves, start_solves, history, status, edge=Non
     )
     _report(p, out, history)
     return out
+
+
+#: A channel within this fraction of its limit is reported at its limit (``active``): the
+#: bounded least-squares steps end a few 1e-10 of the limit short of it (-9.999999996 A of a
+#: 10 A limit was reported as "no current limit is active").
+LIMIT_RTOL = 1e-6
 
 
 #: A closest state whose tip is within this fraction of L of the straight rod's is "nearly
@@ -1302,6 +1333,19 @@ def _stalled_where(p: _Problem, out: ControlResult) -> str:
     return text
 
 
+def _held_by_limits(p: _Problem, out: ControlResult) -> bool:
+    """A local optimum within the limits with no channel at its limit, where a step beyond
+    them would still gain at least half of the squared misses: limits so tight that no
+    step within them moves the tip (e.g. 1e-12 A), not a target out of the robot's reach
+    (there the misses' gradient vanishes, and no step gains, whatever its size: the misses
+    lie off the combinations the currents move)."""
+    r = p.residual(out.result)
+    # the misses on the output combinations the currents move (singular values above
+    # STEP_RCOND of the largest, not round-off ones): an unbounded step removes them all
+    _, moved = _moved(p.jacobian(out.result), r)
+    return float(moved @ moved) > 0.5 * float(r @ r)
+
+
 def _report(p: _Problem, out: ControlResult, history) -> None:
     """Raise ConvergenceError for a position target the real controller did not reach --
     telling the current limits (naming the channels at theirs) from a target outside the
@@ -1313,6 +1357,11 @@ def _report(p: _Problem, out: ControlResult, history) -> None:
             why = (
                 "beyond the current limits: not reachable within them (channels "
                 f"{', '.join(map(str, out.active))} at their limit)"
+            )
+        elif out.optimal and _held_by_limits(p, out):
+            why = (
+                "beyond the current limits: within them the currents barely move the tip (the "
+                "best step within the limits gains almost nothing, one beyond them much)"
             )
         elif out.optimal:
             why = (

@@ -453,6 +453,12 @@ def _problem(rod, magnet, target, bounds, model, steps, clamp_position, clamp_an
             "magnet must be a coils.Dipole, coils.CylinderMagnet or coils.CuboidMagnet; got "
             f"{type(magnet).__name__}"
         )
+    moment = magnet.moment if isinstance(magnet, coils.Dipole) else magnet.dipole().moment
+    if not np.any(moment):
+        raise ValueError(
+            "magnet: its magnetization (dipole moment) is zero, so is its field: no pose moves "
+            "the tip"
+        )
     if model not in ("real", "dipole"):
         raise ValueError(f"model must be 'real' or 'dipole'; got {model!r}")
     goal = as_array(target, "target")

@@ -549,6 +549,25 @@ def _checked_data(rod, fields, measured, fit, output, field_angle, sigma):
     return fields, measured, output, fit, field_angle, weights
 
 
+def _check_reach(rod: Rod, measured: np.ndarray, output: str, options: dict) -> None:
+    """A measured tip coordinate farther from the clamp than the rod's length is no state of
+    the rod (the fit would drive E towards zero and report it): ValueError naming
+    ``measured`` (in m; data in mm are 1000 times too far)."""
+    if output not in ("tip_x", "tip_y"):
+        return
+    clamp = np.asarray(options.get("clamp_position", (0.0, 0.0, 0.0)), dtype=float)
+    if clamp.shape != (3,):  # solve_rod names the bad clamp_position
+        return
+    off = np.abs(measured - clamp[OUTPUTS[output][1]])
+    worst = int(np.argmax(off))
+    if off[worst] > rod.length * (1 + 1e-9):
+        raise ValueError(
+            f"measured[{worst}] = {measured[worst]:g} m puts the tip {off[worst]:g} m from the "
+            f"clamp along {output[-1]}, beyond the rod's length {rod.length:g} m (measured is "
+            "in m: data in mm?)"
+        )
+
+
 def _least_squares(model, measured, weights, x0, bounds, rank_tol, tol, max_nfev):
     """scipy's trust-region least squares of the weighted residuals with the model's exact
     Jacobian from ``x0``: (its solution, the trial points rejected and why).  The rank of the
@@ -703,7 +722,8 @@ def calibrate(
     Raises
     ------
     ValueError
-        Bad input (shapes, NaN, non-positive values, unknown names, fewer than p + 1 points);
+        Bad input (shapes, NaN, non-positive values, unknown names, fewer than p + 1 points,
+        a measured tip x or y farther from the clamp than the rod's length);
         a magnetization with an out-of-plane elevation (the planar rod is fitted).
     IdentifiabilityError
         (a ValueError) The Jacobian is rank deficient at the start or at the fit: the data
@@ -766,6 +786,7 @@ def calibrate(
         if key not in SOLVE_OPTIONS:
             raise ValueError(f"solve_options may set {list(SOLVE_OPTIONS)}; got {key!r}")
 
+    _check_reach(rod, measured, output, options)
     model = _Model(rod, fields, output, fit, field_angle, options)
     initial = model.initial()
     lo, hi = _check_bounds(bounds, fit, initial)

@@ -90,9 +90,16 @@ class FEMResult:
     def __len__(self) -> int:
         return len(self._states)
 
+    def _index(self, k) -> int:
+        """``k`` as a state index (negative from the end), or a ValueError naming it."""
+        n = len(self)
+        if isinstance(k, bool) or not isinstance(k, int | np.integer) or not -n <= k < n:
+            raise ValueError(f"k must be a state index from {-n} to {n - 1}; got {k!r}")
+        return int(k)
+
     def displacement(self, k: int) -> np.ndarray:
         """Nodal displacement of state ``k``, shape (dim, n_nodes), m (see :attr:`nodes`)."""
-        return self._asm.nodal(self._states[k])
+        return self._asm.nodal(self._states[self._index(k)])
 
     def deformed_nodes(self, k: int) -> np.ndarray:
         """Deformed node positions of state ``k``, shape (dim, n_nodes), m."""
@@ -107,7 +114,10 @@ class FEMResult:
         mesh = self.mesh
         disp = np.zeros((npts, 3))
         disp[:, : self.dim] = u[:, :npts].T
-        return to_meshio(mesh, point_data={"displacement": disp})
+        out = to_meshio(mesh, point_data={"displacement": disp})
+        if out.points.shape[1] == 2:  # VTU needs 3D points (meshio pads them, printing so)
+            out.points = np.column_stack([out.points, np.zeros(len(out.points))])
+        return out
 
     def export(self, path, k: int | None = None) -> Path:
         """Write displacement fields for ParaView (apply "Warp By Vector" to see the shape).
@@ -142,10 +152,7 @@ class FEMResult:
                 "files; use .vtu, .vtk or .xdmf"
             )
         if k is not None:
-            n = len(self)
-            if isinstance(k, bool) or not isinstance(k, int | np.integer) or not -n <= k < n:
-                raise ValueError(f"k must be a state index from {-n} to {n - 1}; got {k!r}")
-            k = int(k)
+            k = self._index(k)
         if path.suffix == ".xdmf" and k is None:
             first = self._meshio(0)
             # XML (inline) data: no HDF5 dependency
@@ -188,5 +195,5 @@ class FEMResult:
         ax.set_aspect("equal")
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
-        ax.set_title(f"scale {self.scales[k]:g}")
+        ax.set_title(f"scale {self.scales[self._index(k)]:g}")
         return ax

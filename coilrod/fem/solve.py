@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from coilrod.robot.rod import Rod
@@ -15,11 +17,17 @@ from ..path.stepping import PathOptions, follow_load
 from ..rod.model import clamp_frame, planar_reasons
 from .assembly import Assembler
 from .material import moduli
-from .mesh import check_elements, check_mesh, default_elements, rod_mesh
+from .mesh import check_elements, check_memory, check_mesh, default_elements, rod_mesh
 from .problem import FEMProblem
 from .result import FEMResult
 
 __all__ = ["solve_fem", "DEFAULT_POISSON_RATIO"]
+
+#: Poisson's ratios closer to 0.5 than this are refused: K/G ~ 5e9 and beyond, where the
+#: Newton solve stalls at round-off (0.5 - 1e-11 could not leave scale 0).
+NU_GAP = 1e-10
+#: Below this Poisson's ratio solve_fem warns: the elements lock (dilatational locking, G/K > 6).
+NU_LOCKING = -0.5
 
 #: Default Poisson's ratio: K/G = 2(1 + nu) / (3(1 - 2 nu)) = 999.7, nearly incompressible
 #: like the elastomers of Zhao et al. (2019), who take K >> G.
@@ -27,7 +35,12 @@ DEFAULT_POISSON_RATIO = 0.4995
 
 
 def _scales(scales) -> np.ndarray:
-    arr = np.atleast_1d(np.asarray(scales, dtype=float))
+    if isinstance(scales, str | bytes):
+        raise ValueError(f"scales must be a sequence of numbers; got {scales!r}")
+    try:
+        arr = np.atleast_1d(np.asarray(scales, dtype=float))
+    except (TypeError, ValueError):
+        raise ValueError(f"scales must be a sequence of numbers; got {scales!r}") from None
     if arr.ndim != 1 or arr.size == 0:
         raise ValueError(f"scales must be a non-empty 1D sequence; got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
@@ -59,6 +72,22 @@ def _checked_options(
     nu = finite_scalar(poisson_ratio, "poisson_ratio")
     if not -1.0 < nu < 0.5:
         raise ValueError(f"poisson_ratio must lie in (-1, 0.5); got {nu}")
+    if nu > 0.5 - NU_GAP:
+        raise ValueError(
+            f"poisson_ratio = {nu!r} is within {NU_GAP:g} of 0.5 (K/G = "
+            f"{2 * (1 + nu) / (3 * (1 - 2 * nu)):.3g}): beyond what float64 solves; 0.4999999 "
+            "gives the same tips to 1e-8"
+        )
+    if nu < NU_LOCKING:
+        warnings.warn(
+            f"poisson_ratio = {nu:g} < {NU_LOCKING:g}: the elements lock as nu -> -1 (G/K = "
+            f"{3 * (1 - 2 * nu) / (2 * (1 + nu)):.3g}; the mixed formulation relieves K >> G, "
+            "not G >> K): the body is too stiff by a mesh-dependent amount (at nu = -0.9 a "
+            "slender rod's tip under a small load is 0.74 and 0.92 of its lambda L / 3 on "
+            "(4, 1, 1) and (16, 2, 2) elements); refine the mesh until the tip stops moving",
+            UserWarning,
+            stacklevel=3,
+        )
     for name, val in (("rtol", rtol), ("utol", utol)):
         if not finite_scalar(val, name) > 0:
             raise ValueError(f"{name} must be positive; got {val}")
@@ -74,7 +103,9 @@ def _assembler(rod, field, mesh, elements, dim, order, nu, plane, formulation) -
     if mesh is None:
         if elements is None:
             elements = default_elements(rod, dim)
-        mesh = rod_mesh(rod, dim, check_elements(elements, dim), order)
+        elements = check_elements(elements, dim)
+        check_memory(rod.section, dim, order, elements)
+        mesh = rod_mesh(rod, dim, elements, order)
     elif getattr(getattr(mesh, "p", None), "shape", (dim,))[0] != dim:
         raise ValueError(f"mesh must be {dim}-dimensional for dim={dim}; got {mesh.p.shape[0]}")
     else:
@@ -161,9 +192,11 @@ def solve_fem(
         all, at least one per piece; :func:`~coilrod.fem.length_layers`), so no element
         straddles a jump of |M| or of its angle.
     poisson_ratio : float
-        nu in (-1, 0.5); sets G = E / (2(1 + nu)) and K = E / (3(1 - 2 nu)).  The continuum's
-        own value, independent of ``rod.poisson_ratio`` (the rod's torsional stiffness, which
-        may be the incompressible 0.5 that K cannot take).
+        nu in (-1, 0.5 - 1e-10]; sets G = E / (2(1 + nu)) and K = E / (3(1 - 2 nu)).  The
+        continuum's own value, independent of ``rod.poisson_ratio`` (the rod's torsional
+        stiffness, which may be the incompressible 0.5 that K cannot take).  Below -0.5 a
+        UserWarning: the elements lock as nu -> -1 (G >> K), too stiff by a mesh-dependent
+        amount.
     plane : {"stress", "strain"}
         2D assumption.  Plane stress has the rod's bending stiffness E I; plane strain is
         stiffer by 1/(1 - nu^2).  In 2D a Circle section is the strip of equal I/A

@@ -50,6 +50,16 @@ DEMO_SCENES = {
 }
 
 
+def _version() -> str:
+    """The installed coilrod's version ("unknown" for a source tree that is not installed)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("coilrod")
+    except PackageNotFoundError:  # pragma: no cover
+        return "unknown"
+
+
 def _demo_scene(name: str, magnetization: dict) -> dict:
     return {
         "name": f"demo: seed robot, {name}, Helmholtz pair R = 80 mm vs ideal Config (A)",
@@ -274,6 +284,7 @@ def _parser() -> argparse.ArgumentParser:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    parser.add_argument("--version", action="version", version=f"coilrod {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
     _add_run_commands(sub)

@@ -297,7 +297,9 @@ def _field_cache(scene, plan, result, log):
 
 def _run_job(job, scene, field_obj, progress) -> ModelRun:
     """One model in one field along the scene's scales; on a ConvergenceError the run holds the
-    error and the part of the path that was reached."""
+    error and the part of the path that was reached, on a ValueError of the solver (an input
+    the scene parser does not refuse, e.g. a FEM Poisson ratio within 1e-10 of 0.5) the
+    error alone."""
     t0 = time.perf_counter()
     try:
         scales, tip, angle, res = _solve(job, scene, field_obj, progress)
@@ -309,6 +311,16 @@ def _run_job(job, scene, field_obj, progress) -> ModelRun:
             np.asarray(angle),
             time.perf_counter() - t0,
             result=res,
+        )
+    except ValueError as exc:  # an input the scene parser lets through but the solver refuses
+        return ModelRun(
+            job.model,
+            job.field_label,
+            np.zeros(0),
+            np.zeros((0, 3)),
+            np.zeros(0),
+            time.perf_counter() - t0,
+            error=f"{job.model}: {exc}",
         )
     except ConvergenceError as exc:
         run = ModelRun(
