@@ -295,6 +295,19 @@ def _field_cache(scene, plan, result, log):
     return cached
 
 
+def _failed_run(job, t0: float, error: str) -> ModelRun:
+    """A run of ``job`` that reached no state, holding ``error`` (started at ``t0``, s)."""
+    return ModelRun(
+        job.model,
+        job.field_label,
+        np.zeros(0),
+        np.zeros((0, 3)),
+        np.zeros(0),
+        time.perf_counter() - t0,
+        error=error,
+    )
+
+
 def _run_job(job, scene, field_obj, progress) -> ModelRun:
     """One model in one field along the scene's scales; on a ConvergenceError the run holds the
     error and the part of the path that was reached, on a ValueError of the solver (an input
@@ -313,25 +326,9 @@ def _run_job(job, scene, field_obj, progress) -> ModelRun:
             result=res,
         )
     except ValueError as exc:  # an input the scene parser lets through but the solver refuses
-        return ModelRun(
-            job.model,
-            job.field_label,
-            np.zeros(0),
-            np.zeros((0, 3)),
-            np.zeros(0),
-            time.perf_counter() - t0,
-            error=f"{job.model}: {exc}",
-        )
+        return _failed_run(job, t0, f"{job.model}: {exc}")
     except ConvergenceError as exc:
-        run = ModelRun(
-            job.model,
-            job.field_label,
-            np.zeros(0),
-            np.zeros((0, 3)),
-            np.zeros(0),
-            time.perf_counter() - t0,
-            error=str(exc),
-        )
+        run = _failed_run(job, t0, str(exc))
         partial = getattr(exc, "result", None)
         if partial is not None and len(getattr(partial, "scales", ())):
             # the solver handed over the states it reached
