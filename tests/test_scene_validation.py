@@ -561,6 +561,17 @@ def test_poisson_ratio_reaches_the_rod_and_the_fem():
         "robot.poisson_ratio: 0.5 is incompressible, which the FEM (fem3d) cannot take "
         "(infinite bulk modulus); give e.g. 0.4995"
     ]
+    # within the FEM's gap of 0.5: refused at check, not at run time (coilrod.fem.solve.NU_GAP)
+    from coilrod.fem.solve import NU_GAP
+    from coilrod.scene.checks import FEM_NU_GAP
+
+    assert FEM_NU_GAP == NU_GAP
+    lines = problems_of(scene_with(robot__poisson_ratio=0.5 - 1e-11, models={"run": ["fem2d"]}))
+    assert lines == [
+        "robot.poisson_ratio: 0.49999999999 is within 1e-10 of 0.5, beyond what the FEM (fem2d) "
+        "solves in float64; 0.4999999 gives the same tips to 1e-8"
+    ]
+    assert parse_scene(scene_with(robot__poisson_ratio=0.5 - 1e-11))  # the rod takes it
     for bad in (0.51, -1.0, "0.3", True):
         assert problems_of(scene_with(robot__poisson_ratio=bad))[0].startswith(
             "robot.poisson_ratio: "

@@ -28,6 +28,7 @@ from coils.coaxial import coaxial_parts
 
 from ..fem.mesh import DEFAULT_ELEMENTS as FEM_DEFAULT_ELEMENTS
 from ..fem.mesh import default_elements, linear_circle_problem
+from ..fem.solve import NU_GAP as FEM_NU_GAP
 from ..robot.sections import Circle
 from . import limits
 from .strength import field_strength
@@ -310,10 +311,16 @@ def _planar_and_incompressible(scene) -> list[str]:
             for what in planar
         ]
     fem = [m for m in scene.models if m.startswith("fem")]
-    if scene.poisson_ratio == 0.5 and fem:
+    nu = scene.poisson_ratio
+    if nu == 0.5 and fem:
         problems.append(
             "robot.poisson_ratio: 0.5 is incompressible, which the FEM "
             f"({', '.join(fem)}) cannot take (infinite bulk modulus); give e.g. 0.4995"
+        )
+    elif nu is not None and nu > 0.5 - FEM_NU_GAP and fem:
+        problems.append(
+            f"robot.poisson_ratio: {nu!r} is within {FEM_NU_GAP:g} of 0.5, beyond what the FEM "
+            f"({', '.join(fem)}) solves in float64; 0.4999999 gives the same tips to 1e-8"
         )
     return problems
 
