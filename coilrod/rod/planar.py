@@ -561,7 +561,7 @@ class PlanarRod(DiscreteRod):
         ``tangent`` False (the caller needs the states and residuals only): the out-of-plane
         Cholesky test that :meth:`negative_counts` could reuse is skipped."""
         if not self.uniform:
-            return None
+            return self._compiled_newton_mixed(U, S, opts, tangent)
         pn = _planar_newton()
         if not pn.compiled_pays():
             return None
@@ -582,11 +582,44 @@ class PlanarRod(DiscreteRod):
         err, iters = M[:, 0], M[:, 4].astype(int)
         return U, err, iters, lin
 
+    def _compiled_newton_mixed(self, U: np.ndarray, S: np.ndarray, opts, tangent: bool):
+        """:meth:`compiled_newton` of the mixed layout in coaxial coils' fields
+        (:mod:`coilrod.rod._mixed_newton`), None where it does not apply or pay yet."""
+        from coils import coaxial
+
+        mn = _mixed_newton()
+        if mn.coaxial_groups(self.field) is None:
+            return None
+        if not (coaxial._rental.ready and mn.compiled_pays()):
+            return None
+        out = mn.newton_mixed(self, U, S, opts, tangent)
+        if out is None:
+            return None
+        k, n, M = U.shape[0], self.n, out["M"]
+        R, R1 = out["R"], out["R1"]
+        ok = M[:, 2] != 0.0
+        lin = Linearization(u=U, scale=S, residual=R, ok=ok)
+        lin.load_rate = R1
+        lin.field_values = lin.field_hessian = None
+        if tangent:
+            tan = RodTangent(k, self.size, False, None, out["RT1"])
+            tan._lu = (out["ab"], out["ipiv"])
+            tan.bad = M[:, 4] != 0.0
+            tan.signs = M[:, 3].copy()
+            lin.tangent = tan
+            lin.field_values = (out["B"].reshape(k, n, 3), out["G"].reshape(k, n, 3, 3))
+            if (M[:, 5] != 0.0).all():
+                lin.field_hessian = out["H"].reshape(k * n, 3, 3, 3)
+            lin.path_rate = out["rate"]  # read by the path engine (coilrod.path.stepping)
+        return U, M[:, 0].copy(), M[:, 1].astype(int), lin
+
     def compiled_newton_rent(self, iters) -> None:
         """Charge a numpy corrector call of ``iters`` iterations (per member) to the ski rental
         of :meth:`compiled_newton`."""
         if self.uniform:
             _planar_newton().charge(iters)
+        elif _mixed_newton().coaxial_groups(self.field) is not None:
+            _mixed_newton().charge(iters)
 
     def dense_jacobian(self, u: np.ndarray, scale: float) -> np.ndarray:
         """The Jacobian of one state as a dense (size, size) array (tests, small problems)."""
@@ -917,6 +950,20 @@ def _planar_newton():
 
 
 _PN = None
+
+
+def _mixed_newton():
+    """:mod:`coilrod.rod._mixed_newton`, imported on first use (it imports numba) and kept (as
+    :func:`_planar_newton`)."""
+    global _MN
+    if _MN is None:
+        from . import _mixed_newton as mn
+
+        _MN = mn
+    return _MN
+
+
+_MN = None
 
 
 def _compiled():

@@ -1,0 +1,631 @@
+"""Compiled Newton corrector of the planar rod's mixed layout in coaxial coils' fields (numba,
+cached on disk).
+
+One call runs :func:`coilrod.path.corrector.newton` to the end for a stack of states of
+:class:`~coilrod.rod.planar.PlanarRod`'s mixed layout (positions, angles and force resultants
+at every node) when the field is a sum of coaxial filament groups (a
+:class:`~coils.CoilPair`, a coaxial :class:`~coils.CoilSystem`): the field at the nodes (the
+coils' compiled pass, called from here), the residual and band Jacobian
+(:mod:`coilrod.rod._compiled`'s per-node kernels), the band LU and solves (the arithmetic of
+``band_lu`` / ``band_solve``, member by member: the stacked Jacobian is block diagonal), the
+step limit, the backtracking line search, the error and the stagnation test.
+
+The batched corrector's bookkeeping is reproduced exactly: the members share the chord
+decision (an iteration is a chord step when every active member's last error contraction is
+at most ``opts.chord``), a fresh tangent is formed at the current states when a full Newton
+step follows chord steps, the accepted trial's linearization becomes the tangent after a full
+step, and the linearization returned is the engine's choice (``corrector._final``): the
+tangent at the current states where it describes them all or where the tangent does not
+cover every member (then all are linearized again), else the current residuals paired with
+the last tangent (of each member's last fresh state, a chord step or less away).  Each
+member's numbers do not depend on the others (the engine's stacked evaluations are block
+diagonal), so the states, errors, iterations, residuals, factors, path rates and determinant
+signs are those of the numpy path bit for bit when both run the same kernels
+(``tests/test_rod_mixed_newton.py``; compiled against numpy, libm's sines against numpy's may
+differ in the last bit).
+
+Ski rental (README, "Cold start"): the engine's numpy corrector runs until its estimated cost
+reaches :data:`COMPILE_AFTER` (about what compiling this kernel costs on a cold cache) or
+numba's cache holds it; the compiled one from then on.  The 3D stability count stays with the
+model (``PlanarRod.negative_counts``, its own compiled blocks).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from pathlib import Path
+
+import numba as nb
+import numpy as np
+
+import coils._compiled as cc
+import coils.coaxial as cx
+from coils._immutable import kernel_input
+from coils._numba_cache import Rental
+from coils.field import FieldSum, ScaledField
+
+from . import _compiled as rc
+
+__all__ = ["COMPILE_AFTER", "compiled_pays", "charge", "coaxial_groups", "newton_mixed"]
+
+#: Estimated CPU seconds of numpy Newton iterations of the mixed layout after which the
+#: compiled corrector is used (ski rental); 0 compiles at the first call, ``math.inf`` never.
+COMPILE_AFTER = 10.0
+# measured cost of the numpy corrector (coil field, 16 segments): per call, per member iteration
+_NUMPY_CALL_S, _NUMPY_ITER_S = 2e-4, 1.5e-4
+_NV, _KL, _KU = 5, rc.KL, rc.KU
+_D = _KL + _KU  # row of the diagonal in band storage
+_ROWS = 2 * _KL + _KU + 1
+
+
+def _digest() -> int:
+    """A hash of the sources the kernel compiles in from other files (the rod's per-node
+    kernels, the coils' pass): numba's cache checks only this file, so the kernel captures
+    this number and its cache entry is replaced when one of them changes."""
+    h = hashlib.sha256(cc._source_digest().to_bytes(8, "little"))
+    try:
+        h.update(Path(rc.__file__).read_bytes())
+    except OSError:  # sources not shipped: numba cannot cache either
+        return 0
+    return int.from_bytes(h.digest()[:6], "little")
+
+
+def compiled_pays() -> bool:
+    """True if the compiled corrector should run: it is compiled (or in numba's cache), or the
+    numpy corrector has cost :data:`COMPILE_AFTER` so far."""
+    return _rental.pays()
+
+
+def charge(iterations) -> None:
+    """Charge the estimated cost (s of CPU) of a numpy corrector call of ``iterations`` (per
+    member) to the ski rental."""
+    _rental.charge(_NUMPY_CALL_S + _NUMPY_ITER_S * (float(np.sum(iterations)) + 1.0))
+
+
+def coaxial_groups(field):
+    """The coaxial filament groups of ``field`` with the factor each is scaled by, in the
+    order in which the field's evaluation adds them, or None if ``field`` is not made of
+    coaxial groups only (sums and scalings of them)."""
+    if isinstance(field, FieldSum):
+        out = []
+        for p in field.parts:
+            sub = coaxial_groups(p)
+            if sub is None:
+                return None
+            out.extend(sub)
+        return out
+    if isinstance(field, ScaledField):
+        sub = coaxial_groups(field.field)
+        return None if sub is None else [(g, f * field.factor) for g, f in sub]
+    if isinstance(field, cx.CoaxialCoils):
+        return [(field, 1.0)]
+    return None
+
+
+def _field_arrays(groups):
+    """The coils' kernel arguments of every group, concatenated (read-only, as the coils pass
+    them: one compiled version of their kernel): per group its centre, axis, filament rows,
+    winding rows, moments, first moment, parameters and factor, with offsets into the
+    concatenated rows."""
+    args = [(g._kernel_args or g._prepare())[1] for g, _ in groups]
+    offs = np.zeros((len(groups), 4), dtype=np.int64)  # filament, winding, moment offsets; n0
+    fil, wind, beta = [], [], []
+    a = b = c = 0
+    for i, (_center, _axis, f, wnd, bet, n0, _params) in enumerate(args):
+        offs[i] = (a, b, c, n0)
+        a, b, c = a + f.shape[0], b + wnd.shape[0], c + bet.shape[0]
+        fil.append(f)
+        wind.append(wnd)
+        beta.append(bet)
+    ends = np.array([a, b, c], dtype=np.int64)
+    return (
+        kernel_input(np.stack([x[0] for x in args])),
+        kernel_input(np.stack([x[1] for x in args])),
+        kernel_input(np.concatenate(fil).reshape(-1, 5)),
+        kernel_input(np.concatenate(wind).reshape(-1, 4)),
+        kernel_input(np.concatenate(beta)),
+        offs,
+        ends,
+        kernel_input(np.stack([x[6] for x in args])),
+        np.array([f for _, f in groups], dtype=float),
+    )
+
+
+def _constants(p):
+    """The problem's arrays and numbers the kernel reads (cached on it), or None where the
+    field is not made of coaxial groups."""
+    cached = p.__dict__.get("_mixed_newton_constants", False)
+    if cached is not False:
+        return cached
+    groups = coaxial_groups(p.field)
+    out = None
+    if groups:
+        mesh = (p.mu, p.mesh.h, p.mesh.w, p._inv_w, p._inv_h, p._bend_scale, p.clamp)
+        arrays = tuple(np.ascontiguousarray(x, dtype=float) for x in mesh)
+        par = np.array([p.L, p.theta0, p.tol, rc_floor(), float(p.max_rotation)])
+        out = (arrays, par, _field_arrays(groups))
+    p._mixed_newton_constants = out
+    return out
+
+
+def rc_floor() -> float:
+    """The error's round-off floor factor (``planar._FLOOR`` eps)."""
+    from .planar import _EPS, _FLOOR
+
+    return _FLOOR * _EPS
+
+
+def newton_mixed(problem, U, S, opts, tangent: bool = True):
+    """Newton's method for the stack ``U`` (k, 5 n) (float, C order: iterated in place) at
+    scales ``S`` (k,) of a mixed-layout :class:`~coilrod.rod.planar.PlanarRod` in coaxial
+    coils' field, with :class:`~coilrod.path.corrector.NewtonOptions` ``opts``.
+
+    Returns None where it does not apply (another field; a point the coils cannot evaluate:
+    ``U`` is then as given and the numpy corrector reports it), else a dict of arrays:
+    ``U`` (k, 5n) the last iterates, ``R``, ``R1`` (k, 5n) the residual and dR/dscale there,
+    ``M`` (k, 6) per member the error (inf where inadmissible), the iterations, 1 where the
+    residual is finite, the sign of det J of the returned tangent (0 where singular), 1 where
+    that tangent is bad (not finite or singular), 1 where the field's hessian at ``U`` is in
+    ``H``; with ``tangent`` also ``B`` (k n, 3), ``G`` (k n, 9), ``H`` (k n, 27) the field at
+    the nodes, ``ab`` (16, 5 n k) the factorised band of the returned tangent (Fortran order,
+    ``RodTangent``'s layout), ``ipiv`` (5 n k,) its row interchanges, ``RT1`` (k, 5n) its
+    load derivative and ``rate`` (k, 5n) the path rate ``-J^-1 R1`` (NaN rows where bad).
+    """
+    const = _constants(problem)
+    if const is None:
+        return None
+    arrays, par, fields = const
+    k, size = U.shape
+    n = size // _NV
+    fpar = np.array([*par, float(problem.full_step_growth), float(opts.chord)])
+    chords = opts.chord > 0 and not problem.cheap_tangent
+    ipar = np.array(
+        [opts.max_iter, opts.backtracks, opts.stagnation, chords, opts.chord_start, tangent],
+        dtype=np.int64,
+    )
+    start = U.copy()
+    pts = np.empty((n, 3))
+    pts_ro = pts.view()
+    pts_ro.flags.writeable = False
+    out = {
+        "U": U,
+        "R": np.empty((k, size)),
+        "R1": np.empty((k, size)),
+        "B": np.zeros((k * n, 3)),
+        "G": np.zeros((k * n, 9)),
+        "H": np.zeros((k * n, 27)),
+        "ab": np.zeros((_ROWS, size * k), order="F"),
+        "ipiv": np.empty(size * k, dtype=np.int64),
+        "RT1": np.empty((k, size)),
+        "rate": np.empty((k, size)),
+        "M": np.zeros((k, 6)),
+    }
+    trial = np.zeros((_ROWS, size * k), order="F")
+    code = _newton(
+        U, np.ascontiguousarray(S, dtype=float), *arrays, fpar, ipar, *fields, pts, pts_ro,
+        out["R"], out["R1"], out["B"], out["G"], out["H"], out["ab"], out["ipiv"], out["RT1"],
+        out["rate"], out["M"], trial,
+    )  # fmt: skip
+    if code != 0:  # a point the coils cannot evaluate: the numpy path reports it
+        U[:] = start
+        return None
+    return out
+
+
+def _make_kernel(digest: int):
+    """The compiled corrector (see :func:`newton_mixed`), its cache entry tied to ``digest``
+    (:func:`_digest`)."""
+
+    @nb.njit(cache=True)
+    def newton_kernel(
+        U, S, mu, h, w, inv_w, inv_h, bend_scale, clamp, fpar, ipar,
+        centers, axes, fil, wind, beta, offs, ends, gpar, factors, pts, pts_ro,
+        R, R1, B, G, H, ab, ipiv, RT1, rate, M, tab,
+    ):  # fmt: skip
+        """The corrector: U in place, the outputs of :func:`newton_mixed` filled; returns 0,
+        or 1 if the coils could not evaluate a point (the outputs are then not valid)."""
+        if digest == -1:  # never true: ties the cache entry to the sources (_digest)
+            return -1
+        k, size = U.shape
+        n = size // 5
+        growth, chord_at = fpar[5], fpar[6]
+        max_iter, backtracks, stagnation = ipar[0], ipar[1], ipar[2]
+        chords, chord_start, want_tangent = ipar[3] != 0, ipar[4] != 0, ipar[5] != 0
+        yes = ipar[0] >= 0  # (True, typed as any bool: one compiled version of _linearize)
+        G3 = G.reshape((k * n, 3, 3))
+        H4 = H.reshape((k * n, 3, 3, 3))
+        Ut = np.empty((k, size))
+        Rt = np.empty((k, size))
+        R1t = np.empty((k, size))
+        Bt = np.zeros((k * n, 3))
+        Gt = np.zeros((k * n, 9))
+        Ht = np.zeros((k * n, 27))
+        Gt3 = Gt.reshape((k * n, 3, 3))
+        Ht4 = Ht.reshape((k * n, 3, 3, 3))
+        T = np.empty((14, n))
+        DU = np.empty((k, size))
+        rhs = np.empty(size)
+        e1 = np.empty(1)
+        err = np.empty(k)
+        alive = np.zeros(k, dtype=np.bool_)
+        fresh = np.ones(k, dtype=np.bool_)  # a member's current state is its tangent's
+        cur_ok = np.zeros(k, dtype=np.bool_)  # its current residual is finite
+        has_h = np.ones(k, dtype=np.bool_)  # H holds the hessian at its current state
+        t_ok = np.zeros(k, dtype=np.bool_)  # its tangent's state was finite
+        t_lu = np.zeros(k, dtype=np.bool_)  # its tangent is factorised
+        t_bad = np.zeros(k, dtype=np.bool_)  # ... with an exactly zero pivot
+        iters = np.zeros(k, dtype=np.int64)
+        slow = np.zeros(k, dtype=np.int64)
+        ratio = np.full(k, 0.0 if (chord_start and chords) else 1.0)
+        moved = np.zeros(k, dtype=np.bool_)
+        for j in range(k):  # the start, with its tangent
+            st = _linearize(
+                U, j, S[j], yes, mu, h, w, clamp, fpar, centers, axes, fil, wind, beta, offs,
+                ends, gpar, factors, pts, pts_ro, R, R1, B, G, G3, H, H4, ab, T,
+            )  # fmt: skip
+            if st == 2:
+                return 1
+            cur_ok[j] = t_ok[j] = st == 0
+            for q in range(size):
+                RT1[j, q] = R1[j, q]
+            err[j] = _error(R, U, j, inv_w, inv_h, bend_scale, fpar, cur_ok[j], e1)
+            alive[j] = err[j] < math.inf
+        owners_all = True  # the tangent covers every member
+        for _ in range(max_iter):
+            n_act = 0
+            worst = 0.0
+            stale = False
+            for j in range(k):
+                if alive[j] and err[j] > 1.0:
+                    n_act += 1
+                    worst = max(worst, ratio[j])
+                    if not fresh[j]:
+                        stale = True
+            if n_act == 0:
+                break
+            chord = chords and worst <= chord_at
+            if not chord and stale:  # a new tangent at the current states
+                for j in range(k):
+                    if alive[j] and err[j] > 1.0:
+                        st = _linearize(
+                            U, j, S[j], yes, mu, h, w, clamp, fpar, centers, axes, fil, wind,
+                            beta, offs, ends, gpar, factors, pts, pts_ro, R, R1, B, G, G3, H,
+                            H4, ab, T,
+                        )  # fmt: skip
+                        if st == 2:
+                            return 1
+                        cur_ok[j] = t_ok[j] = st == 0
+                        t_lu[j] = False
+                        fresh[j] = True
+                        has_h[j] = True
+                        for q in range(size):
+                            RT1[j, q] = R1[j, q]
+                owners_all = n_act == k
+            n_step = 0
+            for j in range(k):  # the Newton steps
+                moved[j] = False
+                if not (alive[j] and err[j] > 1.0):
+                    continue
+                _factor(ab, ipiv, j, size, t_ok, t_lu, t_bad)
+                ok = t_ok[j] and not t_bad[j]
+                if ok:
+                    for q in range(size):
+                        rhs[q] = -R[j, q]
+                    _band_solve(ab, ipiv, j * size, size, rhs)
+                    for q in range(size):
+                        DU[j, q] = rhs[q]
+                        if not math.isfinite(rhs[q]):
+                            ok = False
+                if not ok:
+                    alive[j] = False
+                    continue
+                moved[j] = True  # (for now: has a step)
+                n_step += 1
+            if n_step == 0:
+                break
+            n_moved = 0
+            for j in range(k):  # the line searches
+                if not moved[j]:
+                    continue
+                moved[j] = False
+                rot = 0.0
+                for i in range(n):
+                    a = abs(DU[j, 5 * i + 2])
+                    if a > rot:
+                        rot = a
+                full = min(1.0, fpar[4] / rot) if rot > 0 else 1.0
+                alpha = full
+                e_old = err[j]
+                for _r in range(backtracks + 1):
+                    for q in range(size):
+                        Ut[j, q] = U[j, q] + alpha * DU[j, q]
+                    st = _linearize(
+                        Ut, j, S[j], not chord, mu, h, w, clamp, fpar, centers, axes, fil, wind,
+                        beta, offs, ends, gpar, factors, pts, pts_ro, Rt, R1t, Bt, Gt, Gt3, Ht,
+                        Ht4, tab, T,
+                    )  # fmt: skip
+                    if st == 2:
+                        return 1
+                    e_new = _error(Rt, Ut, j, inv_w, inv_h, bend_scale, fpar, st == 0, e1)
+                    accept = e_new < e_old or e_new <= 1.0
+                    if not accept:
+                        accept = alpha == full and e_new <= growth * e_old and e_new < math.inf
+                    if accept:
+                        slow[j] = slow[j] + 1 if e_new > 0.5 * e_old else 0
+                        ratio[j] = e_new / e_old if e_old > 0 else 0.0
+                        for q in range(size):
+                            U[j, q] = Ut[j, q]
+                            R[j, q] = Rt[j, q]
+                            R1[j, q] = R1t[j, q]
+                        for p in range(j * n, (j + 1) * n):
+                            for c in range(3):
+                                B[p, c] = Bt[p, c]
+                            for c in range(9):
+                                G[p, c] = Gt[p, c]
+                            if not chord:
+                                for c in range(27):
+                                    H[p, c] = Ht[p, c]
+                        err[j] = e_new
+                        iters[j] += 1
+                        cur_ok[j] = st == 0
+                        has_h[j] = not chord
+                        fresh[j] = False
+                        if not chord:  # the trial's linearization carries its tangent
+                            c0 = j * size
+                            for c in range(c0, c0 + size):
+                                for r in range(ab.shape[0]):
+                                    ab[r, c] = tab[r, c]
+                            for q in range(size):
+                                RT1[j, q] = R1[j, q]
+                            t_ok[j] = st == 0
+                            t_lu[j] = False
+                            fresh[j] = True
+                        moved[j] = True
+                        n_moved += 1
+                        break
+                    alpha = 0.5 * alpha
+                if not moved[j]:
+                    alive[j] = False
+                    iters[j] += 1
+            if not chord and n_moved > 0:
+                owners_all = n_moved == k
+            for j in range(k):
+                if moved[j] and slow[j] >= stagnation and err[j] > 1.0:
+                    alive[j] = False
+        all_fresh = True
+        for j in range(k):
+            all_fresh = all_fresh and fresh[j]
+        if want_tangent and not owners_all:  # the engine linearizes every member again
+            for j in range(k):
+                st = _linearize(
+                    U, j, S[j], yes, mu, h, w, clamp, fpar, centers, axes, fil, wind, beta,
+                    offs, ends, gpar, factors, pts, pts_ro, R, R1, B, G, G3, H, H4, ab, T,
+                )  # fmt: skip
+                if st == 2:
+                    return 1
+                cur_ok[j] = t_ok[j] = st == 0
+                t_lu[j] = False
+                has_h[j] = True
+                for q in range(size):
+                    RT1[j, q] = R1[j, q]
+        keep_h = not owners_all or all_fresh  # (else: the engine's residuals have no hessian)
+        for j in range(k):
+            M[j, 0] = err[j]
+            M[j, 1] = iters[j]
+            M[j, 2] = 1.0 if cur_ok[j] else 0.0
+            M[j, 5] = 1.0 if (keep_h and has_h[j]) else 0.0
+            if not want_tangent:
+                continue
+            _factor(ab, ipiv, j, size, t_ok, t_lu, t_bad)
+            bad = not t_ok[j] or t_bad[j]
+            M[j, 4] = 1.0 if bad else 0.0
+            if bad:
+                for q in range(size):
+                    rate[j, q] = math.nan
+                continue
+            for q in range(size):
+                rhs[q] = R1[j, q]
+            _band_solve(ab, ipiv, j * size, size, rhs)
+            odd = 0
+            for q in range(size):
+                rate[j, q] = -rhs[q]
+                c = j * size + q
+                if ab[_D, c] < 0.0:
+                    odd += 1
+                if ipiv[c] != c:
+                    odd += 1
+            M[j, 3] = 1.0 if odd % 2 == 0 else -1.0
+        return 0
+
+    return newton_kernel
+
+
+@nb.njit(cache=True)
+def _linearize(
+    U, j, s, tangent, mu, h, w, clamp, fpar, centers, axes, fil, wind, beta, offs, ends, gpar,
+    factors, pts, pts_ro, R, R1, B, G, G3, H, H4, ab, T,
+):  # fmt: skip
+    """``PlanarRod.linearize`` of member j of the stack U (``_mixed``: the field at its nodes,
+    then the per-node kernels of :mod:`coilrod.rod._compiled`), into row j of R, R1, its
+    nodes' rows of B, G, H and (``tangent``) its columns of the band ``ab``.  Returns 0, 1 if
+    the residual is not finite (its row then NaN), 2 if the coils could not evaluate a
+    point."""
+    n = pts.shape[0]
+    size = 5 * n
+    L = fpar[0]
+    finite = True
+    for i in range(n):  # the points as PlanarRod._field makes them
+        pts[i, 0] = U[j, 5 * i] * L + clamp[0]
+        pts[i, 1] = U[j, 5 * i + 1] * L + clamp[1]
+        pts[i, 2] = clamp[2]
+        for c in range(3):
+            if not math.isfinite(pts[i, c]):
+                finite = False
+    p0 = j * n
+    for p in range(p0, p0 + n):
+        for c in range(3):
+            B[p, c] = 0.0
+        for c in range(9):
+            G[p, c] = 0.0
+        if tangent:
+            for c in range(27):
+                H[p, c] = 0.0
+    if finite:
+        bad = _coil_fields(
+            pts_ro, tangent, centers, axes, fil, wind, beta, offs, ends, gpar, factors,
+            B[p0 : p0 + n], G[p0 : p0 + n], H[p0 : p0 + n] if tangent else H[0:0],
+        )  # fmt: skip
+        if bad:
+            return 2
+    else:  # (the engine's validated path: NaN for this member)
+        for p in range(p0, p0 + n):
+            for c in range(3):
+                B[p, c] = math.nan
+            for c in range(9):
+                G[p, c] = math.nan
+            if tangent:
+                for c in range(27):
+                    H[p, c] = math.nan
+    ok = rc._node_terms(U, B, G3, H4, tangent, L, mu, j, T)
+    ok = rc._residual(U, s, j, T, h, w, fpar[1], R, R1) and ok
+    if tangent:
+        c0 = j * size
+        for c in range(c0, c0 + size):
+            for r in range(ab.shape[0]):
+                ab[r, c] = 0.0
+        rc._tangent(U, s, j, T, h, w, ab)
+    if not ok:
+        for q in range(size):
+            R[j, q] = math.nan
+        return 1
+    return 0
+
+
+@nb.njit(cache=True)
+def _coil_fields(pts, hessian, centers, axes, fil, wind, beta, offs, ends, gpar, factors, B, G, H):
+    """Add every coaxial group's field at the points to B (n, 3), G (n, 9) and (``hessian``)
+    H (n, 27), in order (as the coils' evaluation does); True if a group reports a point it
+    cannot evaluate."""
+    flags = np.int64(7) if hessian else np.int64(3)
+    ng = centers.shape[0]
+    for g in range(ng):
+        a0, w0, b0 = offs[g, 0], offs[g, 1], offs[g, 2]
+        a1 = offs[g + 1, 0] if g + 1 < ng else ends[0]
+        w1 = offs[g + 1, 1] if g + 1 < ng else ends[1]
+        b1 = offs[g + 1, 2] if g + 1 < ng else ends[2]
+        err = np.empty(3 + w1 - w0, dtype=np.int64)
+        bad = cc.coaxial_field(
+            pts, centers[g], axes[g], fil[a0:a1], wind[w0:w1], beta[b0:b1], offs[g, 3],
+            gpar[g], flags, factors[g], B, G, H, err,
+        )  # fmt: skip
+        if bad:
+            return True
+    return False
+
+
+@nb.njit(cache=True)
+def _error(R, U, j, inv_w, inv_h, bend_scale, fpar, ok, e1):
+    """``PlanarRod.error`` of member j, inf where not ``ok`` or not finite (``_errors``)."""
+    if not ok:
+        return math.inf
+    rc.mixed_error(R[j : j + 1], U[j : j + 1], inv_w, inv_h, bend_scale, fpar[2], fpar[3], e1)
+    e = e1[0]
+    return e if math.isfinite(e) else math.inf
+
+
+@nb.njit(cache=True)
+def _factor(ab, ipiv, j, size, t_ok, t_lu, t_bad):
+    """Factorise member j's tangent in place once (``RodTangent._factor_band``: an
+    inadmissible member's block is the identity first)."""
+    if t_lu[j]:
+        return
+    c0 = j * size
+    if not t_ok[j]:
+        for c in range(c0, c0 + size):
+            for r in range(ab.shape[0]):
+                ab[r, c] = 0.0
+            ab[_D, c] = 1.0
+    t_bad[j] = _band_lu(ab, c0, size, ipiv) > 0
+    t_lu[j] = True
+
+
+@nb.njit(cache=True)
+def _band_lu(ab, c0, n, ipiv):
+    """``rc.band_lu`` (kl = ku = 5, threshold pivoting) of the n columns from c0 of a stacked
+    band (a block of its block diagonal), the same arithmetic; ``ipiv`` of the stacked
+    matrix (global row indices)."""
+    kl = _KL
+    ku = _KU
+    kv = ku + kl
+    info = 0
+    ju = 0
+    for jl in range(n):
+        j = c0 + jl
+        km = min(kl, n - 1 - jl)
+        jp = 0
+        diag = abs(ab[kv, j])
+        big = diag
+        for i in range(1, km + 1):
+            a = abs(ab[kv + i, j])
+            if a > big:
+                big = a
+                jp = i
+        if diag >= rc.PIVOT_THRESHOLD * big:
+            jp = 0
+        ipiv[j] = j + jp
+        if ab[kv + jp, j] == 0.0:
+            if info == 0:
+                info = jl + 1
+            continue
+        ju = max(ju, min(jl + ku + jp, n - 1))
+        if jp != 0:
+            for cl in range(jl, ju + 1):
+                c = c0 + cl
+                r1 = kv + j + jp - c
+                r0 = kv + j - c
+                tmp = ab[r1, c]
+                ab[r1, c] = ab[r0, c]
+                ab[r0, c] = tmp
+        piv = ab[kv, j]
+        for i in range(1, km + 1):
+            ab[kv + i, j] /= piv
+        for cl in range(jl + 1, ju + 1):
+            c = c0 + cl
+            u = ab[kv + j - c, c]
+            if u != 0.0:
+                for i in range(1, km + 1):
+                    ab[kv + i + j - c, c] -= ab[kv + i, j] * u
+    return info
+
+
+@nb.njit(cache=True)
+def _band_solve(ab, ipiv, c0, n, b):
+    """``rc.band_solve`` of one right-hand side b (n,) with the block of the stacked factors
+    at columns c0 .. c0 + n (the same arithmetic); b is overwritten by x."""
+    kv = _KU + _KL
+    for jl in range(n - 1):  # L, with the row interchanges as they were made
+        j = c0 + jl
+        lm = min(_KL, n - 1 - jl)
+        p = ipiv[j] - c0
+        if p != jl:
+            tmp = b[p]
+            b[p] = b[jl]
+            b[jl] = tmp
+        for i in range(1, lm + 1):
+            f = ab[kv + i, j]
+            if f != 0.0:
+                b[jl + i] -= f * b[jl]
+    for jl in range(n - 1, -1, -1):  # U, bandwidth kl + ku
+        j = c0 + jl
+        d = ab[kv, j]
+        b[jl] /= d
+        for il in range(max(0, jl - kv), jl):
+            f = ab[kv + il - jl, j]
+            if f != 0.0:
+                b[il] -= f * b[jl]
+
+
+_newton = _make_kernel(_digest())
+#: The ski rental of the compiled corrector (:class:`coils._numba_cache.Rental`).
+_rental = Rental(__name__, lambda: _newton)
