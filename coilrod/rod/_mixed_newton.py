@@ -46,6 +46,7 @@ from coils._numba_cache import Rental
 from coils.field import FieldSum, ScaledField
 
 from . import _compiled as rc
+from .mesh import _remember
 
 __all__ = ["COMPILE_AFTER", "compiled_pays", "charge", "coaxial_groups", "newton_mixed"]
 
@@ -132,19 +133,36 @@ def _field_arrays(groups):
     )
 
 
+#: :func:`_field_arrays` of the fields seen lately, by id (with the field: checked on a hit;
+#: fields are immutable), at most ``mesh._CACHE_SIZE`` entries (``mesh._remember``).
+_FIELDS: dict = {}
+
+
+def _fields_of(field):
+    """:func:`_field_arrays` of ``field``'s coaxial groups (remembered), or None if it is not
+    made of coaxial groups only."""
+    hit = _FIELDS.get(id(field))
+    if hit is not None and hit[0] is field:
+        return hit[1]
+    groups = coaxial_groups(field)
+    arrays = None if not groups else _field_arrays(groups)
+    _remember(_FIELDS, id(field), (field, arrays))
+    return arrays
+
+
 def _constants(p):
     """The problem's arrays and numbers the kernel reads (cached on it), or None where the
     field is not made of coaxial groups."""
     cached = p.__dict__.get("_mixed_newton_constants", False)
     if cached is not False:
         return cached
-    groups = coaxial_groups(p.field)
+    fields = _fields_of(p.field)
     out = None
-    if groups:
+    if fields is not None:
         mesh = (p.mu, p.mesh.h, p.mesh.w, p._inv_w, p._inv_h, p._bend_scale, p.clamp)
         arrays = tuple(np.ascontiguousarray(x, dtype=float) for x in mesh)
         par = np.array([p.L, p.theta0, p.tol, rc_floor(), float(p.max_rotation)])
-        out = (arrays, par, _field_arrays(groups))
+        out = (arrays, par, fields)
     p._mixed_newton_constants = out
     return out
 
@@ -181,27 +199,36 @@ def newton_mixed(problem, U, S, opts, tangent: bool = True):
     fpar = np.array([*par, float(problem.full_step_growth), float(opts.chord)])
     chords = opts.chord > 0 and not problem.cheap_tangent
     ipar = np.array(
-        [opts.max_iter, opts.backtracks, opts.stagnation, chords, opts.chord_start, tangent],
+        [
+            opts.max_iter,
+            opts.backtracks,
+            opts.stagnation,
+            chords,
+            opts.chord_start,
+            tangent,
+            problem.out_of_plane is not None,
+        ],
         dtype=np.int64,
     )
     start = U.copy()
     pts = np.empty((n, 3))
     pts_ro = pts.view()
     pts_ro.flags.writeable = False
+    # (every entry is written by the kernel before it is read)
     out = {
         "U": U,
         "R": np.empty((k, size)),
         "R1": np.empty((k, size)),
-        "B": np.zeros((k * n, 3)),
-        "G": np.zeros((k * n, 9)),
-        "H": np.zeros((k * n, 27)),
-        "ab": np.zeros((_ROWS, size * k), order="F"),
+        "B": np.empty((k * n, 3)),
+        "G": np.empty((k * n, 9)),
+        "H": np.empty((k * n, 27)),
+        "ab": np.empty((_ROWS, size * k), order="F"),
         "ipiv": np.empty(size * k, dtype=np.int64),
         "RT1": np.empty((k, size)),
         "rate": np.empty((k, size)),
         "M": np.zeros((k, 6)),
     }
-    trial = np.zeros((_ROWS, size * k), order="F")
+    trial = np.empty((_ROWS, size * k), order="F")
     code = _newton(
         U, np.ascontiguousarray(S, dtype=float), *arrays, fpar, ipar, *fields, pts, pts_ro,
         out["R"], out["R1"], out["B"], out["G"], out["H"], out["ab"], out["ipiv"], out["RT1"],
@@ -232,6 +259,7 @@ def _make_kernel(digest: int):
         growth, chord_at = fpar[5], fpar[6]
         max_iter, backtracks, stagnation = ipar[0], ipar[1], ipar[2]
         chords, chord_start, want_tangent = ipar[3] != 0, ipar[4] != 0, ipar[5] != 0
+        want_h = ipar[6] != 0
         yes = ipar[0] >= 0  # (True, typed as any bool: one compiled version of _linearize)
         G3 = G.reshape((k * n, 3, 3))
         H4 = H.reshape((k * n, 3, 3, 3))
@@ -410,6 +438,15 @@ def _make_kernel(digest: int):
                 for q in range(size):
                     RT1[j, q] = R1[j, q]
         keep_h = not owners_all or all_fresh  # (else: the engine's residuals have no hessian)
+        if want_tangent and want_h and not keep_h:  # the hessian the 3D count needs, here
+            for j in range(k):
+                if not _hessian(
+                    U, j, fpar, clamp, centers, axes, fil, wind, beta, offs, ends, gpar,
+                    factors, pts, pts_ro, B, G, H,
+                ):  # fmt: skip
+                    return 1
+                has_h[j] = True
+            keep_h = True
         for j in range(k):
             M[j, 0] = err[j]
             M[j, 1] = iters[j]
@@ -454,14 +491,7 @@ def _linearize(
     n = pts.shape[0]
     size = 5 * n
     L = fpar[0]
-    finite = True
-    for i in range(n):  # the points as PlanarRod._field makes them
-        pts[i, 0] = U[j, 5 * i] * L + clamp[0]
-        pts[i, 1] = U[j, 5 * i + 1] * L + clamp[1]
-        pts[i, 2] = clamp[2]
-        for c in range(3):
-            if not math.isfinite(pts[i, c]):
-                finite = False
+    finite = _points(U, j, L, clamp, pts)
     p0 = j * n
     for p in range(p0, p0 + n):
         for c in range(3):
@@ -473,8 +503,9 @@ def _linearize(
                 H[p, c] = 0.0
     if finite:
         bad = _coil_fields(
-            pts_ro, tangent, centers, axes, fil, wind, beta, offs, ends, gpar, factors,
-            B[p0 : p0 + n], G[p0 : p0 + n], H[p0 : p0 + n] if tangent else H[0:0],
+            pts_ro, np.int64(7) if tangent else np.int64(3), centers, axes, fil, wind, beta,
+            offs, ends, gpar, factors, B[p0 : p0 + n], G[p0 : p0 + n],
+            H[p0 : p0 + n] if tangent else H[0:0],
         )  # fmt: skip
         if bad:
             return 2
@@ -503,11 +534,45 @@ def _linearize(
 
 
 @nb.njit(cache=True)
-def _coil_fields(pts, hessian, centers, axes, fil, wind, beta, offs, ends, gpar, factors, B, G, H):
-    """Add every coaxial group's field at the points to B (n, 3), G (n, 9) and (``hessian``)
-    H (n, 27), in order (as the coils' evaluation does); True if a group reports a point it
-    cannot evaluate."""
-    flags = np.int64(7) if hessian else np.int64(3)
+def _points(U, j, L, clamp, pts):
+    """The nodes of member j as points (n, 3), m (as ``PlanarRod._field`` makes them); False
+    if one is not finite."""
+    finite = True
+    for i in range(pts.shape[0]):
+        pts[i, 0] = U[j, 5 * i] * L + clamp[0]
+        pts[i, 1] = U[j, 5 * i + 1] * L + clamp[1]
+        pts[i, 2] = clamp[2]
+        for c in range(3):
+            if not math.isfinite(pts[i, c]):
+                finite = False
+    return finite
+
+
+@nb.njit(cache=True)
+def _hessian(U, j, fpar, clamp, centers, axes, fil, wind, beta, offs, ends, gpar, factors, pts,
+             pts_ro, B, G, H):  # fmt: skip
+    """The coils' hessian pass alone at the nodes of member j into its rows of H (NaN where a
+    node is not finite; ``OutOfPlane._mixed_fields``: the combined pass's numbers); False if
+    the coils could not evaluate a point."""
+    n = pts.shape[0]
+    p0 = j * n
+    finite = _points(U, j, fpar[0], clamp, pts)
+    for p in range(p0, p0 + n):
+        for c in range(27):
+            H[p, c] = 0.0 if finite else math.nan
+    if not finite:
+        return True
+    return not _coil_fields(
+        pts_ro, np.int64(4), centers, axes, fil, wind, beta, offs, ends, gpar, factors,
+        B[0:0], G[0:0], H[p0 : p0 + n],
+    )  # fmt: skip
+
+
+@nb.njit(cache=True)
+def _coil_fields(pts, flags, centers, axes, fil, wind, beta, offs, ends, gpar, factors, B, G, H):
+    """Add every coaxial group's field at the points to B (n, 3), G (n, 9) and H (n, 27) as
+    ``flags`` asks (1: B, 2: G, 4: H), in order (as the coils' evaluation does); True if a
+    group reports a point it cannot evaluate."""
     ng = centers.shape[0]
     for g in range(ng):
         a0, w0, b0 = offs[g, 0], offs[g, 1], offs[g, 2]
