@@ -314,8 +314,8 @@ def _make_kernel(digest: int):
                 break
             chord = chords and worst <= chord_at
             if not chord and stale:  # a new tangent at the current states
-                for j in range(k):
-                    if alive[j] and err[j] > 1.0:
+                for j in range(k):  # (a fresh member's is its tangent's: the same numbers)
+                    if alive[j] and err[j] > 1.0 and not fresh[j]:
                         st = _linearize(
                             U, j, S[j], yes, mu, h, w, clamp, fpar, centers, axes, fil, wind,
                             beta, offs, ends, gpar, factors, pts, pts_ro, R, R1, B, G, G3, H,
@@ -426,6 +426,8 @@ def _make_kernel(digest: int):
             all_fresh = all_fresh and fresh[j]
         if want_tangent and not owners_all:  # the engine linearizes every member again
             for j in range(k):
+                if fresh[j]:  # (its tangent is at its state: the same numbers)
+                    continue
                 st = _linearize(
                     U, j, S[j], yes, mu, h, w, clamp, fpar, centers, axes, fil, wind, beta,
                     offs, ends, gpar, factors, pts, pts_ro, R, R1, B, G, G3, H, H4, ab, T,
