@@ -209,9 +209,15 @@ def test_mixed_corrector_is_the_engine_numpy_corrector(python_kernels, monkeypat
         (np.stack([straight, wild]), scale * np.array([1, 2]), NewtonOptions(backtracks=1), True),
         (straight, scale, NewtonOptions(chord_start=True), False),
     ]
-    assert mn.coaxial_groups(pair + 2.0 * pair) == [(pair, 1.0), (pair, 2.0)]
-    assert mn.coaxial_groups(pair + coils.UniformField(B=(0.0, 1e-3, 0.0))) is None
-    for u0, s, opts, tangent in cases:
+    bias = coils.UniformField(B=(0.0, 1e-3, 0.0))
+    assert mn.coaxial_groups(3.0 * (pair + 2.0 * bias)) == [(pair, 3.0), (bias, 6.0)]
+    assert mn.coaxial_groups(pair + pair.ideal().replace(gradient=np.eye(3))) is None
+    biased = build_problem(rod, 0.5 * pair + bias, make_mesh(rod, 4), np.zeros(3), 0.0)
+    cases = [(problem, *case) for case in cases]
+    cases.append(
+        (biased.with_out_of_plane((0.77, 1.3, 1.0)), straight, scale, NewtonOptions(), True)
+    )
+    for problem, u0, s, opts, tangent in cases:
         monkeypatch.setattr(mn, "compiled_pays", lambda: False)  # the engine's corrector
         ref = newton(problem, u0, s, opts, tangent_at_end=tangent)
         monkeypatch.setattr(mn, "_newton", python_kernels)

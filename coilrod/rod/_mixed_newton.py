@@ -44,6 +44,7 @@ import coils.coaxial as cx
 from coils._immutable import kernel_input
 from coils._numba_cache import Rental
 from coils.field import FieldSum, ScaledField
+from coils.ideal import UniformField
 
 from . import _compiled as rc
 from .mesh import _remember
@@ -84,34 +85,37 @@ def charge(iterations) -> None:
     _rental.charge(_NUMPY_CALL_S + _NUMPY_ITER_S * (float(np.sum(iterations)) + 1.0))
 
 
-def coaxial_groups(field):
-    """The coaxial filament groups of ``field`` with the factor each is scaled by, in the
-    order in which the field's evaluation adds them, or None if ``field`` is not made of
-    coaxial groups only (sums and scalings of them)."""
+def coaxial_groups(field, factor: float = 1.0):
+    """The parts of ``field`` with the factor each is scaled by, in the order in which the
+    field's evaluation adds them (``FieldSum._add_to``, ``ScaledField._add_to``: the factors
+    multiplied in the same order): coaxial filament groups and uniform fields, or None if
+    ``field`` has another part (a field made of uniform parts only is solved in the uniform
+    layout, not here)."""
     if isinstance(field, FieldSum):
         out = []
         for p in field.parts:
-            sub = coaxial_groups(p)
+            sub = coaxial_groups(p, factor)
             if sub is None:
                 return None
             out.extend(sub)
         return out
     if isinstance(field, ScaledField):
-        sub = coaxial_groups(field.field)
-        return None if sub is None else [(g, f * field.factor) for g, f in sub]
-    if isinstance(field, cx.CoaxialCoils):
-        return [(field, 1.0)]
+        return coaxial_groups(field.field, factor * field.factor)
+    if isinstance(field, cx.CoaxialCoils) or type(field) is UniformField:
+        return [(field, factor)]
     return None
 
 
 def _field_arrays(groups):
-    """The coils' kernel arguments of every group, concatenated (read-only, as the coils pass
-    them: one compiled version of their kernel): per group its centre, axis, filament rows,
-    winding rows, moments, first moment, parameters and factor, with offsets into the
-    concatenated rows."""
-    args = [(g._kernel_args or g._prepare())[1] for g, _ in groups]
-    offs = np.zeros((len(groups), 4), dtype=np.int64)  # filament, winding, moment offsets; n0
-    fil, wind, beta = [], [], []
+    """The coils' kernel arguments of every coaxial group, concatenated (read-only, as the
+    coils pass them: one compiled version of their kernel): per group its centre, axis,
+    filament rows, winding rows, moments, first moment, parameters, with offsets into the
+    concatenated rows; the uniform parts' B (u, 3) T; per part (kind 0 coaxial, 1 uniform;
+    its index) and its factor."""
+    coaxial = [g for g, _ in groups if not isinstance(g, UniformField)]
+    args = [(g._kernel_args or g._prepare())[1] for g in coaxial]
+    offs = np.zeros((len(args), 4), dtype=np.int64)  # filament, winding, moment offsets; n0
+    fil, wind, beta = [np.zeros((0, 5))], [np.zeros((0, 4))], [np.zeros(0)]
     a = b = c = 0
     for i, (_center, _axis, f, wnd, bet, n0, _params) in enumerate(args):
         offs[i] = (a, b, c, n0)
@@ -120,16 +124,28 @@ def _field_arrays(groups):
         wind.append(wnd)
         beta.append(bet)
     ends = np.array([a, b, c], dtype=np.int64)
+    uniform = [g.B0 for g, _ in groups if isinstance(g, UniformField)]
+    order = np.zeros((len(groups), 2), dtype=np.int64)
+    i = u = 0
+    for row, (g, _) in enumerate(groups):
+        if isinstance(g, UniformField):
+            order[row] = (1, u)
+            u += 1
+        else:
+            order[row] = (0, i)
+            i += 1
     return (
-        kernel_input(np.stack([x[0] for x in args])),
-        kernel_input(np.stack([x[1] for x in args])),
+        kernel_input(np.array([x[0] for x in args]).reshape(-1, 3)),
+        kernel_input(np.array([x[1] for x in args]).reshape(-1, 3)),
         kernel_input(np.concatenate(fil).reshape(-1, 5)),
         kernel_input(np.concatenate(wind).reshape(-1, 4)),
         kernel_input(np.concatenate(beta)),
         offs,
         ends,
-        kernel_input(np.stack([x[6] for x in args])),
+        kernel_input(np.array([x[6] for x in args]).reshape(-1, 8)),
         np.array([f for _, f in groups], dtype=float),
+        np.array(uniform, dtype=float).reshape(-1, 3),
+        order,
     )
 
 
@@ -156,7 +172,7 @@ def _constants(p):
     cached = p.__dict__.get("_mixed_newton_constants", False)
     if cached is not False:
         return cached
-    fields = _fields_of(p.field)
+    fields = None if p.linear else _fields_of(p.field)  # (a linear field has no hessian)
     out = None
     if fields is not None:
         mesh = (p.mu, p.mesh.h, p.mesh.w, p._inv_w, p._inv_h, p._bend_scale, p.clamp)
@@ -230,7 +246,7 @@ def newton_mixed(problem, U, S, opts, tangent: bool = True):
     }
     trial = np.empty((_ROWS, size * k), order="F")
     code = _newton(
-        U, np.ascontiguousarray(S, dtype=float), *arrays, fpar, ipar, *fields, pts, pts_ro,
+        U, np.ascontiguousarray(S, dtype=float), *arrays, fpar, ipar, fields, pts, pts_ro,
         out["R"], out["R1"], out["B"], out["G"], out["H"], out["ab"], out["ipiv"], out["RT1"],
         out["rate"], out["M"], trial,
     )  # fmt: skip
@@ -246,8 +262,7 @@ def _make_kernel(digest: int):
 
     @nb.njit(cache=True)
     def newton_kernel(
-        U, S, mu, h, w, inv_w, inv_h, bend_scale, clamp, fpar, ipar,
-        centers, axes, fil, wind, beta, offs, ends, gpar, factors, pts, pts_ro,
+        U, S, mu, h, w, inv_w, inv_h, bend_scale, clamp, fpar, ipar, fa, pts, pts_ro,
         R, R1, B, G, H, ab, ipiv, RT1, rate, M, tab,
     ):  # fmt: skip
         """The corrector: U in place, the outputs of :func:`newton_mixed` filled; returns 0,
@@ -289,9 +304,28 @@ def _make_kernel(digest: int):
         moved = np.zeros(k, dtype=np.bool_)
         for j in range(k):  # the start, with its tangent
             st = _linearize(
-                U, j, S[j], yes, mu, h, w, clamp, fpar, centers, axes, fil, wind, beta, offs,
-                ends, gpar, factors, pts, pts_ro, R, R1, B, G, G3, H, H4, ab, T,
-            )  # fmt: skip
+                U,
+                j,
+                S[j],
+                yes,
+                mu,
+                h,
+                w,
+                clamp,
+                fpar,
+                fa,
+                pts,
+                pts_ro,
+                R,
+                R1,
+                B,
+                G,
+                G3,
+                H,
+                H4,
+                ab,
+                T,
+            )
             if st == 2:
                 return 1
             cur_ok[j] = t_ok[j] = st == 0
@@ -317,10 +351,28 @@ def _make_kernel(digest: int):
                 for j in range(k):  # (a fresh member's is its tangent's: the same numbers)
                     if alive[j] and err[j] > 1.0 and not fresh[j]:
                         st = _linearize(
-                            U, j, S[j], yes, mu, h, w, clamp, fpar, centers, axes, fil, wind,
-                            beta, offs, ends, gpar, factors, pts, pts_ro, R, R1, B, G, G3, H,
-                            H4, ab, T,
-                        )  # fmt: skip
+                            U,
+                            j,
+                            S[j],
+                            yes,
+                            mu,
+                            h,
+                            w,
+                            clamp,
+                            fpar,
+                            fa,
+                            pts,
+                            pts_ro,
+                            R,
+                            R1,
+                            B,
+                            G,
+                            G3,
+                            H,
+                            H4,
+                            ab,
+                            T,
+                        )
                         if st == 2:
                             return 1
                         cur_ok[j] = t_ok[j] = st == 0
@@ -369,10 +421,28 @@ def _make_kernel(digest: int):
                     for q in range(size):
                         Ut[j, q] = U[j, q] + alpha * DU[j, q]
                     st = _linearize(
-                        Ut, j, S[j], not chord, mu, h, w, clamp, fpar, centers, axes, fil, wind,
-                        beta, offs, ends, gpar, factors, pts, pts_ro, Rt, R1t, Bt, Gt, Gt3, Ht,
-                        Ht4, tab, T,
-                    )  # fmt: skip
+                        Ut,
+                        j,
+                        S[j],
+                        not chord,
+                        mu,
+                        h,
+                        w,
+                        clamp,
+                        fpar,
+                        fa,
+                        pts,
+                        pts_ro,
+                        Rt,
+                        R1t,
+                        Bt,
+                        Gt,
+                        Gt3,
+                        Ht,
+                        Ht4,
+                        tab,
+                        T,
+                    )
                     if st == 2:
                         return 1
                     e_new = _error(Rt, Ut, j, inv_w, inv_h, bend_scale, fpar, st == 0, e1)
@@ -429,9 +499,28 @@ def _make_kernel(digest: int):
                 if fresh[j]:  # (its tangent is at its state: the same numbers)
                     continue
                 st = _linearize(
-                    U, j, S[j], yes, mu, h, w, clamp, fpar, centers, axes, fil, wind, beta,
-                    offs, ends, gpar, factors, pts, pts_ro, R, R1, B, G, G3, H, H4, ab, T,
-                )  # fmt: skip
+                    U,
+                    j,
+                    S[j],
+                    yes,
+                    mu,
+                    h,
+                    w,
+                    clamp,
+                    fpar,
+                    fa,
+                    pts,
+                    pts_ro,
+                    R,
+                    R1,
+                    B,
+                    G,
+                    G3,
+                    H,
+                    H4,
+                    ab,
+                    T,
+                )
                 if st == 2:
                     return 1
                 cur_ok[j] = t_ok[j] = st == 0
@@ -443,9 +532,17 @@ def _make_kernel(digest: int):
         if want_tangent and want_h and not keep_h:  # the hessian the 3D count needs, here
             for j in range(k):
                 if not _hessian(
-                    U, j, fpar, clamp, centers, axes, fil, wind, beta, offs, ends, gpar,
-                    factors, pts, pts_ro, B, G, H,
-                ):  # fmt: skip
+                    U,
+                    j,
+                    fpar,
+                    clamp,
+                    fa,
+                    pts,
+                    pts_ro,
+                    B,
+                    G,
+                    H,
+                ):
                     return 1
                 has_h[j] = True
             keep_h = True
@@ -482,9 +579,8 @@ def _make_kernel(digest: int):
 
 @nb.njit(cache=True)
 def _linearize(
-    U, j, s, tangent, mu, h, w, clamp, fpar, centers, axes, fil, wind, beta, offs, ends, gpar,
-    factors, pts, pts_ro, R, R1, B, G, G3, H, H4, ab, T,
-):  # fmt: skip
+    U, j, s, tangent, mu, h, w, clamp, fpar, fa, pts, pts_ro, R, R1, B, G, G3, H, H4, ab, T
+):
     """``PlanarRod.linearize`` of member j of the stack U (``_mixed``: the field at its nodes,
     then the per-node kernels of :mod:`coilrod.rod._compiled`), into row j of R, R1, its
     nodes' rows of B, G, H and (``tangent``) its columns of the band ``ab``.  Returns 0, 1 if
@@ -505,8 +601,7 @@ def _linearize(
                 H[p, c] = 0.0
     if finite:
         bad = _coil_fields(
-            pts_ro, np.int64(7) if tangent else np.int64(3), centers, axes, fil, wind, beta,
-            offs, ends, gpar, factors, B[p0 : p0 + n], G[p0 : p0 + n],
+            pts_ro, np.int64(7) if tangent else np.int64(3), fa, B[p0 : p0 + n], G[p0 : p0 + n],
             H[p0 : p0 + n] if tangent else H[0:0],
         )  # fmt: skip
         if bad:
@@ -551,8 +646,7 @@ def _points(U, j, L, clamp, pts):
 
 
 @nb.njit(cache=True)
-def _hessian(U, j, fpar, clamp, centers, axes, fil, wind, beta, offs, ends, gpar, factors, pts,
-             pts_ro, B, G, H):  # fmt: skip
+def _hessian(U, j, fpar, clamp, fa, pts, pts_ro, B, G, H):
     """The coils' hessian pass alone at the nodes of member j into its rows of H (NaN where a
     node is not finite; ``OutOfPlane._mixed_fields``: the combined pass's numbers); False if
     the coils could not evaluate a point."""
@@ -565,18 +659,28 @@ def _hessian(U, j, fpar, clamp, centers, axes, fil, wind, beta, offs, ends, gpar
     if not finite:
         return True
     return not _coil_fields(
-        pts_ro, np.int64(4), centers, axes, fil, wind, beta, offs, ends, gpar, factors,
+        pts_ro, np.int64(4), fa,
         B[0:0], G[0:0], H[p0 : p0 + n],
     )  # fmt: skip
 
 
 @nb.njit(cache=True)
-def _coil_fields(pts, flags, centers, axes, fil, wind, beta, offs, ends, gpar, factors, B, G, H):
-    """Add every coaxial group's field at the points to B (n, 3), G (n, 9) and H (n, 27) as
-    ``flags`` asks (1: B, 2: G, 4: H), in order (as the coils' evaluation does); True if a
-    group reports a point it cannot evaluate."""
+def _coil_fields(pts, flags, fa, B, G, H):
+    """Add every part's field at the points to B (n, 3), G (n, 9) and H (n, 27) as ``flags``
+    asks (1: B, 2: G, 4: H), in order (as the field's evaluation does: a uniform part adds its
+    factor times its B); True if a coaxial group reports a point it cannot evaluate."""
+    centers, axes, fil, wind, beta, offs, ends, gpar, factors, ub, order = fa
     ng = centers.shape[0]
-    for g in range(ng):
+    for part in range(order.shape[0]):
+        f = factors[part]
+        if order[part, 0] == 1:
+            if flags & 1:
+                u = order[part, 1]
+                for p in range(B.shape[0]):
+                    for c in range(3):
+                        B[p, c] += f * ub[u, c]
+            continue
+        g = order[part, 1]
         a0, w0, b0 = offs[g, 0], offs[g, 1], offs[g, 2]
         a1 = offs[g + 1, 0] if g + 1 < ng else ends[0]
         w1 = offs[g + 1, 1] if g + 1 < ng else ends[1]
@@ -584,7 +688,7 @@ def _coil_fields(pts, flags, centers, axes, fil, wind, beta, offs, ends, gpar, f
         err = np.empty(3 + w1 - w0, dtype=np.int64)
         bad = cc.coaxial_field(
             pts, centers[g], axes[g], fil[a0:a1], wind[w0:w1], beta[b0:b1], offs[g, 3],
-            gpar[g], flags, factors[g], B, G, H, err,
+            gpar[g], flags, f, B, G, H, err,
         )  # fmt: skip
         if bad:
             return True
