@@ -162,6 +162,7 @@ def python_kernels(monkeypatch):
     pass as its numpy near-zone twin): nothing compiles, and the engine's numpy path runs the
     same per-node arithmetic (libm's sines on both sides)."""
     import coilrod.rod._compiled as rc
+    import coilrod.rod._inertia as ri
     import coilrod.rod._mixed_newton as mn
     from coils import _compiled as cc
     from coils._vectorised import near_pass
@@ -171,7 +172,7 @@ def python_kernels(monkeypatch):
         assert near_pass(pts, center, axis, fil, wind, params, flags, factor, B, G, H)
         return False
 
-    for module in (rc, mn):
+    for module in (rc, ri, mn):
         for name, obj in list(vars(module).items()):
             if hasattr(obj, "py_func") and name != "_newton":
                 monkeypatch.setattr(module, name, obj.py_func)
@@ -179,7 +180,8 @@ def python_kernels(monkeypatch):
     monkeypatch.setattr(cx._rental, "ready", False)  # the engine's field: the numpy pass
     monkeypatch.setattr(cx, "COMPILE_AFTER", np.inf)
     monkeypatch.setattr(cx._rental, "held", lambda: False)
-    monkeypatch.setattr(rc._rental, "ready", True)  # the engine's assembly: the kernel's Python
+    for rental in (rc._rental, rc._odd_rental, ri._rental):  # the engine's: the kernels' Python
+        monkeypatch.setattr(rental, "ready", True)
     return mn._newton.py_func
 
 
@@ -245,4 +247,8 @@ def test_mixed_corrector_is_the_engine_numpy_corrector(python_kernels, monkeypat
         # the hessian the 3D count reads (the engine's: evaluated there after chord steps)
         want = problem.out_of_plane._mixed_fields(a, len(a.u))[2]
         np.testing.assert_array_equal(b.field_hessian, want.reshape(b.field_hessian.shape))
+        # the 3D count (the kernel's; the engine's from the model's blocks and inertia)
+        assert hasattr(b, "_counts_3d")
+        for x, y in zip(problem.negative_counts(b), problem.negative_counts(a), strict=True):
+            np.testing.assert_array_equal(x, y)
         np.testing.assert_array_equal(problem.stability(b), problem.stability(a))

@@ -47,6 +47,7 @@ from coils.field import FieldSum, ScaledField
 from coils.ideal import UniformField
 
 from . import _compiled as rc
+from . import _inertia as inertia
 from .mesh import _remember
 
 __all__ = ["COMPILE_AFTER", "compiled_pays", "charge", "coaxial_groups", "newton_mixed"]
@@ -67,7 +68,8 @@ def _digest() -> int:
     this number and its cache entry is replaced when one of them changes."""
     h = hashlib.sha256(cc._source_digest().to_bytes(8, "little"))
     try:
-        h.update(Path(rc.__file__).read_bytes())
+        for module in (rc, inertia):
+            h.update(Path(module.__file__).read_bytes())
     except OSError:  # sources not shipped: numba cannot cache either
         return 0
     return int.from_bytes(h.digest()[:6], "little")
@@ -212,7 +214,9 @@ def newton_mixed(problem, U, S, opts, tangent: bool = True):
     arrays, par, fields = const
     k, size = U.shape
     n = size // _NV
-    fpar = np.array([*par, float(problem.full_step_growth), float(opts.chord)])
+    oop = problem.out_of_plane
+    k1, k2 = (float(oop.stiffness[0]), float(oop.stiffness[1])) if oop is not None else (1.0, 1.0)
+    fpar = np.array([*par, float(problem.full_step_growth), float(opts.chord), k1, k2])
     chords = opts.chord > 0 and not problem.cheap_tangent
     ipar = np.array(
         [
@@ -242,7 +246,7 @@ def newton_mixed(problem, U, S, opts, tangent: bool = True):
         "ipiv": np.empty(size * k, dtype=np.int64),
         "RT1": np.empty((k, size)),
         "rate": np.empty((k, size)),
-        "M": np.zeros((k, 6)),
+        "M": np.zeros((k, 7)),
     }
     trial = np.empty((_ROWS, size * k), order="F")
     code = _newton(
@@ -572,6 +576,8 @@ def _make_kernel(digest: int):
                 if ipiv[c] != c:
                     odd += 1
             M[j, 3] = 1.0 if odd % 2 == 0 else -1.0
+        if want_tangent and want_h:  # the out-of-plane count of the 3D stability
+            _odd_counts(U, S, mu, h, w, inv_h, fpar, B, G, H, M)
         return 0
 
     return newton_kernel
@@ -628,6 +634,34 @@ def _linearize(
             R[j, q] = math.nan
         return 1
     return 0
+
+
+@nb.njit(cache=True)
+def _odd_counts(U, S, mu, h, w, inv_h, fpar, B, G, H, M):
+    """Negative eigenvalues of the out-of-plane block of the 3D second variation at each
+    member's state into ``M[:, 6]`` (``OutOfPlane.odd_count`` of the mixed layout: its blocks
+    by ``rc._odd_blocks_compiled``, their inertia by ``_inertia._inertia``, member by member;
+    -1 where not finite)."""
+    k = U.shape[0]
+    n = w.shape[0]
+    nf = n - 1
+    D = np.zeros((1, nf, 4, 4))
+    E = np.zeros((1, max(nf - 1, 1), 4, 4))
+    neg = np.zeros(1, dtype=np.int64)
+    zero = np.zeros(1, dtype=np.int64)
+    yes = k >= 0  # (True, typed as any bool: the kernel's version for the model's calls)
+    for j in range(k):
+        D[:] = 0.0
+        E[:] = 0.0
+        p0 = j * n
+        rc._odd_blocks_compiled(
+            U[j : j + 1], S[j : j + 1], mu, h, w, inv_h, fpar[7], fpar[8], fpar[0],
+            B[p0 : p0 + n], G[p0 : p0 + n], H[p0 : p0 + n], yes, D, E,
+        )  # fmt: skip
+        neg[0] = 0
+        zero[0] = 0
+        inertia._inertia(D, E, neg, zero, np.float64(1e-13))
+        M[j, 6] = neg[0] - nf if neg[0] >= 0 else neg[0]
 
 
 @nb.njit(cache=True)

@@ -611,6 +611,11 @@ class PlanarRod(DiscreteRod):
             if (M[:, 5] != 0.0).all():
                 lin.field_hessian = out["H"].reshape(k * n, 3, 3, 3)
             lin.path_rate = out["rate"]  # read by the path engine (coilrod.path.stepping)
+            if self.out_of_plane is not None:  # the 3D count (negative_counts), done there
+                even = _even_count(tan.signs * self.det_reference())
+                odd = M[:, 6].astype(int)
+                total = np.where((odd >= 0) & (even >= 0), odd + even, -1)
+                lin._counts_3d = (total, odd)
         return U, M[:, 0].copy(), M[:, 1].astype(int), lin
 
     def compiled_newton_rent(self, iters) -> None:
