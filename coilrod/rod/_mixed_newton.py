@@ -333,8 +333,7 @@ def _make_kernel(digest: int):
             if st == 2:
                 return 1
             cur_ok[j] = t_ok[j] = st == 0
-            for q in range(size):
-                RT1[j, q] = R1[j, q]
+            _copy_row(RT1, R1, j)
             err[j] = _error(R, U, j, inv_w, inv_h, bend_scale, fpar, cur_ok[j], e1)
             alive[j] = err[j] < math.inf
         owners_all = True  # the tangent covers every member
@@ -383,8 +382,7 @@ def _make_kernel(digest: int):
                         t_lu[j] = False
                         fresh[j] = True
                         has_h[j] = True
-                        for q in range(size):
-                            RT1[j, q] = R1[j, q]
+                        _copy_row(RT1, R1, j)
                 owners_all = n_act == k
             n_step = 0
             for j in range(k):  # the Newton steps
@@ -456,30 +454,14 @@ def _make_kernel(digest: int):
                     if accept:
                         slow[j] = slow[j] + 1 if e_new > 0.5 * e_old else 0
                         ratio[j] = e_new / e_old if e_old > 0 else 0.0
-                        for q in range(size):
-                            U[j, q] = Ut[j, q]
-                            R[j, q] = Rt[j, q]
-                            R1[j, q] = R1t[j, q]
-                        for p in range(j * n, (j + 1) * n):
-                            for c in range(3):
-                                B[p, c] = Bt[p, c]
-                            for c in range(9):
-                                G[p, c] = Gt[p, c]
-                            if not chord:
-                                for c in range(27):
-                                    H[p, c] = Ht[p, c]
+                        _accept(j, not chord, U, Ut, R, Rt, R1, R1t, B, Bt, G, Gt, H, Ht, ab, tab)
                         err[j] = e_new
                         iters[j] += 1
                         cur_ok[j] = st == 0
                         has_h[j] = not chord
                         fresh[j] = False
                         if not chord:  # the trial's linearization carries its tangent
-                            c0 = j * size
-                            for c in range(c0, c0 + size):
-                                for r in range(ab.shape[0]):
-                                    ab[r, c] = tab[r, c]
-                            for q in range(size):
-                                RT1[j, q] = R1[j, q]
+                            _copy_row(RT1, R1, j)
                             t_ok[j] = st == 0
                             t_lu[j] = False
                             fresh[j] = True
@@ -530,8 +512,7 @@ def _make_kernel(digest: int):
                 cur_ok[j] = t_ok[j] = st == 0
                 t_lu[j] = False
                 has_h[j] = True
-                for q in range(size):
-                    RT1[j, q] = R1[j, q]
+                _copy_row(RT1, R1, j)
         keep_h = not owners_all or all_fresh  # (else: the engine's residuals have no hessian)
         if want_tangent and want_h and not keep_h:  # the hessian the 3D count needs, here
             for j in range(k):
@@ -634,6 +615,35 @@ def _linearize(
             R[j, q] = math.nan
         return 1
     return 0
+
+
+@nb.njit(cache=True)
+def _copy_row(dst, src, j):
+    """Row j of src into row j of dst."""
+    for q in range(src.shape[1]):
+        dst[j, q] = src[j, q]
+
+
+@nb.njit(cache=True)
+def _accept(j, tangent, U, Ut, R, Rt, R1, R1t, B, Bt, G, Gt, H, Ht, ab, tab):
+    """Member j's trial state, residual, load derivative and field at its nodes (with
+    ``tangent``: the hessian and its band columns too) become its current ones."""
+    size = U.shape[1]
+    n = size // 5
+    for dst, src in ((U, Ut), (R, Rt), (R1, R1t)):
+        _copy_row(dst, src, j)
+    for p in range(j * n, (j + 1) * n):
+        for c in range(3):
+            B[p, c] = Bt[p, c]
+        for c in range(9):
+            G[p, c] = Gt[p, c]
+        if tangent:
+            for c in range(27):
+                H[p, c] = Ht[p, c]
+    if tangent:
+        for c in range(j * size, (j + 1) * size):
+            for r in range(ab.shape[0]):
+                ab[r, c] = tab[r, c]
 
 
 @nb.njit(cache=True)
