@@ -264,7 +264,7 @@ def _make_kernel(digest: int):
     """The compiled corrector (see :func:`newton_mixed`), its cache entry tied to ``digest``
     (:func:`_digest`)."""
 
-    @nb.njit(cache=True)
+    @nb.njit(cache=True, error_model="numpy")
     def newton_kernel(
         U, S, mu, h, w, inv_w, inv_h, bend_scale, clamp, fpar, ipar, fa, pts, pts_ro,
         R, R1, B, G, H, ab, ipiv, RT1, rate, M, tab,
@@ -564,7 +564,7 @@ def _make_kernel(digest: int):
     return newton_kernel
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _linearize(
     U, j, s, tangent, mu, h, w, clamp, fpar, fa, pts, pts_ro, R, R1, B, G, G3, H, H4, ab, T
 ):
@@ -617,14 +617,14 @@ def _linearize(
     return 0
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _copy_row(dst, src, j):
     """Row j of src into row j of dst."""
     for q in range(src.shape[1]):
         dst[j, q] = src[j, q]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _accept(j, tangent, U, Ut, R, Rt, R1, R1t, B, Bt, G, Gt, H, Ht, ab, tab):
     """Member j's trial state, residual, load derivative and field at its nodes (with
     ``tangent``: the hessian and its band columns too) become its current ones."""
@@ -646,7 +646,7 @@ def _accept(j, tangent, U, Ut, R, Rt, R1, R1t, B, Bt, G, Gt, H, Ht, ab, tab):
                 ab[r, c] = tab[r, c]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _odd_counts(U, S, mu, h, w, inv_h, fpar, B, G, H, M):
     """Negative eigenvalues of the out-of-plane block of the 3D second variation at each
     member's state into ``M[:, 6]`` (``OutOfPlane.odd_count`` of the mixed layout: its blocks
@@ -674,7 +674,7 @@ def _odd_counts(U, S, mu, h, w, inv_h, fpar, B, G, H, M):
         M[j, 6] = neg[0] - nf if neg[0] >= 0 else neg[0]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _points(U, j, L, clamp, pts):
     """The nodes of member j as points (n, 3), m (as ``PlanarRod._field`` makes them); False
     if one is not finite."""
@@ -689,7 +689,7 @@ def _points(U, j, L, clamp, pts):
     return finite
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _hessian(U, j, fpar, clamp, fa, pts, pts_ro, B, G, H):
     """The coils' hessian pass alone at the nodes of member j into its rows of H (NaN where a
     node is not finite; ``OutOfPlane._mixed_fields``: the combined pass's numbers); False if
@@ -708,7 +708,7 @@ def _hessian(U, j, fpar, clamp, fa, pts, pts_ro, B, G, H):
     )  # fmt: skip
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _coil_fields(pts, flags, fa, B, G, H):
     """Add every part's field at the points to B (n, 3), G (n, 9) and H (n, 27) as ``flags``
     asks (1: B, 2: G, 4: H), in order (as the field's evaluation does: a uniform part adds its
@@ -739,7 +739,7 @@ def _coil_fields(pts, flags, fa, B, G, H):
     return False
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _error(R, U, j, inv_w, inv_h, bend_scale, fpar, ok, e1):
     """``PlanarRod.error`` of member j, inf where not ``ok`` or not finite (``_errors``)."""
     if not ok:
@@ -749,7 +749,7 @@ def _error(R, U, j, inv_w, inv_h, bend_scale, fpar, ok, e1):
     return e if math.isfinite(e) else math.inf
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _factor(ab, ipiv, j, size, t_ok, t_lu, t_bad):
     """Factorise member j's tangent in place once (``RodTangent._factor_band``: an
     inadmissible member's block is the identity first)."""
@@ -765,7 +765,7 @@ def _factor(ab, ipiv, j, size, t_ok, t_lu, t_bad):
     t_lu[j] = True
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _band_lu(ab, c0, n, ipiv):
     """``rc.band_lu`` (kl = ku = 5, threshold pivoting) of the n columns from c0 of a stacked
     band (a block of its block diagonal), the same arithmetic; ``ipiv`` of the stacked
@@ -814,7 +814,7 @@ def _band_lu(ab, c0, n, ipiv):
     return info
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _band_solve(ab, ipiv, c0, n, b):
     """``rc.band_solve`` of one right-hand side b (n,) with the block of the stacked factors
     at columns c0 .. c0 + n (the same arithmetic); b is overwritten by x."""
