@@ -221,12 +221,19 @@ def test_mixed_corrector_is_the_engine_numpy_corrector(python_kernels, monkeypat
         (biased.with_out_of_plane((0.77, 1.3, 1.0)), straight, scale, NewtonOptions(), True)
     )
     for problem, u0, s, opts, tangent in cases:
-        monkeypatch.setattr(mn, "compiled_pays", lambda: False)  # the engine's corrector
+        # ski rental (a tiny price): the engine's numpy corrector runs and charges its
+        # iterations, then the compiled one pays
+        monkeypatch.setattr(mn, "COMPILE_AFTER", 1e-9)
+        monkeypatch.setattr(mn._rental, "held", lambda: False)
+        monkeypatch.setattr(mn._rental, "ready", False)
+        monkeypatch.setattr(mn._rental, "spent", 0.0)
         ref = newton(problem, u0, s, opts, tangent_at_end=tangent)
+        assert not mn._rental.ready
+        assert mn._rental.spent > 0
         monkeypatch.setattr(mn, "_newton", python_kernels)
-        monkeypatch.setattr(mn, "compiled_pays", lambda: True)
         monkeypatch.setattr(cx._rental, "ready", True)  # (the corrector asks for the coils')
         got = newton(problem, u0, s, opts, tangent_at_end=tangent)
+        assert mn._rental.ready
         monkeypatch.setattr(cx._rental, "ready", False)
         assert getattr(got.lin, "path_rate", None) is not None or not tangent
         for name in ("u", "error", "ok", "iterations"):
