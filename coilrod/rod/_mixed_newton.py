@@ -24,10 +24,15 @@ signs are those of the numpy path bit for bit when both run the same kernels
 (``tests/test_rod_mixed_newton.py``; compiled against numpy, libm's sines against numpy's may
 differ in the last bit).
 
+For the 3D stability the kernel also counts the negative eigenvalues of the out-of-plane block
+at the returned states (the model's own kernels: ``rc._odd_blocks_compiled`` and the block
+LDL^T of :mod:`coilrod.rod._inertia`), which ``PlanarRod.negative_counts`` then reads.
+
 Ski rental (README, "Cold start"): the engine's numpy corrector runs until its estimated cost
-reaches :data:`COMPILE_AFTER` (about what compiling this kernel costs on a cold cache) or
-numba's cache holds it; the compiled one from then on.  The 3D stability count stays with the
-model (``PlanarRod.negative_counts``, its own compiled blocks).
+reaches :data:`COMPILE_AFTER` (about what compiling this kernel costs on a cold cache: 10-15 s
+of CPU measured on the shared 2-core machine) or numba's cache holds it; the compiled one from
+then on.  The test suite never compiles it (``tests/conftest.py``; tested through
+``.py_func``).
 """
 
 from __future__ import annotations
@@ -179,13 +184,13 @@ def _constants(p):
     if fields is not None:
         mesh = (p.mu, p.mesh.h, p.mesh.w, p._inv_w, p._inv_h, p._bend_scale, p.clamp)
         arrays = tuple(np.ascontiguousarray(x, dtype=float) for x in mesh)
-        par = np.array([p.L, p.theta0, p.tol, rc_floor(), float(p.max_rotation)])
+        par = np.array([p.L, p.theta0, p.tol, _floor(), float(p.max_rotation)])
         out = (arrays, par, fields)
     p._mixed_newton_constants = out
     return out
 
 
-def rc_floor() -> float:
+def _floor() -> float:
     """The error's round-off floor factor (``planar._FLOOR`` eps)."""
     from .planar import _EPS, _FLOOR
 
@@ -200,10 +205,12 @@ def newton_mixed(problem, U, S, opts, tangent: bool = True):
     Returns None where it does not apply (another field; a point the coils cannot evaluate:
     ``U`` is then as given and the numpy corrector reports it), else a dict of arrays:
     ``U`` (k, 5n) the last iterates, ``R``, ``R1`` (k, 5n) the residual and dR/dscale there,
-    ``M`` (k, 6) per member the error (inf where inadmissible), the iterations, 1 where the
+    ``M`` (k, 7) per member the error (inf where inadmissible), the iterations, 1 where the
     residual is finite, the sign of det J of the returned tangent (0 where singular), 1 where
     that tangent is bad (not finite or singular), 1 where the field's hessian at ``U`` is in
-    ``H``; with ``tangent`` also ``B`` (k n, 3), ``G`` (k n, 9), ``H`` (k n, 27) the field at
+    ``H``, and (with ``tangent`` and an out-of-plane block) the out-of-plane negative
+    eigenvalues (``OutOfPlane.odd_count``, -1 where not finite); with ``tangent`` also
+    ``B`` (k n, 3), ``G`` (k n, 9), ``H`` (k n, 27) the field at
     the nodes, ``ab`` (16, 5 n k) the factorised band of the returned tangent (Fortran order,
     ``RodTangent``'s layout), ``ipiv`` (5 n k,) its row interchanges, ``RT1`` (k, 5n) its
     load derivative and ``rate`` (k, 5n) the path rate ``-J^-1 R1`` (NaN rows where bad).

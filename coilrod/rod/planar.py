@@ -552,12 +552,14 @@ class PlanarRod(DiscreteRod):
 
     def compiled_newton(self, U: np.ndarray, S: np.ndarray, opts, tangent: bool = True):
         """Newton's method for the stack ``U`` (k, size) (float, C order: iterated in place)
-        at scales ``S`` (k,) by the compiled corrector of the uniform layout
-        (:mod:`coilrod.rod._planar_newton`): the states of
+        at scales ``S`` (k,) by a compiled corrector -- the uniform layout's
+        (:mod:`coilrod.rod._planar_newton`) or the mixed layout's in coaxial coils' fields
+        (:mod:`coilrod.rod._mixed_newton`): the states of
         :func:`~coilrod.path.corrector.newton`, in one call.  Returns ``(U, err, iters,
         lin)`` (``lin`` the linearization at ``U``, with its tangent), or None where it does
-        not apply (the mixed layout) or does not pay yet (ski rental; the caller then runs the
-        numpy corrector and reports its iterations to :meth:`compiled_newton_rent`).
+        not apply (the mixed layout in another field) or does not pay yet (ski rental; the
+        caller then runs the numpy corrector and reports its iterations to
+        :meth:`compiled_newton_rent`).
         ``tangent`` False (the caller needs the states and residuals only): the out-of-plane
         Cholesky test that :meth:`negative_counts` could reuse is skipped."""
         if not self.uniform:
