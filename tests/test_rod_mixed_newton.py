@@ -191,6 +191,7 @@ def test_mixed_corrector_is_the_engine_numpy_corrector(python_kernels, monkeypat
     # them all again at the end) with a member not finite and one whose line search fails,
     # the Richardson mesh's chord start without tangent, and a sum with a uniform bias (chord
     # steps: the final tangent an earlier iterate's, the hessian evaluated for the 3D count)
+    # and a Maxwell pair's ideal() field with the bias (a constant gradient: no hessian)
     import coilrod.rod._mixed_newton as mn
     from coilrod.path.corrector import NewtonOptions, newton
 
@@ -214,11 +215,18 @@ def test_mixed_corrector_is_the_engine_numpy_corrector(python_kernels, monkeypat
     ]
     bias = coils.UniformField(B=(0.0, 1e-3, 0.0))
     assert mn.coaxial_groups(3.0 * (pair + 2.0 * bias)) == [(pair, 3.0), (bias, 6.0)]
-    assert mn.coaxial_groups(pair + pair.ideal().replace(gradient=np.eye(3))) is None
+    dipole = coils.Dipole(moment=(0.0, 0.0, 1.0), center=(0.0, 0.0, 1.0))
+    assert mn.coaxial_groups(pair + dipole) is None
     biased = build_problem(rod, 0.5 * pair + bias, make_mesh(rod, 4), np.zeros(3), 0.0)
     cases = [(problem, *case) for case in cases]
     cases.append(
         (biased.with_out_of_plane((0.77, 1.3, 1.0)), straight, scale, NewtonOptions(), True)
+    )
+    maxwell = coils.MaxwellPair(radius=2 * rod.length, turns=200, current=1.0, axis="y")
+    ideal = build_problem(rod, 3.0 * maxwell.ideal() + bias, make_mesh(rod, 4), np.zeros(3), 0.0)
+    assert ideal.linear
+    cases.append(
+        (ideal.with_out_of_plane((0.77, 1.3, 1.0)), straight, scale, NewtonOptions(), True)
     )
     for problem, u0, s, opts, tangent in cases:
         # ski rental (a tiny price): the engine's numpy corrector runs and charges its
@@ -253,8 +261,10 @@ def test_mixed_corrector_is_the_engine_numpy_corrector(python_kernels, monkeypat
         for x, y in zip(b.field_values, a.field_values, strict=True):
             np.testing.assert_array_equal(x, y)
         # the hessian the 3D count reads (the engine's: evaluated there after chord steps)
-        want = problem.out_of_plane._mixed_fields(a, len(a.u))[2]
-        np.testing.assert_array_equal(b.field_hessian, want.reshape(b.field_hessian.shape))
+        want = problem.out_of_plane._mixed_fields(a, len(a.u))[2]  # (None: a linear field)
+        assert (want is None) == (b.field_hessian is None) == problem.linear
+        if want is not None:
+            np.testing.assert_array_equal(b.field_hessian, want.reshape(b.field_hessian.shape))
         # the 3D count (the kernel's; the engine's from the model's blocks and inertia)
         assert hasattr(b, "_counts_3d")
         for x, y in zip(problem.negative_counts(b), problem.negative_counts(a), strict=True):

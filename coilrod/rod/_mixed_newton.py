@@ -4,7 +4,8 @@ cached on disk).
 One call runs :func:`coilrod.path.corrector.newton` to the end for a stack of states of
 :class:`~coilrod.rod.planar.PlanarRod`'s mixed layout (positions, angles and force resultants
 at every node) when the field is a sum of coaxial filament groups (a
-:class:`~coils.CoilPair`, a coaxial :class:`~coils.CoilSystem`): the field at the nodes (the
+:class:`~coils.CoilPair`, a coaxial :class:`~coils.CoilSystem`), uniform fields and constant
+gradients (an ideal Maxwell pair, :class:`~coils.LinearField`): the field at the nodes (the
 coils' compiled pass, called from here), the residual and band Jacobian
 (:mod:`coilrod.rod._compiled`'s per-node kernels), the band LU and solves (the arithmetic of
 ``band_lu`` / ``band_solve``, member by member: the stacked Jacobian is block diagonal), the
@@ -49,7 +50,7 @@ import coils.coaxial as cx
 from coils._immutable import kernel_input
 from coils._numba_cache import Rental
 from coils.field import FieldSum, ScaledField
-from coils.ideal import UniformField
+from coils.ideal import LinearField, UniformField
 
 from . import _compiled as rc
 from . import _inertia as inertia
@@ -95,9 +96,9 @@ def charge(iterations) -> None:
 def coaxial_groups(field, factor: float = 1.0):
     """The parts of ``field`` with the factor each is scaled by, in the order in which the
     field's evaluation adds them (``FieldSum._add_to``, ``ScaledField._add_to``: the factors
-    multiplied in the same order): coaxial filament groups and uniform fields, or None if
-    ``field`` has another part (a field made of uniform parts only is solved in the uniform
-    layout, not here)."""
+    multiplied in the same order): coaxial filament groups, uniform fields and constant
+    gradients (:class:`~coils.LinearField`, e.g. a Maxwell pair's ``ideal()``), or None if
+    ``field`` has another part."""
     if isinstance(field, FieldSum):
         out = []
         for p in field.parts:
@@ -108,7 +109,7 @@ def coaxial_groups(field, factor: float = 1.0):
         return out
     if isinstance(field, ScaledField):
         return coaxial_groups(field.field, factor * field.factor)
-    if isinstance(field, cx.CoaxialCoils) or type(field) is UniformField:
+    if isinstance(field, cx.CoaxialCoils) or type(field) in (UniformField, LinearField):
         return [(field, factor)]
     return None
 
@@ -119,7 +120,7 @@ def _field_arrays(groups):
     filament rows, winding rows, moments, first moment, parameters, with offsets into the
     concatenated rows; the uniform parts' B (u, 3) T; per part (kind 0 coaxial, 1 uniform;
     its index) and its factor."""
-    coaxial = [g for g, _ in groups if not isinstance(g, UniformField)]
+    coaxial = [g for g, _ in groups if not isinstance(g, LinearField)]
     args = [(g._kernel_args or g._prepare())[1] for g in coaxial]
     offs = np.zeros((len(args), 4), dtype=np.int64)  # filament, winding, moment offsets; n0
     fil, wind, beta = [np.zeros((0, 5))], [np.zeros((0, 4))], [np.zeros(0)]
@@ -131,12 +132,16 @@ def _field_arrays(groups):
         wind.append(wnd)
         beta.append(bet)
     ends = np.array([a, b, c], dtype=np.int64)
-    uniform = [g.B0 for g, _ in groups if isinstance(g, UniformField)]
+    linear = [  # B0, origin, G (row-major) of the uniform and linear parts
+        np.concatenate([g.B0, g.origin, g.G.ravel()])
+        for g, _ in groups
+        if isinstance(g, LinearField)
+    ]
     order = np.zeros((len(groups), 2), dtype=np.int64)
     i = u = 0
     for row, (g, _) in enumerate(groups):
-        if isinstance(g, UniformField):
-            order[row] = (1, u)
+        if isinstance(g, LinearField):  # (1: uniform, 2: a constant gradient)
+            order[row] = (1 if type(g) is UniformField else 2, u)
             u += 1
         else:
             order[row] = (0, i)
@@ -151,7 +156,7 @@ def _field_arrays(groups):
         ends,
         kernel_input(np.array([x[6] for x in args]).reshape(-1, 8)),
         np.array([f for _, f in groups], dtype=float),
-        np.array(uniform, dtype=float).reshape(-1, 3),
+        np.array(linear, dtype=float).reshape(-1, 15),
         order,
     )
 
@@ -179,7 +184,7 @@ def _constants(p):
     cached = p.__dict__.get("_mixed_newton_constants", False)
     if cached is not False:
         return cached
-    fields = None if p.linear else _fields_of(p.field)  # (a linear field has no hessian)
+    fields = _fields_of(p.field)
     out = None
     if fields is not None:
         mesh = (p.mu, p.mesh.h, p.mesh.w, p._inv_w, p._inv_h, p._bend_scale, p.clamp)
@@ -223,7 +228,8 @@ def newton_mixed(problem, U, S, opts, tangent: bool = True):
     n = size // _NV
     oop = problem.out_of_plane
     k1, k2 = (float(oop.stiffness[0]), float(oop.stiffness[1])) if oop is not None else (1.0, 1.0)
-    fpar = np.array([*par, float(problem.full_step_growth), float(opts.chord), k1, k2])
+    linear = 1.0 if problem.linear else 0.0
+    fpar = np.array([*par, float(problem.full_step_growth), float(opts.chord), k1, k2, linear])
     chords = opts.chord > 0 and not problem.cheap_tangent
     ipar = np.array(
         [
@@ -285,7 +291,9 @@ def _make_kernel(digest: int):
         growth, chord_at = fpar[5], fpar[6]
         max_iter, backtracks, stagnation = ipar[0], ipar[1], ipar[2]
         chords, chord_start, want_tangent = ipar[3] != 0, ipar[4] != 0, ipar[5] != 0
-        want_h = ipar[6] != 0
+        want_3d = ipar[6] != 0  # the out-of-plane count of the 3D stability
+        linear = fpar[9] != 0.0
+        want_h = want_3d and not linear  # ... needs the field's hessian
         yes = ipar[0] >= 0  # (True, typed as any bool: one compiled version of _linearize)
         G3 = G.reshape((k * n, 3, 3))
         H4 = H.reshape((k * n, 3, 3, 3))
@@ -520,7 +528,8 @@ def _make_kernel(digest: int):
                 t_lu[j] = False
                 has_h[j] = True
                 _copy_row(RT1, R1, j)
-        keep_h = not owners_all or all_fresh  # (else: the engine's residuals have no hessian)
+        # (else the engine's residuals have no hessian; a linear field has none)
+        keep_h = (not owners_all or all_fresh) and not linear
         if want_tangent and want_h and not keep_h:  # the hessian the 3D count needs, here
             for j in range(k):
                 if not _hessian(
@@ -564,7 +573,7 @@ def _make_kernel(digest: int):
                 if ipiv[c] != c:
                     odd += 1
             M[j, 3] = 1.0 if odd % 2 == 0 else -1.0
-        if want_tangent and want_h:  # the out-of-plane count of the 3D stability
+        if want_tangent and want_3d:  # the out-of-plane count of the 3D stability
             _odd_counts(U, S, mu, h, w, inv_h, fpar, B, G, H, M)
         return 0
 
@@ -584,19 +593,20 @@ def _linearize(
     size = 5 * n
     L = fpar[0]
     finite = _points(U, j, L, clamp, pts)
+    hess = tangent and fpar[9] == 0.0  # (a linear field has no hessian: the engine's H None)
     p0 = j * n
     for p in range(p0, p0 + n):
         for c in range(3):
             B[p, c] = 0.0
         for c in range(9):
             G[p, c] = 0.0
-        if tangent:
+        if hess:
             for c in range(27):
                 H[p, c] = 0.0
     if finite:
         bad = _coil_fields(
-            pts_ro, np.int64(7) if tangent else np.int64(3), fa, B[p0 : p0 + n], G[p0 : p0 + n],
-            H[p0 : p0 + n] if tangent else H[0:0],
+            pts_ro, np.int64(7) if hess else np.int64(3), fa, B[p0 : p0 + n], G[p0 : p0 + n],
+            H[p0 : p0 + n] if hess else H[0:0],
         )  # fmt: skip
         if bad:
             return 2
@@ -606,10 +616,10 @@ def _linearize(
                 B[p, c] = math.nan
             for c in range(9):
                 G[p, c] = math.nan
-            if tangent:
+            if hess:
                 for c in range(27):
                     H[p, c] = math.nan
-    ok = rc._node_terms(U, B, G3, H4, tangent, L, mu, j, T)
+    ok = rc._node_terms(U, B, G3, H4, hess, L, mu, j, T)
     ok = rc._residual(U, s, j, T, h, w, fpar[1], R, R1) and ok
     if tangent:
         c0 = j * size
@@ -666,14 +676,14 @@ def _odd_counts(U, S, mu, h, w, inv_h, fpar, B, G, H, M):
     E = np.zeros((1, max(nf - 1, 1), 4, 4))
     neg = np.zeros(1, dtype=np.int64)
     zero = np.zeros(1, dtype=np.int64)
-    yes = k >= 0  # (True, typed as any bool: the kernel's version for the model's calls)
+    has_h = fpar[9] == 0.0  # (not a linear field)
     for j in range(k):
         D[:] = 0.0
         E[:] = 0.0
         p0 = j * n
         rc._odd_blocks_compiled(
             U[j : j + 1], S[j : j + 1], mu, h, w, inv_h, fpar[7], fpar[8], fpar[0],
-            B[p0 : p0 + n], G[p0 : p0 + n], H[p0 : p0 + n], yes, D, E,
+            B[p0 : p0 + n], G[p0 : p0 + n], H[p0 : p0 + n], has_h, D, E,
         )  # fmt: skip
         neg[0] = 0
         zero[0] = 0
@@ -724,12 +734,29 @@ def _coil_fields(pts, flags, fa, B, G, H):
     ng = centers.shape[0]
     for part in range(order.shape[0]):
         f = factors[part]
-        if order[part, 0] == 1:
+        kind = order[part, 0]
+        if kind == 1:  # uniform: B only (Field._add_to)
             if flags & 1:
                 u = order[part, 1]
                 for p in range(B.shape[0]):
                     for c in range(3):
                         B[p, c] += f * ub[u, c]
+            continue
+        if kind == 2:  # a constant gradient: B0 + (x - origin) G^T, G (LinearField)
+            u = order[part, 1]
+            for p in range(pts.shape[0]):
+                if flags & 1:
+                    d0 = pts[p, 0] - ub[u, 3]
+                    d1 = pts[p, 1] - ub[u, 4]
+                    d2 = pts[p, 2] - ub[u, 5]
+                    for c in range(3):
+                        b = ub[u, c] + (
+                            d0 * ub[u, 6 + 3 * c] + d1 * ub[u, 7 + 3 * c] + d2 * ub[u, 8 + 3 * c]
+                        )
+                        B[p, c] += f * b
+                if flags & 2:
+                    for c in range(9):
+                        G[p, c] += f * ub[u, 6 + c]
             continue
         g = order[part, 1]
         a0, w0, b0 = offs[g, 0], offs[g, 1], offs[g, 2]
