@@ -184,15 +184,14 @@ def coil_sections(out, note: str = "") -> None:
         "solve in the coil field and in the ideal one in turn.  Every kernel compiled (as in a "
         "process that has compiled them, or finds them in numba's cache), the uniform field's "
         "Newton correctors included: the uniform field's (`coilrod/rod/_planar_newton.py`) "
-        "and the mixed layout's in coaxial coils' fields (`coilrod/rod/_mixed_newton.py`, "
-        "a coil pair, also with a uniform bias); 'numpy corrector': the same field solved "
+        "and the mixed layout's (`coilrod/rod/_mixed_newton.py`: coil pairs, uniform fields "
+        "and constant gradients, and their sums); 'numpy corrector': the same field solved "
         "with the engine's numpy corrector instead (what a fresh process runs until the ski "
-        "rentals pay: ~4 s of uniform-field, ~10 s of coil-field Newton iterations).  The "
-        "Maxwell pair's ideal() field (a constant gradient) is solved in the mixed layout "
-        "with the numpy corrector (the compiled one takes coaxial coils and uniform parts "
-        "only).  Checked in the same run: the coil field's states with the compiled and "
-        "with the numpy corrector agree to 1e-12 of the tip (bit for bit so far), with the "
-        "same load steps, iterations and stability verdicts."
+        "rentals pay: ~4 s of uniform-field, ~10 s of mixed-layout Newton iterations).  The "
+        "Maxwell pair's ideal() field (a constant gradient) is solved in the mixed layout, "
+        "like the coil field.  Checked in the same run: the mixed layout's states with the "
+        "compiled and with the numpy corrector agree to 1e-12 of the tip (bit for bit so "
+        "far), with the same load steps, iterations and stability verdicts."
     )
     out()
     out(
@@ -236,7 +235,7 @@ def coil_sections(out, note: str = "") -> None:
         ),
     ]
     for name, sweep, r_, coil, ideal, scales in cases:
-        (t_c, t_cn, t_i, t_n), (rc, rcn, ri, _) = best_alternating(
+        (t_c, t_cn, t_i, t_n), (rc, rcn, ri, rin) = best_alternating(
             [
                 lambda r_=r_, coil=coil, scales=scales: solve_with(r_, coil, scales),
                 lambda r_=r_, coil=coil, scales=scales: solve_with(r_, coil, scales, False),
@@ -245,6 +244,8 @@ def coil_sections(out, note: str = "") -> None:
             ]
         )
         same_states(rc, rcn, name)
+        if not ideal.uniform:  # (the uniform corrector: libm's sines against numpy's)
+            same_states(ri, rin, name + " ideal()")
         shift = np.linalg.norm(rc.tip[-1] - ri.tip[-1]) / L
         k = len(scales)
         out(
@@ -461,8 +462,9 @@ def coil_phases(out, rod, pair, scales, repeat=3 * REPEAT):
         "in turn.  'ideal(), mixed layout': the pair's ideal() field plus a 1e-30 T/m "
         "gradient, so the planar model solves it in the layout of a non-uniform field "
         "(positions, angles and forces at every node, a band Jacobian of 5 unknowns per "
-        "node, the engine's numpy corrector) instead of the uniform field's angles-only "
-        "tridiagonal one.  A uniform field is solved by the compiled corrector of "
+        "node; the compiled mixed corrector, with the numpy one in the 'numpy passes' "
+        "table) instead of the uniform field's angles-only tridiagonal one.  A uniform "
+        "field is solved by the compiled corrector of "
         "`coilrod/rod/_planar_newton.py` once it is compiled (one call per load step: no "
         "linearize or solve calls to time) and by the engine's numpy corrector before that "
         "(ski rental, ~4 s of Newton iterations); the coil field likewise by the compiled "
