@@ -587,12 +587,10 @@ class PlanarRod(DiscreteRod):
     def _compiled_newton_mixed(self, U: np.ndarray, S: np.ndarray, opts, tangent: bool):
         """:meth:`compiled_newton` of the mixed layout in coaxial coils' fields
         (:mod:`coilrod.rod._mixed_newton`), None where it does not apply or pay yet."""
-        from coils import coaxial
-
         mn = _mixed_newton()
-        if mn.coaxial_groups(self.field) is None:
+        if mn._constants(self) is None:  # (another field: cached on the problem)
             return None
-        if not (coaxial._rental.ready and mn.compiled_pays()):
+        if not (mn.cx._rental.ready and mn.compiled_pays()):  # (the coils' pass compiled)
             return None
         out = mn.newton_mixed(self, U, S, opts, tangent)
         if out is None:
@@ -625,7 +623,7 @@ class PlanarRod(DiscreteRod):
         of :meth:`compiled_newton`."""
         if self.uniform:
             _planar_newton().charge(iters)
-        elif _mixed_newton().coaxial_groups(self.field) is not None:
+        elif _mixed_newton()._constants(self) is not None:
             _mixed_newton().charge(iters)
 
     def dense_jacobian(self, u: np.ndarray, scale: float) -> np.ndarray:
