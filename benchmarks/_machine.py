@@ -143,6 +143,7 @@ _RENTED = (
     "coilrod.rod._compiled_spatial",
     "coilrod.rod._inertia",
     "coilrod.rod._planar_newton",
+    "coilrod.rod._mixed_newton",
 )
 
 

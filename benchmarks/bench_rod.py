@@ -183,17 +183,20 @@ def coil_sections(out, note: str = "") -> None:
         f"number of requested states; {clock_name()} time, best of {3 * REPEAT} rounds that "
         "solve in the coil field and in the ideal one in turn.  Every kernel compiled (as in a "
         "process that has compiled them, or finds them in numba's cache), the uniform field's "
-        "Newton corrector (`coilrod/rod/_planar_newton.py`) included; 'numpy corrector': the "
-        "ideal() field solved with the engine's numpy corrector instead (a fresh process's "
-        "first ~4 s of uniform-field Newton iterations, and what the earlier figures compared "
-        "against).  A uniform field has no mixed-layout counterpart of that compiled "
-        "corrector; the Maxwell pair's ideal() field (a constant gradient) is solved in the "
-        "mixed layout like the coil field."
+        "Newton correctors included: the uniform field's (`coilrod/rod/_planar_newton.py`) "
+        "and the mixed layout's (`coilrod/rod/_mixed_newton.py`: coil pairs, uniform fields "
+        "and constant gradients, and their sums); 'numpy corrector': the same field solved "
+        "with the engine's numpy corrector instead (what a fresh process runs until the ski "
+        "rentals pay: ~4 s of uniform-field, ~10 s of mixed-layout Newton iterations).  The "
+        "Maxwell pair's ideal() field (a constant gradient) is solved in the mixed layout, "
+        "like the coil field.  Checked in the same run: the mixed layout's states with the "
+        "compiled and with the numpy corrector agree to 1e-12 of the tip (bit for bit so "
+        "far), with the same load steps, iterations and stability verdicts."
     )
     out()
     out(
         "| field | sweep | time (s) | per state (ms) | tip shift coil vs ideal / L | "
-        "coil / ideal() | coil / ideal(), numpy corrector |"
+        "/ ideal() | / ideal(), numpy corrector |"
     )
     out("|---|---|---|---|---|---|---|")
     helm = coils.HelmholtzPair(radius=2 * L, turns=200, current=1.0, axis="y")
@@ -232,18 +235,26 @@ def coil_sections(out, note: str = "") -> None:
         ),
     ]
     for name, sweep, r_, coil, ideal, scales in cases:
-        (t_c, t_i, t_n), (rc, ri, _) = best_alternating(
+        (t_c, t_cn, t_i, t_n), (rc, rcn, ri, rin) = best_alternating(
             [
                 lambda r_=r_, coil=coil, scales=scales: solve_with(r_, coil, scales),
+                lambda r_=r_, coil=coil, scales=scales: solve_with(r_, coil, scales, False),
                 lambda r_=r_, ideal=ideal, scales=scales: solve_with(r_, ideal, scales),
                 lambda r_=r_, ideal=ideal, scales=scales: solve_with(r_, ideal, scales, False),
             ]
         )
+        same_states(rc, rcn, name)
+        if not ideal.uniform:  # (the uniform corrector: libm's sines against numpy's)
+            same_states(ri, rin, name + " ideal()")
         shift = np.linalg.norm(rc.tip[-1] - ri.tip[-1]) / L
         k = len(scales)
         out(
             f"| {name}: coil | {sweep} | {t_c:.4f} | {1e3 * t_c / k:.3f} | {shift:.2e} | "
             f"{t_c / t_i:.2f} | {t_c / t_n:.2f} |"
+        )
+        out(
+            f"| {name}: coil, numpy corrector | {sweep} | {t_cn:.4f} | {1e3 * t_cn / k:.3f} | | "
+            f"{t_cn / t_i:.2f} | {t_cn / t_n:.2f} |"
         )
         out(f"| {name}: ideal() | {sweep} | {t_i:.4f} | {1e3 * t_i / k:.3f} | | 1 | |")
         out(
@@ -262,6 +273,7 @@ PHASES = (
     ("factorisation and solves", "coilrod.rod.planar", "RodTangent", "solve"),
     ("stability (3D count)", "coilrod.rod.planar", "PlanarRod", "stability"),
     ("Richardson second mesh (all of it)", "coilrod.rod.solve", None, "_refine"),
+    ("compiled mixed corrector (whole calls)", "coilrod.rod._mixed_newton", None, "newton_mixed"),
 )  # fmt: skip
 
 
@@ -298,22 +310,43 @@ def phase_timer(totals: dict, calls: dict):
 
 @contextlib.contextmanager
 def uniform_corrector(compiled: bool):
-    """Solve uniform fields with the compiled Newton corrector of
-    :mod:`coilrod.rod._planar_newton` (``compiled``; compiled now if numba's cache does not
-    hold it) or with the engine's numpy corrector, whatever the ski rental would choose."""
+    """Solve with the compiled Newton correctors (``compiled``; compiled now if numba's cache
+    does not hold them) -- the uniform field's (:mod:`coilrod.rod._planar_newton`) and the
+    mixed layout's in coaxial coils' fields (:mod:`coilrod.rod._mixed_newton`, where the
+    checkout has it) -- or with the engine's numpy corrector, whatever the ski rentals would
+    choose."""
     import coilrod.rod._planar_newton as pn
 
-    saved = (pn.compiled_pays, pn._rental.spent)
-    pn.compiled_pays = lambda: compiled
+    modules = [pn]
+    try:
+        import coilrod.rod._mixed_newton as mn
+
+        modules.append(mn)
+    except ImportError:  # (an older checkout timed alongside)
+        pass
+    saved = [(m.compiled_pays, m._rental.spent) for m in modules]
+    for m in modules:
+        m.compiled_pays = lambda: compiled
     try:
         yield
     finally:
-        pn.compiled_pays, pn._rental.spent = saved
+        for m, (pays, spent) in zip(modules, saved, strict=True):
+            m.compiled_pays, m._rental.spent = pays, spent
+
+
+def same_states(a, b, name: str) -> None:
+    """Assert that two solves of one problem (compiled and numpy correctors) gave the same
+    states: tips to 1e-12 relative, the same load steps, iterations and stability verdicts."""
+    tip = np.abs(a.tip - b.tip).max() / np.abs(a.tip).max()
+    assert tip <= 1e-12, f"{name}: the correctors' tips differ by {tip:.2e} relative"
+    assert np.array_equal(a.scales, b.scales), f"{name}: different load steps"
+    assert np.array_equal(a.iterations, b.iterations), f"{name}: different iterations"
+    assert np.array_equal(a.stable, b.stable), f"{name}: different stability verdicts"
 
 
 def solve_with(rod, field, scales, compiled=True):
-    """``solve_rod`` with the uniform field's compiled corrector or its numpy one
-    (:func:`uniform_corrector`); a non-uniform field uses neither."""
+    """``solve_rod`` with the compiled correctors or the engine's numpy one
+    (:func:`uniform_corrector`)."""
     with uniform_corrector(compiled):
         return solve_rod(rod, field, scales)
 
@@ -371,6 +404,7 @@ KERNELS = (
     ("error", "coilrod.rod._compiled", "mixed_error"),
     ("3D count: out-of-plane blocks", "coilrod.rod._compiled", "_odd_blocks_compiled"),
     ("3D count: block LDL^T", "coilrod.rod._inertia", "_inertia"),
+    ("mixed corrector (its field, assembly, LU, solves)", "coilrod.rod._mixed_newton", "_newton"),
 )
 
 
@@ -428,16 +462,22 @@ def coil_phases(out, rod, pair, scales, repeat=3 * REPEAT):
         "in turn.  'ideal(), mixed layout': the pair's ideal() field plus a 1e-30 T/m "
         "gradient, so the planar model solves it in the layout of a non-uniform field "
         "(positions, angles and forces at every node, a band Jacobian of 5 unknowns per "
-        "node, the engine's numpy corrector) instead of the uniform field's angles-only "
-        "tridiagonal one.  A uniform field is solved by the compiled corrector of "
+        "node; the compiled mixed corrector, with the numpy one in the 'numpy passes' "
+        "table) instead of the uniform field's angles-only tridiagonal one.  A uniform "
+        "field is solved by the compiled corrector of "
         "`coilrod/rod/_planar_newton.py` once it is compiled (one call per load step: no "
         "linearize or solve calls to time) and by the engine's numpy corrector before that "
-        "(ski rental, ~4 s of Newton iterations)."
+        "(ski rental, ~4 s of Newton iterations); the coil field likewise by the compiled "
+        "corrector of `coilrod/rod/_mixed_newton.py` (its field evaluations, assemblies, "
+        "factorisations and solves inside one call per load step: the row 'compiled mixed "
+        "corrector') or, in the column 'coil, numpy corrector' and before its ski rental "
+        "pays (~10 s of Newton iterations), by the engine's numpy corrector."
     )
     out()
     columns = {
         "compiled": (
             ("coil", pair, True),
+            ("coil, numpy corrector", pair, False),
             ("ideal(), mixed layout", mixed, True),
             ("ideal(), compiled corrector", ideal, True),
             ("ideal(), numpy corrector", ideal, False),
@@ -466,7 +506,7 @@ def coil_phases(out, rod, pair, scales, repeat=3 * REPEAT):
             ]
             out(f"| {label} | " + " | ".join(cells) + " |")
         model = ("model linearize (field included)", "factorisation and solves")
-        model += ("stability (3D count)",)
+        model += ("stability (3D count)", "compiled mixed corrector (whole calls)")
         rest = [t - sum(ph.get(q, 0.0) for q in model) for _, t, ph, *_ in runs]
         out(
             "| the rest: engine, problem set-up, result | "
@@ -476,6 +516,7 @@ def coil_phases(out, rod, pair, scales, repeat=3 * REPEAT):
         its = [int(r.iterations.sum()) for *_, r in runs]
         out("| Newton iterations (both meshes) | " + " | ".join(map(str, its)) + " |")
         t = {name: time for name, time, *_ in runs}
+        res = {name: r for name, *_, r in runs}
         out()
         for ref in [
             name for name, *_ in runs if name.startswith("ideal(), ") and "mixed" not in name
@@ -486,10 +527,8 @@ def coil_phases(out, rod, pair, scales, repeat=3 * REPEAT):
                 f"ideal() mixed) {t['coil'] / t['ideal(), mixed layout']:.2f}x."
             )
             out()
-        out(
-            "The mixed-layout ideal() tip differs from the uniform one by "
-            f"{np.abs(runs[1][4].tip - runs[-1][4].tip).max() / rod.length:.1e} L."
-        )
+        gap = np.abs(res["ideal(), mixed layout"].tip - runs[-1][4].tip).max() / rod.length
+        out(f"The mixed-layout ideal() tip differs from the uniform one by {gap:.1e} L.")
         out()
         if regime == "compiled":
             total, parts = kernel_share(rod, pair, scales, repeat)
@@ -523,6 +562,9 @@ if __name__ == "__main__":
         coilrod.rod._compiled.ODD_COMPILE_AFTER = 0.0
         coilrod.rod._inertia.COMPILE_AFTER = 0.0
         coilrod.rod._planar_newton.COMPILE_AFTER = 0.0
+        import coilrod.rod._mixed_newton
+
+        coilrod.rod._mixed_newton.COMPILE_AFTER = 0.0
         lines = []
 
         def out(text=""):

@@ -154,3 +154,119 @@ def test_compiled_out_of_plane_blocks_are_the_numpy_assembly(numpy_pass, monkeyp
         np.testing.assert_allclose(Ec, E, rtol=1e-13, atol=1e-13 * np.abs(E).max())
         assert np.abs(D[:, :, 0, 0]).max() > 0 or field.linear  # (the hessian term is there)
         np.testing.assert_array_equal(oop.odd_count(lin), counts)
+
+
+@pytest.fixture
+def python_kernels(monkeypatch):
+    """Every compiled kernel the mixed layout's corrector runs, as Python (.py_func; the coils'
+    pass as its numpy near-zone twin): nothing compiles, and the engine's numpy path runs the
+    same per-node arithmetic (libm's sines on both sides)."""
+    import coilrod.rod._compiled as rc
+    import coilrod.rod._inertia as ri
+    import coilrod.rod._mixed_newton as mn
+    from coils import _compiled as cc
+    from coils._vectorised import near_pass
+
+    def python_pass(pts, center, axis, fil, wind, beta, n0, params, flags, factor, B, G, H, err):
+        err[:] = -1
+        assert near_pass(pts, center, axis, fil, wind, params, flags, factor, B, G, H)
+        return False
+
+    for module in (rc, ri, mn):
+        for name, obj in list(vars(module).items()):
+            if hasattr(obj, "py_func") and name != "_newton":
+                monkeypatch.setattr(module, name, obj.py_func)
+    monkeypatch.setattr(cc, "coaxial_field", python_pass)
+    monkeypatch.setattr(cx._rental, "ready", False)  # the engine's field: the numpy pass
+    monkeypatch.setattr(cx, "COMPILE_AFTER", np.inf)
+    monkeypatch.setattr(cx._rental, "held", lambda: False)
+    for rental in (rc._rental, rc._odd_rental, ri._rental):  # the engine's: the kernels' Python
+        monkeypatch.setattr(rental, "ready", True)
+    return mn._newton.py_func
+
+
+def test_mixed_corrector_is_the_engine_numpy_corrector(python_kernels, monkeypatch):
+    # a coil pair, 4 segments: one state without chord steps (the final tangent the last
+    # step's), stacks whose members converge at different iterations (the engine linearizes
+    # them all again at the end) with a member not finite and one whose line search fails,
+    # the Richardson mesh's chord start without tangent, and a sum with a uniform bias (chord
+    # steps: the final tangent an earlier iterate's, the hessian evaluated for the 3D count)
+    # and a Maxwell pair's ideal() field with the bias (a constant gradient: no hessian)
+    import coilrod.rod._mixed_newton as mn
+    from coilrod.path.corrector import NewtonOptions, newton
+
+    rod = presets.seed_rod()
+    pair = coils.HelmholtzPair(radius=2 * rod.length, turns=200, current=1.0, axis="y")
+    scale = 4.0 / rod.magnetoelastic_number(pair.ideal().B0[1])
+    problem = build_problem(rod, pair, make_mesh(rod, 4), np.zeros(3), 0.0)
+    problem = problem.with_out_of_plane((0.77, 1.3, 1.0))
+    straight = problem.straight()
+    bad = straight.copy()
+    bad[2::5] += 1.5  # (a kinked start)
+    rng = np.random.default_rng(1)
+    wild = straight + rng.normal(size=(2, straight.size))[1]  # (its line search fails)
+    nan = straight.copy()
+    nan[7] = np.nan
+    cases = [
+        (straight, 0.5 * scale, NewtonOptions(chord=0.0), True),  # (no chord steps)
+        (np.stack([straight, bad, nan]), scale * np.array([0.01, 3.0, 1.0]), NewtonOptions(), True),
+        (np.stack([straight, wild]), scale * np.array([1, 2]), NewtonOptions(backtracks=1), True),
+        (straight, scale, NewtonOptions(chord_start=True), False),
+    ]
+    bias = coils.UniformField(B=(0.0, 1e-3, 0.0))
+    assert mn.coaxial_groups(3.0 * (pair + 2.0 * bias)) == [(pair, 3.0), (bias, 6.0)]
+    dipole = coils.Dipole(moment=(0.0, 0.0, 1.0), center=(0.0, 0.0, 1.0))
+    assert mn.coaxial_groups(pair + dipole) is None
+    biased = build_problem(rod, 0.5 * pair + bias, make_mesh(rod, 4), np.zeros(3), 0.0)
+    cases = [(problem, *case) for case in cases]
+    cases.append(
+        (biased.with_out_of_plane((0.77, 1.3, 1.0)), straight, scale, NewtonOptions(), True)
+    )
+    maxwell = coils.MaxwellPair(radius=2 * rod.length, turns=200, current=1.0, axis="y")
+    ideal = build_problem(rod, 3.0 * maxwell.ideal() + bias, make_mesh(rod, 4), np.zeros(3), 0.0)
+    assert ideal.linear
+    cases.append(
+        (ideal.with_out_of_plane((0.77, 1.3, 1.0)), straight, scale, NewtonOptions(), True)
+    )
+    for problem, u0, s, opts, tangent in cases:
+        # ski rental (a tiny price): the engine's numpy corrector runs and charges its
+        # iterations, then the compiled one pays
+        monkeypatch.setattr(mn, "COMPILE_AFTER", 1e-9)
+        monkeypatch.setattr(mn._rental, "held", lambda: False)
+        monkeypatch.setattr(mn._rental, "ready", False)
+        monkeypatch.setattr(mn._rental, "spent", 0.0)
+        ref = newton(problem, u0, s, opts, tangent_at_end=tangent)
+        assert not mn._rental.ready
+        assert mn._rental.spent > 0
+        monkeypatch.setattr(mn, "_newton", python_kernels)
+        monkeypatch.setattr(cx._rental, "ready", True)  # (the corrector asks for the coils')
+        got = newton(problem, u0, s, opts, tangent_at_end=tangent)
+        assert mn._rental.ready
+        monkeypatch.setattr(cx._rental, "ready", False)
+        assert getattr(got.lin, "path_rate", None) is not None or not tangent
+        for name in ("u", "error", "ok", "iterations"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(ref, name))
+        np.testing.assert_array_equal(got.lin.residual, ref.lin.residual)
+        if not tangent:
+            continue
+        a, b = ref.lin, got.lin
+        np.testing.assert_array_equal(b.load_rate, a.load_rate)
+        np.testing.assert_array_equal(b.tangent.load_rate, a.tangent.load_rate)
+        np.testing.assert_array_equal(b.tangent.det_signs(), a.tangent.det_signs())
+        np.testing.assert_array_equal(b.tangent._lu[0], a.tangent.factor()[0])
+        np.testing.assert_array_equal(b.tangent._lu[1], a.tangent._lu[1])
+        with np.errstate(all="ignore"):
+            rate = -problem.solve(a, a.load_rate)
+        np.testing.assert_array_equal(b.path_rate, rate)
+        for x, y in zip(b.field_values, a.field_values, strict=True):
+            np.testing.assert_array_equal(x, y)
+        # the hessian the 3D count reads (the engine's: evaluated there after chord steps)
+        want = problem.out_of_plane._mixed_fields(a, len(a.u))[2]  # (None: a linear field)
+        assert (want is None) == (b.field_hessian is None) == problem.linear
+        if want is not None:
+            np.testing.assert_array_equal(b.field_hessian, want.reshape(b.field_hessian.shape))
+        # the 3D count (the kernel's; the engine's from the model's blocks and inertia)
+        assert hasattr(b, "_counts_3d")
+        for x, y in zip(problem.negative_counts(b), problem.negative_counts(a), strict=True):
+            np.testing.assert_array_equal(x, y)
+        np.testing.assert_array_equal(problem.stability(b), problem.stability(a))

@@ -552,16 +552,18 @@ class PlanarRod(DiscreteRod):
 
     def compiled_newton(self, U: np.ndarray, S: np.ndarray, opts, tangent: bool = True):
         """Newton's method for the stack ``U`` (k, size) (float, C order: iterated in place)
-        at scales ``S`` (k,) by the compiled corrector of the uniform layout
-        (:mod:`coilrod.rod._planar_newton`): the states of
+        at scales ``S`` (k,) by a compiled corrector -- the uniform layout's
+        (:mod:`coilrod.rod._planar_newton`) or the mixed layout's in coaxial coils' fields
+        (:mod:`coilrod.rod._mixed_newton`): the states of
         :func:`~coilrod.path.corrector.newton`, in one call.  Returns ``(U, err, iters,
         lin)`` (``lin`` the linearization at ``U``, with its tangent), or None where it does
-        not apply (the mixed layout) or does not pay yet (ski rental; the caller then runs the
-        numpy corrector and reports its iterations to :meth:`compiled_newton_rent`).
+        not apply (the mixed layout in another field) or does not pay yet (ski rental; the
+        caller then runs the numpy corrector and reports its iterations to
+        :meth:`compiled_newton_rent`).
         ``tangent`` False (the caller needs the states and residuals only): the out-of-plane
         Cholesky test that :meth:`negative_counts` could reuse is skipped."""
         if not self.uniform:
-            return None
+            return self._compiled_newton_mixed(U, S, opts, tangent)
         pn = _planar_newton()
         if not pn.compiled_pays():
             return None
@@ -582,11 +584,47 @@ class PlanarRod(DiscreteRod):
         err, iters = M[:, 0], M[:, 4].astype(int)
         return U, err, iters, lin
 
+    def _compiled_newton_mixed(self, U: np.ndarray, S: np.ndarray, opts, tangent: bool):
+        """:meth:`compiled_newton` of the mixed layout in coaxial coils' fields
+        (:mod:`coilrod.rod._mixed_newton`), None where it does not apply or pay yet."""
+        mn = _mixed_newton()
+        if mn._constants(self) is None:  # (another field: cached on the problem)
+            return None
+        if not (mn.cx._rental.ready and mn.compiled_pays()):  # (the coils' pass compiled)
+            return None
+        out = mn.newton_mixed(self, U, S, opts, tangent)
+        if out is None:
+            return None
+        k, n, M = U.shape[0], self.n, out["M"]
+        R, R1 = out["R"], out["R1"]
+        ok = M[:, 2] != 0.0
+        lin = Linearization(u=U, scale=S, residual=R, ok=ok)
+        lin.load_rate = R1
+        lin.field_values = lin.field_hessian = None
+        if tangent:
+            tan = RodTangent(k, self.size, False, None, out["RT1"])
+            tan._lu = (out["ab"], out["ipiv"])
+            tan.bad = M[:, 4] != 0.0
+            tan.signs = M[:, 3].copy()
+            lin.tangent = tan
+            lin.field_values = (out["B"].reshape(k, n, 3), out["G"].reshape(k, n, 3, 3))
+            if (M[:, 5] != 0.0).all():
+                lin.field_hessian = out["H"].reshape(k * n, 3, 3, 3)
+            lin.path_rate = out["rate"]  # read by the path engine (coilrod.path.stepping)
+            if self.out_of_plane is not None:  # the 3D count (negative_counts), done there
+                even = _even_count(tan.signs * self.det_reference())
+                odd = M[:, 6].astype(int)
+                total = np.where((odd >= 0) & (even >= 0), odd + even, -1)
+                lin._counts_3d = (total, odd)
+        return U, M[:, 0].copy(), M[:, 1].astype(int), lin
+
     def compiled_newton_rent(self, iters) -> None:
         """Charge a numpy corrector call of ``iters`` iterations (per member) to the ski rental
         of :meth:`compiled_newton`."""
         if self.uniform:
             _planar_newton().charge(iters)
+        elif _mixed_newton()._constants(self) is not None:
+            _mixed_newton().charge(iters)
 
     def dense_jacobian(self, u: np.ndarray, scale: float) -> np.ndarray:
         """The Jacobian of one state as a dense (size, size) array (tests, small problems)."""
@@ -917,6 +955,20 @@ def _planar_newton():
 
 
 _PN = None
+
+
+def _mixed_newton():
+    """:mod:`coilrod.rod._mixed_newton`, imported on first use (it imports numba) and kept (as
+    :func:`_planar_newton`)."""
+    global _MN
+    if _MN is None:
+        from . import _mixed_newton as mn
+
+        _MN = mn
+    return _MN
+
+
+_MN = None
 
 
 def _compiled():
