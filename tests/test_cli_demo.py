@@ -162,15 +162,12 @@ def test_fem_scene_matches_closed_form_elastica():
 @pytest.mark.slow
 def test_maxwell_scene_rod_fem_and_bvp_agree():
     # Config (B) with real coils: the rod's coil-field tip against an independent solve_bvp, and
-    # the rod and FEM shifts against each other (at every other load step of the scene: the
-    # final load is what is checked, the steps between only repeat it)
-    # (the solve_bvp continuation keeps every step: with five it jumps to another branch)
+    # the rod and FEM shifts against each other
     scene = load_scene(shipped_scenes()["maxwell_vs_ideal"])
-    scales, scene.scales = scene.scales, scene.scales[1::2]
     result = run_scene(scene, progress=False)
     assert result.ok
     L = scene.rod.length
-    tip = bvp_tip_continued(scene.rod, scene.fields["coils"], scales)
+    tip = bvp_tip_continued(scene.rod, scene.fields["coils"], scene.scales)
     np.testing.assert_allclose(result.run("rod", "coils").tip[-1, :2], tip, atol=1e-6 * L)
     shift = {s["model"]: s for s in result.shift()}
     assert shift["rod"]["tip_shift_percent_L"] > 0.5
