@@ -519,9 +519,9 @@ def test_the_contact_kernels_cache_goes_stale_with_its_helpers(tmp_path, monkeyp
     import numba
     from numba.core import config
 
-    import coils._numba_cache as nc
     import coilrod.rod._compiled_contact as cc
     import coilrod.rod._compiled_spatial as cs
+    import coils._numba_cache as nc
 
     both = hashlib.sha256(Path(cc.__file__).read_bytes() + Path(cs.__file__).read_bytes())
     assert cc.contact_core._cache._cache_file._source_stamp[1] == both.hexdigest()
