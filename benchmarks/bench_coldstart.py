@@ -15,7 +15,8 @@ compiled code is loaded from disk). CPU time is the children's user + system tim
   temporary folder).
 
 Then what each compiled kernel costs to compile (numba's compile events in one process with an
-empty cache, the numpy alternatives switched off), and the steady-state speed of each kernel that
+empty cache, the numpy alternatives switched off; the two contact kernels each in a process of
+its own, a catheter in a vessel bend), and the steady-state speed of each kernel that
 has a numpy alternative (the coil pass, :mod:`coils._vectorised`; the planar mixed kernel,
 :mod:`coilrod.rod._mixed_numpy`; the spatial per-node pass, :mod:`coilrod.rod._spatial_numpy`;
 the inertia count) next to it, with the number of calls after
@@ -117,16 +118,11 @@ def side_by_side(names, other, repeats):
 
 
 COMPILE_EVENTS = """
-import json, sys, time
+import importlib, json, sys, time
 from numba.core import event
-import coils.coaxial, coilrod.rod._compiled
-coils.coaxial.COMPILE_AFTER = 0.0  # compile everything the scenario uses
-coilrod.rod._compiled.COMPILE_AFTER = 0.0
-coilrod.rod._compiled.ODD_COMPILE_AFTER = 0.0
-import coilrod.rod._inertia, coilrod.rod._compiled_spatial, coilrod.rod._planar_newton
-coilrod.rod._inertia.COMPILE_AFTER = 0.0
-coilrod.rod._compiled_spatial.COMPILE_AFTER = 0.0
-coilrod.rod._planar_newton.COMPILE_AFTER = 0.0
+for name in sys.argv[2].split():  # module:threshold, set to 0: compile what the scenario uses
+    module, attr = name.split(":")
+    setattr(importlib.import_module(module), attr, 0.0)
 starts, out = {}, {}
 class Listener(event.Listener):
     def on_start(self, ev):
@@ -149,7 +145,39 @@ KERNELS = {
     "coilrod.rod._inertia._inertia": "block inertia",
     "coilrod.rod._compiled_spatial.spatial_core": "spatial per-node pass",
     "coilrod.rod._planar_newton._newton": "planar uniform-field Newton corrector",
+    "coilrod.rod._compiled_contact.contact_core": "contact terms of a spatial linearization",
+    "coilrod.contact._compiled_search.closed_form_search": "vessel's closest-point search",
 }
+#: the thresholds set to 0 in the scenarios' process (COMPILE_EVENTS)
+EVERY_KERNEL = (
+    "coils.coaxial:COMPILE_AFTER coilrod.rod._compiled:COMPILE_AFTER "
+    "coilrod.rod._compiled:ODD_COMPILE_AFTER coilrod.rod._inertia:COMPILE_AFTER "
+    "coilrod.rod._compiled_spatial:COMPILE_AFTER coilrod.rod._planar_newton:COMPILE_AFTER"
+)
+#: a catheter pressed on a vessel bend's wall (16 segments): the contact kernels, each compiled
+#: cold in a process of its own (the shared helpers of the spatial pass included; the rest of
+#: the solve on numpy)
+CONTACT = """
+import numpy as np, coils
+from coilrod import Circle, Magnetization, Rod, Vessel, solve_rod
+from coilrod.contact.insertion import _default_clamp
+rod = Rod(0.025, 1e6, Circle(1e-3), Magnetization.segments([0.015, 0.01], [0, 128e3], [0, 0]))
+vessel = Vessel.bend(bend_radius=0.02, angle=np.pi / 2, radius=0.002, straight_before=0.02,
+                     straight_after=0.03)
+p0, R0 = _default_clamp(vessel)
+solve_rod(rod, coils.UniformField(B=(0, 0.01, 0)), [1.0], nodes=16, clamp_position=p0,
+          clamp_rotation=R0, obstacles=[vessel], model="spatial", richardson=False,
+          stability=False)
+"""
+CONTACT_NOTE = (
+    "The last two rows: each compiled in a process of its own with an empty cache, a catheter "
+    "pressed on a vessel bend's wall (16 segments, the rest of the solve on numpy), the helpers "
+    "it shares with the spatial per-node pass included; the scenarios above compile neither."
+)
+CONTACT_KERNELS = (
+    "coilrod.rod._compiled_contact:COMPILE_AFTER",
+    "coilrod.contact._compiled_search:COMPILE_AFTER",
+)
 #: a planar state in a uniform field (the uniform-field corrector; no scenario above uses it)
 UNIFORM = """
 import coils
@@ -161,16 +189,22 @@ solve_rod(rod, coils.UniformField(B=(0, rod.field_for_lambda(5), 0)), [1.0])
 
 def compile_costs():
     """CPU seconds each kernel takes to compile on an empty cache (all three scenarios, the
-    numpy alternatives switched off)."""
+    numpy alternatives switched off; each contact kernel in a process of its own, the
+    catheter in a bend of :data:`CONTACT`)."""
     import json
 
-    with tempfile.TemporaryDirectory() as cache:
-        env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=str(ROOT))
-        code = COIL + ROD + SPATIAL + UNIFORM
-        res = subprocess.run(
-            [sys.executable, "-c", COMPILE_EVENTS, code], env=env, check=True, capture_output=True
-        )
-    return json.loads(res.stdout.decode().splitlines()[-1])
+    runs = [(COIL + ROD + SPATIAL + UNIFORM, EVERY_KERNEL)]
+    runs += [(CONTACT, threshold) for threshold in CONTACT_KERNELS]
+    costs = {}
+    for code, thresholds in runs:
+        with tempfile.TemporaryDirectory() as cache:
+            env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=str(ROOT))
+            res = subprocess.run(
+                [sys.executable, "-c", COMPILE_EVENTS, code, thresholds],
+                env=env, check=True, capture_output=True,
+            )  # fmt: skip
+        costs |= json.loads(res.stdout.decode().splitlines()[-1])
+    return costs
 
 
 def best(f, n=5):
@@ -293,6 +327,7 @@ def kernel_speed(lines, costs):
     lines += ["", "## Compile cost of each kernel (empty cache, CPU s, callees included)", ""]
     lines += ["| kernel | compile CPU (s) |", "|---|---|"]
     lines += [f"| {KERNELS[k]} (`{k}`) | {costs[k]:.2f} |" for k in KERNELS if k in costs]
+    lines += ["", CONTACT_NOTE]
     lines += ["", "## Steady state: compiled against the numpy alternative (best of 5, CPU)", ""]
     lines += ["| kernel and size | compiled (ms) | numpy (ms) | compiling pays after |"]
     lines += ["|---|---|---|---|"]

@@ -8,6 +8,7 @@ cache.  This module does not import numba: it only reads the cache path a dispat
 
 from __future__ import annotations
 
+import hashlib
 import pickle
 import sys
 import warnings
@@ -29,6 +30,31 @@ def on_disk(dispatcher) -> bool:
             seen = False
         _seen[dispatcher] = seen
     return seen
+
+
+def tie_to_sources(dispatcher, *paths) -> None:
+    """Make numba's on-disk cache of ``dispatcher`` (a ``numba.njit(cache=True)`` function)
+    stale when any file of ``paths`` changes, not only its own: numba checks only the
+    defining file's contents (its index's "source stamp"), but a kernel compiled with helpers
+    of another module holds their code too.  The stamp becomes ``(numba's own stamp, sha256 of
+    the files' contents)``: numba's loader then treats an index written before either file
+    changed as empty, compiles anew and overwrites it.  Call it where the kernel is defined
+    (before its first call); reads the files, compiles nothing.  Where the stamp cannot be
+    set (numba internals changed) or a file cannot be read, the cache is off for this kernel
+    (a stale kernel would be worse than compiling)."""
+    h = hashlib.sha256()
+    try:
+        for path in paths:
+            h.update(Path(path).read_bytes())
+        cache_file = dispatcher._cache._cache_file
+        cache_file._source_stamp = (cache_file._source_stamp, h.hexdigest())
+    except (OSError, AttributeError):
+        try:
+            from numba.core.caching import NullCache
+
+            dispatcher._cache = NullCache()
+        except (ImportError, AttributeError):  # pragma: no cover - numba without NullCache
+            pass
 
 
 def _check_index(dispatcher) -> None:

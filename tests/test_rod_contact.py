@@ -508,6 +508,44 @@ def test_compiled_contact_terms_are_the_numpy_twins(monkeypatch):
     np.testing.assert_array_equal(band_c, every)
 
 
+def test_the_contact_kernels_cache_goes_stale_with_its_helpers(tmp_path, monkeypatch):
+    # numba's cache checks only the defining file, but the contact kernel compiles the
+    # helpers of _compiled_spatial in: its cache entry is tied to both files' contents
+    # (coils._numba_cache.tie_to_sources).  numba's own loader reads the indices; nothing is
+    # compiled
+    import hashlib
+    from pathlib import Path
+
+    import numba
+    from numba.core import config
+
+    import coilrod.rod._compiled_contact as cc
+    import coilrod.rod._compiled_spatial as cs
+    import coils._numba_cache as nc
+
+    both = hashlib.sha256(Path(cc.__file__).read_bytes() + Path(cs.__file__).read_bytes())
+    assert cc.contact_core._cache._cache_file._source_stamp[1] == both.hexdigest()
+    monkeypatch.setattr(config, "CACHE_DIR", str(tmp_path))  # what NUMBA_CACHE_DIR sets
+    helper = tmp_path / "helper.py"
+    helper.write_text("A = 1\n")
+
+    def twice(x):
+        return 2.0 * x
+
+    def tied(*paths):  # a fresh process's dispatcher of twice, tied to paths
+        kernel = numba.njit(cache=True)(twice)
+        nc.tie_to_sources(kernel, *paths)
+        return kernel
+
+    tied(helper)._cache._cache_file._save_index({"sig": "twice.1.nbc"})
+    assert tied(helper)._cache._cache_file._load_index() == {"sig": "twice.1.nbc"}  # the same
+    helper.write_text("A = 2\n")
+    assert tied(helper)._cache._cache_file._load_index() == {}  # changed: compiled anew
+    kernel = tied(tmp_path / "missing.py")  # unreadable: no cache rather than a stale one
+    assert isinstance(kernel._cache, numba.core.caching.NullCache)
+    assert not kernel.overloads
+
+
 class TestSurface:
     """Contact is with the rod's surface: a circle's radius, a rectangle's half-extent along
     the contact normal."""

@@ -62,20 +62,26 @@ class VesselNetwork(Obstacle):
         return len(self.vessels)
 
     def _evaluate(self, points: np.ndarray, order: int):
-        gaps = np.stack([v._evaluate(points, 0)[0] for v in self.vessels], axis=1)
+        # each member at every point with the derivatives asked for, its winners' rows taken:
+        # a member's search of these points is remembered (a vessel's last searches), where a
+        # search of its winners alone would be a new one; the numbers of a point do not
+        # depend on the others evaluated with it
+        each = [v._evaluate(points, order) for v in self.vessels]
+        if len(each) == 1:
+            return each[0]
+        gaps = np.stack([e[0] for e in each], axis=1)
         who = np.argmax(gaps, axis=1)
         gap = gaps[np.arange(len(points)), who]
         if order == 0:
             return gap, None, None
         grad = np.empty((len(points), 3))
         hess = np.empty((len(points), 3, 3)) if order >= 2 else None
-        for k, v in enumerate(self.vessels):
+        for k, (_, gr, he) in enumerate(each):
             rows = np.flatnonzero(who == k)
             if rows.size:
-                _, gr, he = v._evaluate(points[rows], order)
-                grad[rows] = gr
+                grad[rows] = gr[rows]
                 if order >= 2:
-                    hess[rows] = he
+                    hess[rows] = he[rows]
         return gap, grad, hess
 
     @property

@@ -15,8 +15,9 @@ The numpy twin is :meth:`SpatialRod._contact_rows`, :meth:`SpatialRod._contact_b
 relative): it runs until compiling pays (:data:`COMPILE_AFTER`, ski rental) or numba's cache
 holds the kernel.  Compiled with numba's numpy error model (inf and NaN as in numpy).
 
-Note: the small helpers come from :mod:`coilrod.rod._compiled_spatial`; numba's cache checks
-only this file's time stamp, so a change of those helpers needs this cache cleared too.
+The small helpers come from :mod:`coilrod.rod._compiled_spatial`: numba's cache checks only
+the defining file, so the kernel's cache entry is tied to both files' contents
+(:func:`coils._numba_cache.tie_to_sources`): a change of either compiles it anew.
 """
 
 from __future__ import annotations
@@ -26,8 +27,9 @@ import math
 import numba as nb
 import numpy as np
 
-from coils._numba_cache import Rental
+from coils._numba_cache import Rental, tie_to_sources
 
+from . import _compiled_spatial
 from ._compiled_spatial import _cross, _exp_and_jl, _hat, _inner, _mm, _sym_term
 
 __all__ = ["COMPILE_AFTER", "MODES", "compiled_pays", "contact_core"]
@@ -238,3 +240,8 @@ def _put(ab, kv, r0, c0, M):
     for a in range(3):
         for b in range(3):
             ab[kv + r0 + a - (c0 + b), c0 + b] = M[a, b]
+
+
+# the cache entry also goes stale when the helpers of _compiled_spatial change (they are
+# compiled into the kernel; numba checks only this file)
+tie_to_sources(contact_core, __file__, _compiled_spatial.__file__)

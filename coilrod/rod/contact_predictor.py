@@ -120,46 +120,45 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     def rate(active):
         ab = base.copy(order="F")
         ab[bi, ci] = np.where(active[..., None], active_rows, inactive_rows)
-        with np.errstate(all="ignore"):
-            r = RodTangent(1, problem.size, False, ab, rhs, kl, ku).solve(rhs)[0]
-        return r if np.all(np.isfinite(r)) else None
-
-    def gaps(x):
-        return problem._state_gaps(x[None])[0, 1:]
+        r = RodTangent(1, problem.size, False, ab, rhs, kl, ku).solve(rhs)[0]
+        return r if np.isfinite(r).all() else None
 
     lam0 = u.reshape(n, nv)[1:, 9 : 9 + nc]
     active = problem.kappa * g[1:] < lam0
     x, left = u.copy(), 1.0
     switched = set()
     g0 = g[1:]
-    for _ in range(max_events):
-        r = rate(active)
-        if r is None:
-            return None
-        d = left * ds * r
-        g1 = gaps(x + d)
-        l0, l1 = x.reshape(n, nv)[1:, 9 : 9 + nc], (x + d).reshape(n, nv)[1:, 9 : 9 + nc]
-        with np.errstate(all="ignore"):
+    with np.errstate(all="ignore"):  # (one context for the loop: its entry costs as an op)
+        for _ in range(max_events):
+            r = rate(active)
+            if r is None:
+                return None
+            d = left * ds * r
+            xd = x + d
+            g1 = problem._state_gaps(xd[None])[0, 1:]
+            l0, l1 = x.reshape(n, nv)[1:, 9 : 9 + nc], xd.reshape(n, nv)[1:, 9 : 9 + nc]
             closing = ~active & (g1 < 0.0) & (g1 < g0)
             f_close = np.where(closing, np.clip(g0 / (g0 - g1), 0.0, 1.0), np.inf)
             releasing = active & (l1 < 0.0) & (l1 < l0)
             f_rel = np.where(releasing, np.clip(l0 / (l0 - l1), 0.0, 1.0), np.inf)
-        f = min(float(f_close.min()), float(f_rel.min()))
-        if not f < 1.0:
-            return x + d
-        x = x + f * d
-        left *= 1.0 - f
-        g0 = g0 + f * (g1 - g0)  # the gaps at the event, to the order of the prediction
-        at = (f_close <= f) | (f_rel <= f)
-        for p in zip(*np.nonzero(at), strict=True):
-            key = (p, round(left, 12))
-            if key in switched:  # back and forth at one scale: degenerate, give up
-                return None
-            switched.add(key)
-        active = active ^ at
-        V = x.reshape(n, nv)
-        V[1:, 9 : 9 + nc] = np.where((f_rel <= f), 0.0, V[1:, 9 : 9 + nc])
-        x = V.ravel()
+            f = min(float(f_close.min()), float(f_rel.min()))
+            if not f < 1.0:
+                return xd
+            x = x + f * d
+            left *= 1.0 - f
+            g0 = g0 + f * (g1 - g0)  # the gaps at the event, to the order of the prediction
+            released = f_rel <= f
+            at = (f_close <= f) | released
+            where = round(left, 12)
+            for p in zip(*np.nonzero(at), strict=True):
+                key = (p, where)
+                if key in switched:  # back and forth at one scale: degenerate, give up
+                    return None
+                switched.add(key)
+            active = active ^ at
+            V = x.reshape(n, nv)
+            V[1:, 9 : 9 + nc] = np.where(released, 0.0, V[1:, 9 : 9 + nc])
+            x = V.ravel()
     return None
 
 

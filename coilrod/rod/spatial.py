@@ -121,11 +121,21 @@ def _tangents(phi: np.ndarray, R0: np.ndarray) -> np.ndarray:
     cos = np.cos(ts)
     a = np.sin(ts) / ts
     b = (1.0 - cos) / (ts * ts)
-    if small.any():  # (the clamp's node at least)
-        s2 = t2[small]
-        a[small] = 1 - s2 / 6 * (1 - s2 / 20 * (1 - s2 / 42))
-        b[small] = 0.5 - s2 / 24 * (1 - s2 / 30 * (1 - s2 / 56))
-        cos[small] = 1.0 - b[small] * s2
+    idx = np.flatnonzero(small)  # (the clamp's node at least)
+    if idx.size <= 4:  # a few: in Python floats (IEEE arithmetic: numpy's roundings)
+        af, bf, cf, tf = a.reshape(-1), b.reshape(-1), cos.reshape(-1), t2.reshape(-1)
+        for i in idx.tolist():
+            s2 = float(tf[i])
+            bs = 0.5 - s2 / 24 * (1 - s2 / 30 * (1 - s2 / 56))
+            af[i] = 1 - s2 / 6 * (1 - s2 / 20 * (1 - s2 / 42))
+            bf[i] = bs
+            cf[i] = 1.0 - bs * s2
+    else:
+        s2 = t2.reshape(-1)[idx]
+        bs = 0.5 - s2 / 24 * (1 - s2 / 30 * (1 - s2 / 56))
+        a.reshape(-1)[idx] = 1 - s2 / 6 * (1 - s2 / 20 * (1 - s2 / 42))
+        b.reshape(-1)[idx] = bs
+        cos.reshape(-1)[idx] = 1.0 - bs * s2
     # phi x r = phi @ M, the rows of M the unit vectors' cross products with r
     M = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
     return cos[..., None] * r + a[..., None] * (phi @ M) + (b * (phi @ r))[..., None] * phi
@@ -765,12 +775,8 @@ class SpatialRod(DiscreteRod):
         gaps = np.empty((k, n, self.nc))
         normals = np.empty((k, n, self.nc, 3))
         hess = np.zeros((k, n, self.nc, 3, 3)) if hessian else None
-        for o, ob in enumerate(self.obstacles):
-            if hasattr(ob, "evaluate"):  # one nearest-point search for all three
-                g, grad, hs = ob.evaluate(pts, order=2 if hessian else 1)
-            else:
-                g, grad = ob.gap(pts), ob.gap_gradient(pts)
-                hs = ob.gap_hessian(pts) if hessian else None
+        for o in range(self.nc):
+            g, grad, hs = self._evaluate_at(o, pts, 2 if hessian else 1)
             gaps[:, :, o] = np.asarray(g, float).reshape(k, n) / self.L
             normals[:, :, o] = np.asarray(grad, float).reshape(k, n, 3)
             if hessian:
@@ -799,12 +805,37 @@ class SpatialRod(DiscreteRod):
         k, n = x.shape[:2]
         c, _ = self._contact_geometry()
         pts = self.points(x + c[:, None] * t).reshape(-1, 3)
+        if self.nc == 1:  # (one obstacle: its gaps as they come, the same roundings)
+            g = self._evaluate_at(0, pts, 0)[0]
+            return (np.asarray(g, float).reshape(k, n, 1) / self.L) - self._half[0]
         gaps = np.empty((k, n, self.nc))
-        for o, ob in enumerate(self.obstacles):
-            g = ob.evaluate(pts, order=0)[0] if hasattr(ob, "evaluate") else ob.gap(pts)
+        for o in range(self.nc):
+            g = self._evaluate_at(o, pts, 0)[0]
             gaps[:, :, o] = np.asarray(g, float).reshape(k, n) / self.L
         gaps -= self._half[0]
         return gaps
+
+    def _evaluate_at(self, o: int, pts: np.ndarray, order: int):
+        """(gap, gradient or None, hessian or None) of obstacle ``o`` at the contact points
+        ``pts`` (n, 3), m, up to ``order``: an :class:`~coilrod.contact.Obstacle`'s own
+        ``_evaluate`` where the points are finite (what its ``evaluate`` validates: the
+        same numbers without the checks), else its public methods (which raise on
+        non-finite points, as before)."""
+        ob = self.obstacles[o]
+        direct = self.__dict__.get("_direct")
+        if direct is None:
+            from ..contact.obstacle import Obstacle
+
+            direct = self.__dict__["_direct"] = [isinstance(b, Obstacle) for b in self.obstacles]
+        if direct[o] and len(pts) and np.isfinite(pts).all():
+            return ob._evaluate(pts, order)
+        if hasattr(ob, "evaluate"):  # one nearest-point search for all three
+            return ob.evaluate(pts, order=order)
+        return (
+            ob.gap(pts),
+            ob.gap_gradient(pts) if order >= 1 else None,
+            ob.gap_hessian(pts) if order >= 2 else None,
+        )
 
     def _state_gaps(self, U: np.ndarray) -> np.ndarray:
         """Surface gaps of states (k, size): :meth:`surface_gaps` at their node positions and
