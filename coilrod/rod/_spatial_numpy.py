@@ -75,7 +75,7 @@ def _norm(v: np.ndarray) -> np.ndarray:
 
 
 def _exp_and_jl(phi: np.ndarray):
-    """exp(hat(phi)) and J_l(phi), (..., 3, 3) each (``_exp_and_jl`` of the kernel)."""
+    """exp(hat(phi)) and J_l(phi), (..., 3, 3) each (``_exp_jl_at`` of the kernel)."""
     theta = _norm(phi)
     t2 = theta * theta
     sin = _libm(math.sin, theta)
