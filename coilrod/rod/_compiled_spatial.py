@@ -143,7 +143,7 @@ def spatial_pass(*args):
 @nb.njit(cache=True, error_model="numpy")
 def spatial_core(
     phi, X, F, S, B, G, H, has_h, uniform, tangent, mu, K, h, w, R0, L,
-    frames, R, R1, blk, diag, A_ab, m_out, ab, kv, band,
+    frames, R, R1, blk, diag, A_ab, m_out, ab, kv, band, econ, tol, floor, stats,
 ):  # fmt: skip
     """Frames (k, n, 3, 3), residual R and R1 (k, n, 9 or 3; moment, position and force
     slots), and with ``tangent``: the Jacobian blocks ``blk`` (k, n, 10, 3, 3) -- 0 m_prev,
@@ -154,7 +154,9 @@ def spatial_core(
     ``band``, ``tangent`` and ``uniform``, the blocks of ``blk`` are also written into the
     LAPACK band storage ``ab`` (2 kl + ku + 1, k 3 n; Fortran order; ``kv`` = kl + ku; its
     constant entries already in place): True is returned then (else False; the caller
-    gathers the band from ``blk``).
+    gathers the band from ``blk``).  With ``stats`` (k, 3) (else (0, 3)), each member's
+    error, largest rotation-vector component and finiteness (:func:`_member_stats`; ``econ``,
+    ``tol``, ``floor``: its constants).
 
     Member by member: :func:`_frames`, :func:`_bending`, :func:`_moment_rows`, and for a
     non-uniform field :func:`_position_force_rows`; with ``tangent`` :func:`_rotation_blocks`
@@ -172,6 +174,9 @@ def spatial_core(
         if not uniform:
             _position_force_rows(X[m], F[m], S[m], G[m], h, w, L, frames[m], m_out[m],
                                  R[m], R1[m])  # fmt: skip
+        if stats.shape[0] == k:
+            _member_stats(phi[m], X[m], F[m], S[m], uniform, R[m], R1[m], econ, tol, floor,
+                          stats[m])  # fmt: skip
         if not tangent:
             continue
         _rotation_blocks(F[m], S[m], B[m], uniform, op, h, w, frames[m], m_out[m], p, P, Jl,
@@ -182,6 +187,60 @@ def spatial_core(
         elif band:
             _band_blocks(blk[m], ab, kv, 3 * n * m)
     return band and tangent and uniform
+
+
+@_inner
+def _member_stats(phi, X, F, s_m, uniform, R, R1, econ, tol, floor, out):
+    """One member's ``out`` = (error, max |phi_a|, 1 if every residual is finite else 0): the
+    numbers of :meth:`coilrod.rod.spatial.SpatialRod.error` and the admissibility tests of
+    ``linearize``, bitwise (the same products and quotients; maxima in any order are exact,
+    NaN kept).  The error: max over equations of ``|R| s / (tol + floor (size b + load))``
+    with ``s`` the row multipliers ``econ[:, :nv]`` (the clamp's rows and the tip's force
+    row counted as 0), ``b`` the bending round-off scale ``econ[:, nv]``, size 1 + max |u|,
+    load = max |R1| s times |scale|; inf where not finite."""
+    n, nv = R.shape
+    big = 0.0  # max |phi_a| (NaN stays: x > NaN is False)
+    for i in range(n):
+        for a in range(3):
+            x = abs(phi[i, a])
+            if x > big or x != x:
+                big = x
+    size = big
+    if not uniform:  # the positions and forces too
+        for i in range(n):
+            for a in range(3):
+                x = abs(X[i, a])
+                if x > size or x != x:
+                    size = x
+                x = abs(F[i, a])
+                if x > size or x != x:
+                    size = x
+    load = 0.0
+    finite = True
+    for i in range(n):
+        for a in range(nv):
+            x = abs(R1[i, a]) * econ[i, a]
+            if x > load or x != x:
+                load = x
+            if not R[i, a] - R[i, a] == 0.0:  # inf or NaN
+                finite = False
+    load *= abs(s_m)
+    size = 1.0 + size
+    clamp = 3 if uniform else 6
+    e = 0.0
+    for i in range(n):
+        div = ((econ[i, nv] * size) + load) * floor + tol
+        for a in range(nv):
+            if (i == 0 and a < clamp) or (not uniform and i == n - 1 and a >= 6):
+                x = 0.0  # (a zeroed row: 0 / div, NaN where div is)
+            else:
+                x = abs(R[i, a]) * econ[i, a]
+            q = x / div
+            if q > e or q != q:
+                e = q
+    out[0] = e if e < math.inf else math.inf
+    out[1] = big
+    out[2] = 1.0 if finite else 0.0
 
 
 @_inner
