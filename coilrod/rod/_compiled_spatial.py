@@ -190,6 +190,12 @@ def spatial_core(
 
 
 @_inner
+def _nanmax(m, x):
+    """max(m, x) for m, x >= 0 or NaN, NaN kept (as numpy's maximum)."""
+    return x if x > m or x != x else m
+
+
+@_inner
 def _member_stats(phi, X, F, s_m, uniform, R, R1, econ, tol, floor, out):
     """One member's ``out`` = (error, max |phi_a|, 1 if every residual is finite else 0): the
     numbers of :meth:`coilrod.rod.spatial.SpatialRod.error` and the admissibility tests of
@@ -199,48 +205,31 @@ def _member_stats(phi, X, F, s_m, uniform, R, R1, econ, tol, floor, out):
     row counted as 0), ``b`` the bending round-off scale ``econ[:, nv]``, size 1 + max |u|,
     load = max |R1| s times |scale|; inf where not finite."""
     n, nv = R.shape
-    big = 0.0  # max |phi_a| (NaN stays: x > NaN is False)
+    big = 0.0  # max |phi_a|
+    size = 0.0  # max |x_a|, |F_a|
+    load = 0.0
+    bad = 0.0  # sum of R - R: NaN where a residual is inf or NaN
     for i in range(n):
         for a in range(3):
-            x = abs(phi[i, a])
-            if x > big or x != x:
-                big = x
-    size = big
-    if not uniform:  # the positions and forces too
-        for i in range(n):
-            for a in range(3):
-                x = abs(X[i, a])
-                if x > size or x != x:
-                    size = x
-                x = abs(F[i, a])
-                if x > size or x != x:
-                    size = x
-    load = 0.0
-    finite = True
-    for i in range(n):
+            big = _nanmax(big, abs(phi[i, a]))
+            if not uniform:
+                size = _nanmax(_nanmax(size, abs(X[i, a])), abs(F[i, a]))
         for a in range(nv):
-            x = abs(R1[i, a]) * econ[i, a]
-            if x > load or x != x:
-                load = x
-            if not R[i, a] - R[i, a] == 0.0:  # inf or NaN
-                finite = False
+            load = _nanmax(load, abs(R1[i, a]) * econ[i, a])
+            bad += R[i, a] - R[i, a]
     load *= abs(s_m)
-    size = 1.0 + size
+    size = 1.0 + _nanmax(size, big)
     clamp = 3 if uniform else 6
     e = 0.0
     for i in range(n):
         div = ((econ[i, nv] * size) + load) * floor + tol
         for a in range(nv):
-            if (i == 0 and a < clamp) or (not uniform and i == n - 1 and a >= 6):
-                x = 0.0  # (a zeroed row: 0 / div, NaN where div is)
-            else:
-                x = abs(R[i, a]) * econ[i, a]
-            q = x / div
-            if q > e or q != q:
-                e = q
+            zero = (i == 0 and a < clamp) or (not uniform and i == n - 1 and a >= 6)
+            # (a zeroed row: 0 / div, NaN where div is)
+            e = _nanmax(e, (0.0 if zero else abs(R[i, a]) * econ[i, a]) / div)
     out[0] = e if e < math.inf else math.inf
     out[1] = big
-    out[2] = 1.0 if finite else 0.0
+    out[2] = 1.0 if bad == 0.0 else 0.0
 
 
 @_inner
