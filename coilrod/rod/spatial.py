@@ -471,6 +471,13 @@ class SpatialRod(DiscreteRod):
         lin.pair = (self._pair, R, R1, stats)  # (R and R1 views of it: error, _error_one)
         return lin
 
+    def solve(self, lin: Linearization, rhs: np.ndarray) -> np.ndarray:
+        """:meth:`DiscreteRod.solve` without its ``np.atleast_2d`` where ``rhs`` is a stack
+        (k, size) already (the engine's: the same array)."""
+        if not (type(rhs) is np.ndarray and rhs.ndim == 2):
+            rhs = np.atleast_2d(rhs)
+        return lin.tangent.solve(rhs)
+
     @property
     def _turn_bound(self) -> float:
         """A bound on the largest rotation-vector component below which no node has turned
