@@ -34,6 +34,8 @@ os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 HERE = Path(__file__).parent
 ROUNDS = 3
+#: The results file's last section, kept when the file is rewritten (the rounds' history).
+ROUNDS_HEADING = "## Rounds"
 SEGMENTS = (4, 16, 64)
 
 #: Run in a subprocess against either version (the public API is the same).
@@ -213,5 +215,9 @@ if __name__ == "__main__":
     args = parser.parse_args()
     text = main(args.base, args.rounds)
     target = HERE / "results" / "rod3d_profile.md"
+    # the hand-kept history of the rounds (its own section, last) stays
+    old = target.read_text() if target.exists() else ""
+    if ROUNDS_HEADING in old:
+        text += "\n" + old[old.index(ROUNDS_HEADING) :]
     target.write_text(text)
     print(f"written to {target}")

@@ -13,6 +13,7 @@ from scipy.spatial.transform import Rotation
 
 import coils
 from coilrod import Circle, ConvergenceError, Magnetization, Rectangle, Rod, solve_rod, trace_rod
+from coilrod.path.protocol import Linearization
 from coilrod.rod import so3
 from coilrod.rod.elastica import elastica
 from coilrod.rod.mesh import RodMesh
@@ -240,6 +241,19 @@ class TestDiscreteProblem:
             for x, y in zip(list(a[:3]) + list(a[3]), list(b[:3]) + list(b[3]), strict=True):
                 assert np.isnan(x).any()
                 np.testing.assert_array_equal(y, x)
+            # the compiled pass's member statistics (error, largest rotation component,
+            # finiteness: what error and linearize read) against error's numpy numbers and
+            # the direct tests, bitwise: the states above, diverged ones, stacked and alone
+            for V, Sv in [(U, S), (bad, S[:2])] + [(U[j : j + 1], S[j : j + 1]) for j in (0, 3)]:
+                R, R1 = P._assemble(V, Sv, False, core=spatial_core)[:2]
+                stats = P._stats
+                lin = Linearization(u=V, scale=Sv, residual=R, ok=None)  # (no stats: numpy)
+                lin.load_rate = R1
+                with np.errstate(all="ignore"):
+                    np.testing.assert_array_equal(stats[:, 0], P.error(lin, None))
+                np.testing.assert_array_equal(stats[:, 1], np.abs(P.rotations(V)).max(axis=(1, 2)))
+                np.testing.assert_array_equal(stats[:, 2] > 0, np.isfinite(R).all(axis=1))
+                assert np.isinf(stats[:, 0]).any() == (V is bad)
 
     def test_the_pass_gets_contiguous_field_inputs(self):
         # _assemble calls the compiled pass directly once its rental is over: strided field

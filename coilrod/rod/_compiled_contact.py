@@ -30,9 +30,55 @@ import numpy as np
 from coils._numba_cache import Rental, tie_to_sources
 
 from . import _compiled_spatial
-from ._compiled_spatial import _cross, _exp_and_jl, _hat, _inner, _mm, _sym_term
+from ._compiled_spatial import _cross, _hat, _inner
+from .so3 import _SMALL  # the spatial pass's series switch
 
 __all__ = ["COMPILE_AFTER", "MODES", "compiled_pays", "contact_core"]
+
+
+# the 3x3 products, exp/J_l and symmetric term of the contact terms (the spatial pass now
+# indexes its arrays in place instead: these stay the contact kernel's own)
+@_inner
+def _mm(A, B, out):
+    for i in range(3):
+        for j in range(3):
+            acc = 0.0
+            for q in range(3):
+                acc += A[i, q] * B[q, j]
+            out[i, j] = acc
+
+
+@_inner
+def _exp_and_jl(phi, Q, J, K, K2, with_j):
+    """Q = exp(hat(phi)) and, if ``with_j``, J = J_l(phi) (K, K2: (3, 3) scratch)."""
+    theta = math.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
+    t2 = theta * theta
+    if theta < _SMALL:
+        a = 1 - t2 / 6 * (1 - t2 / 20 * (1 - t2 / 42))
+        b = 0.5 - t2 / 24 * (1 - t2 / 30 * (1 - t2 / 56))
+        c = 1 / 6 - t2 / 120 * (1 - t2 / 42 * (1 - t2 / 72))
+    else:
+        a = math.sin(theta) / theta
+        b = (1 - math.cos(theta)) / t2
+        c = (theta - math.sin(theta)) / (t2 * theta)
+    _hat(phi, K)
+    _mm(K, K, K2)
+    for i in range(3):
+        for j in range(3):
+            eye = 1.0 if i == j else 0.0
+            Q[i, j] = eye + a * K[i, j] + b * K2[i, j]
+            if with_j:
+                J[i, j] = eye + b * K[i, j] + c * K2[i, j]
+
+
+@_inner
+def _sym_term(a, b, scale, out):
+    """out += scale * ((a b^T + b a^T) / 2 - (a . b) I)."""
+    d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    for i in range(3):
+        for j in range(3):
+            out[i, j] += scale * (0.5 * (a[i] * b[j] + b[i] * a[j]) - (d if i == j else 0.0))
+
 
 #: Estimated CPU seconds of numpy contact terms after which the compiled kernel is used (ski
 #: rental: about what compiling it costs on a cold cache, benchmarks/results/contact.md);

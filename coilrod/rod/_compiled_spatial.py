@@ -49,39 +49,6 @@ def _cross(a, b, out):
 
 
 @_inner
-def _mm(A, B, out):
-    for i in range(3):
-        for j in range(3):
-            acc = 0.0
-            for q in range(3):
-                acc += A[i, q] * B[q, j]
-            out[i, j] = acc
-
-
-@_inner
-def _exp_and_jl(phi, Q, J, K, K2, with_j):
-    """Q = exp(hat(phi)) and, if ``with_j``, J = J_l(phi) (K, K2: (3, 3) scratch)."""
-    theta = math.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
-    t2 = theta * theta
-    if theta < _SMALL:
-        a = 1 - t2 / 6 * (1 - t2 / 20 * (1 - t2 / 42))
-        b = 0.5 - t2 / 24 * (1 - t2 / 30 * (1 - t2 / 56))
-        c = 1 / 6 - t2 / 120 * (1 - t2 / 42 * (1 - t2 / 72))
-    else:
-        a = math.sin(theta) / theta
-        b = (1 - math.cos(theta)) / t2
-        c = (theta - math.sin(theta)) / (t2 * theta)
-    _hat(phi, K)
-    _mm(K, K, K2)
-    for i in range(3):
-        for j in range(3):
-            eye = 1.0 if i == j else 0.0
-            Q[i, j] = eye + a * K[i, j] + b * K2[i, j]
-            if with_j:
-                J[i, j] = eye + b * K[i, j] + c * K2[i, j]
-
-
-@_inner
 def _log(R, out):
     v0 = 0.5 * (R[2, 1] - R[1, 2])
     v1 = 0.5 * (R[0, 2] - R[2, 0])
@@ -134,12 +101,12 @@ def _c_coefficients(theta, with_dc):
 
 
 @_inner
-def _sym_term(a, b, scale, out):
-    """out += scale * ((a b^T + b a^T) / 2 - (a . b) I)."""
+def _sym_term(a, b, scale, out, k):
+    """out[k] += scale * ((a b^T + b a^T) / 2 - (a . b) I)."""
     d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
     for i in range(3):
         for j in range(3):
-            out[i, j] += scale * (0.5 * (a[i] * b[j] + b[i] * a[j]) - (d if i == j else 0.0))
+            out[k, i, j] += scale * (0.5 * (a[i] * b[j] + b[i] * a[j]) - (d if i == j else 0.0))
 
 
 #: Estimated CPU seconds of numpy passes after which the compiled pass is used (ski rental:
@@ -176,7 +143,7 @@ def spatial_pass(*args):
 @nb.njit(cache=True, error_model="numpy")
 def spatial_core(
     phi, X, F, S, B, G, H, has_h, uniform, tangent, mu, K, h, w, R0, L,
-    frames, R, R1, blk, diag, A_ab, m_out, ab, kv, band,
+    frames, R, R1, blk, diag, A_ab, m_out, ab, kv, band, econ, tol, floor, stats,
 ):  # fmt: skip
     """Frames (k, n, 3, 3), residual R and R1 (k, n, 9 or 3; moment, position and force
     slots), and with ``tangent``: the Jacobian blocks ``blk`` (k, n, 10, 3, 3) -- 0 m_prev,
@@ -187,7 +154,9 @@ def spatial_core(
     ``band``, ``tangent`` and ``uniform``, the blocks of ``blk`` are also written into the
     LAPACK band storage ``ab`` (2 kl + ku + 1, k 3 n; Fortran order; ``kv`` = kl + ku; its
     constant entries already in place): True is returned then (else False; the caller
-    gathers the band from ``blk``).
+    gathers the band from ``blk``).  With ``stats`` (k, 3) (else (0, 3)), each member's
+    error, largest rotation-vector component and finiteness (:func:`_member_stats`; ``econ``,
+    ``tol``, ``floor``: its constants).
 
     Member by member: :func:`_frames`, :func:`_bending`, :func:`_moment_rows`, and for a
     non-uniform field :func:`_position_force_rows`; with ``tangent`` :func:`_rotation_blocks`
@@ -205,6 +174,9 @@ def spatial_core(
         if not uniform:
             _position_force_rows(X[m], F[m], S[m], G[m], h, w, L, frames[m], m_out[m],
                                  R[m], R1[m])  # fmt: skip
+        if stats.shape[0] == k:
+            _member_stats(phi[m], X[m], F[m], S[m], uniform, R[m], R1[m], econ, tol, floor,
+                          stats[m])  # fmt: skip
         if not tangent:
             continue
         _rotation_blocks(F[m], S[m], B[m], uniform, op, h, w, frames[m], m_out[m], p, P, Jl,
@@ -215,6 +187,49 @@ def spatial_core(
         elif band:
             _band_blocks(blk[m], ab, kv, 3 * n * m)
     return band and tangent and uniform
+
+
+@_inner
+def _nanmax(m, x):
+    """max(m, x) for m, x >= 0 or NaN, NaN kept (as numpy's maximum)."""
+    return x if x > m or x != x else m
+
+
+@_inner
+def _member_stats(phi, X, F, s_m, uniform, R, R1, econ, tol, floor, out):
+    """One member's ``out`` = (error, max |phi_a|, 1 if every residual is finite else 0): the
+    numbers of :meth:`coilrod.rod.spatial.SpatialRod.error` and the admissibility tests of
+    ``linearize``, bitwise (the same products and quotients; maxima in any order are exact,
+    NaN kept).  The error: max over equations of ``|R| s / (tol + floor (size b + load))``
+    with ``s`` the row multipliers ``econ[:, :nv]`` (the clamp's rows and the tip's force
+    row counted as 0), ``b`` the bending round-off scale ``econ[:, nv]``, size 1 + max |u|,
+    load = max |R1| s times |scale|; inf where not finite."""
+    n, nv = R.shape
+    big = 0.0  # max |phi_a|
+    size = 0.0  # max |x_a|, |F_a|
+    load = 0.0
+    bad = 0.0  # sum of R - R: NaN where a residual is inf or NaN
+    for i in range(n):
+        for a in range(3):
+            big = _nanmax(big, abs(phi[i, a]))
+            if not uniform:
+                size = _nanmax(_nanmax(size, abs(X[i, a])), abs(F[i, a]))
+        for a in range(nv):
+            load = _nanmax(load, abs(R1[i, a]) * econ[i, a])
+            bad += R[i, a] - R[i, a]
+    load *= abs(s_m)
+    size = 1.0 + _nanmax(size, big)
+    clamp = 3 if uniform else 6
+    e = 0.0
+    for i in range(n):
+        div = ((econ[i, nv] * size) + load) * floor + tol
+        for a in range(nv):
+            zero = (i == 0 and a < clamp) or (not uniform and i == n - 1 and a >= 6)
+            # (a zeroed row: 0 / div, NaN where div is)
+            e = _nanmax(e, (0.0 if zero else abs(R[i, a]) * econ[i, a]) / div)
+    out[0] = e if e < math.inf else math.inf
+    out[1] = big
+    out[2] = 1.0 if bad == 0.0 else 0.0
 
 
 @_inner
@@ -236,14 +251,56 @@ def _band_blocks(blk, ab, kv, off):
 
 
 @_inner
+def _exp_jl_at(phi, i, Q, J, K, K2, with_j):
+    """Q = exp(hat(phi[i])) and, if ``with_j``, J[i] = J_l(phi[i]) (K, K2: (3, 3) scratch)."""
+    p0, p1, p2 = phi[i, 0], phi[i, 1], phi[i, 2]
+    theta = math.sqrt(p0**2 + p1**2 + p2**2)
+    t2 = theta * theta
+    if theta < _SMALL:
+        a = 1 - t2 / 6 * (1 - t2 / 20 * (1 - t2 / 42))
+        b = 0.5 - t2 / 24 * (1 - t2 / 30 * (1 - t2 / 56))
+        c = 1 / 6 - t2 / 120 * (1 - t2 / 42 * (1 - t2 / 72))
+    else:
+        a = math.sin(theta) / theta
+        b = (1 - math.cos(theta)) / t2
+        c = (theta - math.sin(theta)) / (t2 * theta)
+    K[0, 0] = 0.0
+    K[0, 1] = -p2
+    K[0, 2] = p1
+    K[1, 0] = p2
+    K[1, 1] = 0.0
+    K[1, 2] = -p0
+    K[2, 0] = -p1
+    K[2, 1] = p0
+    K[2, 2] = 0.0
+    for r in range(3):
+        for s in range(3):
+            acc = 0.0
+            for q in range(3):
+                acc += K[r, q] * K[q, s]
+            K2[r, s] = acc
+    for r in range(3):
+        for s in range(3):
+            eye = 1.0 if r == s else 0.0
+            Q[r, s] = eye + a * K[r, s] + b * K2[r, s]
+            if with_j:
+                J[i, r, s] = eye + b * K[r, s] + c * K2[r, s]
+
+
+@_inner
 def _frames(phi, R0, mu, frames, Jl, m_out, tangent):
     """One member's node frames ``exp(hat(phi_i)) R0``, with ``tangent`` ``J_l(phi_i)``, and
     the world magnetization ``frames_i mu_i``."""
     mats = np.empty((3, 3, 3))
     Q, K, K2 = mats[0], mats[1], mats[2]
     for i in range(phi.shape[0]):
-        _exp_and_jl(phi[i], Q, Jl[i], K, K2, tangent)
-        _mm(Q, R0, frames[i])
+        _exp_jl_at(phi, i, Q, Jl, K, K2, tangent)
+        for a in range(3):
+            for b in range(3):
+                acc = 0.0
+                for q in range(3):
+                    acc += Q[a, q] * R0[q, b]
+                frames[i, a, b] = acc
         for a in range(3):
             acc = 0.0
             for q in range(3):
@@ -261,13 +318,11 @@ def _bending(frames, K, h, tangent, p, P):
     Nm, Gh, M1, M2, KM = mats[4], mats[5], mats[6], mats[7], mats[8]
     psi, g, tmp, tmp2, Jg = vecs[0], vecs[1], vecs[2], vecs[3], vecs[4]
     for i in range(frames.shape[0] - 1):
-        Ra = frames[i]
-        Rb = frames[i + 1]
         for a in range(3):
             for b in range(3):
                 acc = 0.0
                 for q in range(3):
-                    acc += Ra[q, a] * Rb[q, b]
+                    acc += frames[i, q, a] * frames[i + 1, q, b]
                 Delta[a, b] = acc
         _log(Delta, psi)
         for a in range(3):
@@ -281,18 +336,28 @@ def _bending(frames, K, h, tangent, p, P):
         for a in range(3):
             acc = 0.0
             for q in range(3):
-                acc += Rb[a, q] * Jg[q]
+                acc += frames[i + 1, a, q] * Jg[q]
             p[i, a] = acc
         if not tangent:
             continue
         _hat(psi, Psi)
-        _mm(Psi, Psi, Psi2)
+        for a in range(3):
+            for b in range(3):
+                acc = 0.0
+                for q in range(3):
+                    acc += Psi[a, q] * Psi[q, b]
+                Psi2[a, b] = acc
         for a in range(3):
             for b in range(3):
                 Minv[a, b] = (1.0 if a == b else 0.0) + 0.5 * Psi[a, b] + cc * Psi2[a, b]
         # N = -hat(g)/2 - c hat(g) hat(psi) - c hat(g x psi) + dc psi (psi^2 g)^T
         _hat(g, Gh)
-        _mm(Gh, Psi, M1)
+        for a in range(3):
+            for b in range(3):
+                acc = 0.0
+                for q in range(3):
+                    acc += Gh[a, q] * Psi[q, b]
+                M1[a, b] = acc
         _cross(g, psi, tmp)
         _hat(tmp, M2)
         for a in range(3):
@@ -318,13 +383,18 @@ def _bending(frames, K, h, tangent, p, P):
                     acc2 += Minv[q, a] * Nm[q, b]
                     acc3 += Minv[q, b] * Nm[q, a]
                 M1[a, b] = acc + 0.5 * (acc2 + acc3)
-        # P = Rb inner Rb^T
-        _mm(Rb, M1, M2)
+        # P = Rb inner Rb^T (Rb = frames[i + 1])
         for a in range(3):
             for b in range(3):
                 acc = 0.0
                 for q in range(3):
-                    acc += M2[a, q] * Rb[b, q]
+                    acc += frames[i + 1, a, q] * M1[q, b]
+                M2[a, b] = acc
+        for a in range(3):
+            for b in range(3):
+                acc = 0.0
+                for q in range(3):
+                    acc += M2[a, q] * frames[i + 1, b, q]
                 P[i, a, b] = acc
 
 
@@ -394,7 +464,9 @@ def _position_force_rows(X, F, s_m, G, h, w, L, frames, m_out, R, R1):
 @_inner
 def _rotation_blocks(F, s_m, B, uniform, op, h, w, frames, m_out, p, P, Jl, R, blk, diag, A_ab):
     """One member's second-variation blocks ``diag`` and ``A_ab`` and the Jacobian blocks of
-    the moment rows with respect to the rotations (``blk`` 0 m_prev, 1 m_diag, 2 m_next)."""
+    the moment rows with respect to the rotations (``blk`` 0 m_prev, 1 m_diag, 2 m_next).
+    (Every array indexed in place: a view or a call per node costs more than its
+    arithmetic.)"""
     n = frames.shape[0]
     vecs = np.empty((3, 3))
     t, hF, tmp = vecs[0], vecs[1], vecs[2]
@@ -402,36 +474,45 @@ def _rotation_blocks(F, s_m, B, uniform, op, h, w, frames, m_out, p, P, Jl, R, b
     for i in range(n):
         for a in range(3):
             t[a] = frames[i, a, 0]
-        D = diag[i]
         for a in range(3):
             for b in range(3):
-                D[a, b] = 0.0
+                diag[i, a, b] = 0.0
         if i >= 1:
             for a in range(3):
                 for b in range(3):
-                    D[a, b] += P[i - 1, a, b]
+                    diag[i, a, b] += P[i - 1, a, b]
         if i <= n - 2:
             for a in range(3):
                 for b in range(3):
-                    D[a, b] += P[i, a, b]
-        _sym_term(m_out[i], B[i], -s_m * w[i], D)
+                    diag[i, a, b] += P[i, a, b]
+        # + (-s w) ((m B^T + B m^T) / 2 - (m . B) I) (_sym_term)
+        scale = -s_m * w[i]
+        d = m_out[i, 0] * B[i, 0] + m_out[i, 1] * B[i, 1] + m_out[i, 2] * B[i, 2]
+        for a in range(3):
+            for b in range(3):
+                diag[i, a, b] += scale * (
+                    0.5 * (m_out[i, a] * B[i, b] + B[i, a] * m_out[i, b]) - (d if a == b else 0.0)
+                )
         if not uniform:
             if i >= 1:
                 for a in range(3):
                     hF[a] = 0.5 * h[i - 1] * F[i - 1, a]
-                _sym_term(t, hF, -1.0, D)
+                _sym_term(t, hF, -1.0, diag, i)
             if i <= n - 2:
                 for a in range(3):
                     hF[a] = 0.5 * h[i] * F[i, a]
-                _sym_term(t, hF, -1.0, D)
+                _sym_term(t, hF, -1.0, diag, i)
+        # - hat(R_i) / 2
         for a in range(3):
             tmp[a] = R[i, op + a]
         _hat(tmp, M1)
         for a in range(3):
             for b in range(3):
-                D[a, b] -= 0.5 * M1[a, b]
+                diag[i, a, b] -= 0.5 * M1[a, b]
     for i in range(n - 1):
-        _hat(p[i], M1)
+        for a in range(3):
+            tmp[a] = p[i, a]
+        _hat(tmp, M1)
         for a in range(3):
             for b in range(3):
                 A_ab[i, a, b] = -P[i, a, b] + 0.5 * M1[a, b]
@@ -439,41 +520,62 @@ def _rotation_blocks(F, s_m, B, uniform, op, h, w, frames, m_out, p, P, Jl, R, b
         # m_prev: A_ba(seg i-1) Jl_{i-1}; m_diag: diag_i Jl_i; m_next: A_ab(seg i) Jl_{i+1}
         for a in range(3):
             for b in range(3):
-                A_ba = -P[i - 1, a, b] - (A_ab[i - 1, a, b] + P[i - 1, a, b])
-                M1[a, b] = A_ba
-        _mm(M1, Jl[i - 1], blk[i, 0])
-        _mm(diag[i], Jl[i], blk[i, 1])
+                M1[a, b] = -P[i - 1, a, b] - (A_ab[i - 1, a, b] + P[i - 1, a, b])
+        for a in range(3):
+            for b in range(3):
+                acc = 0.0
+                acc2 = 0.0
+                for q in range(3):
+                    acc += M1[a, q] * Jl[i - 1, q, b]
+                    acc2 += diag[i, a, q] * Jl[i, q, b]
+                blk[i, 0, a, b] = acc
+                blk[i, 1, a, b] = acc2
         if i <= n - 2:
-            _mm(A_ab[i], Jl[i + 1], blk[i, 2])
+            for a in range(3):
+                for b in range(3):
+                    acc = 0.0
+                    for q in range(3):
+                        acc += A_ab[i, a, q] * Jl[i + 1, q, b]
+                    blk[i, 2, a, b] = acc
 
 
 @_inner
 def _position_blocks(s_m, G, H, has_h, h, w, L, frames, m_out, Jl, blk):
     """One member's Jacobian blocks of a non-uniform field: ``blk`` 3 p_phiprev, 4 p_phi,
-    5 m_x, 6 m_Fprev, 7 m_F, 8 f_xnext, 9 f_phinext."""
+    5 m_x, 6 m_Fprev, 7 m_F, 8 f_xnext, 9 f_phinext (every array indexed in place, as in
+    :func:`_rotation_blocks`)."""
     n = frames.shape[0]
     vecs = np.empty((2, 3))
-    mats = np.empty((3, 3, 3))
+    mats = np.empty((4, 3, 3))
     t, tmp = vecs[0], vecs[1]
-    M1, M2, Nm = mats[0], mats[1], mats[2]
+    M1, M2, Nm, M0 = mats[0], mats[1], mats[2], mats[3]
     for i in range(1, n):
         hh = 0.5 * h[i - 1]
         for a in range(3):
             tmp[a] = frames[i - 1, a, 0]
-        _hat(tmp, M1)
+        _hat(tmp, M0)
         for a in range(3):
             for b in range(3):
-                M1[a, b] *= hh
-        _mm(M1, Jl[i - 1], blk[i, 3])
+                M0[a, b] *= hh
         for a in range(3):
             t[a] = frames[i, a, 0]
         _hat(t, M2)
         for a in range(3):
             for b in range(3):
                 M1[a, b] = hh * M2[a, b]
-        _mm(M1, Jl[i], blk[i, 4])
+        for a in range(3):
+            for b in range(3):
+                acc = 0.0
+                acc2 = 0.0
+                for q in range(3):
+                    acc += M0[a, q] * Jl[i - 1, q, b]
+                    acc2 += M1[a, q] * Jl[i, q, b]
+                blk[i, 3, a, b] = acc
+                blk[i, 4, a, b] = acc2
         # m_x = -c w L hat(m) G ; m_Fprev = -(h_{i-1}/2) hat(t); m_F = -(h_i/2) hat(t)
-        _hat(m_out[i], M1)
+        for a in range(3):
+            tmp[a] = m_out[i, a]
+        _hat(tmp, M1)
         cwL = s_m * w[i] * L
         for a in range(3):
             for b in range(3):
@@ -497,4 +599,9 @@ def _position_blocks(s_m, G, H, has_h, h, w, L, frames, m_out, Jl, blk):
                 for q in range(3):
                     acc2 += G[i, q, a] * M1[q, b]
                 Nm[a, b] = cwL * acc2
-        _mm(Nm, Jl[i], blk[i, 9])
+        for a in range(3):
+            for b in range(3):
+                acc = 0.0
+                for q in range(3):
+                    acc += Nm[a, q] * Jl[i, q, b]
+                blk[i, 9, a, b] = acc

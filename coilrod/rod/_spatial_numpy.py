@@ -75,7 +75,7 @@ def _norm(v: np.ndarray) -> np.ndarray:
 
 
 def _exp_and_jl(phi: np.ndarray):
-    """exp(hat(phi)) and J_l(phi), (..., 3, 3) each (``_exp_and_jl`` of the kernel)."""
+    """exp(hat(phi)) and J_l(phi), (..., 3, 3) each (``_exp_jl_at`` of the kernel)."""
     theta = _norm(phi)
     t2 = theta * theta
     sin = _libm(math.sin, theta)
@@ -205,11 +205,13 @@ def _bending(frames, K, h, tangent):
 
 def spatial_core_numpy(
     phi, X, F, S, B, G, H, has_h, uniform, tangent, mu, K, h, w, R0, L,
-    frames, R, R1, blk, diag, A_ab, m_out, ab=None, kv=0, band=False,
+    frames, R, R1, blk, diag, A_ab, m_out, ab=None, kv=0, band=False, econ=None, tol=0.0,
+    floor=0.0, stats=None,
 ):  # fmt: skip
     """:func:`coilrod.rod._compiled_spatial.spatial_core` (same arguments, same outputs, the
-    same entries written) in numpy, except the band storage: ``ab`` is left alone and False
-    returned (the caller gathers the band from ``blk``)."""
+    same entries written) in numpy, except the band storage and the member statistics:
+    ``ab`` and ``stats`` are left alone and False returned (the caller gathers the band from
+    ``blk`` and computes the statistics itself)."""
     op = 0 if uniform else 3
     with np.errstate(all="ignore"):
         Q, Jl = _exp_and_jl(phi)

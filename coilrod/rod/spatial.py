@@ -67,6 +67,8 @@ _NO_BAND = np.zeros((2, 2), order="F")
 _NO_HESS = np.zeros((1, 1, 1, 3, 3))
 #: The second variation's outputs of the compiled contact terms without the tangent.
 _NO_VAR, _NO_TURN = np.zeros((1, 1, 3, 3, 3)), np.zeros((1, 1, 1, 3))
+#: The member statistics argument of the per-node pass where none are asked for.
+_NO_STATS = np.zeros((0, 3))
 
 _CS = None  # the module coilrod.rod._compiled_spatial once imported (it imports numba)
 
@@ -161,8 +163,9 @@ _MESH_CONSTANTS: dict = {}
 
 def _mesh_constants(h, w, K, uniform: bool, nv: int) -> tuple:
     """1/h, 1/w, the bending round-off scale per node (n,), its maximum, the same as a
-    column (n, 1) and the scaled residual's row multipliers (n, 3 or nv), as
-    :class:`SpatialRod` uses them (read-only: computed once per mesh, stiffness and layout)."""
+    column (n, 1), the scaled residual's row multipliers (n, 3 or nv) and the last two side
+    by side (n, 3 or nv + 1: the compiled pass's error constants), as :class:`SpatialRod`
+    uses them (read-only: computed once per mesh, stiffness and layout)."""
     key = (h.tobytes(), w.tobytes(), K.tobytes(), uniform, nv)
     out = _MESH_CONSTANTS.get(key)
     if out is None:
@@ -184,11 +187,14 @@ def _mesh_constants(h, w, K, uniform: bool, nv: int) -> tuple:
             row_scale[:, 3:6] = inv_w[:, None]
             row_scale[1:, 0:3] = inv_h[:, None]
             row_scale[:-1, 6:9] = inv_w[1:, None]
-        arrays = (inv_h, inv_w, bend_scale, bend_column, row_scale)
+        econ = np.concatenate((row_scale, bend_column), axis=1)
+        arrays = (inv_h, inv_w, bend_scale, bend_column, row_scale, econ)
         for a in arrays:
             a.flags.writeable = False
         out = _remember(
-            _MESH_CONSTANTS, key, (inv_h, inv_w, bend_scale, bend_max, bend_column, row_scale)
+            _MESH_CONSTANTS,
+            key,
+            (inv_h, inv_w, bend_scale, bend_max, bend_column, row_scale, econ),
         )
     return out
 
@@ -312,7 +318,7 @@ class SpatialRod(DiscreteRod):
         self.size = self.nv * n
         (
             self._inv_h, self._inv_w, self._bend_scale, self._bend_max, self._bend_column,
-            self._row_scale,
+            self._row_scale, self._econ,
         ) = _mesh_constants(mesh.h, mesh.w, self.K, self.uniform, self.nv)  # fmt: skip
         self._band_cache: dict = {}
         self._work: dict = {}  # per-call arrays of _assemble (_workspace)
@@ -461,10 +467,16 @@ class SpatialRod(DiscreteRod):
                 R, R1, ab, sym = self._assemble(U, S, tangent)
         else:  # the compiled pass (numpy's error model, silent) and band gathers only
             R, R1, ab, sym = self._assemble(U, S, tangent)
-        ok = np.logical_and.reduce(np.isfinite(R), axis=1)
-        phi = U if self.uniform else self.rotations(U)  # (every unknown a rotation, or (k, n, 3))
+        stats = self._stats  # (the compiled pass's: finiteness, largest rotation component)
+        if stats is None:
+            ok = np.logical_and.reduce(np.isfinite(R), axis=1)
+            phi = U if self.uniform else self.rotations(U)  # (every unknown a rotation)
+            big = _max(np.abs(phi), axis=None)
+        else:
+            ok = stats[:, 2] > 0.0
+            big = stats[0, 1] if U.shape[0] == 1 else _max(stats[:, 1])
         # |phi| <= sqrt(3) max|phi_a|: the norms only where that bound exceeds the limit
-        if not _max(np.abs(phi), axis=None) <= self._turn_bound:
+        if not big <= self._turn_bound:
             phi = self.rotations(U)
             with np.errstate(all="ignore"):
                 turned = np.sqrt(np.einsum("kni,kni->kn", phi, phi)).max(axis=1)
@@ -483,8 +495,15 @@ class SpatialRod(DiscreteRod):
             tan.blocks = sym  # (diagonal, upper) blocks of the second variation
         lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
         lin.load_rate = R1
-        lin.pair = (self._pair, R, R1)  # (R and R1 views of it: _error_one)
+        lin.pair = (self._pair, R, R1, stats)  # (R and R1 views of it: error, _error_one)
         return lin
+
+    def solve(self, lin: Linearization, rhs: np.ndarray) -> np.ndarray:
+        """:meth:`DiscreteRod.solve` without its ``np.atleast_2d`` where ``rhs`` is a stack
+        (k, size) already (the engine's: the same array)."""
+        if not (type(rhs) is np.ndarray and rhs.ndim == 2):
+            rhs = np.atleast_2d(rhs)
+        return lin.tangent.solve(rhs)
 
     @property
     def _turn_bound(self) -> float:
@@ -525,6 +544,12 @@ class SpatialRod(DiscreteRod):
         """max over equations of |scaled residual| / (tol + its round-off floor), shape (k,)."""
         # the largest |scaled residual| of each node, divided by the node's tolerance (the
         # same maximum as dividing every equation: a positive divisor keeps the order)
+        pair = getattr(lin, "pair", None)
+        if (
+            pair is not None and pair[3] is not None
+            and pair[1] is lin.residual and pair[2] is lin.load_rate
+        ):  # fmt: skip
+            return pair[3][:, 0].copy()  # the compiled pass's (the same numbers)
         if lin.residual.shape[0] == 1:
             return self._error_one(lin)
         scaled = self._scaled_max(lin.residual)  # (k, n)
@@ -1175,11 +1200,17 @@ class SpatialRod(DiscreteRod):
         # the compiled pass writes the uniform layout's band itself (into the template's copy)
         direct = band and tangent and self.uniform and not self.nc
         ab = self._blk_gather(k)[0].copy(order="F") if direct else _NO_BAND
+        # each member's error, largest rotation component and finiteness from the compiled
+        # pass (the numpy passes leave the -1: linearize and error compute them); not with
+        # contact (its rows are added below)
+        stats = np.full((k, 3), -1.0) if not self.nc else _NO_STATS
         wrote = core(
             phi, X, F, S, B, G, Hs if has_h else ws["H"], has_h, self.uniform, tangent,
             self.mu, self.K, self.mesh.h, self.mesh.w, self.R0, self.L, frames, R, R1, blk,
-            diag, A_ab, m, ab, self.kl + self.ku, direct,
+            diag, A_ab, m, ab, self.kl + self.ku, direct, self._econ, self.tol, _FLOOR * _EPS,
+            stats,
         )  # fmt: skip
+        self._stats = stats if stats.shape[0] and stats[0, 2] >= 0.0 else None
         if self.nc and self._contact_kernel(k, tangent, band):
             return self._compiled_contact(U, S, V, X, frames, phi, blk, m, G, pair, diag, A_ab,
                                           tangent)  # fmt: skip
@@ -1663,12 +1694,13 @@ def _solve_many(tan: RodTangent, rhs: np.ndarray) -> np.ndarray:
 
 def numpy_core(
     phi, X, F, S, B, G, H, has_h, uniform, tangent, mu, K, h, w, R0, L,
-    frames, R, R1, blk, diag, A_ab, m_out, ab=None, kv=0, band=False,
+    frames, R, R1, blk, diag, A_ab, m_out, ab=None, kv=0, band=False, econ=None, tol=0.0,
+    floor=0.0, stats=None,
 ):  # fmt: skip
     """:func:`coilrod.rod._compiled_spatial.spatial_core` in numpy, with the same arguments and
-    outputs (the band storage ``ab`` left alone: returns None, the caller gathers it from
-    ``blk``): the reference the compiled pass is tested against (the equations are in the
-    module docstring)."""
+    outputs (the band storage ``ab`` and ``stats`` left alone: returns None, the caller
+    gathers the band from ``blk`` and computes the statistics itself): the reference the
+    compiled pass is tested against (the equations are in the module docstring)."""
     op = 0 if uniform else 3
     inv_h = 1.0 / h
     Rm = expm(phi) @ R0  # (k, n, 3, 3)
