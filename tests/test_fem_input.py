@@ -12,6 +12,7 @@ from _scenes import scene_with
 import coilrod
 import coils
 from coilrod import presets
+from coilrod.fem.mesh import clamp_layers
 
 L = 0.04
 
@@ -135,7 +136,10 @@ def test_circle_mesh_and_2d_circle(field):
     D = rod.section.diameter
     assert h == pytest.approx(np.sqrt(3) / 2 * D, rel=1e-12)
     res3 = coilrod.solve_fem(rod, field, [0.0], dim=3, elements=(2, 2, 1))
-    assert res3.mesh.t.shape[1] == 2 * (2 * 2 + 4 * 2 * 1)
+    # 2 layers and the clamp's graded ones (the first halved to no longer than D)
+    layers = 2 + clamp_layers(rod.length / 2, D)
+    assert layers > 2
+    assert res3.mesh.t.shape[1] == layers * (2 * 2 + 4 * 2 * 1)
     r = np.hypot(res3.nodes[1], res3.nodes[2])
     assert r.max() == pytest.approx(D / 2, rel=1e-12)
 

@@ -21,7 +21,7 @@ import coilrod
 import coils
 from coilrod import presets
 from coilrod.fem import DEFAULT_ELEMENTS, default_elements, length_layers
-from coilrod.fem.mesh import rod_mesh
+from coilrod.fem.mesh import clamp_layer, clamp_layers, rod_mesh
 from coilrod.rod.mesh import MERGE_BREAKS
 
 L = 0.04
@@ -57,7 +57,11 @@ def test_every_breakpoint_is_a_facet_plane(dim, section, elements):
     breaks = np.array(rod.magnetization.breakpoints)
     mesh = rod_mesh(rod, dim, elements)
     xs = _layers(mesh)
-    assert xs.size == elements[0] + 1  # elements[0] layers in all
+    # elements[0] layers in all, and in 3D the first (3.1 mm) halved once at the clamp (to
+    # no longer than the section's smallest extent, 2 mm)
+    graded = 0 if dim == 2 else clamp_layers(lengths[0], clamp_layer(section))
+    assert graded == (dim - 2)
+    assert xs.size == elements[0] + 1 + graded
     assert xs[0] == 0.0
     assert xs[-1] == L
     for b in breaks:
@@ -67,7 +71,9 @@ def test_every_breakpoint_is_a_facet_plane(dim, section, elements):
     lo, hi = xe.min(axis=0), xe.max(axis=0)
     inside = (lo[:, None] < breaks - 2 * ULP) & (hi[:, None] > breaks + 2 * ULP)
     assert not inside.any()
-    # at least one layer per piece, uniform within each piece
+    # at least one layer per piece, uniform within each piece (the clamp's graded layers
+    # merged back)
+    xs = np.delete(xs, np.arange(1, 1 + graded))
     edges = np.concatenate([[0.0], breaks, [L]])
     for a, b in zip(edges[:-1], edges[1:], strict=True):
         piece = xs[(xs >= a - 2 * ULP) & (xs <= b + 2 * ULP)]
