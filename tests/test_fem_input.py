@@ -224,6 +224,8 @@ def _box(x1, y0, y1, z0=-1e-3, z1=1e-3, x0=0.0):
         (_box(L, -0.5e-3, 0.5e-3), r"area .* 50 %"),  # too thin
     ],
 )
+# uniform given meshes of 4 layers, 5 sections long: valid, with the ungraded clamp's warning
+@pytest.mark.filterwarnings("ignore:mesh. an element:coilrod.StabilityWarning")
 def test_a_given_mesh_must_be_the_rods(mesh, match):
     rod = _square_rod()
     field = coils.UniformField((0.0, rod.field_for_lambda(1.0), 0.0))
@@ -233,6 +235,8 @@ def test_a_given_mesh_must_be_the_rods(mesh, match):
     coilrod.solve_fem(rod, field, [0.0], dim=3, mesh=_box(L, -1e-3, 1e-3))  # the right one
 
 
+# uniform given meshes of 4 layers, 5 sections long: valid, with the ungraded clamp's warning
+@pytest.mark.filterwarnings("ignore:mesh. an element:coilrod.StabilityWarning")
 def test_given_mesh_kind_and_the_generated_meshes_pass():
     from skfem import MeshHex1, MeshQuad1, MeshTri
 

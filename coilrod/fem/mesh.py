@@ -61,6 +61,9 @@ DEFAULT_ELEMENTS = MappingProxyType({2: (20, 1), 3: (20, 1, 1), "3circle": (20, 
 #: elements of a 0.4 mm square section 40 mm long (h = 12.5 times the side); uniform
 #: (16, 1, 1) and (32, 1, 1) at 1.27 and 3.38.  Graded from one side, none up to 8.
 CLAMP_LAYER = 1.0
+#: A given 3D mesh whose layers near the clamp exceed this many times the grading's limit gets
+#: a StabilityWarning from ``solve_fem`` (:func:`ungraded_clamp`).
+UNGRADED_FACTOR = 2.0
 
 #: Piece lengths times the element count are rounded to this many decimals before the count
 #: is shared out, so that breakpoints a few ulp off a round number give the round number's
@@ -200,24 +203,26 @@ def clamp_layers(length: float, limit: float | None) -> int:
 
 def ungraded_clamp(mesh, section) -> str:
     """A 3D ``mesh`` whose layers near the clamp are long against ``section``: the message
-    (empty if none).  A layer from x to x + h must have ``h <= max(c, 2 x)`` with ``c`` the
-    :func:`clamp_layer` of the section, as the meshes of :func:`length_layers` with ``clamp``
-    have; else the stability count at the clamp is a property of the mesh (see
-    :data:`CLAMP_LAYER`)."""
+    (empty if none).  An element from x to x + h along the rod must have ``h <= 2 max(c, 2 x)``
+    with ``c`` the :func:`clamp_layer` of the section (twice the limit of the meshes of
+    :func:`length_layers` with ``clamp = c``: graded from 2 c, a rod in pure tension was stable
+    to a stretch of about 2); else the stability count at the clamp is a property of the mesh
+    (see :data:`CLAMP_LAYER`)."""
     xe = mesh.p[0, mesh.t]
     lo, hi = xe.min(axis=0), xe.max(axis=0)
-    limit = np.maximum(clamp_layer(section), 2.0 * lo)
+    limit = UNGRADED_FACTOR * np.maximum(clamp_layer(section), 2.0 * lo)
     bad = (hi - lo) > limit * (1 + 1e-6)
     if not bad.any():
         return ""
     k = int(np.argmax(np.where(bad, (hi - lo) / limit, 0.0)))
     return (
         f"mesh: an element {hi[k] - lo[k]:.3g} m long starts {lo[k]:.3g} m from the clamp, "
-        f"longer than {clamp_layer(section):.3g} m (the section's smallest extent) and than "
-        "twice its distance from the clamp: the stability count is unreliable on such a mesh "
-        "(the discrete stresses of the clamp's boundary layer twist the section there; a rod "
-        "in pure tension, which cannot buckle, was reported unstable at small loads); grade "
-        "the layers at the clamp as coilrod.fem.length_layers(..., clamp=...) does"
+        f"longer than {UNGRADED_FACTOR * clamp_layer(section):.3g} m (twice the section's "
+        "smallest extent) and than four times its distance from the clamp: the stability "
+        "count is unreliable on such a mesh (the discrete stresses of the clamp's boundary "
+        "layer twist the section there; a rod in pure tension, which cannot buckle, was "
+        "reported unstable at small loads); grade the layers at the clamp as "
+        "coilrod.fem.length_layers(..., clamp=...) does"
     )
 
 
@@ -266,9 +271,7 @@ def element_count(section, dim: int, elements: tuple[int, ...], length=None) -> 
     return n * math.prod(rest)
 
 
-def check_memory(
-    section, dim: int, order: int, elements: tuple[int, ...], length=None
-) -> None:
+def check_memory(section, dim: int, order: int, elements: tuple[int, ...], length=None) -> None:
     """Raise ValueError (naming ``elements``) if the mesh of ``elements`` would need more
     memory than the machine has (:data:`ELEMENT_BYTES` per element), instead of building it
     until the operating system stops the process (``length``: see :func:`element_count`)."""

@@ -225,8 +225,9 @@ def solve_fem(
         in 3D (of linear geometry for ``order=1``), spanning x in [0, L] with facets on x = 0
         and x = L, within the section's bounds about the x axis and filling its area
         (:func:`~coilrod.fem.mesh.check_mesh`; else ValueError saying what is off).  A 3D
-        mesh not graded at the clamp as above gets a StabilityWarning (its stability count
-        is unreliable; :func:`~coilrod.fem.mesh.ungraded_clamp`).
+        mesh with layers near the clamp more than twice as long as that grading allows gets a
+        StabilityWarning (its stability count is unreliable;
+        :func:`~coilrod.fem.mesh.ungraded_clamp`).
     rtol, utol : float
         Newton tolerances: residual relative to the force scale, increment relative to L.
     max_iterations, max_cuts : int
