@@ -176,19 +176,18 @@ def test_inverted_state_is_reported_not_nan(rod):
     assert ev.min_jacobian <= 0
 
 
-@pytest.mark.parametrize(("dim", "width"), [(2, 2e-3), (3, 3e-3)])
-def test_antiparallel_field_loses_stability_at_euler_load(dim, width):
+def test_antiparallel_field_loses_stability_at_euler_load():
     # M along +x, B along -x: the straight state is an equilibrium for every field, stable below
-    # the clamped-free Euler load lambda = pi^2/4 of rod theory and unstable above it.  (In 3D a
-    # wider-than-thick section keeps the out-of-plane mode, at (w/t)^2 pi^2/4, out of the range.)
+    # the clamped-free Euler load lambda = pi^2/4 of rod theory and unstable above it (3D:
+    # test_antiparallel_critical_load_converges_to_euler_on_coarse_meshes below)
     import coils
     from coilrod import Rectangle, Rod, StabilityWarning, presets, solve_fem
 
-    rod = Rod(0.04, 1e6, Rectangle(width, 2e-3), presets.M1())
+    rod = Rod(0.04, 1e6, Rectangle(2e-3, 2e-3), presets.M1())
     field = coils.UniformField((-rod.field_for_lambda(1.0), 0.0, 0.0))
     lams = np.array([1.0, 2.0, 2.3, 2.7, 3.5])
     with pytest.warns(StabilityWarning, match="lost stability between scales 2.3 and 2.7"):
-        res = solve_fem(rod, field, lams, dim=dim)
+        res = solve_fem(rod, field, lams, dim=2)
     assert np.pi**2 / 4 == pytest.approx(2.467, abs=1e-3)
     np.testing.assert_array_equal(res.stable, [True, True, True, False, False])
     # stayed straight: away from the critical load to round-off, and at the first state past
@@ -234,7 +233,7 @@ def test_pure_tension_is_stable_on_coarse_meshes(elements):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no StabilityWarning
         res = coilrod.solve_fem(
-            THIN, coils.UniformField((0.5, 0.0, 0.0)), [0.5, 1.0], dim=3, elements=elements
+            THIN, coils.UniformField((0.5, 0.0, 0.0)), [1.0], dim=3, elements=elements
         )
     assert res.stable.all()
     assert not res.instabilities
@@ -259,7 +258,11 @@ def test_antiparallel_critical_load_converges_to_euler_on_coarse_meshes():
             res = coilrod.solve_fem(rod, field, [0.9, 1.1], dim=3, elements=elements, max_cuts=8)
         np.testing.assert_array_equal(res.stable, [True, False])
         (event,) = res.instabilities
+        assert event["kind"] == "bifurcation"
+        assert not event["stable"]
         gaps.append(event["scale"] - 1.0)
+        # straight below the critical load, to round-off
+        np.testing.assert_allclose(res.tip[0, 1:], 0.0, atol=1e-8 * L)
     assert 0.0 < gaps[1] < gaps[0] / 2, gaps
     assert gaps[0] < 0.06, gaps
     assert gaps[1] < 0.025, gaps

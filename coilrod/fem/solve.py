@@ -200,9 +200,10 @@ def solve_fem(
         end at the magnetization's breakpoints (piecewise uniform; ``elements[0]`` layers in
         all, at least one per piece; :func:`~coilrod.fem.length_layers`), so no element
         straddles a jump of |M| or of its angle.  In 3D the layers are graded at the clamp,
-        halved there until none is longer than the section's smallest extent (a side, the
-        diameter) or than twice its distance from the clamp: about ``log2(L / (elements[0]
-        side))`` layers more (none for the default (20, 1, 1) of a section of L/20).  On
+        halved there until each is no longer than the larger of the section's smallest extent
+        (a side, the diameter) and twice its distance from the clamp: about
+        ``log2(L / (elements[0] side))`` layers more (none for the default (20, 1, 1) of a
+        section of L/20).  On
         layers long against the section at the clamp the stability count is a property of the
         mesh: a rod in pure tension (it cannot buckle) was reported unstable at small loads.
     poisson_ratio : float
