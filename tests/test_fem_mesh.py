@@ -21,7 +21,7 @@ import coilrod
 import coils
 from coilrod import presets
 from coilrod.fem import DEFAULT_ELEMENTS, default_elements, length_layers
-from coilrod.fem.mesh import rod_mesh
+from coilrod.fem.mesh import clamp_layer, clamp_layers, rod_mesh
 from coilrod.rod.mesh import MERGE_BREAKS
 
 L = 0.04
@@ -57,7 +57,11 @@ def test_every_breakpoint_is_a_facet_plane(dim, section, elements):
     breaks = np.array(rod.magnetization.breakpoints)
     mesh = rod_mesh(rod, dim, elements)
     xs = _layers(mesh)
-    assert xs.size == elements[0] + 1  # elements[0] layers in all
+    # elements[0] layers in all, and in 3D the first (3.1 mm) halved once at the clamp (to
+    # no longer than the section's smallest extent, 2 mm)
+    graded = 0 if dim == 2 else clamp_layers(lengths[0], clamp_layer(section))
+    assert graded == (dim - 2)
+    assert xs.size == elements[0] + 1 + graded
     assert xs[0] == 0.0
     assert xs[-1] == L
     for b in breaks:
@@ -67,7 +71,9 @@ def test_every_breakpoint_is_a_facet_plane(dim, section, elements):
     lo, hi = xe.min(axis=0), xe.max(axis=0)
     inside = (lo[:, None] < breaks - 2 * ULP) & (hi[:, None] > breaks + 2 * ULP)
     assert not inside.any()
-    # at least one layer per piece, uniform within each piece
+    # at least one layer per piece, uniform within each piece (the clamp's graded layers
+    # merged back)
+    xs = np.delete(xs, np.arange(1, 1 + graded))
     edges = np.concatenate([[0.0], breaks, [L]])
     for a, b in zip(edges[:-1], edges[1:], strict=True):
         piece = xs[(xs >= a - 2 * ULP) & (xs <= b + 2 * ULP)]
@@ -189,3 +195,32 @@ def test_default_elements_are_the_solvers_and_the_scene_checks():
     assert res.mesh.t.shape[1] == 20 * 1 * 1
     res = coilrod.solve_fem(box, field, [0.0], dim=2)
     assert res.mesh.t.shape[1] == 20 * 1
+
+
+def test_3d_layers_are_graded_at_the_clamp_and_a_given_ungraded_mesh_warns():
+    """Every 3D mesh rod_mesh makes has no layer longer than the section's smallest extent at
+    the clamp, nor than twice its distance from the clamp (also after a short first piece);
+    2D and the rod-of-L/20 defaults are unchanged; a given uniform mesh long against the
+    section at the clamp gets the StabilityWarning (its stability count is a mesh property:
+    tests/test_fem_stability.py::test_pure_tension_is_stable_on_coarse_meshes)."""
+    from coilrod.fem.mesh import box_mesh, ungraded_clamp
+
+    thin = coilrod.Rod(L, 1e6, coilrod.Rectangle(4e-4, 8e-4), presets.M1())
+    segmented = _segmented([3e-4, 0.01, L - 0.0103], coilrod.Circle(4e-4))
+    for rod, elements in ((thin, (1, 1, 1)), (thin, (8, 1, 2)), (segmented, (4, 2, 1))):
+        mesh = rod_mesh(rod, 3, elements)
+        xs = _layers(mesh)
+        h, x0 = np.diff(xs), xs[:-1]
+        assert np.all(h <= np.maximum(4e-4, 2 * x0) * (1 + 1e-9))
+        assert ungraded_clamp(mesh, rod.section) == ""
+        assert xs.size - 1 <= elements[0] + np.log2(L / elements[0] / 4e-4) + 3
+    np.testing.assert_array_equal(_layers(rod_mesh(thin, 2, (8, 1))), np.linspace(0, L, 9))
+    np.testing.assert_array_equal(
+        _layers(rod_mesh(_segmented([L]), 3, DEFAULT_ELEMENTS[3])), np.linspace(0, L, 21)
+    )
+    field = coils.UniformField((0.01, 0.0, 0.0))
+    with pytest.warns(coilrod.StabilityWarning, match=r"element 0.005 m long starts 0 m from"):
+        coilrod.solve_fem(thin, field, [0.0], dim=3, mesh=box_mesh(L, 8e-4, 4e-4, 8, 1, 1))
+    graded = box_mesh(L, 8e-4, 4e-4, 8, 1, 1, clamp=4e-4)
+    assert ungraded_clamp(graded, thin.section) == ""
+    assert "unreliable" in ungraded_clamp(box_mesh(L, 8e-4, 4e-4, 8, 1, 1), thin.section)

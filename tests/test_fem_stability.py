@@ -7,6 +7,8 @@ test_fem_rod where a reference exists) or raises ``ConvergenceError`` with ``rea
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from test_fem_rod import elastica_tips
@@ -174,19 +176,18 @@ def test_inverted_state_is_reported_not_nan(rod):
     assert ev.min_jacobian <= 0
 
 
-@pytest.mark.parametrize(("dim", "width"), [(2, 2e-3), (3, 3e-3)])
-def test_antiparallel_field_loses_stability_at_euler_load(dim, width):
+def test_antiparallel_field_loses_stability_at_euler_load():
     # M along +x, B along -x: the straight state is an equilibrium for every field, stable below
-    # the clamped-free Euler load lambda = pi^2/4 of rod theory and unstable above it.  (In 3D a
-    # wider-than-thick section keeps the out-of-plane mode, at (w/t)^2 pi^2/4, out of the range.)
+    # the clamped-free Euler load lambda = pi^2/4 of rod theory and unstable above it (3D:
+    # test_antiparallel_critical_load_converges_to_euler_on_coarse_meshes below)
     import coils
     from coilrod import Rectangle, Rod, StabilityWarning, presets, solve_fem
 
-    rod = Rod(0.04, 1e6, Rectangle(width, 2e-3), presets.M1())
+    rod = Rod(0.04, 1e6, Rectangle(2e-3, 2e-3), presets.M1())
     field = coils.UniformField((-rod.field_for_lambda(1.0), 0.0, 0.0))
     lams = np.array([1.0, 2.0, 2.3, 2.7, 3.5])
     with pytest.warns(StabilityWarning, match="lost stability between scales 2.3 and 2.7"):
-        res = solve_fem(rod, field, lams, dim=dim)
+        res = solve_fem(rod, field, lams, dim=2)
     assert np.pi**2 / 4 == pytest.approx(2.467, abs=1e-3)
     np.testing.assert_array_equal(res.stable, [True, True, True, False, False])
     # stayed straight: away from the critical load to round-off, and at the first state past
@@ -212,3 +213,56 @@ def test_bent_path_stays_stable():
     field = coils.UniformField((0.0, rod.field_for_lambda(1.0), 0.0))
     res = solve_fem(rod, field, [1.0, 5.0, 10.0], dim=2)
     assert res.stable.all()
+
+
+# a 0.4 mm square section 40 mm long: uniform layers of L/8 are 12.5 sides long
+THIN = coilrod.Rod(L, 1e6, coilrod.Rectangle(4e-4, 4e-4), coilrod.Magnetization(128e3, 0.0))
+
+
+@pytest.mark.parametrize("elements", [(1, 1, 1), (8, 1, 1)])
+def test_pure_tension_is_stable_on_coarse_meshes(elements):
+    """M and B along the rod: a dead tension A M B, which cannot buckle.  On uniform layers
+    long against the section at the clamp the discrete stresses there twisted the section:
+    reported unstable from scale 0.39 on (8, 1, 1) (0.11 on (4, 1, 1), 1.27 on (16, 1, 1));
+    the graded default layers keep it stable, stretched as the incompressible neo-Hookean bar
+    in uniaxial tension, G (lam - 1 / lam^2) = M B s (closed form)."""
+    from scipy.optimize import brentq
+
+    from coilrod.fem.solve import DEFAULT_POISSON_RATIO
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no StabilityWarning
+        res = coilrod.solve_fem(
+            THIN, coils.UniformField((0.5, 0.0, 0.0)), [1.0], dim=3, elements=elements
+        )
+    assert res.stable.all()
+    assert not res.instabilities
+    G = moduli(1e6, DEFAULT_POISSON_RATIO)[0]
+    lam = [brentq(lambda x, s=s: G * (x - x**-2) - 128e3 * 0.5 * s, 1, 2) for s in res.scales]
+    np.testing.assert_allclose(res.tip[:, 0] / L, lam, rtol=1e-4)
+    np.testing.assert_allclose(res.tip[:, 1:], 0.0, atol=1e-9 * L)
+
+
+def test_antiparallel_critical_load_converges_to_euler_on_coarse_meshes():
+    """B antiparallel to M: a dead compression A M B, at scale 1 Euler's clamped-free load
+    pi^2 E I / (4 L^2) about the weak axis (closed form).  The located critical scale on
+    graded meshes of 1 and 4 layers (7 and 8 with the clamp's) approaches it from above (the
+    continuum is stiffer by a clamp layer of O(t / L): 1.006 on (16, 1, 1))."""
+    w, t, M = 2e-3, 1e-3, 128e3
+    rod = coilrod.Rod(L, 1e6, coilrod.Rectangle(w, t), coilrod.Magnetization(M, 0.0))
+    b = np.pi**2 * 1e6 * (w * t**3 / 12) / (4 * L**2 * w * t * M)
+    field = coils.UniformField((-b, 0.0, 0.0))
+    gaps = []
+    for elements in ((1, 1, 1), (4, 1, 1)):
+        with pytest.warns(coilrod.StabilityWarning, match="lost stability between scales 0.9"):
+            res = coilrod.solve_fem(rod, field, [0.9, 1.1], dim=3, elements=elements, max_cuts=8)
+        np.testing.assert_array_equal(res.stable, [True, False])
+        (event,) = res.instabilities
+        assert event["kind"] == "bifurcation"
+        assert not event["stable"]
+        gaps.append(event["scale"] - 1.0)
+        # straight below the critical load, to round-off
+        np.testing.assert_allclose(res.tip[0, 1:], 0.0, atol=1e-8 * L)
+    assert 0.0 < gaps[1] < gaps[0] / 2, gaps
+    assert gaps[0] < 0.06, gaps
+    assert gaps[1] < 0.025, gaps

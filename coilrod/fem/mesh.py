@@ -29,6 +29,8 @@ __all__ = [
     "check_mesh",
     "check_memory",
     "linear_circle_problem",
+    "clamp_layer",
+    "ungraded_clamp",
     "equivalent_height",
 ]
 
@@ -49,6 +51,19 @@ MIN_CIRCLE_AREA_RATIO = 8 * math.sin(math.pi / 4) / (2 * math.pi) * (1 - 1e-9)
 #: thickness, width) for a 3D Rectangle (key 3) and (length, core, ring) for a 3D Circle (key
 #: ``"3circle"``).  Use :func:`default_elements` to pick the entry for a rod.
 DEFAULT_ELEMENTS = MappingProxyType({2: (20, 1), 3: (20, 1, 1), "3circle": (20, 2, 1)})
+
+#: The 3D meshes of :func:`rod_mesh` grade the layers at the clamp (halving the first layer
+#: until it is no longer than this many times the section's smallest extent; see
+#: :func:`length_layers`).  A layer long against the section at the clamp makes the stability
+#: count a property of the mesh: the discrete stresses of the clamp's boundary layer twist the
+#: section there, resisted only by the element's torsional stiffness ~ G J / h, and a rod in
+#: pure tension (it cannot buckle) lost stability at 0.39 of a field of 0.5 T on (8, 1, 1)
+#: elements of a 0.4 mm square section 40 mm long (h = 12.5 times the side); uniform
+#: (16, 1, 1) and (32, 1, 1) at 1.27 and 3.38.  Graded from one side, none up to 8.
+CLAMP_LAYER = 1.0
+#: A given 3D mesh whose layers near the clamp exceed this many times the grading's limit gets
+#: a StabilityWarning from ``solve_fem`` (:func:`ungraded_clamp`).
+UNGRADED_FACTOR = 2.0
 
 #: Piece lengths times the element count are rounded to this many decimals before the count
 #: is shared out, so that breakpoints a few ulp off a round number give the round number's
@@ -102,7 +117,9 @@ def _layer_counts(n: int, fractions: np.ndarray) -> np.ndarray:
     return counts
 
 
-def length_layers(length: float, n_length: int, breakpoints=()) -> np.ndarray:
+def length_layers(
+    length: float, n_length: int, breakpoints=(), clamp: float | None = None
+) -> np.ndarray:
     """x-coordinates of the element layer boundaries: piecewise uniform, one at each breakpoint.
 
     The breakpoints are merged and trimmed exactly as for the rod model
@@ -114,6 +131,12 @@ def length_layers(length: float, n_length: int, breakpoints=()) -> np.ndarray:
     own floating-point value), and a breakpoint a few ulp off a round number gives that
     number's layers: the shares are rounded to 1e-9 of an element before they are compared.
 
+    With ``clamp`` the layers near the clamp are graded: a layer from x to x + h longer than
+    ``max(clamp, 2 x)`` is halved towards x until its first part is not (h/2^m, h/2^m,
+    h/2^(m-1), ..., h/2 for the first layer), which adds about ``log2(h / clamp)`` layers; the
+    3D meshes of :func:`rod_mesh` take ``clamp`` = the section's smallest extent
+    (:func:`clamp_layer`, :data:`CLAMP_LAYER`).
+
     Parameters
     ----------
     length : float
@@ -122,6 +145,8 @@ def length_layers(length: float, n_length: int, breakpoints=()) -> np.ndarray:
         Elements along the length (more if there are more pieces; see above).
     breakpoints : array-like, shape (k,)
         Arc lengths (m) of the magnetization's jumps (``Magnetization.breakpoints``).
+    clamp : float, optional
+        Longest layer at the clamp, m (None: no grading).
 
     Returns
     -------
@@ -134,6 +159,8 @@ def length_layers(length: float, n_length: int, breakpoints=()) -> np.ndarray:
     [0.0, 0.01, 0.02, 0.03, 0.04]
     >>> length_layers(0.04, 4, [0.015]).tolist()  # 1.5 + 2.5 elements: the tie goes to the clamp
     [0.0, 0.0075, 0.015, 0.0275, 0.04]
+    >>> (length_layers(0.04, 4, clamp=0.003) * 1e3).round(6).tolist()  # graded at the clamp
+    [0.0, 2.5, 5.0, 10.0, 20.0, 30.0, 40.0]
     """
     L = float(length)
     br = np.sort(np.asarray(breakpoints, dtype=float).ravel())
@@ -146,7 +173,57 @@ def length_layers(length: float, n_length: int, breakpoints=()) -> np.ndarray:
     pieces = [
         np.linspace(a, b, c + 1)[:-1] for a, b, c in zip(edges[:-1], edges[1:], counts, strict=True)
     ]
-    return np.concatenate([*pieces, [L]])
+    xs = np.concatenate([*pieces, [L]])
+    if clamp is None:
+        return xs
+    out = [xs[:1]]
+    for a, b in zip(xs[:-1], xs[1:], strict=True):
+        m = clamp_layers(b - a, max(clamp, 2.0 * a))
+        if m:  # halve the layer m times towards a: a + h/2^m, ..., a + h/2
+            out.append(a + (b - a) * 0.5 ** np.arange(m, 0, -1))
+        out.append([b])
+    return np.concatenate(out)
+
+
+def clamp_layer(section) -> float:
+    """Longest layer (m) a 3D mesh of :func:`rod_mesh` has at the clamp: :data:`CLAMP_LAYER`
+    times the section's smallest extent (a Rectangle's smaller side, a Circle's diameter)."""
+    if isinstance(section, Rectangle):
+        return CLAMP_LAYER * min(section.thickness, section.width)
+    return CLAMP_LAYER * section.diameter
+
+
+def clamp_layers(length: float, limit: float | None) -> int:
+    """Halvings of a layer ``length`` (m) long until it is no longer than ``limit`` (m; 0 for
+    None): the layers :func:`length_layers` adds to it."""
+    if limit is None or not length > limit * (1 + 1e-9):
+        return 0
+    return math.ceil(math.log2(length / limit) - 1e-9)
+
+
+def ungraded_clamp(mesh, section) -> str:
+    """A 3D ``mesh`` whose layers near the clamp are long against ``section``: the message
+    (empty if none).  An element from x to x + h along the rod must have ``h <= 2 max(c, 2 x)``
+    with ``c`` the :func:`clamp_layer` of the section (twice the limit of the meshes of
+    :func:`length_layers` with ``clamp = c``: graded from 2 c, a rod in pure tension was stable
+    to a stretch of about 2); else the stability count at the clamp is a property of the mesh
+    (see :data:`CLAMP_LAYER`)."""
+    xe = mesh.p[0, mesh.t]
+    lo, hi = xe.min(axis=0), xe.max(axis=0)
+    limit = UNGRADED_FACTOR * np.maximum(clamp_layer(section), 2.0 * lo)
+    bad = (hi - lo) > limit * (1 + 1e-6)
+    if not bad.any():
+        return ""
+    k = int(np.argmax(np.where(bad, (hi - lo) / limit, 0.0)))
+    return (
+        f"mesh: an element {hi[k] - lo[k]:.3g} m long starts {lo[k]:.3g} m from the clamp, "
+        f"longer than {UNGRADED_FACTOR * clamp_layer(section):.3g} m (twice the section's "
+        "smallest extent) and than four times its distance from the clamp: the stability "
+        "count is unreliable on such a mesh (the discrete stresses of the clamp's boundary "
+        "layer twist the section there; a rod in pure tension, which cannot buckle, was "
+        "reported unstable at small loads); grade the layers at the clamp as "
+        "coilrod.fem.length_layers(..., clamp=...) does"
+    )
 
 
 def check_elements(elements, dim: int) -> tuple[int, ...]:
@@ -180,21 +257,25 @@ def physical_memory() -> float | None:
         return None
 
 
-def element_count(section, dim: int, elements: tuple[int, ...]) -> int:
+def element_count(section, dim: int, elements: tuple[int, ...], length=None) -> int:
     """Elements of the mesh :func:`rod_mesh` makes from ``elements`` (at least; more layers
     along the length where the magnetization has more pieces): in 2D and for a 3D Rectangle
-    their product, for a 3D Circle ``length (core^2 + 4 core ring)``."""
+    their product, for a 3D Circle ``length (core^2 + 4 core ring)``; in 3D with the rod's
+    ``length`` (m) given, with the layers graded at the clamp (:func:`length_layers`)."""
+    n, *rest = elements
+    if dim == 3 and length is not None:
+        n = length_layers(length, n, (), clamp_layer(section)).size - 1
     if dim == 3 and isinstance(section, Circle):
-        n, core, ring = elements
+        core, ring = rest
         return n * (core * core + 4 * core * ring)
-    return math.prod(elements)
+    return n * math.prod(rest)
 
 
-def check_memory(section, dim: int, order: int, elements: tuple[int, ...]) -> None:
+def check_memory(section, dim: int, order: int, elements: tuple[int, ...], length=None) -> None:
     """Raise ValueError (naming ``elements``) if the mesh of ``elements`` would need more
     memory than the machine has (:data:`ELEMENT_BYTES` per element), instead of building it
-    until the operating system stops the process."""
-    count = element_count(section, dim, elements)
+    until the operating system stops the process (``length``: see :func:`element_count`)."""
+    count = element_count(section, dim, elements, length)
     need = count * ELEMENT_BYTES[dim, order]
     have = physical_memory()
     if have is not None and need > have:
@@ -248,6 +329,7 @@ def box_mesh(
     n_thickness: int,
     n_width: int,
     breakpoints=(),
+    clamp: float | None = None,
 ):
     """Hexahedral mesh of ``[0, L] x [-t/2, t/2] x [-w/2, w/2]`` (thickness along y).
 
@@ -259,6 +341,8 @@ def box_mesh(
         Elements along x (about, see :func:`length_layers`), y and z.
     breakpoints : array-like, shape (k,)
         Arc lengths (m) where element layers must end (magnetization jumps).
+    clamp : float, optional
+        Longest layer at the clamp, m: the layers are graded there (:func:`length_layers`).
 
     Returns
     -------
@@ -267,7 +351,7 @@ def box_mesh(
     from skfem import MeshHex1
 
     return MeshHex1.init_tensor(
-        length_layers(length, n_length, breakpoints),
+        length_layers(length, n_length, breakpoints, clamp),
         np.linspace(-thickness / 2, thickness / 2, n_thickness + 1),
         np.linspace(-width / 2, width / 2, n_width + 1),
     )
@@ -327,12 +411,14 @@ def circle_mesh(
     n_ring: int = 1,
     breakpoints=(),
     quadratic: bool = True,
+    clamp: float | None = None,
 ):
     """Mapped hexahedral mesh of a circular cylinder along x (O-grid section).
 
     The section is an O-grid (see ``_disc_quads``): ``n_core**2 + 4 n_core n_ring`` elements
     per section, extruded in about ``n_length`` layers that end at every breakpoint (arc
-    lengths, m; see :func:`length_layers`).  With ``quadratic`` (for quadratic elements) the
+    lengths, m; see :func:`length_layers`; graded at the clamp to layers no longer than
+    ``clamp``, m, if given).  With ``quadratic`` (for quadratic elements) the
     mesh is a 27-node ``MeshHex2`` whose lateral-surface nodes lie on the exact cylinder
     (isoparametric quadratic boundary): the circumference has ``4 n_core`` parabolic arcs and
     the section area is 1.2 % short with ``n_core = 1`` (90-degree arcs), 0.08 % with 2 and
@@ -350,7 +436,7 @@ def circle_mesh(
     R = diameter / 2
     verts, quads = _disc_quads(R, n_core, n_ring)
     nv = verts.shape[1]
-    xs = length_layers(length, n_length, breakpoints)
+    xs = length_layers(length, n_length, breakpoints, clamp)
     n_length = xs.size - 1
     p = np.concatenate([np.vstack([np.full(nv, x), verts]) for x in xs], axis=1)
     lo = quads[:, None, :] + nv * np.arange(n_length)[None, :, None]  # (4, nl, nq)
@@ -480,20 +566,26 @@ def rod_mesh(rod, dim: int, elements: tuple[int, ...], order: int = 2):
     for a 3D Rectangle, and (length, core, ring) for a 3D Circle: ``core`` elements along each
     side of the O-grid's central square and ``ring`` radial layers around it.  The layers
     along the length end at the magnetization's breakpoints (:func:`length_layers`): there
-    are ``elements[0]`` of them, or one per piece between breakpoints if that is more.  A 3D
-    Circle has quadratic geometry (``MeshHex2``) for ``order`` 2 and the linear mesh of the
-    same vertices (``MeshHex1``, a polygonal section) for ``order`` 1 (:func:`circle_mesh`).
+    are ``elements[0]`` of them, or one per piece between breakpoints if that is more; in 3D
+    more at the clamp, where they are graded to no longer than the section's smallest extent
+    (:func:`clamp_layer`; a layer long against the section there makes the stability count a
+    property of the mesh, see :data:`CLAMP_LAYER`).  A 3D Circle has quadratic geometry
+    (``MeshHex2``) for ``order`` 2 and the linear mesh of the same vertices (``MeshHex1``, a
+    polygonal section) for ``order`` 1 (:func:`circle_mesh`).
     """
     L = rod.length
     sec = rod.section
     br = rod.magnetization.breakpoints
     if dim == 2:
         return rectangle_mesh(L, equivalent_height(sec), *elements, breakpoints=br)
+    clamp = clamp_layer(sec)
     if isinstance(sec, Rectangle):
-        return box_mesh(L, sec.thickness, sec.width, *elements, breakpoints=br)
+        return box_mesh(L, sec.thickness, sec.width, *elements, breakpoints=br, clamp=clamp)
     if isinstance(sec, Circle):
         problem = linear_circle_problem(sec, dim, order, elements)
         if problem:
             raise ValueError(problem)
-        return circle_mesh(L, sec.diameter, *elements, breakpoints=br, quadratic=order == 2)
+        return circle_mesh(
+            L, sec.diameter, *elements, breakpoints=br, quadratic=order == 2, clamp=clamp
+        )
     raise ValueError(f"unsupported section {sec!r}")

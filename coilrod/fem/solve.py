@@ -12,12 +12,19 @@ from coils.field import Field
 
 from ..errors import ConvergenceError
 from ..path.corrector import NewtonOptions
-from ..path.events import warn_events
+from ..path.events import StabilityWarning, warn_events
 from ..path.stepping import PathOptions, follow_load
 from ..rod.model import clamp_frame, planar_reasons
 from .assembly import Assembler
 from .material import moduli
-from .mesh import check_elements, check_memory, check_mesh, default_elements, rod_mesh
+from .mesh import (
+    check_elements,
+    check_memory,
+    check_mesh,
+    default_elements,
+    rod_mesh,
+    ungraded_clamp,
+)
 from .problem import FEMProblem
 from .result import FEMResult
 
@@ -104,12 +111,14 @@ def _assembler(rod, field, mesh, elements, dim, order, nu, plane, formulation) -
         if elements is None:
             elements = default_elements(rod, dim)
         elements = check_elements(elements, dim)
-        check_memory(rod.section, dim, order, elements)
+        check_memory(rod.section, dim, order, elements, rod.length)
         mesh = rod_mesh(rod, dim, elements, order)
     elif getattr(getattr(mesh, "p", None), "shape", (dim,))[0] != dim:
         raise ValueError(f"mesh must be {dim}-dimensional for dim={dim}; got {mesh.p.shape[0]}")
     else:
         check_mesh(mesh, rod, dim, order)
+        if dim == 3 and (problem := ungraded_clamp(mesh, rod.section)):
+            warnings.warn(problem, StabilityWarning, stacklevel=3)
     G, K = moduli(rod.youngs_modulus, nu)
     asm = Assembler(mesh, order, rod, field, G, K, plane=plane, mixed=formulation == "mixed")
     # the field must be finite on the undeformed body
@@ -190,7 +199,13 @@ def solve_fem(
         (20, 1, 1) in 3D and (20, 2, 1) for a 3D Circle.  The element layers along the length
         end at the magnetization's breakpoints (piecewise uniform; ``elements[0]`` layers in
         all, at least one per piece; :func:`~coilrod.fem.length_layers`), so no element
-        straddles a jump of |M| or of its angle.
+        straddles a jump of |M| or of its angle.  In 3D the layers are graded at the clamp,
+        halved there until each is no longer than the larger of the section's smallest extent
+        (a side, the diameter) and twice its distance from the clamp: about
+        ``log2(L / (elements[0] side))`` layers more (none for the default (20, 1, 1) of a
+        section of L/20).  On
+        layers long against the section at the clamp the stability count is a property of the
+        mesh: a rod in pure tension (it cannot buckle) was reported unstable at small loads.
     poisson_ratio : float
         nu in (-1, 0.5 - 1e-10]; sets G = E / (2(1 + nu)) and K = E / (3(1 - 2 nu)).  The
         continuum's own value, independent of ``rod.poisson_ratio`` (the rod's torsional
@@ -210,7 +225,10 @@ def solve_fem(
         A reference mesh to use instead of the generated one: MeshQuad1/2 in 2D, MeshHex1/2
         in 3D (of linear geometry for ``order=1``), spanning x in [0, L] with facets on x = 0
         and x = L, within the section's bounds about the x axis and filling its area
-        (:func:`~coilrod.fem.mesh.check_mesh`; else ValueError saying what is off).
+        (:func:`~coilrod.fem.mesh.check_mesh`; else ValueError saying what is off).  A 3D
+        mesh with layers near the clamp more than twice as long as that grading allows gets a
+        StabilityWarning (its stability count is unreliable;
+        :func:`~coilrod.fem.mesh.ungraded_clamp`).
     rtol, utol : float
         Newton tolerances: residual relative to the force scale, increment relative to L.
     max_iterations, max_cuts : int
