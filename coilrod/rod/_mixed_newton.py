@@ -54,6 +54,7 @@ from coils.ideal import LinearField, UniformField
 
 from . import _compiled as rc
 from . import _inertia as inertia
+from .discrete import _EPS, _FLOOR
 from .mesh import _remember
 
 __all__ = ["COMPILE_AFTER", "compiled_pays", "charge", "coaxial_groups", "newton_mixed"]
@@ -196,9 +197,7 @@ def _constants(p):
 
 
 def _floor() -> float:
-    """The error's round-off floor factor (``planar._FLOOR`` eps)."""
-    from .planar import _EPS, _FLOOR
-
+    """The error's round-off floor factor (``discrete._FLOOR`` eps)."""
     return _FLOOR * _EPS
 
 

@@ -8,6 +8,11 @@ import numpy as np
 
 from ..path.protocol import Linearization, PathProblem
 
+#: Multiple of eps times the size of a residual's terms below which it is round-off (the
+#: planar and spatial rods' error floor, and the compiled mixed corrector's).
+_FLOOR = 32.0
+_EPS = float(np.finfo(float).eps)
+
 __all__ = ["DiscreteRod"]
 
 

@@ -44,7 +44,7 @@ from scipy.linalg.lapack import dstebz as _stebz
 from ..path.protocol import Linearization
 from ._spectrum import closest_to_zero
 from ._spectrum import lowest_from_inverse as _lowest_from_inverse
-from .discrete import DiscreteRod
+from .discrete import _EPS, _FLOOR, DiscreteRod
 from .mesh import _remember
 
 __all__ = ["PlanarRod", "RodTangent"]
@@ -55,9 +55,6 @@ _KL, _KU = 5, 5  # bandwidths of the mixed Jacobian
 _DIAG = _KL + _KU  # row of the diagonal in LAPACK's factorisation band storage
 #: Free nodes up to which the second variation of the mixed layout is formed densely.
 _DENSE_STABILITY = 96
-#: Multiple of eps times the size of a residual's terms below which it is round-off.
-_FLOOR = 32.0
-_EPS = float(np.finfo(float).eps)
 
 
 def _rot(theta: np.ndarray, mu: np.ndarray) -> np.ndarray:

@@ -41,15 +41,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..path.protocol import Linearization
-from .discrete import DiscreteRod
+from .discrete import _EPS, _FLOOR, DiscreteRod
 from .mesh import _remember
 from .planar import RodTangent, _lowest_from_inverse, _take_tangent, closest_to_zero
 from .so3 import cross, expm, hat, inv_right_jacobian_coefficients, left_jacobian, logm
 
 __all__ = ["SpatialRod"]
 
-_FLOOR = 32.0
-_EPS = float(np.finfo(float).eps)
 #: Free rotational unknowns up to which the second variation is formed densely.
 _DENSE_STABILITY = 600
 
