@@ -42,7 +42,7 @@ import numpy as np
 from coils._files import input_path
 from coils._validate import as_bool, as_choice, as_count, as_points, nonnegative
 
-from .obstacle import Obstacle, _mm
+from .obstacle import Obstacle, _mm, _point_mm, as_friction
 from .vessel import Vessel
 
 __all__ = ["MeshVessel", "tessellate", "phantom_path"]
@@ -100,8 +100,10 @@ class MeshVessel(Obstacle):
     ------
     ValueError
         Fewer than 4 vertices or 4 faces, non-finite vertices, bad indices, degenerate
-        faces, non-manifold edges (shared by more than two faces), inconsistent winding, or
-        inward-facing normals without ``fix_normals``; each message names ``source``.
+        faces, non-manifold edges (shared by more than two faces) or vertices (two sheets
+        meeting at a point), inconsistent winding, inward-facing normals (of any closed
+        component) without ``fix_normals``, or a closed surface with outward normals nested
+        inside the lumen; each message names ``source``.
 
     Examples
     --------
@@ -129,7 +131,7 @@ class MeshVessel(Obstacle):
 
         label = "mesh" if source is None else f"mesh {source!r}"
         self.source = source
-        self.friction = nonnegative(friction, "friction")
+        self.friction = as_friction(friction)
         self.smooth = as_bool(smooth, "smooth")
         fix_normals = as_bool(fix_normals, "fix_normals")
         v = as_points(vertices, "vertices")
@@ -157,16 +159,41 @@ class MeshVessel(Obstacle):
                 f"{label}: the faces are not consistently oriented (neighbouring normals "
                 "point to opposite sides); repair it (e.g. trimesh.repair.fix_winding)"
             )
+        pinch = _pinched_vertex(mesh.faces, mesh.face_adjacency, mesh.face_adjacency_edges)
+        if pinch is not None:
+            raise ValueError(
+                f"{label} is not manifold: vertex {pinch} at {_point_mm(mesh.vertices[pinch])} "
+                "joins two sheets of faces that share no edge there (two surfaces touching "
+                "at a point); separate them"
+            )
         self.watertight = bool(mesh.is_watertight)
         if self.watertight:
-            if mesh.volume < 0:
+            # every closed component by itself: the winding number just outside each one's
+            # faces must be 0 (a component turned inside out gives -1 there, one nested in
+            # another lumen +1); the total volume alone misses an inverted component beside
+            # a larger right one
+            inverted, nested = _component_orientation(mesh)
+            if nested is not None:
+                raise ValueError(
+                    f"{label}: the closed surface of face {nested} lies inside the lumen "
+                    "with its normals pointing out of it (a lumen inside the lumen); a cavity "
+                    "in the lumen (a solid inside it) must have normals pointing into it"
+                )
+            if inverted.any():
                 if not fix_normals:
+                    part = (
+                        ""
+                        if inverted.all()
+                        else f" (faces {_ranges(np.flatnonzero(inverted))} of {len(inverted)})"
+                    )
                     raise ValueError(
-                        f"{label}: the face normals point into the lumen (the lumen is the "
-                        "enclosed volume, its normals must point out of it); reverse the "
+                        f"{label}: the face normals point into the lumen{part} (the lumen is "
+                        "the enclosed volume, its normals must point out of it); reverse the "
                         "faces' winding, or pass fix_normals=True to turn them around"
                     )
-                mesh.invert()
+                faces = np.array(mesh.faces)
+                faces[inverted] = faces[inverted][:, ::-1]
+                mesh = trimesh.Trimesh(mesh.vertices, faces, process=False, validate=False)
             self.volume = float(mesh.volume)
         else:
             warnings.warn(
@@ -467,6 +494,80 @@ PLATEAU = 0.7
 #: The smoothed gap is used alone where the weights sum to more than this (the exact
 #: polyhedral gap alone below half of it: near the lumen's medial axis).
 WEIGHT_FULL = 0.3
+
+
+def _pinched_vertex(faces, adjacency, adjacency_edges):
+    """A vertex whose faces form more than one fan (sheets meeting only at the vertex), or
+    None: the corners (face, vertex) joined across every shared edge, counted per vertex."""
+    faces = np.asarray(faces)
+    adjacency, edges = np.asarray(adjacency), np.asarray(adjacency_edges)
+    if len(faces) == 0:
+        return None
+
+    def corner(f, v):
+        return 3 * f + np.argmax(faces[f] == v[:, None], axis=1)
+
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    rows = np.concatenate([corner(adjacency[:, 0], edges[:, k]) for k in (0, 1)])
+    cols = np.concatenate([corner(adjacency[:, 1], edges[:, k]) for k in (0, 1)])
+    n = 3 * len(faces)
+    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    pairs = np.unique(np.column_stack([faces.ravel(), label]), axis=0)
+    fans = np.bincount(pairs[:, 0])
+    return int(np.argmax(fans)) if fans.max(initial=0) > 1 else None
+
+
+def _winding(tris: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Winding numbers of points ``p`` (k, 3) about the closed triangles ``tris`` (m, 3, 3):
+    the solid angles (Van Oosterom & Strackee 1983) summed over 4 pi; +1 inside a surface
+    whose normals point out of it, 0 outside."""
+    a, b, c = (tris[None, :, i] - p[:, None] for i in range(3))
+    la, lb, lc = (np.linalg.norm(x, axis=2) for x in (a, b, c))
+    num = np.einsum("kmi,kmi->km", a, np.cross(b, c))
+    den = (
+        la * lb * lc
+        + np.einsum("kmi,kmi->km", a, b) * lc
+        + np.einsum("kmi,kmi->km", a, c) * lb
+        + np.einsum("kmi,kmi->km", b, c) * la
+    )
+    return np.arctan2(num, den).sum(axis=1) / (2 * np.pi)
+
+
+def _component_orientation(mesh):
+    """Per face: whether its closed component is turned inside out (the winding number of
+    the whole mesh just outside one of its faces is -1), and a face of a component nested
+    in the lumen with outward normals (+1 there), or None."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    m = len(mesh.faces)
+    adj = np.asarray(mesh.face_adjacency)
+    graph = coo_matrix((np.ones(len(adj)), (adj[:, 0], adj[:, 1])), shape=(m, m))
+    count, label = connected_components(graph, directed=False)
+    area = np.asarray(mesh.area_faces)
+    # each component's largest face: a point a little outside its centroid
+    first = np.full(count, -1)
+    order = np.argsort(area)
+    first[label[order]] = order  # (the last write per component is its largest face)
+    tris = np.asarray(mesh.triangles)
+    normal = np.asarray(mesh.face_normals)[first]
+    step = 1e-3 * np.sqrt(area[first])
+    probe = tris[first].mean(axis=1) + step[:, None] * normal
+    chunk = max(1, 2_000_000 // m)  # (k, m) arrays of at most a few million entries
+    w = np.concatenate([_winding(tris, probe[i : i + chunk]) for i in range(0, count, chunk)])
+    w = np.rint(w).astype(int)
+    nested = np.flatnonzero(w > 0)
+    return w[label] < 0, (int(first[nested[0]]) if nested.size else None)
+
+
+def _ranges(idx: np.ndarray) -> str:
+    """``[0, 1, 2, 7]`` as ``"0-2, 7"`` (at most four ranges shown)."""
+    cuts = np.flatnonzero(np.diff(idx) != 1) + 1
+    parts = [f"{r[0]}-{r[-1]}" if len(r) > 1 else f"{r[0]}" for r in np.split(idx, cuts)]
+    return ", ".join(parts[:4]) + (", ..." if len(parts) > 4 else "")
 
 
 def _smoothstep(t):

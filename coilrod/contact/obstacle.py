@@ -40,6 +40,8 @@ __all__ = ["Obstacle", "GapEvaluation"]
 
 def as_friction(friction, name: str = "friction") -> float:
     """A Coulomb friction coefficient: a finite float >= 0 (ValueError naming ``name``)."""
+    if isinstance(friction, bool | np.bool_ | str | bytes):  # float(True) is 1.0, float("1")
+        raise ValueError(f"{name} must be a number >= 0; got {friction!r}")
     try:
         mu = float(friction)
     except (TypeError, ValueError):

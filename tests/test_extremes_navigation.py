@@ -1,0 +1,79 @@
+"""Breaking the navigation code (issue 20) before a user does: contact, friction, vessels,
+meshes, insertion and navigation scenes at awkward inputs.  Earlier rounds:
+tests/test_files_robust.py, tests/test_extremes.py, tests/test_extremes_fem_sweep.py."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from coilrod.contact import MeshVessel, Wall
+
+
+def _box(half=5e-3, at=(0.0, 0.0, 0.0)):
+    m = trimesh.creation.box((2 * half,) * 3)
+    m.apply_translation(at)
+    return m
+
+
+def _brute_box_gap(p, half, at=(0.0, 0.0, 0.0)):
+    """Signed distance into an axis-aligned cube (> 0 inside), by hand."""
+    q = np.abs(np.asarray(p) - at) - half
+    outside = np.linalg.norm(np.maximum(q, 0.0), axis=1)
+    return np.where(q.max(axis=1) > 0, -outside, -q.max(axis=1))
+
+
+def test_a_mesh_component_inside_out_beside_a_right_one_is_an_error():
+    # the total volume of a right cube and an inverted one is ~0 (not < 0): the old check
+    # took it, and the inverted cube's inside counted as wall-side (gap -5 mm at its centre,
+    # a lumen there by its winding).  Now: the error naming its faces, or fixed per component
+    # (then both cubes are lumens: gap = the brute-force box distance at each centre)
+    right, wrong = _box(), _box(at=(0.05, 0, 0))
+    wrong.invert()
+    both = trimesh.util.concatenate([right, wrong])
+    with pytest.raises(ValueError, match=r"point into the lumen \(faces 12-23 of 24\)"):
+        MeshVessel(both.vertices, both.faces)
+    fixed = MeshVessel(both.vertices, both.faces, fix_normals=True, smooth=False)
+    p = np.array([[0.05, 0.0, 0.0], [0.0, 0.002, 0.0], [0.053, 0.0, -0.001]])
+    ref = np.maximum(_brute_box_gap(p, 5e-3), _brute_box_gap(p, 5e-3, (0.05, 0, 0)))
+    np.testing.assert_allclose(fixed.gap(p), ref, atol=1e-15)
+    assert fixed.volume == pytest.approx(2 * 1e-6, rel=1e-12)
+
+
+def test_a_cavity_is_kept_and_a_nested_lumen_is_an_error():
+    # a solid cube (normals into it) inside a lumen cube: the gap is the brute-force distance
+    # to the nearer wall, negative in the solid; a lumen cube nested with outward normals is
+    # no lumen (winding number 2 inside it): an error
+    outer, inner = _box(20e-3), _box()
+    inner.invert()
+    cav = trimesh.util.concatenate([outer, inner])
+    mv = MeshVessel(cav.vertices, cav.faces, smooth=False)
+    p = np.array([[0.0, 0.0, 0.0], [0.0075, 0.0, 0.0], [0.0, 0.018, 0.001]])
+    ref = np.minimum(_brute_box_gap(p, 20e-3), -_brute_box_gap(p, 5e-3))
+    np.testing.assert_allclose(mv.gap(p), ref, atol=1e-15)
+    nested = trimesh.util.concatenate([outer, _box()])
+    with pytest.raises(ValueError, match="lumen inside the lumen"):
+        MeshVessel(nested.vertices, nested.faces)
+
+
+def test_two_cubes_touching_at_a_corner_are_not_manifold():
+    # the shared corner's faces form two fans: its pseudo-normal summed to zero and the
+    # smoothed gap's ball search raised scipy's "'x' must be finite"
+    pinch = trimesh.util.concatenate([_box(), _box(at=(0.01, 0.01, 0.01))])
+    with pytest.raises(ValueError, match=r"pinch.stl' is not manifold: vertex \d+ at \(5, 5, 5\)"):
+        MeshVessel(pinch.vertices, pinch.faces, source="pinch.stl")
+
+
+def test_friction_must_be_a_number_not_a_bool_or_a_string():
+    # Wall(friction=True) was mu = 1 and friction="0.3" was 0.3 (float() of them), while
+    # MeshVessel refused both; one rule for every obstacle now
+    v, f = _box().vertices, _box().faces
+    for bad in (True, np.True_, "0.3"):
+        with pytest.raises(ValueError, match="friction must be a number >= 0"):
+            Wall((0, 0, 0), "y", friction=bad)
+        with pytest.raises(ValueError, match="friction must be a number >= 0"):
+            MeshVessel(v, f, friction=bad)
+    with pytest.raises(ValueError, match="friction"):
+        MeshVessel(v, f, friction=np.inf)
+    assert Wall((0, 0, 0), "y", friction=np.float32(0.25)).friction == 0.25
