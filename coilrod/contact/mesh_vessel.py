@@ -40,7 +40,7 @@ from importlib import resources
 import numpy as np
 
 from coils._files import input_path
-from coils._validate import as_bool, as_choice, as_count, as_points, nonnegative
+from coils._validate import as_bool, as_choice, as_count, as_points
 
 from .obstacle import Obstacle, _mm, _point_mm, as_friction
 from .vessel import Vessel
