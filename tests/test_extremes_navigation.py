@@ -77,3 +77,49 @@ def test_friction_must_be_a_number_not_a_bool_or_a_string():
     with pytest.raises(ValueError, match="friction"):
         MeshVessel(v, f, friction=np.inf)
     assert Wall((0, 0, 0), "y", friction=np.float32(0.25)).friction == 0.25
+
+
+# -- scenes ---------------------------------------------------------------------------------------
+def _nav_scene(rotated: bool, vessel_along_y: bool):
+    import tomllib
+    from pathlib import Path
+
+    import coilrod.scene
+
+    path = Path(coilrod.scene.__file__).parent / "examples" / "navigation_bend.toml"
+    data = tomllib.loads(path.read_text())
+    data["insertion"].update(lengths=["6 mm", "20 mm"], steps=3, nodes=8, withdraw=False)
+    if rotated:  # the clamp turned 90 deg about z: the robot along +y, its field along -x
+        data["rod"] = {"clamp_rotation": {"axis": [0, 0, 1], "angle": "90 deg"}}
+        data["field"]["direction"] = "-x"
+    if vessel_along_y:  # the vessel turned by hand the same way
+        data["obstacles"]["vessel"][0].update(
+            direction=[0, 1, 0], start=["0 mm", "-1 mm", "0 mm"], plane_normal=[0, 0, 1]
+        )
+    return data, str(path)
+
+
+def test_a_rotated_clamp_is_checked_along_its_own_direction():
+    # the scene's start check took the straight robot along +x whatever rod.clamp_rotation
+    # said: a clamp turned to +y in a vessel along +x passed (the robot leaves the 3 mm lumen
+    # 3.2 mm from the clamp), and the same scene turned as a whole was refused.  The turned
+    # scene now runs and its answer is the unturned one's turned (tips, wall forces; push
+    # forces equal), to round-off
+    from coilrod.scene.navigation import run_navigation
+    from coilrod.scene.parse import SceneError, parse_scene
+    from coilrod.scene.runner import plan_scene
+
+    with pytest.raises(SceneError, match=r"vessel\[0\]: the straight robot leaves it 3.188 mm"):
+        parse_scene(*_nav_scene(rotated=True, vessel_along_y=False))
+    runs = []
+    for rotated in (False, True):
+        scene = parse_scene(*_nav_scene(rotated, vessel_along_y=rotated))
+        (run,) = run_navigation(scene, plan_scene(scene)).runs
+        assert not run.error
+        runs.append(run.result)
+    a, b = runs
+    Q = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # 90 deg about z
+    assert a.wall_force_magnitude[-1] > 1e-4  # the tip presses on the wall at the last step
+    np.testing.assert_allclose(b.tip, a.tip @ Q.T, atol=1e-12 * 0.04)
+    np.testing.assert_allclose(b.wall_force, a.wall_force @ Q.T, atol=1e-9 * 1e-3)
+    np.testing.assert_allclose(b.push_force, a.push_force, atol=1e-9 * 1e-3)
