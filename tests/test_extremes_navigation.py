@@ -123,3 +123,36 @@ def test_a_rotated_clamp_is_checked_along_its_own_direction():
     np.testing.assert_allclose(b.tip, a.tip @ Q.T, atol=1e-12 * 0.04)
     np.testing.assert_allclose(b.wall_force, a.wall_force @ Q.T, atol=1e-9 * 1e-3)
     np.testing.assert_allclose(b.push_force, a.push_force, atol=1e-9 * 1e-3)
+
+
+# -- insertion ------------------------------------------------------------------------------------
+def _bend_insertion():
+    import coils
+    from coilrod import Circle, Magnetization, Rod, Vessel
+
+    rod = Rod(0.04, 1e6, Circle(2e-3), Magnetization(640e3, 0.2))
+    bend = Vessel.bend(
+        bend_radius=0.02, angle=np.pi / 2, radius=0.003, straight_before=0.005,
+        straight_after=0.03, start=(-0.001, 0, 0),
+    )  # fmt: skip
+    return rod, bend, coils.UniformField(B=(0, 8e-3, 0))
+
+
+def test_a_first_length_that_leaves_the_vessel_straight_is_named():
+    # the first step starts from the straight free part: where it left the bend, insert
+    # raised solve_rod's "points[7] at (16.5, 0, 0) mm lies 0.585 mm outside the vessel"
+    # (which points?).  By hand: the bend's wall is the torus about (4, 20) mm of major
+    # radius 20 mm and lumen radius 3 mm, so the straight axis y = 0 from the clamp at
+    # x = -1 mm leaves it at 1 + 4 + sqrt(23^2 - 20^2) = 16.358 mm and the 1 mm surface
+    # reaches it at 5 + sqrt(22^2 - 20^2) = 14.165 mm
+    from coilrod import insert
+
+    rod, bend, field = _bend_insertion()
+    with pytest.raises(ValueError, match=r"lengths\[0\] = 16.4 mm: .* leaves the vessel"):
+        insert(rod, bend, [0.0164, 0.02], field, nodes=8)
+    with pytest.raises(ValueError, match=r"lengths\[0\] = 14.2 mm: .* surface .* shorter first"):
+        insert(rod, bend, [0.0142, 0.02], field, nodes=8)
+    with pytest.raises(ValueError, match=r"mm from the clamp .* or turn clamp_rotation"):
+        insert(rod, bend, [0.01], field, nodes=8, clamp_rotation=[[0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    ins = insert(rod, bend, [0.0141], field, nodes=8)  # just short of it: solved
+    assert ins.min_gap[0] >= -1e-9 * 0.0141
