@@ -156,3 +156,28 @@ def test_a_first_length_that_leaves_the_vessel_straight_is_named():
         insert(rod, bend, [0.01], field, nodes=8, clamp_rotation=[[0, -1, 0], [1, 0, 0], [0, 0, 1]])
     ins = insert(rod, bend, [0.0141], field, nodes=8)  # just short of it: solved
     assert ins.min_gap[0] >= -1e-9 * 0.0141
+
+
+# -- vessels --------------------------------------------------------------------------------------
+def test_a_sparse_smooth_centreline_with_a_hairpin_is_the_spline_through_its_points():
+    # four points round a 180 deg turn: the arc-length knot iteration does not contract and
+    # the spline is resampled; its cubic pieces were then taken per point interval from the
+    # resampled spline's first coefficients -- another curve (reaching (246, -102) mm), which
+    # the construction refused as "intersects itself at (3.302, -4.717, 0) mm".  Now: the gap
+    # is R at the points and, off them, R minus the brute-force distance to the chord-length
+    # spline through the points (scipy, densely sampled; ends="round": the end balls count)
+    from scipy.interpolate import CubicSpline
+    from scipy.spatial import cKDTree
+
+    from coilrod.contact import Vessel
+
+    P = np.array([[0, 0, 0], [0.02, 0, 0], [0.025, 0.005, 0], [0.02, 0.01, 0]])
+    R = 5e-4
+    v = Vessel(P, R, smooth=True, ends="round")
+    np.testing.assert_allclose(v.gap(P), R, atol=1e-15)
+    chords = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(P, axis=0), axis=1))])
+    curve = CubicSpline(chords, P)(np.linspace(0, chords[-1], 100_001))
+    x = np.random.default_rng(0).uniform([0.0, -4e-3, -1e-3], [0.028, 0.012, 1e-3], (300, 3))
+    dist = cKDTree(curve).query(x)[0]
+    x = x[(dist > 2e-4) & (dist < 3e-3)]  # (the samples are 0.4 um apart)
+    np.testing.assert_allclose(v.gap(x), R - cKDTree(curve).query(x)[0], atol=1e-10)
