@@ -181,3 +181,15 @@ def test_a_sparse_smooth_centreline_with_a_hairpin_is_the_spline_through_its_poi
     dist = cKDTree(curve).query(x)[0]
     x = x[(dist > 2e-4) & (dist < 3e-3)]  # (the samples are 0.4 um apart)
     np.testing.assert_allclose(v.gap(x), R - cKDTree(curve).query(x)[0], atol=1e-10)
+
+
+def test_friction_with_a_unit_in_a_scene_says_it_has_none():
+    # obstacles.friction = "0.1 mm" said only "expected a number" (every other length in a
+    # scene is a quoted quantity with a unit); now it says the coefficient has no unit
+    from coilrod.scene.parse import SceneError, parse_scene
+
+    for bad in ("0.1 mm", "0.1"):
+        data, path = _nav_scene(rotated=False, vessel_along_y=False)
+        data["obstacles"]["friction"] = bad
+        with pytest.raises(SceneError, match=r"obstacles.friction: .*Coulomb .*no unit"):
+            parse_scene(data, path)

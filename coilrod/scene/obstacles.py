@@ -222,7 +222,13 @@ def parse_obstacles(data, source: str = "<embedded>", length=None, thickness=Non
     p = _Problems()
     p.take(_unknown_keys, data, "obstacles", {"friction", *_KINDS})
     friction = 0.0
-    if "friction" in data:
+    if isinstance(data.get("friction"), str):  # "0.1 mm", "0.1": a coefficient has no unit
+        p.add(
+            "obstacles.friction: expected a plain number, the Coulomb coefficient mu >= 0 "
+            f"(no unit, no quotes: friction = 0.1); got {_show(data['friction'])}"
+        )
+        friction = None
+    elif "friction" in data:
         friction = p.take(_plain, data["friction"], "obstacles.friction", low=0.0)
     xs = [0.0] if length is None else np.linspace(0.0, float(length), 33)
     t = np.array([1.0, 0.0, 0.0]) if tangent is None else np.asarray(tangent, float)
