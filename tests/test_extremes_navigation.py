@@ -193,3 +193,24 @@ def test_friction_with_a_unit_in_a_scene_says_it_has_none():
         data["obstacles"]["friction"] = bad
         with pytest.raises(SceneError, match=r"obstacles.friction: .*Coulomb .*no unit"):
             parse_scene(data, path)
+
+
+def test_a_single_precision_mesh_far_from_the_origin_is_reported(tmp_path):
+    # a binary STL stores float32: a 10 mm cube 10 km from the origin is rounded by up to
+    # 2^-11 m = 0.49 mm in the file (by hand: 2^13 <= 1e4 < 2^14, float32 steps of
+    # 2^(13-23) m there, half a step), a twentieth of its
+    # edge, and its gaps were silently a tenth of a millimetre off; a million metres off its
+    # faces collapse (the "degenerate" error, now with the warning saying why).  The same
+    # cube saved as OBJ (text, double) keeps its coordinates and has no warning
+    import warnings
+
+    for offset, ext, warns in ((1e4, "stl", True), (0.0, "stl", False), (1e4, "obj", False)):
+        path = tmp_path / f"far{int(offset)}.{ext}"
+        _box(at=(offset, 0, 0)).export(path)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            MeshVessel.from_file(path, smooth=False)
+        hit = [w for w in caught if "single-precision" in str(w.message)]
+        assert bool(hit) == warns, (offset, ext, [str(w.message) for w in caught])
+        if warns:
+            assert "rounded by up to 0.00049" in str(hit[0].message)

@@ -315,6 +315,8 @@ class MeshVessel(Obstacle):
         vertices = np.asarray(loaded.vertices, dtype=float)
         if not np.all(np.isfinite(vertices)):
             raise ValueError(f"mesh file {path!r} has non-finite vertex coordinates")
+        if ext in ("stl", "ply"):  # (formats that store single precision)
+            _check_precision(vertices, np.asarray(loaded.faces), path)
         size = _UNITS[units] * float(np.max(np.ptp(vertices, axis=0)))
         if not MIN_SIZE <= size <= MAX_SIZE:
             from ..errors import UnitsWarning
@@ -494,6 +496,37 @@ PLATEAU = 0.7
 #: The smoothed gap is used alone where the weights sum to more than this (the exact
 #: polyhedral gap alone below half of it: near the lumen's medial axis).
 WEIGHT_FULL = 0.3
+
+
+#: Largest rounding of single-precision coordinates, as a fraction of the shortest edge,
+#: that a mesh file's vertices may have without a warning.
+PRECISION = 1e-3
+
+
+def _check_precision(vertices: np.ndarray, faces: np.ndarray, path: str) -> None:
+    """Warn if the file's coordinates are single precision (STL always, PLY often) and far
+    enough from the origin for their rounding to reach :data:`PRECISION` of the shortest
+    edge: the mesh is then distorted in the file (the gaps are exact for the distorted mesh;
+    at a million times its size from the origin its faces collapse, a "degenerate" error)."""
+    if not np.array_equal(vertices.astype(np.float32).astype(float), vertices):
+        return  # (not single precision)
+    far = float(np.max(np.abs(vertices)))
+    rounding = 0.5 * float(np.spacing(np.float32(far)))
+    tri = vertices[faces]
+    edges = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).ravel()
+    edges = edges[edges > 0]
+    if edges.size == 0:
+        return  # (every face collapsed: the mesh's own "degenerate" error follows)
+    short = float(edges.min())
+    if rounding > PRECISION * short:
+        warnings.warn(
+            f"mesh file {path!r} stores single-precision coordinates up to {far:.3g} from "
+            f"the origin: they are rounded by up to {rounding:.2g} (file units), "
+            f"{rounding / short:.2g} of its shortest edge ({short:.3g}); "
+            "the mesh is distorted in the file -- move it near the origin before saving, or "
+            "save it in double precision (OBJ, double PLY)",
+            stacklevel=3,
+        )
 
 
 def _pinched_vertex(faces, adjacency, adjacency_edges):
