@@ -214,3 +214,22 @@ def test_a_single_precision_mesh_far_from_the_origin_is_reported(tmp_path):
         assert bool(hit) == warns, (offset, ext, [str(w.message) for w in caught])
         if warns:
             assert "rounded by up to 0.00049" in str(hit[0].message)
+
+
+def test_insertion_plot_bad_steps_and_force_range():
+    # steps=[5] of a 2-step insertion raised IndexError from inside the drawing, a reversed
+    # or non-positive force_range drew an empty band on the log axis; one named error each,
+    # before any figure is made
+    from coilrod import insert
+
+    rod, bend, field = _bend_insertion()
+    ins = insert(rod, bend, [0.006, 0.008], field, nodes=8)
+    for kw, name in (
+        ({"steps": [5]}, r"steps .* in \[0, 2\)"),
+        ({"steps": [0.5]}, "steps must be step indices"),
+        ({"force_range": (0.4, 0.1)}, "force_range"),
+        ({"force_range": (0.0, 0.4)}, "force_range"),
+        ({"force_range": "x"}, "force_range"),
+    ):
+        with pytest.raises(ValueError, match=name):
+            ins.plot(**kw)

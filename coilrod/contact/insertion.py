@@ -128,6 +128,24 @@ class Insertion:
         import matplotlib.pyplot as plt
         from matplotlib.ticker import FuncFormatter
 
+        m = len(self)
+        if steps is None:
+            steps = np.unique(np.linspace(0, m - 1, min(8, m)).astype(int))
+        else:
+            raw = steps
+            steps = np.atleast_1d(np.asarray(steps))
+            if steps.ndim != 1 or not np.issubdtype(steps.dtype, np.integer):
+                raise ValueError(f"steps must be step indices (integers); got {raw!r}")
+            if np.any((steps < -m) | (steps >= m)):
+                raise ValueError(f"steps must be step indices in [0, {m}); got {raw!r}")
+            steps = steps % m
+        try:
+            lo, hi = (float(v) for v in force_range)
+        except (TypeError, ValueError):
+            lo = hi = np.nan
+        if not 0 < lo < hi < np.inf:
+            raise ValueError(f"force_range must be (low, high) N with 0 < low < high; got "
+                             f"{force_range!r}")  # fmt: skip
         if ax is None:  # constrained layout: a suptitle added later keeps its own row
             fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), layout="constrained")
         else:
@@ -135,8 +153,6 @@ class Insertion:
             fig = axes[0].figure
         if self.vessel is not None and hasattr(self.vessel, "plot"):
             self.vessel.plot(ax=axes[0], color="0.6")
-        m = len(self)
-        steps = np.unique(np.linspace(0, m - 1, min(8, m)).astype(int)) if steps is None else steps
         cmap = plt.get_cmap("viridis")
         for i, k in enumerate(steps):
             x = self._shapes[k]
