@@ -233,3 +233,28 @@ def test_insertion_plot_bad_steps_and_force_range():
     ):
         with pytest.raises(ValueError, match=name):
             ins.plot(**kw)
+
+
+def test_a_network_of_rough_vessels_and_a_changed_preset_keep_their_friction():
+    # the solver reads the obstacle's own coefficient: a VesselNetwork of vessels with
+    # mu = 0.3 had the class's 0 (frictionless, silently), and a preset's replace() rebuilt
+    # it from the preset's parameters without its friction.  Reference: the insertion into
+    # the rough bend itself (a network of one member is the member); mu = 0 differs
+    from coilrod import insert
+    from coilrod.contact import VesselNetwork
+
+    rod, bend, field = _bend_insertion()
+    rough = bend.with_friction(0.3)
+    lengths = [0.006, 0.03]  # (no contact at 6 mm: the first step is cheap)
+    ref = insert(rod, rough, lengths, field, nodes=8)
+    net = insert(rod, VesselNetwork([rough]), lengths, field, nodes=8)
+    np.testing.assert_allclose(net.push_force, ref.push_force, rtol=1e-12, atol=1e-15)
+    smooth = insert(rod, bend, lengths, field, nodes=8)
+    assert abs(smooth.push_force[-1] - ref.push_force[-1]) > 1e-2 * abs(ref.push_force[-1])
+    with pytest.raises(ValueError, match=r"friction coefficients differ \(0.3, 0\)"):
+        VesselNetwork([rough, bend])
+    assert VesselNetwork([rough, bend], friction=0.1).friction == 0.1
+    # replace() of presets (their parameters have no friction) and of a network
+    assert rough.replace(radius=0.0032).friction == 0.3
+    assert rough.replace(friction=0.1).friction == 0.1
+    assert VesselNetwork([rough]).replace(vessels=[rough, rough]).friction == 0.3

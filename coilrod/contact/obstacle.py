@@ -110,6 +110,20 @@ class Obstacle(Immutable, ABC):
             params = {**params, "friction": mu}
         return self._evolve(params, friction=mu)
 
+    def replace(self, **changes):
+        """A copy with some construction parameters changed (see
+        :meth:`coils._immutable.Immutable.replace`), keeping the wall's friction: a preset's
+        parameters do not hold it (``Vessel.bend(...).with_friction(0.2).replace(radius=...)``
+        was frictionless), and ``friction=mu`` is accepted there too."""
+        params = self.__dict__.get("_params") or {}
+        mu = self.friction
+        if "friction" not in params and "friction" in changes:
+            mu = as_friction(changes.pop("friction"))
+        new = super().replace(**changes)
+        if "friction" not in params and getattr(new, "friction", 0.0) != mu:
+            new = new.with_friction(mu)
+        return new
+
     # -- the gap and its derivatives ------------------------------------------------------------
     def evaluate(self, points, order: int = 2) -> GapEvaluation:
         """Gap of ``points`` and its derivatives up to ``order``, from one nearest-point search.
