@@ -547,10 +547,14 @@ def _pinched_vertex(faces, adjacency, adjacency_edges):
     cols = np.concatenate([corner(adjacency[:, 1], edges[:, k]) for k in (0, 1)])
     n = 3 * len(faces)
     graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
-    _, label = connected_components(graph, directed=False)
-    pairs = np.unique(np.column_stack([faces.ravel(), label]), axis=0)
-    fans = np.bincount(pairs[:, 0])
-    return int(np.argmax(fans)) if fans.max(initial=0) > 1 else None
+    count, label = connected_components(graph, directed=False)
+    # each fan (component of corners) belongs to one vertex: as many fans as vertices used
+    # unless a vertex has two
+    if count == np.count_nonzero(np.bincount(faces.ravel())):
+        return None
+    owner = np.empty(count, dtype=np.int64)
+    owner[label] = faces.ravel()
+    return int(np.argmax(np.bincount(owner)))
 
 
 def _winding(tris: np.ndarray, p: np.ndarray) -> np.ndarray:
