@@ -258,3 +258,31 @@ def test_a_network_of_rough_vessels_and_a_changed_preset_keep_their_friction():
     assert rough.replace(radius=0.0032).friction == 0.3
     assert rough.replace(friction=0.1).friction == 0.1
     assert VesselNetwork([rough]).replace(vessels=[rough, rough]).friction == 0.3
+
+
+def test_a_scene_whose_straight_surface_reaches_the_wall_is_refused_before_the_run(monkeypatch):
+    # the scene check took the centreline only: a first free length whose straight surface
+    # reaches the bend's wall passed, and `coilrod run` ended in solve_rod's traceback.  By
+    # hand: the scene's clamp is the origin, the bend's torus centre (4, 20) mm (5 mm straight
+    # from x = -1 mm), so the 1 mm surface of the axis y = 0 meets the 3 mm lumen's wall
+    # where (x - 4)^2 + 20^2 = 22^2: x = 4 + sqrt(84) = 13.165 mm.  Now 13.3 mm is a scene
+    # error naming insertion.lengths[0] and 13.1 mm passes.  A ValueError in a run is
+    # reported as that run's failure, not a traceback
+    from coilrod.scene.navigation import run_navigation
+    from coilrod.scene.parse import SceneError, parse_scene
+    from coilrod.scene.runner import plan_scene
+
+    data, path = _nav_scene(rotated=False, vessel_along_y=False)
+    data["insertion"]["lengths"] = ["13.3 mm", "20 mm"]
+    with pytest.raises(SceneError, match=r"insertion.lengths\[0\]: .* 13.3 mm, and its surface"):
+        parse_scene(data, path)
+    data["insertion"]["lengths"] = ["13.1 mm", "20 mm"]
+    scene = parse_scene(data, path)
+
+    def refuse(*args, **kwargs):
+        raise ValueError("lengths[0]: refused")
+
+    monkeypatch.setattr("coilrod.contact.insert", refuse)
+    result = run_navigation(scene, plan_scene(scene))
+    assert not result.ok
+    assert "refused" in result.runs[0].error
