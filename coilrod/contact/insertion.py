@@ -128,6 +128,24 @@ class Insertion:
         import matplotlib.pyplot as plt
         from matplotlib.ticker import FuncFormatter
 
+        m = len(self)
+        if steps is None:
+            steps = np.unique(np.linspace(0, m - 1, min(8, m)).astype(int))
+        else:
+            raw = steps
+            steps = np.atleast_1d(np.asarray(steps))
+            if steps.ndim != 1 or not np.issubdtype(steps.dtype, np.integer):
+                raise ValueError(f"steps must be step indices (integers); got {raw!r}")
+            if np.any((steps < -m) | (steps >= m)):
+                raise ValueError(f"steps must be step indices in [0, {m}); got {raw!r}")
+            steps = steps % m
+        try:
+            lo, hi = (float(v) for v in force_range)
+        except (TypeError, ValueError):
+            lo = hi = np.nan
+        if not 0 < lo < hi < np.inf:
+            raise ValueError(f"force_range must be (low, high) N with 0 < low < high; got "
+                             f"{force_range!r}")  # fmt: skip
         if ax is None:  # constrained layout: a suptitle added later keeps its own row
             fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), layout="constrained")
         else:
@@ -135,8 +153,6 @@ class Insertion:
             fig = axes[0].figure
         if self.vessel is not None and hasattr(self.vessel, "plot"):
             self.vessel.plot(ax=axes[0], color="0.6")
-        m = len(self)
-        steps = np.unique(np.linspace(0, m - 1, min(8, m)).astype(int)) if steps is None else steps
         cmap = plt.get_cmap("viridis")
         for i, k in enumerate(steps):
             x = self._shapes[k]
@@ -352,6 +368,10 @@ def insert(
         raise ValueError(f"lengths must lie in (0, {rod.length:g}] m (the rod's length)")
     schedule = _fields(field_schedule, lengths.size)
     clamp, R0 = _introducer(vessel, clamp_position, clamp_rotation)
+    sec = rod.section  # the surface: a circle's radius, a rectangle's smaller half-side
+    half = sec.diameter / 2 if hasattr(sec, "diameter") else min(sec.width, sec.thickness) / 2
+    given = clamp_position is not None or clamp_rotation is not None
+    _check_straight_start(vessel, clamp, R0, float(lengths[0]), float(half), given)
     rec = _Record(lengths, vessel, rod.bending_stiffness)
     bar = None
     if progress:
@@ -424,6 +444,34 @@ def _introducer(vessel, clamp_position, clamp_rotation):
     if callable(check):
         check(clamp[None], "the clamp (introducer)")
     return clamp, R0
+
+
+def _check_straight_start(vessel, clamp, R0, length: float, half: float, given: bool) -> None:
+    """ValueError naming ``lengths[0]`` if the first free part, straight out of the
+    introducer, leaves the vessel or its surface (``half`` m from its axis) reaches into the
+    wall: the insertion's first step starts from it (solve_rod's own check named neither the
+    length nor the way out)."""
+    gap_of = getattr(vessel, "gap", None)
+    if not callable(gap_of):
+        return
+    s = np.linspace(0.0, length, 65)
+    gap = np.asarray(gap_of(clamp + np.outer(s, R0[:, 0])), float)
+    bad = np.flatnonzero(~(gap >= -1e-12 * length))
+    what = "it leaves the vessel"
+    if not bad.size:
+        bad = np.flatnonzero(~(gap - half >= -1e-12 * length))
+        if bad.size and bad[0] == 0:  # no room at the clamp: solve_rod says why (too thick)
+            return
+        what = f"its surface ({1e3 * half:.4g} mm from its axis) reaches into the wall"
+        gap = gap - half
+    if bad.size:
+        k = int(bad[0])
+        turn = " or turn clamp_rotation along the vessel" if given else ""
+        raise ValueError(
+            f"lengths[0] = {1e3 * length:.4g} mm: the first free part starts straight out of "
+            f"the introducer, and straight {what} {1e3 * s[k]:.4g} mm from the clamp (by "
+            f"{1e3 * -gap[bad].min():.3g} mm at most); start with a shorter first length{turn}"
+        )
 
 
 def _first_step(free, field, nodes, clamp, R0, vessel, tol):
@@ -566,7 +614,8 @@ class _Record:
         out["R"].append(R)
         out["f"].append(per_length)
         out["p"].append(problem.points(problem.contact_points(u[None], frames)[0]))
-        out["push"].append(-float(V[0, 6:9] @ problem.R0[:, 0]) * (EI / L**2))
+        # (0.0 - x: no "-0" in the tables of a step without contact)
+        out["push"].append((0.0 - float(V[0, 6:9] @ problem.R0[:, 0])) * (EI / L**2))
         chord = np.diff(V[:, 0:3], axis=0)
         chord /= np.linalg.norm(chord, axis=1, keepdims=True)
         out["axial"].append(np.einsum("ji,ji->j", V[:-1, 6:9], chord) * (EI / L**2))

@@ -40,9 +40,9 @@ from importlib import resources
 import numpy as np
 
 from coils._files import input_path
-from coils._validate import as_bool, as_choice, as_count, as_points, nonnegative
+from coils._validate import as_bool, as_choice, as_count, as_points
 
-from .obstacle import Obstacle, _mm
+from .obstacle import Obstacle, _mm, _point_mm, as_friction
 from .vessel import Vessel
 
 __all__ = ["MeshVessel", "tessellate", "phantom_path"]
@@ -100,8 +100,10 @@ class MeshVessel(Obstacle):
     ------
     ValueError
         Fewer than 4 vertices or 4 faces, non-finite vertices, bad indices, degenerate
-        faces, non-manifold edges (shared by more than two faces), inconsistent winding, or
-        inward-facing normals without ``fix_normals``; each message names ``source``.
+        faces, non-manifold edges (shared by more than two faces) or vertices (two sheets
+        meeting at a point), inconsistent winding, inward-facing normals (of any closed
+        component) without ``fix_normals``, or a closed surface with outward normals nested
+        inside the lumen; each message names ``source``.
 
     Examples
     --------
@@ -129,7 +131,7 @@ class MeshVessel(Obstacle):
 
         label = "mesh" if source is None else f"mesh {source!r}"
         self.source = source
-        self.friction = nonnegative(friction, "friction")
+        self.friction = as_friction(friction)
         self.smooth = as_bool(smooth, "smooth")
         fix_normals = as_bool(fix_normals, "fix_normals")
         v = as_points(vertices, "vertices")
@@ -157,16 +159,41 @@ class MeshVessel(Obstacle):
                 f"{label}: the faces are not consistently oriented (neighbouring normals "
                 "point to opposite sides); repair it (e.g. trimesh.repair.fix_winding)"
             )
+        pinch = _pinched_vertex(mesh.faces, mesh.face_adjacency, mesh.face_adjacency_edges)
+        if pinch is not None:
+            raise ValueError(
+                f"{label} is not manifold: vertex {pinch} at {_point_mm(mesh.vertices[pinch])} "
+                "joins two sheets of faces that share no edge there (two surfaces touching "
+                "at a point); separate them"
+            )
         self.watertight = bool(mesh.is_watertight)
         if self.watertight:
-            if mesh.volume < 0:
+            # every closed component by itself: the winding number just outside each one's
+            # faces must be 0 (a component turned inside out gives -1 there, one nested in
+            # another lumen +1); the total volume alone misses an inverted component beside
+            # a larger right one
+            inverted, nested = _component_orientation(mesh)
+            if nested is not None:
+                raise ValueError(
+                    f"{label}: the closed surface of face {nested} lies inside the lumen "
+                    "with its normals pointing out of it (a lumen inside the lumen); a cavity "
+                    "in the lumen (a solid inside it) must have normals pointing into it"
+                )
+            if inverted.any():
                 if not fix_normals:
+                    part = (
+                        ""
+                        if inverted.all()
+                        else f" (faces {_ranges(np.flatnonzero(inverted))} of {len(inverted)})"
+                    )
                     raise ValueError(
-                        f"{label}: the face normals point into the lumen (the lumen is the "
-                        "enclosed volume, its normals must point out of it); reverse the "
+                        f"{label}: the face normals point into the lumen{part} (the lumen is "
+                        "the enclosed volume, its normals must point out of it); reverse the "
                         "faces' winding, or pass fix_normals=True to turn them around"
                     )
-                mesh.invert()
+                faces = np.array(mesh.faces)
+                faces[inverted] = faces[inverted][:, ::-1]
+                mesh = trimesh.Trimesh(mesh.vertices, faces, process=False, validate=False)
             self.volume = float(mesh.volume)
         else:
             warnings.warn(
@@ -288,6 +315,8 @@ class MeshVessel(Obstacle):
         vertices = np.asarray(loaded.vertices, dtype=float)
         if not np.all(np.isfinite(vertices)):
             raise ValueError(f"mesh file {path!r} has non-finite vertex coordinates")
+        if ext in ("stl", "ply"):  # (formats that store single precision)
+            _check_precision(vertices, np.asarray(loaded.faces), path)
         size = _UNITS[units] * float(np.max(np.ptp(vertices, axis=0)))
         if not MIN_SIZE <= size <= MAX_SIZE:
             from ..errors import UnitsWarning
@@ -467,6 +496,115 @@ PLATEAU = 0.7
 #: The smoothed gap is used alone where the weights sum to more than this (the exact
 #: polyhedral gap alone below half of it: near the lumen's medial axis).
 WEIGHT_FULL = 0.3
+
+
+#: Largest rounding of single-precision coordinates, as a fraction of the shortest edge,
+#: that a mesh file's vertices may have without a warning.
+PRECISION = 1e-3
+
+
+def _check_precision(vertices: np.ndarray, faces: np.ndarray, path: str) -> None:
+    """Warn if the file's coordinates are single precision (STL always, PLY often) and far
+    enough from the origin for their rounding to reach :data:`PRECISION` of the shortest
+    edge: the mesh is then distorted in the file (the gaps are exact for the distorted mesh;
+    at a million times its size from the origin its faces collapse, a "degenerate" error)."""
+    if not np.array_equal(vertices.astype(np.float32).astype(float), vertices):
+        return  # (not single precision)
+    far = float(np.max(np.abs(vertices)))
+    rounding = 0.5 * float(np.spacing(np.float32(far)))
+    tri = vertices[faces]
+    edges = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).ravel()
+    edges = edges[edges > 0]
+    if edges.size == 0:
+        return  # (every face collapsed: the mesh's own "degenerate" error follows)
+    short = float(edges.min())
+    if rounding > PRECISION * short:
+        warnings.warn(
+            f"mesh file {path!r} stores single-precision coordinates up to {far:.3g} from "
+            f"the origin: they are rounded by up to {rounding:.2g} (file units), "
+            f"{rounding / short:.2g} of its shortest edge ({short:.3g}); "
+            "the mesh is distorted in the file -- move it near the origin before saving, or "
+            "save it in double precision (OBJ, double PLY)",
+            stacklevel=3,
+        )
+
+
+def _pinched_vertex(faces, adjacency, adjacency_edges):
+    """A vertex whose faces form more than one fan (sheets meeting only at the vertex), or
+    None: the corners (face, vertex) joined across every shared edge, counted per vertex."""
+    faces = np.asarray(faces)
+    adjacency, edges = np.asarray(adjacency), np.asarray(adjacency_edges)
+    if len(faces) == 0:
+        return None
+
+    def corner(f, v):
+        return 3 * f + np.argmax(faces[f] == v[:, None], axis=1)
+
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    rows = np.concatenate([corner(adjacency[:, 0], edges[:, k]) for k in (0, 1)])
+    cols = np.concatenate([corner(adjacency[:, 1], edges[:, k]) for k in (0, 1)])
+    n = 3 * len(faces)
+    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    count, label = connected_components(graph, directed=False)
+    # each fan (component of corners) belongs to one vertex: as many fans as vertices used
+    # unless a vertex has two
+    if count == np.count_nonzero(np.bincount(faces.ravel())):
+        return None
+    owner = np.empty(count, dtype=np.int64)
+    owner[label] = faces.ravel()
+    return int(np.argmax(np.bincount(owner)))
+
+
+def _winding(tris: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Winding numbers of points ``p`` (k, 3) about the closed triangles ``tris`` (m, 3, 3):
+    the solid angles (Van Oosterom & Strackee 1983) summed over 4 pi; +1 inside a surface
+    whose normals point out of it, 0 outside."""
+    a, b, c = (tris[None, :, i] - p[:, None] for i in range(3))
+    la, lb, lc = (np.linalg.norm(x, axis=2) for x in (a, b, c))
+    num = np.einsum("kmi,kmi->km", a, np.cross(b, c))
+    den = (
+        la * lb * lc
+        + np.einsum("kmi,kmi->km", a, b) * lc
+        + np.einsum("kmi,kmi->km", a, c) * lb
+        + np.einsum("kmi,kmi->km", b, c) * la
+    )
+    return np.arctan2(num, den).sum(axis=1) / (2 * np.pi)
+
+
+def _component_orientation(mesh):
+    """Per face: whether its closed component is turned inside out (the winding number of
+    the whole mesh just outside one of its faces is -1), and a face of a component nested
+    in the lumen with outward normals (+1 there), or None."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    m = len(mesh.faces)
+    adj = np.asarray(mesh.face_adjacency)
+    graph = coo_matrix((np.ones(len(adj)), (adj[:, 0], adj[:, 1])), shape=(m, m))
+    count, label = connected_components(graph, directed=False)
+    area = np.asarray(mesh.area_faces)
+    # each component's largest face: a point a little outside its centroid
+    first = np.full(count, -1)
+    order = np.argsort(area)
+    first[label[order]] = order  # (the last write per component is its largest face)
+    tris = np.asarray(mesh.triangles)
+    normal = np.asarray(mesh.face_normals)[first]
+    step = 1e-3 * np.sqrt(area[first])
+    probe = tris[first].mean(axis=1) + step[:, None] * normal
+    chunk = max(1, 2_000_000 // m)  # (k, m) arrays of at most a few million entries
+    w = np.concatenate([_winding(tris, probe[i : i + chunk]) for i in range(0, count, chunk)])
+    w = np.rint(w).astype(int)
+    nested = np.flatnonzero(w > 0)
+    return w[label] < 0, (int(first[nested[0]]) if nested.size else None)
+
+
+def _ranges(idx: np.ndarray) -> str:
+    """``[0, 1, 2, 7]`` as ``"0-2, 7"`` (at most four ranges shown)."""
+    cuts = np.flatnonzero(np.diff(idx) != 1) + 1
+    parts = [f"{r[0]}-{r[-1]}" if len(r) > 1 else f"{r[0]}" for r in np.split(idx, cuts)]
+    return ", ".join(parts[:4]) + (", ..." if len(parts) > 4 else "")
 
 
 def _smoothstep(t):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._lumens import _draw_lumens
-from .obstacle import Obstacle
+from .obstacle import Obstacle, as_friction
 
 __all__ = ["VesselNetwork"]
 
@@ -25,6 +25,10 @@ class VesselNetwork(Obstacle):
     vessels : sequence of Obstacle
         At least one (stored as the tuple ``vessels``; immutable, ``replace(vessels=...)``
         gives a changed copy).
+    friction : float, optional
+        Coulomb friction coefficient mu >= 0 of the network's wall, what the contact models
+        use (the members' own coefficients are not looked at again).  Default: the members'
+        common coefficient; members with different ones are a ValueError unless it is given.
 
     Examples
     --------
@@ -39,7 +43,7 @@ class VesselNetwork(Obstacle):
     _outside = "outside the vessels"
     _immutable = True
 
-    def __init__(self, vessels):
+    def __init__(self, vessels, friction=None):
         try:
             members = list(vessels)
         except TypeError:
@@ -54,9 +58,21 @@ class VesselNetwork(Obstacle):
                     f"vessels[{k}] must be a Vessel (or another obstacle); got {type(v).__name__}"
                 )
         self.vessels = tuple(members)
+        if friction is None:  # (a network of rough vessels was frictionless: the solver
+            # reads the network's coefficient, the class's 0)
+            mus = [as_friction(getattr(v, "friction", 0.0), f"vessels[{k}].friction")
+                   for k, v in enumerate(members)]  # fmt: skip
+            if len(set(mus)) > 1:
+                raise ValueError(
+                    f"the vessels' friction coefficients differ ({', '.join(f'{m:g}' for m in mus)}"
+                    "): a network's wall has one; give it as friction=mu"
+                )
+            friction = mus[0]
+        self.friction = as_friction(friction)
 
     def __repr__(self) -> str:
-        return f"VesselNetwork([{', '.join(repr(v) for v in self.vessels)}])"
+        mu = f", friction={self.friction:g}" if self.friction else ""
+        return f"VesselNetwork([{', '.join(repr(v) for v in self.vessels)}]{mu})"
 
     def __len__(self) -> int:
         return len(self.vessels)

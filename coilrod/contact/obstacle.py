@@ -40,6 +40,8 @@ __all__ = ["Obstacle", "GapEvaluation"]
 
 def as_friction(friction, name: str = "friction") -> float:
     """A Coulomb friction coefficient: a finite float >= 0 (ValueError naming ``name``)."""
+    if isinstance(friction, bool | np.bool_ | str | bytes):  # float(True) is 1.0, float("1")
+        raise ValueError(f"{name} must be a number >= 0; got {friction!r}")
     try:
         mu = float(friction)
     except (TypeError, ValueError):
@@ -107,6 +109,20 @@ class Obstacle(Immutable, ABC):
         if params is not None and "friction" in params:
             params = {**params, "friction": mu}
         return self._evolve(params, friction=mu)
+
+    def replace(self, **changes):
+        """A copy with some construction parameters changed (see
+        :meth:`coils._immutable.Immutable.replace`), keeping the wall's friction: a preset's
+        parameters do not hold it (``Vessel.bend(...).with_friction(0.2).replace(radius=...)``
+        was frictionless), and ``friction=mu`` is accepted there too."""
+        params = self.__dict__.get("_params") or {}
+        mu = self.friction
+        if "friction" not in params and "friction" in changes:
+            mu = as_friction(changes.pop("friction"))
+        new = super().replace(**changes)
+        if "friction" not in params and getattr(new, "friction", 0.0) != mu:
+            new = new.with_friction(mu)
+        return new
 
     # -- the gap and its derivatives ------------------------------------------------------------
     def evaluate(self, points, order: int = 2) -> GapEvaluation:

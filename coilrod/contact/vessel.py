@@ -233,7 +233,10 @@ class Vessel(Obstacle):
         if smooth:
             spline, knots = fit_spline(pts)
             section = section_from(radius, knots)
-            pieces = spline_pieces(spline, knots, max_piece=section.minimum)
+            # cut at the spline's own breakpoints: the points' knots, or (a resampled spline,
+            # sparse points with sharp turns) its samples -- cubic pieces taken per point
+            # interval from a resampled spline's first coefficients were another curve
+            pieces = spline_pieces(spline, spline.x, max_piece=section.minimum)
         else:
             pieces, knots = polyline_pieces(pts)
             section = section_from(radius, knots)

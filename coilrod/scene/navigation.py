@@ -306,7 +306,7 @@ def run_navigation(scene, plan, progress: bool = False, log=None) -> NavigationS
                 progress=progress,
             )
             run = NavigationRun(job.field_label, time.perf_counter() - t0, ins)
-        except ConvergenceError as exc:
+        except (ConvergenceError, ValueError) as exc:  # (a failed run is reported, no traceback)
             run = NavigationRun(
                 job.field_label, time.perf_counter() - t0, getattr(exc, "result", None), str(exc)
             )
@@ -335,6 +335,8 @@ def check_insertion(data: dict, robot, rod_options, models) -> dict:
         elif type(obstacles[0]).__name__ == "Wall":
             lines.append("insertion: the obstacle must be a lumen (vessel, mesh or centreline), "
                          "not a wall")  # fmt: skip
+        elif spec is not None and isinstance(robot, tuple):
+            lines += _straight_surface(obstacles[0], robot[0], rod_options, spec["lengths"][0])
     if isinstance(models, list | tuple) and [m for m in models if m != "rod"]:
         lines.append("insertion: insertion is modelled by the rod only -- run the rod alone")
     if isinstance(rod_options, dict) and rod_options.get("model") == "planar":
@@ -344,6 +346,28 @@ def check_insertion(data: dict, robot, rod_options, models) -> dict:
     if not isinstance(rod_options, dict):  # its problems are listed already
         return rod_options
     return {**rod_options, "insertion": spec}
+
+
+def _straight_surface(lumen, rod, rod_options, length: float) -> list[str]:
+    """The problem (a line, or none) of a first free length whose straight surface reaches
+    the lumen's wall (its centreline is checked by :func:`~coilrod.scene.obstacles.
+    parse_obstacles`): the insertion's first step starts from it."""
+    from ..rod.model import clamp_frame
+
+    sec = rod.section  # (a circle's radius, a rectangle's smaller half-side: as insert)
+    half = sec.diameter / 2 if hasattr(sec, "diameter") else min(sec.width, sec.thickness) / 2
+    tangent = clamp_frame(0.0, rod_options.get("clamp_rotation"))[:, 0]
+    s = np.linspace(0.0, length, 65)
+    gap = np.asarray(lumen.gap(np.outer(s, tangent)), float) - half
+    bad = np.flatnonzero(gap < -1e-12 * length)
+    if bad.size == 0 or bad[0] == 0:  # (none, or no room at the clamp: said elsewhere)
+        return []
+    return [
+        f"insertion.lengths[0]: the robot starts straight at its first free length "
+        f"{1e3 * length:.4g} mm, and its surface ({1e3 * half:.4g} mm from its axis) reaches "
+        f"the lumen's wall {1e3 * s[bad[0]]:.4g} mm from the clamp (by {1e3 * -gap.min():.3g} "
+        "mm); start with a shorter first length"
+    ]
 
 
 def first_length(data) -> float | None:

@@ -188,7 +188,7 @@ def _narrowest(ob) -> float | None:
     return min(radii) if radii else None
 
 
-def parse_obstacles(data, source: str = "<embedded>", length=None, thickness=None):
+def parse_obstacles(data, source: str = "<embedded>", length=None, thickness=None, tangent=None):
     """The obstacles of a scene's ``[obstacles]`` table.
 
     Parameters
@@ -198,11 +198,14 @@ def parse_obstacles(data, source: str = "<embedded>", length=None, thickness=Non
     source : str
         The scene's path: mesh and centreline files are relative to its folder.
     length : float, optional
-        The robot's length (m): its straight starting state along +x from the clamp at the
-        origin is checked to lie in every obstacle's admissible region (the clamp alone if
+        The robot's length (m): its straight starting state along ``tangent`` from the clamp
+        at the origin is checked to lie in every obstacle's admissible region (the clamp alone if
         None).
     thickness : float, optional
         The robot's largest half-width (m): a vessel narrower than it is a problem.
+    tangent : array-like, shape (3,), optional
+        The straight robot's unit direction from the clamp (default +x; the first column of
+        ``rod.clamp_rotation`` for a rotated clamp).
 
     Returns
     -------
@@ -219,10 +222,17 @@ def parse_obstacles(data, source: str = "<embedded>", length=None, thickness=Non
     p = _Problems()
     p.take(_unknown_keys, data, "obstacles", {"friction", *_KINDS})
     friction = 0.0
-    if "friction" in data:
+    if isinstance(data.get("friction"), str):  # "0.1 mm", "0.1": a coefficient has no unit
+        p.add(
+            "obstacles.friction: expected a plain number, the Coulomb coefficient mu >= 0 "
+            f"(no unit, no quotes: friction = 0.1); got {_show(data['friction'])}"
+        )
+        friction = None
+    elif "friction" in data:
         friction = p.take(_plain, data["friction"], "obstacles.friction", low=0.0)
     xs = [0.0] if length is None else np.linspace(0.0, float(length), 33)
-    start = np.column_stack([xs, np.zeros(len(xs)), np.zeros(len(xs))])
+    t = np.array([1.0, 0.0, 0.0]) if tangent is None else np.asarray(tangent, float)
+    start = np.outer(xs, t / np.linalg.norm(t))
     base = Path(source).parent if source != "<embedded>" else Path.cwd()
     out = []
     for kind in _KINDS:
@@ -254,7 +264,7 @@ def parse_obstacles(data, source: str = "<embedded>", length=None, thickness=Non
             elif np.any(gap < 0):
                 k = int(np.flatnonzero(gap < 0)[0])
                 p.add(
-                    f"{key}: the straight robot leaves it {1e3 * start[k, 0]:.4g} mm from the "
+                    f"{key}: the straight robot leaves it {1e3 * xs[k]:.4g} mm from the "
                     "clamp (the solve starts from the straight robot; lengthen the straight part)"
                 )
             out.append(ob)

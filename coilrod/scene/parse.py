@@ -787,7 +787,10 @@ def parse_scene(data: dict, source: str = "<embedded>") -> Scene:
             half = sec.diameter / 2 if hasattr(sec, "diameter") else None
             if hasattr(sec, "width"):
                 half = 0.5 * float(np.hypot(sec.width, sec.thickness))
-        found = p.take(parse_obstacles, data["obstacles"], source, length, half)
+        tangent = None  # the straight robot's direction: +x or the rotated clamp's
+        if _ok(rod_options) and "clamp_rotation" in rod_options:
+            tangent = np.asarray(rod_options["clamp_rotation"])[:, 0]
+        found = p.take(parse_obstacles, data["obstacles"], source, length, half, tangent)
         if _ok(found):
             rod_options = {**rod_options, "obstacles": found[0]}
     if "insertion" in data:
