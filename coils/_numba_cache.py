@@ -156,6 +156,15 @@ class Rental:
             self._buy()
         return True
 
+    def rent(self, seconds: float) -> bool:
+        """:meth:`pays` for a call whose numpy twin would cost an estimated ``seconds`` of CPU,
+        and if not, that cost :meth:`charge` d: True runs the compiled kernel, False the numpy
+        twin (the caller's two branches)."""
+        if self.pays(seconds):
+            return True
+        self.charge(seconds)
+        return False
+
     def charge(self, seconds: float) -> None:
         """Add the estimated CPU seconds of one numpy call to :attr:`spent`."""
         self.spent += seconds

@@ -57,11 +57,7 @@ def _compiled_pays(work: int) -> bool:
     (or on disk in numba's cache at the first evaluation of the process), or the numpy passes
     so far plus this one would cost more than :data:`COMPILE_AFTER`; else the numpy pass's
     estimated cost (s of CPU) is charged."""
-    cost = _NUMPY_CALL_S + _NUMPY_POINT_S * work
-    if _rental.pays(cost):
-        return True
-    _rental.charge(cost)
-    return False
+    return _rental.rent(_NUMPY_CALL_S + _NUMPY_POINT_S * work)
 
 
 def frame_from_axis(axis: np.ndarray) -> np.ndarray:

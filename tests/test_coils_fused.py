@@ -267,6 +267,11 @@ def test_rental_decides_as_each_site_did(monkeypatch):
                     assert pays == (held or not rents)
                     assert rental.ready == pays
                     assert asked == ([held] if rents else [])
+                    rental = nc.Rental(owner.__name__, lambda: None)  # rent: pays, else charge
+                    rental.held = probe(held, [])
+                    rental.charge(spent)
+                    assert rental.rent(seconds) == (held or not rents)
+                    assert rental.spent == (spent if rental.ready else spent + seconds)
                     rental = nc.Rental(owner.__name__, lambda: None)
                     rental.charge(spent)
                     rental.expect(seconds)

@@ -57,13 +57,7 @@ def search_pays(points: int, pieces: int) -> bool:
     candidate pieces: it is compiled in numba's cache (at this process's first look), or the
     numpy searches so far plus this one would cost more than :data:`COMPILE_AFTER`; else the
     numpy search's estimated cost (s of CPU) is charged."""
-    if _rental.ready:
-        return True
-    cost = _NUMPY_CALL_S + _NUMPY_PAIR_S * points * pieces
-    if _rental.pays(cost):
-        return True
-    _rental.charge(cost)
-    return False
+    return _rental.ready or _rental.rent(_NUMPY_CALL_S + _NUMPY_PAIR_S * points * pieces)
 
 
 @nb.njit(cache=True, error_model="numpy")

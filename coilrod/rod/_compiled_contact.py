@@ -97,13 +97,7 @@ def compiled_pays(k: int, n: int) -> bool:
     """Whether the compiled kernel should add the contact terms of a stack of ``k`` states
     of ``n`` nodes (with the tangent): True once compiling pays (:class:`Rental`), else the
     numpy twin's estimated cost is charged and False is returned (the caller runs it)."""
-    if _rental.ready:
-        return True
-    cost = _NUMPY_CALL_S + _NUMPY_NODE_S * k * n
-    if _rental.pays(cost):
-        return True
-    _rental.charge(cost)
-    return False
+    return _rental.ready or _rental.rent(_NUMPY_CALL_S + _NUMPY_NODE_S * k * n)
 
 
 @nb.njit(cache=True, error_model="numpy")
