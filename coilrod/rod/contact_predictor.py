@@ -116,22 +116,25 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     inactive_rows[..., 6:] = np.eye(nc)
     rhs = -np.asarray(load_rate, float)  # (1, size)
     kl, ku = problem.kl, problem.ku
+    band = base.copy(order="F")  # the rates' band, unfactorised: the last rate's contact rows
     last = []  # the last rate's active set, factors and pivots
 
     def rate(active):
-        ab = base.copy(order="F")
-        ab[bi, ci] = np.where(active[..., None], active_rows, inactive_rows)
         if not last:
-            ipiv = np.empty(ab.shape[1], dtype=np.int64)
-            start = 0
+            band[bi, ci] = np.where(active[..., None], active_rows, inactive_rows)
+            ab, ipiv, start = band.copy(order="F"), np.empty(band.shape[1], np.int64), 0
         else:
-            # one event switches a few contact rows: the factors' columns before the first
-            # column of those rows' entries are the last rate's (band_lu restarts there,
-            # bitwise the factorisation from column 0)
-            was, lu, ipiv = last
-            switched = ci[active != was]
-            start = int(switched.min()) if switched.size else ab.shape[1]
-            ab[:, :start] = lu[:, :start]
+            # an event switches a few contact rows: the factors' columns before the first
+            # column of those rows' entries are the last rate's, kept (band_lu restarts
+            # there, bitwise the factorisation from column 0); the others the new band's
+            was, ab, ipiv = last
+            flipped = active != was
+            band[bi[flipped], ci[flipped]] = np.where(
+                active[flipped][:, None], active_rows[flipped], inactive_rows[flipped]
+            )
+            cols = ci[flipped]
+            start = int(cols.min()) if cols.size else band.shape[1]
+            ab[:, start:] = band[:, start:]
         last[:] = ()
         if band_lu(ab, kl, ku, ipiv, start) > 0:  # an exactly zero pivot: singular
             return None
