@@ -387,8 +387,8 @@ def test_band_lu_restarts_from_a_column_bitwise():
     # with the earlier factors' leading columns kept, are bitwise (factors, pivots, info) the
     # factorisation from column 0; weak diagonals make row exchanges before and after the
     # restart (their fill reaching past it); restarts at both edges; a zero column before it
-    # keeps its info.  One right-hand side is solved bitwise as the first of two.  Plain
-    # Python (.py_func): no compiled version for the test.
+    # keeps its info.  One right-hand side is solved bitwise as the first of two (and both
+    # against numpy's dense solve).  Plain Python (.py_func): no compiled version for the test.
     from coilrod.rod._compiled import band_lu, band_solve
 
     lu, solve = band_lu.py_func, band_solve.py_func
@@ -426,12 +426,14 @@ def test_band_lu_restarts_from_a_column_bitwise():
                 assert np.array_equal(a, b)
             assert full[2] == (0 if zero_column is None else zero_column + 1)
         assert factor(A, n, old)[2] == old[2]  # (every column kept: nothing to do)
-    ab, ipiv, _ = old = factor(matrix())
+    A = matrix()
+    ab, ipiv, _ = factor(A)
     b = rng.normal(size=(n, 2))
     x1, x2 = b[:, :1].copy(), b.copy()
     solve(ab, kl, ku, ipiv, x1)
     solve(ab, kl, ku, ipiv, x2)
     assert np.array_equal(x1[:, 0], x2[:, 0])
+    np.testing.assert_allclose(x2, np.linalg.solve(A, b), rtol=1e-10, atol=1e-12)
 
 
 def test_band_kernels_compile_once_for_either_band_order():
