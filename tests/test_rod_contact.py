@@ -667,11 +667,20 @@ def test_event_fraction_of_a_release():
     assert P.event_fraction(u.reshape(1, -1), du.reshape(1, -1))[0] == 1.0
 
 
-def test_piecewise_prediction_across_the_tip_closing():
+def test_piecewise_prediction_across_the_tip_closing(monkeypatch):
     # from a free state (scale 0.05) to one with the tip on the wall (0.15): the prediction
     # that switches the contact set where the tip closes lands within 2 % of the change of
     # the converged state (an independent solve), the plain path tangent 150 % off (through
-    # the wall)
+    # the wall); the rate after the closing refactors the band from the tip node's first
+    # column alone (band_lu's restart, bitwise a factorisation from column 0: test_rod_physics)
+    import coilrod.rod._compiled as rc
+
+    starts, band_lu = [], rc.band_lu
+
+    def counted(ab, kl, ku, ipiv, start):
+        starts.append(start)
+        return band_lu(ab, kl, ku, ipiv, start)
+
     rod = _rod()
     field = coils.LinearField(
         B0=(0, rod.field_for_lambda(6.0), 0), gradient=1e-9 * np.diag([-0.5, 1.0, -0.5])
@@ -682,7 +691,10 @@ def test_piecewise_prediction_across_the_tip_closing():
     P = res._solution.problems[0]
     u0, u1 = res._solution.states[0]
     assert [int(P.contact_state(u[None])[2].sum()) for u in (u0, u1)] == [0, 1]
+    monkeypatch.setattr(rc, "band_lu", counted)
     pred = P.piecewise_prediction(u0, 0.05, 0.1)
+    monkeypatch.setattr(rc, "band_lu", band_lu)
+    assert starts == [0, P.nv * (P.n - 1)]
     lin = P.linearize(u0[None], np.array([0.05]))
     plain = u0 - 0.1 * P.solve(lin, lin.load_rate)[0]
     change = P.distance((u1 - u0)[None])[0]

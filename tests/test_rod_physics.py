@@ -367,7 +367,7 @@ def test_band_lu_exchanges_rows_only_where_the_diagonal_is_weak(diagonal):
     A[0, 0], A[3, 0] = diagonal, 2.0
     ab = _band_storage(A, kl, ku)
     ipiv = np.empty(n, dtype=np.int64)
-    assert band_lu(ab, kl, ku, ipiv) == 0
+    assert band_lu(ab, kl, ku, ipiv, 0) == 0
     assert ipiv[0] == (0 if diagonal >= PIVOT_THRESHOLD * 2.0 else 3)
     b = rng.normal(size=(n, 2))
     x = b.copy()
@@ -379,6 +379,61 @@ def test_band_lu_exchanges_rows_only_where_the_diagonal_is_weak(diagonal):
     swaps = np.count_nonzero(ipiv != np.arange(n))
     negative = np.count_nonzero(ab[kl + ku] < 0)
     assert (-1) ** (swaps + negative) == np.linalg.slogdet(A)[0]
+
+
+def test_band_lu_restarts_from_a_column_bitwise():
+    # band_lu from a column (the contact predictor's rates after an event): the factors of a
+    # matrix whose rows from r on changed, restarted at the first column those rows reach
+    # with the earlier factors' leading columns kept, are bitwise (factors, pivots, info) the
+    # factorisation from column 0; weak diagonals make row exchanges before and after the
+    # restart (their fill reaching past it); restarts at both edges; a zero column before it
+    # keeps its info.  One right-hand side is solved bitwise as the first of two (and both
+    # against numpy's dense solve).  Plain Python (.py_func): no compiled version for the test.
+    from coilrod.rod._compiled import band_lu, band_solve
+
+    lu, solve = band_lu.py_func, band_solve.py_func
+    n, kl, ku = 28, 3, 2
+    rng = np.random.default_rng(5)
+
+    def matrix():
+        # the lower diagonals 4x the others: row exchanges in a third of the columns
+        return sum(
+            np.diag(rng.uniform(-1.0, 1.0, n - abs(d)) * (4.0 if d < 0 else 1.0), d)
+            for d in range(-kl, ku + 1)
+        )
+
+    def factor(A, start=0, kept=None):
+        ab, ipiv = _band_storage(A, kl, ku), np.zeros(n, dtype=np.int64)
+        if kept is not None:
+            ab[:, :start], ipiv[:start] = kept[0][:, :start], kept[1][:start]
+        info = lu(ab, kl, ku, ipiv, start)
+        return ab, ipiv, info
+
+    for zero_column in (None, 4):
+        A = matrix()
+        if zero_column is not None:
+            A[:, zero_column] = 0.0
+        old = factor(A)
+        assert np.count_nonzero(old[1] != np.arange(n)) >= 3
+        for r in (0, 1, 9, 17, n - 1):
+            B = A.copy()
+            B[r:] = matrix()[r:]
+            if zero_column is not None:
+                B[:, zero_column] = 0.0
+            start = max(0, r - kl)  # the first column the changed rows reach
+            full, again = factor(B), factor(B, start, old)
+            for a, b in zip(full, again, strict=True):
+                assert np.array_equal(a, b)
+            assert full[2] == (0 if zero_column is None else zero_column + 1)
+        assert factor(A, n, old)[2] == old[2]  # (every column kept: nothing to do)
+    A = matrix()
+    ab, ipiv, _ = factor(A)
+    b = rng.normal(size=(n, 2))
+    x1, x2 = b[:, :1].copy(), b.copy()
+    solve(ab, kl, ku, ipiv, x1)
+    solve(ab, kl, ku, ipiv, x2)
+    assert np.array_equal(x1[:, 0], x2[:, 0])
+    np.testing.assert_allclose(x2, np.linalg.solve(A, b), rtol=1e-10, atol=1e-12)
 
 
 def test_band_kernels_compile_once_for_either_band_order():

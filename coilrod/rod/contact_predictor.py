@@ -93,7 +93,7 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     complementarity problem along the step: a piecewise-linear path, one new tangent per
     event, all at the tangent matrix of ``u``).  Returns the predicted state (size,), or None
     when it cannot be formed (a singular tangent, more than ``max_events`` switches)."""
-    from .planar import RodTangent
+    from ._compiled import band_lu, band_solve
 
     n, nv, nc = problem.n, problem.nv, problem.nc
     if max_events is None:
@@ -116,11 +116,32 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     inactive_rows[..., 6:] = np.eye(nc)
     rhs = -np.asarray(load_rate, float)  # (1, size)
     kl, ku = problem.kl, problem.ku
+    band = base.copy(order="F")  # the rates' band, unfactorised: the last rate's contact rows
+    last = []  # the last rate's active set, factors and pivots
 
     def rate(active):
-        ab = base.copy(order="F")
-        ab[bi, ci] = np.where(active[..., None], active_rows, inactive_rows)
-        r = RodTangent(1, problem.size, False, ab, rhs, kl, ku).solve(rhs)[0]
+        if not last:
+            band[bi, ci] = np.where(active[..., None], active_rows, inactive_rows)
+            ab, ipiv, start = band.copy(order="F"), np.empty(band.shape[1], np.int64), 0
+        else:
+            # an event switches a few contact rows: the factors' columns before the first
+            # column of those rows' entries are the last rate's, kept (band_lu restarts
+            # there, bitwise the factorisation from column 0); the others the new band's
+            was, ab, ipiv = last
+            flipped = active != was
+            band[bi[flipped], ci[flipped]] = np.where(
+                active[flipped][:, None], active_rows[flipped], inactive_rows[flipped]
+            )
+            cols = ci[flipped]
+            start = int(cols.min()) if cols.size else band.shape[1]
+            ab[:, start:] = band[:, start:]
+        last[:] = ()
+        if band_lu(ab, kl, ku, ipiv, start) > 0:  # an exactly zero pivot: singular
+            return None
+        last[:] = active, ab, ipiv
+        x = np.array(rhs).reshape(-1, 1)
+        band_solve(ab, kl, ku, ipiv, x)
+        r = x.reshape(-1)
         return r if np.isfinite(r).all() else None
 
     lam0 = u.reshape(n, nv)[1:, 9 : 9 + nc]

@@ -132,7 +132,7 @@ class RodTangent:
                 ab[diag, j * n : (j + 1) * n] = 1.0
         ipiv = np.empty(ab.shape[1], dtype=np.int64)
         # LAPACK's gbtf2, compiled: no per-column calls
-        info = (_PC or _compiled()).band_lu(ab, self.kl, self.ku, ipiv)
+        info = (_PC or _compiled()).band_lu(ab, self.kl, self.ku, ipiv, 0)
         lu = ab
         self.parts = None  # factorised in place: the band storage now holds the factors
         if info > 0:
