@@ -384,6 +384,16 @@ class _Tracker:
         if hook is not None:
             hook(p.u)
 
+    def touches_too_hard(self, cur: PathPoint, u: np.ndarray) -> bool:
+        """A path-dependent model (friction) whose points that touch in the step from
+        ``cur`` to ``u`` already press harder than its ``touchdown_tol``: their slip would
+        be measured from where they were before the step, not from where they touched (the
+        step is cut until it ends at the touch)."""
+        hook = getattr(self.model, "touchdown_force", None)
+        if hook is None or not getattr(self.model, "path_dependent", False):
+            return False
+        return hook(cur.u, u) > self.model.touchdown_tol
+
     def near_fold(self, cur: PathPoint) -> bool:
         """The model says ``cur`` is close to a limit point (failing steps then mean a fold)."""
         hook = getattr(self.model, "near_fold", None)
@@ -440,6 +450,11 @@ class _Tracker:
             if ok:
                 rate = self.rate(res.lin)
                 ok = self.smooth(cur, u, rate, h)
+            if ok and self.touches_too_hard(cur, u) and abs(h) > opts.min_step * abs(full):
+                h /= 2.0  # friction: end the step where the new contact points touch
+                self.cuts += 1
+                locating, seen_at = True, s1
+                continue
             if ok and opts.stability:
                 stab = float(self.P.stability(res.lin)[0])
                 if self.stable(stab) != self.stable(cur.stability):
