@@ -193,6 +193,8 @@ class _Tracker:
         #: Corrections below this (1e-3 of the model's max_correction) never signal a jump.
         limit = self.P.max_correction
         self.negligible = 1e-3 * limit if np.isfinite(limit) else 0.0
+        #: Normal force a newly touching point may carry (friction; :meth:`touchdown_force`).
+        self.touchdown_tol = float(getattr(problem, "touchdown_tol", np.inf))
 
     # -- small helpers ------------------------------------------------------------------------
     def point(self, u, scale, error, lin, stab=None, rate=None) -> PathPoint:
@@ -384,15 +386,28 @@ class _Tracker:
         if hook is not None:
             hook(p.u)
 
-    def touches_too_hard(self, cur: PathPoint, u: np.ndarray) -> bool:
-        """A path-dependent model (friction) whose points that touch in the step from
-        ``cur`` to ``u`` already press harder than its ``touchdown_tol``: their slip would
-        be measured from where they were before the step, not from where they touched (the
-        step is cut until it ends at the touch)."""
+    def touchdown_force(self, cur: PathPoint, u: np.ndarray) -> float:
+        """Normal force of the points that touch in the step from ``cur`` to ``u``, for a
+        path-dependent model (friction) with a ``touchdown_force(u_old, u_new)`` method
+        (0 otherwise): above the model's ``touchdown_tol`` their slip would be measured
+        from where they were before the step, not from where they touched, so the step is
+        cut until it ends at the touch (:meth:`touchdown_step`)."""
         hook = getattr(self.model, "touchdown_force", None)
         if hook is None or not getattr(self.model, "path_dependent", False):
-            return False
-        return hook(cur.u, u) > self.model.touchdown_tol
+            return 0.0
+        return float(hook(cur.u, u))
+
+    def touchdown_step(self, cur: PathPoint, h: float, s1: float, force: float, landed):
+        """The next trial step after the trial at ``s1`` touched with ``force`` (> the
+        model's ``touchdown_tol``): aimed just past the touch that the secant through the
+        last such trial ``landed`` = (scale, force) predicts (the normal force grows
+        linearly from 0 at the touch), else half the step."""
+        if landed is not None and landed[1] != force and landed[0] != s1:
+            slope = (force - landed[1]) / (s1 - landed[0])
+            aim = s1 - (force - 0.25 * self.touchdown_tol) / slope
+            if (aim - cur.scale) * h > 0 and abs(aim - cur.scale) < abs(s1 - cur.scale):
+                return aim - cur.scale
+        return h / 2.0
 
     def near_fold(self, cur: PathPoint) -> bool:
         """The model says ``cur`` is close to a limit point (failing steps then mean a fold)."""
@@ -431,6 +446,7 @@ class _Tracker:
         locating = False  # a change of stability lies ahead: bisect, do not grow the step
         seen_at = None  # the trial scale where the change was seen
         residual = np.inf
+        landed = None  # (scale, force) of the last trial cut for touching too hard
         while True:
             remaining = target - cur.scale
             if remaining == 0:
@@ -450,11 +466,16 @@ class _Tracker:
             if ok:
                 rate = self.rate(res.lin)
                 ok = self.smooth(cur, u, rate, h)
-            if ok and self.touches_too_hard(cur, u) and abs(h) > opts.min_step * abs(full):
-                h /= 2.0  # friction: end the step where the new contact points touch
+            force = self.touchdown_force(cur, u) if ok else 0.0
+            if force > self.touchdown_tol and abs(h) > opts.min_step * abs(full):
+                # friction: end the step where the new contact points touch
+                h = self.touchdown_step(cur, h, s1, force, landed)
+                landed = (s1, force)
                 self.cuts += 1
                 locating, seen_at = True, s1
                 continue
+            if ok and force > 0:
+                landed = None  # (touched: the next touch-down is another one)
             if ok and opts.stability:
                 stab = float(self.P.stability(res.lin)[0])
                 if self.stable(stab) != self.stable(cur.stability):

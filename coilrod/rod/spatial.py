@@ -356,8 +356,8 @@ class SpatialRod(DiscreteRod):
 
     def touchdown_force(self, u_old: np.ndarray, u_new: np.ndarray) -> float:
         """Largest normal force per length (EI_z / L^3) in state ``u_new`` (size,) of the
-        contact points not in contact in the accepted state ``u_old`` (size,); 0 without
-        friction.
+        contact points not in contact in the accepted state ``u_old`` (size,), on obstacles
+        with friction (0 without).
 
         The friction rows measure a point's slip from its place in the last accepted state
         (:meth:`accept_state`), so the tangential motion of a point that touches within a
@@ -370,7 +370,7 @@ class SpatialRod(DiscreteRod):
             return 0.0
         lam_old = np.asarray(u_old, float).reshape(self.n, self.nv)[:, 9 : 9 + self.nc]
         lam_new = np.asarray(u_new, float).reshape(self.n, self.nv)[:, 9 : 9 + self.nc]
-        new = (lam_old <= 0) & (lam_new > 0)
+        new = (lam_old <= 0) & (lam_new > 0) & (self.mu_f > 0)  # (touching a rough obstacle)
         return float(lam_new[new].max()) if new.any() else 0.0
 
     def set_reference(self, points: np.ndarray, tau: np.ndarray | None = None) -> None:
