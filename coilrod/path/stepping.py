@@ -16,6 +16,10 @@ included -- is the same:
    bifurcation on this branch (reported as an event; the solver stays on its branch), while a
    jump onto another branch (e.g. over the knee of an imperfect bifurcation) disappears as the
    steps resolve the path;
+   A path-dependent model (friction) with a ``touchdown_force`` method also has a step in
+   which a contact point first touches cut (a secant toward the touch) until that point
+   carries at most the model's ``touchdown_tol``: its slip is then measured from where it
+   touched, not from where it was before the step (else the answer moves with the steps);
 4. otherwise **halve** the step (and double it again after easy steps);
 5. a step that cannot be shortened further (``min_step``) means the branch ends: the path is
    followed around the limit point by pseudo-arclength continuation
