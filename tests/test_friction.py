@@ -78,9 +78,9 @@ def test_stick_within_the_cone_and_a_tip_that_touches_within_a_step_sticks_where
     # solution -- its tip does not move after touching, so it is the frictional one too,
     # with tau = 0.  Now: the frictionless tip to 1e-9 L at every mesh, in one step or
     # three, tau ~ 0; the one-step tips converge monotonically, at second order
-    assert np.abs(tau).max() < 1e-4  # EI / L^3 (1e-2 before: mu lam at landing)
+    assert np.abs(tau).max() < 1e-4  # EI / L^3 (0.18 before: mu lam at landing)
     tips = []
-    for nodes in (8, 16, 32):
+    for nodes in (4, 8, 16):  # (8, 16, 32 as well; 32 costs 3x)
         free = _tip_on_wall(0.0, nodes=nodes)
         ref = free.contact_points(_follow(free, [4.5]))[0, -1]
         P = _tip_on_wall(0.3, nodes=nodes)
