@@ -451,6 +451,7 @@ class _Tracker:
         seen_at = None  # the trial scale where the change was seen
         residual = np.inf
         landed = None  # (scale, force) of the last trial cut for touching too hard
+        resume = None  # the step's length before such cuts (resumed once the points touched)
         while True:
             remaining = target - cur.scale
             if remaining == 0:
@@ -473,6 +474,8 @@ class _Tracker:
             force = self.touchdown_force(cur, u) if ok else 0.0
             if force > self.touchdown_tol and abs(h) > opts.min_step * abs(full):
                 # friction: end the step where the new contact points touch
+                if resume is None:
+                    resume = h
                 h = self.touchdown_step(cur, h, s1, force, landed)
                 landed = (s1, force)
                 self.cuts += 1
@@ -500,12 +503,17 @@ class _Tracker:
                     # passed the trial state where the change was seen without meeting it
                     # (that trial had converged to another branch): stop bisecting
                     locating = False
+                taken = h
                 if res.iterations[0] <= 4 and not locating:
                     h *= 2.0
                 elif res.iterations[0] <= 4:
                     # bisecting toward the change: grow, but never past the scale where it
                     # was seen (a step cut for another reason must not creep on at its size)
                     h = math.copysign(min(2.0 * abs(h), abs(seen_at - s1)), h)
+                if force > 0 and resume is not None:  # touched: on at the step's length
+                    h, resume, locating = resume, None, False
+                elif landed is not None:  # short of the touch aimed at: the same step again
+                    h = taken
                 continue
             h /= 2.0
             failures += 1
