@@ -510,8 +510,11 @@ class _Tracker:
                     # bisecting toward the change: grow, but never past the scale where it
                     # was seen (a step cut for another reason must not creep on at its size)
                     h = math.copysign(min(2.0 * abs(h), abs(seen_at - s1)), h)
-                if force > 0 and resume is not None:  # touched: on at the step's length
-                    h, resume, locating = resume, None, False
+                if force > 0 and resume is not None:
+                    # touched: back toward the step's length before the cuts (at once, the
+                    # next trial often failed past the next touch: at most 64 landing steps)
+                    h = math.copysign(min(abs(resume), 64.0 * abs(taken)), h)
+                    resume, locating = None, False
                 elif landed is not None:  # short of the touch aimed at: the same step again
                     h = taken
                 continue
