@@ -16,6 +16,10 @@ included -- is the same:
    bifurcation on this branch (reported as an event; the solver stays on its branch), while a
    jump onto another branch (e.g. over the knee of an imperfect bifurcation) disappears as the
    steps resolve the path;
+   A path-dependent model (friction) with a ``touchdown_force`` method also has a step in
+   which a contact point first touches cut (a secant toward the touch) until that point
+   carries at most the model's ``touchdown_tol``: its slip is then measured from where it
+   touched, not from where it was before the step (else the answer moves with the steps);
 4. otherwise **halve** the step (and double it again after easy steps);
 5. a step that cannot be shortened further (``min_step``) means the branch ends: the path is
    followed around the limit point by pseudo-arclength continuation
@@ -193,6 +197,8 @@ class _Tracker:
         #: Corrections below this (1e-3 of the model's max_correction) never signal a jump.
         limit = self.P.max_correction
         self.negligible = 1e-3 * limit if np.isfinite(limit) else 0.0
+        #: Normal force a newly touching point may carry (friction; :meth:`touchdown_force`).
+        self.touchdown_tol = float(getattr(problem, "touchdown_tol", np.inf))
 
     # -- small helpers ------------------------------------------------------------------------
     def point(self, u, scale, error, lin, stab=None, rate=None) -> PathPoint:
@@ -384,6 +390,29 @@ class _Tracker:
         if hook is not None:
             hook(p.u)
 
+    def touchdown_force(self, cur: PathPoint, u: np.ndarray) -> float:
+        """Normal force of the points that touch in the step from ``cur`` to ``u``, for a
+        path-dependent model (friction) with a ``touchdown_force(u_old, u_new)`` method
+        (0 otherwise): above the model's ``touchdown_tol`` their slip would be measured
+        from where they were before the step, not from where they touched, so the step is
+        cut until it ends at the touch (:meth:`touchdown_step`)."""
+        hook = getattr(self.model, "touchdown_force", None)
+        if hook is None or not getattr(self.model, "path_dependent", False):
+            return 0.0
+        return float(hook(cur.u, u))
+
+    def touchdown_step(self, cur: PathPoint, h: float, s1: float, force: float, landed):
+        """The next trial step after the trial at ``s1`` touched with ``force`` (> the
+        model's ``touchdown_tol``): aimed just past the touch that the secant through the
+        last such trial ``landed`` = (scale, force) predicts (the normal force grows
+        linearly from 0 at the touch), else half the step."""
+        if landed is not None and landed[1] != force and landed[0] != s1:
+            slope = (force - landed[1]) / (s1 - landed[0])
+            aim = s1 - (force - 0.25 * self.touchdown_tol) / slope
+            if (aim - cur.scale) * h > 0 and abs(aim - cur.scale) < abs(s1 - cur.scale):
+                return aim - cur.scale
+        return h / 2.0
+
     def near_fold(self, cur: PathPoint) -> bool:
         """The model says ``cur`` is close to a limit point (failing steps then mean a fold)."""
         hook = getattr(self.model, "near_fold", None)
@@ -421,6 +450,8 @@ class _Tracker:
         locating = False  # a change of stability lies ahead: bisect, do not grow the step
         seen_at = None  # the trial scale where the change was seen
         residual = np.inf
+        landed = None  # (scale, force) of the last trial cut for touching too hard
+        resume = None  # the step's length before such cuts (resumed once the points touched)
         while True:
             remaining = target - cur.scale
             if remaining == 0:
@@ -440,6 +471,18 @@ class _Tracker:
             if ok:
                 rate = self.rate(res.lin)
                 ok = self.smooth(cur, u, rate, h)
+            force = self.touchdown_force(cur, u) if ok else 0.0
+            if force > self.touchdown_tol and abs(h) > opts.min_step * abs(full):
+                # friction: end the step where the new contact points touch
+                if resume is None:
+                    resume = h
+                h = self.touchdown_step(cur, h, s1, force, landed)
+                landed = (s1, force)
+                self.cuts += 1
+                locating, seen_at = True, s1
+                continue
+            if ok and force > 0:
+                landed = None  # (touched: the next touch-down is another one)
             if ok and opts.stability:
                 stab = float(self.P.stability(res.lin)[0])
                 if self.stable(stab) != self.stable(cur.stability):
@@ -460,12 +503,20 @@ class _Tracker:
                     # passed the trial state where the change was seen without meeting it
                     # (that trial had converged to another branch): stop bisecting
                     locating = False
+                taken = h
                 if res.iterations[0] <= 4 and not locating:
                     h *= 2.0
                 elif res.iterations[0] <= 4:
                     # bisecting toward the change: grow, but never past the scale where it
                     # was seen (a step cut for another reason must not creep on at its size)
                     h = math.copysign(min(2.0 * abs(h), abs(seen_at - s1)), h)
+                if force > 0 and resume is not None:
+                    # touched: back toward the step's length before the cuts (at once, the
+                    # next trial often failed past the next touch: at most 64 landing steps)
+                    h = math.copysign(min(abs(resume), 64.0 * abs(taken)), h)
+                    resume, locating = None, False
+                elif landed is not None:  # short of the touch aimed at: the same step again
+                    h = taken
                 continue
             h /= 2.0
             failures += 1

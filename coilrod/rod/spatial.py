@@ -348,6 +348,31 @@ class SpatialRod(DiscreteRod):
             self._p_ref = self.contact_points(u[None])[0].copy()
             self._tau_ref = self.friction_forces(u[None])[0]
 
+    #: Largest normal force per length (EI_z / L^3) a contact point may carry in the accepted
+    #: state in which it first touches, with friction (:meth:`touchdown_force`): the path
+    #: engine cuts a load step that lands a point harder, so that its slip is measured from
+    #: where it touched.
+    touchdown_tol = 1e-6
+
+    def touchdown_force(self, u_old: np.ndarray, u_new: np.ndarray) -> float:
+        """Largest normal force per length (EI_z / L^3) in state ``u_new`` (size,) of the
+        contact points not in contact in the accepted state ``u_old`` (size,), on obstacles
+        with friction (0 without).
+
+        The friction rows measure a point's slip from its place in the last accepted state
+        (:meth:`accept_state`), so the tangential motion of a point that touches within a
+        step -- its approach before it touched included -- counts as slip, and it lands on
+        the cone with ``|tau| = mu lam``: a friction force set by how far past the touch the
+        step went, i.e. by the sub-steps (and the mesh).  The path engine therefore cuts a
+        step whose newly touching points carry more than :attr:`touchdown_tol` until it
+        ends where they touch (:mod:`coilrod.path.stepping`)."""
+        if not self.nt:
+            return 0.0
+        lam_old = np.asarray(u_old, float).reshape(self.n, self.nv)[:, 9 : 9 + self.nc]
+        lam_new = np.asarray(u_new, float).reshape(self.n, self.nv)[:, 9 : 9 + self.nc]
+        new = (lam_old <= 0) & (lam_new > 0) & (self.mu_f > 0)  # (touching a rough obstacle)
+        return float(lam_new[new].max()) if new.any() else 0.0
+
     def set_reference(self, points: np.ndarray, tau: np.ndarray | None = None) -> None:
         """Set the friction's reference: contact points (n, 3) (units of L relative to the
         clamp) and friction forces per length (n, nc, 3) (EI_z / L^3 units; None: zero) of
