@@ -86,6 +86,18 @@ def _contact_entries(problem):
     return hit
 
 
+def _fractions(events: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The fractions ``a / (a - b)`` (n - 1, nc) of a step at which the points ``events``
+    reach zero (a quantity going from a to b), inf elsewhere, for :func:`piecewise_prediction`:
+    clipped to [0, 1] (np.clip, element by element) where the least is not positive; where it
+    is, unclipped (the event loop's least fraction and its tests ``<= f`` for f < 1 come out
+    the same: clipping is monotone, and a value above 1 is not below such an f either way)."""
+    out = np.where(events, a / (a - b), np.inf)
+    if not float(out.min()) > 0.0:
+        out = np.where(events, np.clip(out, 0.0, 1.0), np.inf)
+    return out
+
+
 def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_events=None):
     """Prediction of the state at ``scale + ds`` from the converged state ``u`` (size,) of the
     spatial rod ``problem``, following the path tangent of the active contact set and
@@ -159,9 +171,9 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
             g1 = problem._state_gaps(xd[None])[0, 1:]
             l0, l1 = x.reshape(n, nv)[1:, 9 : 9 + nc], xd.reshape(n, nv)[1:, 9 : 9 + nc]
             closing = ~active & (g1 < 0.0) & (g1 < g0)
-            f_close = np.where(closing, np.clip(g0 / (g0 - g1), 0.0, 1.0), np.inf)
+            f_close = _fractions(closing, g0, g1)
             releasing = active & (l1 < 0.0) & (l1 < l0)
-            f_rel = np.where(releasing, np.clip(l0 / (l0 - l1), 0.0, 1.0), np.inf)
+            f_rel = _fractions(releasing, l0, l1)
             f = min(float(f_close.min()), float(f_rel.min()))
             if not f < 1.0:
                 return xd
@@ -171,15 +183,13 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
             released = f_rel <= f
             at = (f_close <= f) | released
             where = round(left, 12)
-            for p in zip(*np.nonzero(at), strict=True):
+            for p in np.flatnonzero(at).tolist():  # (p: the point's flat index in (n-1, nc))
                 key = (p, where)
                 if key in switched:  # back and forth at one scale: degenerate, give up
                     return None
                 switched.add(key)
             active = active ^ at
-            V = x.reshape(n, nv)
-            V[1:, 9 : 9 + nc] = np.where(released, 0.0, V[1:, 9 : 9 + nc])
-            x = V.ravel()
+            x.reshape(n, nv)[1:, 9 : 9 + nc][released] = 0.0
     return None
 
 
