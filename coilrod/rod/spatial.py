@@ -852,7 +852,11 @@ class SpatialRod(DiscreteRod):
         gaps alone (no normals), the same numbers as :meth:`_contact_terms`'."""
         k, n = x.shape[:2]
         c, _ = self._contact_geometry()
-        pts = self.points(x + c[:, None] * t).reshape(-1, 3)
+        return self._gaps_at(self.points(x + c[:, None] * t).reshape(-1, 3), k, n)
+
+    def _gaps_at(self, pts: np.ndarray, k: int, n: int) -> np.ndarray:
+        """Gaps (k, n, nc) of a round section's surface, units of L, at its contact points
+        pts (k n, 3), m."""
         if self.nc == 1:  # (one obstacle: its gaps as they come, the same roundings)
             g = self._evaluate_at(0, pts, 0)[0]
             return (np.asarray(g, float).reshape(k, n, 1) / self.L) - self._half[0]
@@ -893,14 +897,48 @@ class SpatialRod(DiscreteRod):
         hit = self._gaps_memo.get((U.shape, U.tobytes()))
         if hit is None:
             if self._round:  # the tangents alone (Rodrigues on R0's first column)
-                M = self.__dict__.get("_cross_R0")
-                if M is None:
-                    M = self.__dict__["_cross_R0"] = _cross_matrix(self.R0[:, 0])
-                t = _tangents(self.rotations(U), self.R0, M)
-                hit = self._round_gaps(self.node_positions(U), t)
+                hit = self._round_state_gaps(self.rotations(U), self.node_positions(U))
             else:
                 hit = self.surface_gaps(self.node_positions(U), self.frames(U))
         return self._remember_gaps(U, hit)
+
+    def _round_state_gaps(self, phi: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """:meth:`_round_gaps` of states given by their rotation vectors phi and node
+        positions x (k, n, 3): the tangents and contact points by the compiled
+        :func:`~coilrod.rod._compiled_contact.round_points` once compiling pays (the numpy
+        operations whose roundings numpy owns stay numpy's: the same numbers), else by
+        :func:`_tangents`; (k, n, nc), units of L."""
+        cached = self.__dict__.get("_cross_R0")
+        if cached is None:
+            r = np.ascontiguousarray(self.R0[:, 0])
+            cached = self.__dict__["_cross_R0"] = (_cross_matrix(r), r)
+        M, r = cached
+        k, n = x.shape[:2]
+        if not _contact_module().points_pay(k * n):
+            return self._round_gaps(x, _tangents(phi, self.R0, M))
+        # _tangents' numpy operations, the same calls on the same arrays
+        t2 = np.einsum("...i,...i->...", phi, phi)
+        theta = np.sqrt(t2)
+        small = theta < 0.05
+        ts = np.where(small, 1.0, theta)
+        cos, sin = np.cos(ts), np.sin(ts)
+        pm, pr = phi @ M, phi @ r
+        c, _ = self._contact_geometry()
+        pts = np.empty((k * n, 3))
+        _contact_module().round_points(
+            np.ascontiguousarray(phi).reshape(-1, 3), np.ascontiguousarray(x).reshape(-1, 3),
+            t2.reshape(-1), ts.reshape(-1), cos.reshape(-1), sin.reshape(-1),
+            np.ascontiguousarray(pm).reshape(-1, 3), pr.reshape(-1), small.reshape(-1), r, c,
+            self._clamp_point(), float(self.L), pts,
+        )  # fmt: skip
+        return self._gaps_at(pts, k, n)
+
+    def _clamp_point(self) -> np.ndarray:
+        """The clamp's position (3,) as a C-contiguous float array (the compiled points')."""
+        out = self.__dict__.get("_clamp_c")
+        if out is None:
+            out = self.__dict__["_clamp_c"] = np.ascontiguousarray(self.clamp, dtype=float)
+        return out
 
     def _remember_gaps(self, U: np.ndarray, gaps: np.ndarray) -> np.ndarray:
         """Remember the surface gaps (k, n, nc) of states U (k, size) for
