@@ -131,21 +131,24 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     band = base.copy(order="F")  # the rates' band, unfactorised: the last rate's contact rows
     last = []  # the last rate's active set, factors and pivots
 
-    def rate(active):
+    w = 6 + nc  # the flat views of the contact rows' entries: one row of w per point
+    bf, cf = bi.reshape(-1, w), ci.reshape(-1, w)
+    af, nf = active_rows.reshape(-1, w), inactive_rows.reshape(-1, w)
+
+    def rate(active, flipped=None):
         if not last:
             band[bi, ci] = np.where(active[..., None], active_rows, inactive_rows)
             ab, ipiv, start = band.copy(order="F"), np.empty(band.shape[1], np.int64), 0
         else:
-            # an event switches a few contact rows: the factors' columns before the first
-            # column of those rows' entries are the last rate's, kept (band_lu restarts
-            # there, bitwise the factorisation from column 0); the others the new band's
-            was, ab, ipiv = last
-            flipped = active != was
-            band[bi[flipped], ci[flipped]] = np.where(
-                active[flipped][:, None], active_rows[flipped], inactive_rows[flipped]
-            )
-            cols = ci[flipped]
-            start = int(cols.min()) if cols.size else band.shape[1]
+            # an event switches a few contact rows (flipped: the points' flat indices): the
+            # factors' columns before the first column of those rows' entries are the last
+            # rate's, kept (band_lu restarts there, bitwise the factorisation from column
+            # 0); the others the new band's
+            _, ab, ipiv = last
+            cols = cf[flipped]
+            band[bf[flipped], cols] = np.where(active.reshape(-1)[flipped, None], af[flipped],
+                                               nf[flipped])  # fmt: skip
+            start = int(cols.min()) if flipped.size else band.shape[1]
             ab[:, start:] = band[:, start:]
         last[:] = ()
         if band_lu(ab, kl, ku, ipiv, start) > 0:  # an exactly zero pivot: singular
@@ -160,10 +163,11 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     active = problem.kappa * g[1:] < lam0
     x, left = u.copy(), 1.0
     switched = set()
+    flipped = None  # the points switched at the last event (flat indices in (n-1, nc))
     g0 = g[1:]
     with np.errstate(all="ignore"):  # (one context for the loop: its entry costs as an op)
         for _ in range(max_events):
-            r = rate(active)
+            r = rate(active, flipped)
             if r is None:
                 return None
             d = left * ds * r
@@ -183,7 +187,8 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
             released = f_rel <= f
             at = (f_close <= f) | released
             where = round(left, 12)
-            for p in np.flatnonzero(at).tolist():  # (p: the point's flat index in (n-1, nc))
+            flipped = np.flatnonzero(at)
+            for p in flipped.tolist():
                 key = (p, where)
                 if key in switched:  # back and forth at one scale: degenerate, give up
                     return None
