@@ -894,13 +894,14 @@ class SpatialRod(DiscreteRod):
         frames, (k, n, nc), units of L; the last few stacks remembered (a load step's event
         test and its prediction ask for the converged state's), read-only."""
         U = np.atleast_2d(U)
-        hit = self._gaps_memo.get((U.shape, U.tobytes()))
+        key = (U.shape, U.tobytes())
+        hit = self._gaps_memo.get(key)
         if hit is None:
             if self._round:  # the tangents alone (Rodrigues on R0's first column)
                 hit = self._round_state_gaps(self.rotations(U), self.node_positions(U))
             else:
                 hit = self.surface_gaps(self.node_positions(U), self.frames(U))
-        return self._remember_gaps(U, hit)
+        return self._remember_gaps(U, hit, key)
 
     def _round_state_gaps(self, phi: np.ndarray, x: np.ndarray) -> np.ndarray:
         """:meth:`_round_gaps` of states given by their rotation vectors phi and node
@@ -940,12 +941,14 @@ class SpatialRod(DiscreteRod):
             out = self.__dict__["_clamp_c"] = np.ascontiguousarray(self.clamp, dtype=float)
         return out
 
-    def _remember_gaps(self, U: np.ndarray, gaps: np.ndarray) -> np.ndarray:
+    def _remember_gaps(self, U: np.ndarray, gaps: np.ndarray, key=None) -> np.ndarray:
         """Remember the surface gaps (k, n, nc) of states U (k, size) for
         :meth:`_state_gaps` (the last four stacks; a linearization's too: a converged
-        state's event test then needs no search), read-only; returns them."""
+        state's event test then needs no search), read-only; returns them.  ``key``: U's
+        memory key ``(U.shape, U.tobytes())`` if at hand."""
         gaps.flags.writeable = False
-        return _remember(self._gaps_memo, (U.shape, U.tobytes()), gaps, size=4)
+        key = (U.shape, U.tobytes()) if key is None else key
+        return _remember(self._gaps_memo, key, gaps, size=4)
 
     def contact_state(self, U: np.ndarray, frames: np.ndarray | None = None):
         """Contact of states (k, size) at the contact points (:meth:`contact_points`): force
