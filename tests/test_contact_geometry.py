@@ -374,6 +374,14 @@ def test_vessel_takes_the_compiled_search_when_it_pays(monkeypatch):
     assert calls == [9]
     obstacles()["spline"].evaluate(p, 2)
     assert calls == [9]
+    # a gaps-only search (order 0: no derivatives kept), then one with them, remembered
+    v._memo().clear()
+    for order in (0, 2, 0, 1):
+        got, want = v.evaluate(p, order), twin._evaluate_numpy(p, order)
+        np.testing.assert_allclose(got.gap, want[0], rtol=0, atol=16 * eps * np.abs(p).max())
+        for a, b in zip(got[1:], want[1:], strict=True):
+            assert (a is None and b is None) or np.allclose(a, b, 0, tol * np.abs(b).max())
+    assert calls == [9, 9, 9]
 
 
 def test_compiled_search_is_rented_until_compiling_pays(monkeypatch):

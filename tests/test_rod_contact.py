@@ -461,23 +461,33 @@ def test_compiled_contact_terms_are_the_numpy_twins(monkeypatch):
     # _contact_blocks, _scatter) on the state of the test above and a perturbed one as a
     # stack of two, for both complementarity functions and every row the gap's: the same
     # residual, the band to rounding, the same second variation; and a load step's
-    # prediction band from the kept kernel inputs is the every-rows linearization's
+    # prediction band from the kept kernel inputs is the every-rows linearization's.  The
+    # compiled contact points (round_points, .py_func) give bitwise the numpy twin's surface
+    # gaps (SpatialRod._state_gaps; so3's series at a few nodes and at all), and both the
+    # gaps of the frames' first columns (expm) to rounding
     import coilrod.rod._compiled_contact as cc
     import coilrod.rod._compiled_spatial as cs
 
     P, u, rng = _wall_and_bend_problem(Circle(2e-3))
     U = np.stack([u, u + 1e-3 * rng.standard_normal(P.size)])
     S = np.array([0.7, 0.5])
+    G = np.stack([u, 1e-3 * u])  # (every rotation below so3's series switch in the second)
     twin = {}
     for ready in (False, True):
         monkeypatch.setattr(cc._rental, "ready", ready)
+        monkeypatch.setattr(cc._points_rental, "ready", ready)
         monkeypatch.setattr(cc, "COMPILE_AFTER", np.inf)
+        monkeypatch.setattr(cc, "POINTS_COMPILE_AFTER", np.inf)
         monkeypatch.setattr(cc._rental, "held", lambda: False)
+        monkeypatch.setattr(cc._points_rental, "held", lambda: False)
         if ready:  # the kernel and its helpers as Python
             for mod, names in ((cc, ("_cross", "_hat", "_mm", "_sym_term", "_exp_and_jl",
-                                     "_put", "contact_core")), (cs, ("_hat",))):  # fmt: skip
+                                     "_put", "contact_core", "round_points")),
+                               (cs, ("_hat",))):  # fmt: skip
                 for name in names:
                     monkeypatch.setattr(mod, name, getattr(mod, name).py_func)
+        P._gaps_memo.clear()
+        twin.setdefault("gaps", []).append(np.array(P._state_gaps(G)))
         for mode in ("min", "fb", "every"):
             P.ncp, P._every_rows = ("min", True) if mode == "every" else (mode, False)
             lin = P.linearize(U, S)
@@ -501,6 +511,10 @@ def test_compiled_contact_terms_are_the_numpy_twins(monkeypatch):
         np.testing.assert_allclose(Dc, D, rtol=0, atol=1e-14 * np.abs(D).max())
         np.testing.assert_array_equal(Ec, E)  # (no contact terms)
     assert (twin["min"][0][2] != 0).sum() < (twin["fb"][0][2] != 0).sum()  # (min: 0 or 1)
+    gaps, gaps_c = twin["gaps"]
+    np.testing.assert_array_equal(gaps_c, gaps)
+    frames = P.surface_gaps(P.node_positions(G), P.frames(G))
+    np.testing.assert_allclose(gaps, frames, rtol=0, atol=1e-14)
     (band, rate), (band_c, rate_c) = twin["kept"]
     np.testing.assert_allclose(band_c, band, rtol=0, atol=1e-14 * np.abs(band).max())
     np.testing.assert_array_equal(rate_c, rate)

@@ -159,6 +159,8 @@ def _compiled():
 #: Point sets whose nearest-point search a vessel remembers (:meth:`Vessel._located`).
 _LOCATED_KEPT = 4
 _EYE3 = np.eye(3)
+#: The compiled search's derivative outputs at order 0 (empty: never written).
+_NO_GRAD, _NO_HESS = np.empty((0, 3)), np.empty((0, 3, 3))
 
 
 class Vessel(Obstacle):
@@ -726,19 +728,25 @@ class Vessel(Obstacle):
     def _evaluate_compiled(self, points: np.ndarray, order: int):
         """:meth:`_evaluate` by the compiled all-pairs search and evaluation
         (:mod:`coilrod.contact._compiled_search`; the numpy search is its twin), remembered
-        like :meth:`_located`'s: (gap, piece, parameter, gradient, hessian)."""
+        like :meth:`_located`'s: (gap, piece, parameter, gradient, hessian), the last two
+        None after an order-0 call (the gaps alone; an order >= 1 call then searches anew)."""
         key = points.tobytes()
         memo = self._memo()
         hit = memo.get(key)
-        if hit is None or len(hit) != 5:  # (not the numpy search's)
+        # (not the numpy search's; an order-0 search's has no derivatives: searched anew)
+        if hit is None or len(hit) != 5 or (order >= 1 and hit[3] is None):
             j, kind, geom = self._search_inputs()
             n = len(points)
             g, col, u = np.empty(n), np.empty(n, dtype=np.int64), np.empty(n)
-            grad, hess = np.empty((n, 3)), np.empty((n, 3, 3))
+            if order == 0:  # the gaps alone (the same numbers: the derivatives come after)
+                grad, hess = _NO_GRAD, _NO_HESS
+            else:
+                grad, hess = np.empty((n, 3)), np.empty((n, 3, 3))
             _compiled().closed_form_search(
-                kernel_input(points), 2, kind, geom, self._rho_scale, ON_LINE, g, col, u, grad, hess
-            )
-            hit = (g, j[col], u, grad, hess)
+                kernel_input(points), 0 if order == 0 else 2, kind, geom, self._rho_scale,
+                ON_LINE, g, col, u, grad, hess,
+            )  # fmt: skip
+            hit = (g, j[col], u) + ((None, None) if order == 0 else (grad, hess))
         remember(memo, key, hit, _LOCATED_KEPT)
         return (
             hit[0].copy(),

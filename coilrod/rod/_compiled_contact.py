@@ -15,6 +15,12 @@ The numpy twin is :meth:`SpatialRod._contact_rows`, :meth:`SpatialRod._contact_b
 relative): it runs until compiling pays (:data:`COMPILE_AFTER`, ski rental) or numba's cache
 holds the kernel.  Compiled with numba's numpy error model (inf and NaN as in numpy).
 
+A second kernel, :func:`round_points`, forms the contact points of a round section's
+states for their surface gaps (:meth:`SpatialRod._state_gaps`: the contact predictor's event
+loop asks once per event): the node tangents by Rodrigues' formula and the points after the
+numpy operations whose roundings numpy owns, bitwise :func:`coilrod.rod.spatial._tangents`
+and the points; its own ski rental (:data:`POINTS_COMPILE_AFTER`).
+
 The small helpers come from :mod:`coilrod.rod._compiled_spatial`: numba's cache checks only
 the defining file, so the kernel's cache entry is tied to both files' contents
 (:func:`coils._numba_cache.tie_to_sources`): a change of either compiles it anew.
@@ -33,7 +39,15 @@ from . import _compiled_spatial
 from ._compiled_spatial import _cross, _hat, _inner
 from .so3 import _SMALL  # the spatial pass's series switch
 
-__all__ = ["COMPILE_AFTER", "MODES", "compiled_pays", "contact_core"]
+__all__ = [
+    "COMPILE_AFTER",
+    "MODES",
+    "POINTS_COMPILE_AFTER",
+    "compiled_pays",
+    "contact_core",
+    "points_pay",
+    "round_points",
+]
 
 
 # the 3x3 products, exp/J_l and symmetric term of the contact terms (the spatial pass now
@@ -280,6 +294,68 @@ def _put(ab, kv, r0, c0, M):
     for a in range(3):
         for b in range(3):
             ab[kv + r0 + a - (c0 + b), c0 + b] = M[a, b]
+
+
+#: Estimated CPU seconds of numpy contact points (:func:`coilrod.rod.spatial._tangents` and
+#: the points) after which :func:`round_points` is used (ski rental, its own: its cache entry
+#: is not :func:`contact_core`'s); 0 compiles at the first call, ``math.inf`` never.
+POINTS_COMPILE_AFTER = 0.5
+#: Measured cost of the numpy twin (the tangents and points): per call and per node, s.
+_POINTS_CALL_S, _POINTS_NODE_S = 4e-5, 5e-8
+#: The ski rental of :func:`round_points`.
+_points_rental = Rental(__name__, lambda: round_points, "POINTS_COMPILE_AFTER", in_process=True)
+
+
+def points_pay(nodes: int) -> bool:
+    """Whether :func:`round_points` should form the contact points of ``nodes`` nodes in
+    all: True once compiling pays, else the numpy twin's estimated cost is charged."""
+    return _points_rental.ready or _points_rental.rent(_POINTS_CALL_S + _POINTS_NODE_S * nodes)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def round_points(phi, x, t2, ts, cos, sin, pm, pr, small, r, c, clamp, scale, out):
+    """Contact points ``clamp + scale (x + c t)`` (m) of nodes with positions x and tangents
+    ``t = expm(phi) r`` (Rodrigues' formula; so3's series where ``small``), written into out,
+    compiled (``round_points.py_func``: the same in plain Python): the arithmetic after the
+    numpy operations of :func:`coilrod.rod.spatial._tangents` whose roundings numpy owns (its
+    sums, square root, trigonometry and products with the cross matrix), in the same order.
+
+    Parameters
+    ----------
+    phi, x : ndarray, shape (m, 3)
+        Rotation vectors (rad) and node positions (units of L) of m = k n nodes.
+    t2, ts, cos, sin, pm, pr : ndarray
+        ``|phi|^2``, the angle (1 where ``small``), its cosine and sine (m,), ``phi @ M``
+        (m, 3) with ``v @ M = v x r``, and ``phi @ r`` (m,).
+    small : ndarray of bool, shape (m,)
+        Angle below so3's series switch.
+    r : ndarray, shape (3,)
+        The clamp frame's tangent.
+    c : ndarray, shape (n,)
+        Offsets of the contact points along the tangents (units of L); node i is c[i % n].
+    clamp : ndarray, shape (3,)
+        The clamp's position, m.
+    scale : float
+        The rod's length L, m.
+    out : ndarray, shape (m, 3)
+        Out: the points, m.
+    """
+    m, n = phi.shape[0], c.shape[0]
+    for i in range(m):
+        if small[i]:
+            s2 = t2[i]
+            b = 0.5 - s2 / 24 * (1 - s2 / 30 * (1 - s2 / 56))
+            a = 1 - s2 / 6 * (1 - s2 / 20 * (1 - s2 / 42))
+            cs = 1.0 - b * s2
+        else:
+            a = sin[i] / ts[i]
+            b = (1.0 - cos[i]) / (ts[i] * ts[i])
+            cs = cos[i]
+        bp = b * pr[i]
+        ci = c[i % n]
+        for e in range(3):
+            t = cs * r[e] + a * pm[i, e] + bp * phi[i, e]
+            out[i, e] = clamp[e] + scale * (x[i, e] + ci * t)
 
 
 # the cache entry also goes stale when the helpers of _compiled_spatial change (they are

@@ -86,6 +86,18 @@ def _contact_entries(problem):
     return hit
 
 
+def _fractions(events: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The fractions ``a / (a - b)`` (n - 1, nc) of a step at which the points ``events``
+    reach zero (a quantity going from a to b), inf elsewhere, for :func:`piecewise_prediction`:
+    clipped to [0, 1] (np.clip, element by element) where the least is not positive; where it
+    is, unclipped (the event loop's least fraction and its tests ``<= f`` for f < 1 come out
+    the same: clipping is monotone, and a value above 1 is not below such an f either way)."""
+    out = np.where(events, a / (a - b), np.inf)
+    if not float(out.min()) > 0.0:
+        out = np.where(events, np.clip(out, 0.0, 1.0), np.inf)
+    return out
+
+
 def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_events=None):
     """Prediction of the state at ``scale + ds`` from the converged state ``u`` (size,) of the
     spatial rod ``problem``, following the path tangent of the active contact set and
@@ -119,21 +131,24 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     band = base.copy(order="F")  # the rates' band, unfactorised: the last rate's contact rows
     last = []  # the last rate's active set, factors and pivots
 
-    def rate(active):
+    w = 6 + nc  # the flat views of the contact rows' entries: one row of w per point
+    bf, cf = bi.reshape(-1, w), ci.reshape(-1, w)
+    af, nf = active_rows.reshape(-1, w), inactive_rows.reshape(-1, w)
+
+    def rate(active, flipped=None):
         if not last:
             band[bi, ci] = np.where(active[..., None], active_rows, inactive_rows)
             ab, ipiv, start = band.copy(order="F"), np.empty(band.shape[1], np.int64), 0
         else:
-            # an event switches a few contact rows: the factors' columns before the first
-            # column of those rows' entries are the last rate's, kept (band_lu restarts
-            # there, bitwise the factorisation from column 0); the others the new band's
-            was, ab, ipiv = last
-            flipped = active != was
-            band[bi[flipped], ci[flipped]] = np.where(
-                active[flipped][:, None], active_rows[flipped], inactive_rows[flipped]
-            )
-            cols = ci[flipped]
-            start = int(cols.min()) if cols.size else band.shape[1]
+            # an event switches a few contact rows (flipped: the points' flat indices): the
+            # factors' columns before the first column of those rows' entries are the last
+            # rate's, kept (band_lu restarts there, bitwise the factorisation from column
+            # 0); the others the new band's
+            _, ab, ipiv = last
+            cols = cf[flipped]
+            band[bf[flipped], cols] = np.where(active.reshape(-1)[flipped, None], af[flipped],
+                                               nf[flipped])  # fmt: skip
+            start = int(cols.min()) if flipped.size else band.shape[1]
             ab[:, start:] = band[:, start:]
         last[:] = ()
         if band_lu(ab, kl, ku, ipiv, start) > 0:  # an exactly zero pivot: singular
@@ -148,10 +163,11 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     active = problem.kappa * g[1:] < lam0
     x, left = u.copy(), 1.0
     switched = set()
+    flipped = None  # the points switched at the last event (flat indices in (n-1, nc))
     g0 = g[1:]
     with np.errstate(all="ignore"):  # (one context for the loop: its entry costs as an op)
         for _ in range(max_events):
-            r = rate(active)
+            r = rate(active, flipped)
             if r is None:
                 return None
             d = left * ds * r
@@ -159,9 +175,9 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
             g1 = problem._state_gaps(xd[None])[0, 1:]
             l0, l1 = x.reshape(n, nv)[1:, 9 : 9 + nc], xd.reshape(n, nv)[1:, 9 : 9 + nc]
             closing = ~active & (g1 < 0.0) & (g1 < g0)
-            f_close = np.where(closing, np.clip(g0 / (g0 - g1), 0.0, 1.0), np.inf)
+            f_close = _fractions(closing, g0, g1)
             releasing = active & (l1 < 0.0) & (l1 < l0)
-            f_rel = np.where(releasing, np.clip(l0 / (l0 - l1), 0.0, 1.0), np.inf)
+            f_rel = _fractions(releasing, l0, l1)
             f = min(float(f_close.min()), float(f_rel.min()))
             if not f < 1.0:
                 return xd
@@ -171,15 +187,14 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
             released = f_rel <= f
             at = (f_close <= f) | released
             where = round(left, 12)
-            for p in zip(*np.nonzero(at), strict=True):
+            flipped = np.flatnonzero(at)
+            for p in flipped.tolist():
                 key = (p, where)
                 if key in switched:  # back and forth at one scale: degenerate, give up
                     return None
                 switched.add(key)
             active = active ^ at
-            V = x.reshape(n, nv)
-            V[1:, 9 : 9 + nc] = np.where(released, 0.0, V[1:, 9 : 9 + nc])
-            x = V.ravel()
+            x.reshape(n, nv)[1:, 9 : 9 + nc][released] = 0.0
     return None
 
 

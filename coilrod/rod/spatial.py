@@ -108,19 +108,39 @@ def _outer(a, b):
     return a[..., :, None] * b[..., None, :]
 
 
-def _tangents(phi: np.ndarray, R0: np.ndarray) -> np.ndarray:
+#: The small-angle series of :func:`_tangents`, rows sin(t)/t and (1 - cos t)/t^2 side by
+#: side: ``C0 - t^2/C3 (1 - t^2/C2 (1 - t^2/C1))`` (so3's, term by term).
+_SERIES_C0 = np.array([[1.0], [0.5]])
+_SERIES_C1 = np.array([[42.0], [56.0]])
+_SERIES_C2 = np.array([[20.0], [30.0]])
+_SERIES_C3 = np.array([[6.0], [24.0]])
+
+
+def _cross_matrix(r: np.ndarray) -> np.ndarray:
+    """M (3, 3) with ``v @ M = v x r`` (the rows the unit vectors' cross products with r)."""
+    return np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+
+
+def _tangents(phi: np.ndarray, R0: np.ndarray, M: np.ndarray | None = None) -> np.ndarray:
     """Node tangents ``expm(phi) R0 e_1`` (..., 3) of rotation vectors phi (..., 3) by
     Rodrigues' formula on the vector, ``cos(t) r + sin(t)/t phi x r + (1 - cos t)/t^2
     (phi . r) phi`` with ``r = R0 e_1`` and ``t = |phi|`` (the frames' first column without
-    the whole frames; the same to rounding; so3's series below 0.05 rad)."""
+    the whole frames; the same to rounding; so3's series below 0.05 rad).  ``M``:
+    ``_cross_matrix(r)`` if at hand."""
     r = R0[:, 0]
     t2 = np.einsum("...i,...i->...", phi, phi)
     theta = np.sqrt(t2)
     small = theta < 0.05
     ts = np.where(small, 1.0, theta)
-    cos = np.cos(ts)
-    a = np.sin(ts) / ts
-    b = (1.0 - cos) / (ts * ts)
+    # cos t, sin(t)/t and (1 - cos t)/t^2 as the rows of one array (the series' nodes then
+    # written in one scatter; each entry by the same operations, the same roundings)
+    q = np.empty((3,) + t2.shape)
+    cos, a, b = q
+    np.cos(ts, out=cos)
+    np.sin(ts, out=a)
+    a /= ts
+    np.subtract(1.0, cos, out=b)
+    b /= ts * ts
     idx = np.flatnonzero(small)  # (the clamp's node at least)
     if idx.size <= 4:  # a few: in Python floats (IEEE arithmetic: numpy's roundings)
         af, bf, cf, tf = a.reshape(-1), b.reshape(-1), cos.reshape(-1), t2.reshape(-1)
@@ -132,13 +152,18 @@ def _tangents(phi: np.ndarray, R0: np.ndarray) -> np.ndarray:
             cf[i] = 1.0 - bs * s2
     else:
         s2 = t2.reshape(-1)[idx]
-        bs = 0.5 - s2 / 24 * (1 - s2 / 30 * (1 - s2 / 56))
-        a.reshape(-1)[idx] = 1 - s2 / 6 * (1 - s2 / 20 * (1 - s2 / 42))
-        b.reshape(-1)[idx] = bs
-        cos.reshape(-1)[idx] = 1.0 - bs * s2
-    # phi x r = phi @ M, the rows of M the unit vectors' cross products with r
-    M = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
-    return cos[..., None] * r + a[..., None] * (phi @ M) + (b * (phi @ r))[..., None] * phi
+        ser = np.empty((3, idx.size))
+        ser[1:] = _SERIES_C0 - s2 / _SERIES_C3 * (1 - s2 / _SERIES_C2 * (1 - s2 / _SERIES_C1))
+        np.multiply(ser[2], s2, out=ser[0])
+        np.subtract(1.0, ser[0], out=ser[0])
+        q.reshape(3, -1)[:, idx] = ser
+    if M is None:
+        M = _cross_matrix(r)
+    out = cos[..., None] * r
+    out += a[..., None] * (phi @ M)
+    b *= phi @ r
+    out += b[..., None] * phi
+    return out
 
 
 def _sym_term(a, b):
@@ -852,7 +877,11 @@ class SpatialRod(DiscreteRod):
         gaps alone (no normals), the same numbers as :meth:`_contact_terms`'."""
         k, n = x.shape[:2]
         c, _ = self._contact_geometry()
-        pts = self.points(x + c[:, None] * t).reshape(-1, 3)
+        return self._gaps_at(self.points(x + c[:, None] * t).reshape(-1, 3), k, n)
+
+    def _gaps_at(self, pts: np.ndarray, k: int, n: int) -> np.ndarray:
+        """Gaps (k, n, nc) of a round section's surface, units of L, at its contact points
+        pts (k n, 3), m."""
         if self.nc == 1:  # (one obstacle: its gaps as they come, the same roundings)
             g = self._evaluate_at(0, pts, 0)[0]
             return (np.asarray(g, float).reshape(k, n, 1) / self.L) - self._half[0]
@@ -890,21 +919,61 @@ class SpatialRod(DiscreteRod):
         frames, (k, n, nc), units of L; the last few stacks remembered (a load step's event
         test and its prediction ask for the converged state's), read-only."""
         U = np.atleast_2d(U)
-        hit = self._gaps_memo.get((U.shape, U.tobytes()))
+        key = (U.shape, U.tobytes())
+        hit = self._gaps_memo.get(key)
         if hit is None:
             if self._round:  # the tangents alone (Rodrigues on R0's first column)
-                t = _tangents(self.rotations(U), self.R0)
-                hit = self._round_gaps(self.node_positions(U), t)
+                hit = self._round_state_gaps(self.rotations(U), self.node_positions(U))
             else:
                 hit = self.surface_gaps(self.node_positions(U), self.frames(U))
-        return self._remember_gaps(U, hit)
+        return self._remember_gaps(U, hit, key)
 
-    def _remember_gaps(self, U: np.ndarray, gaps: np.ndarray) -> np.ndarray:
+    def _round_state_gaps(self, phi: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """:meth:`_round_gaps` of states given by their rotation vectors phi and node
+        positions x (k, n, 3): the tangents and contact points by the compiled
+        :func:`~coilrod.rod._compiled_contact.round_points` once compiling pays (the numpy
+        operations whose roundings numpy owns stay numpy's: the same numbers), else by
+        :func:`_tangents`; (k, n, nc), units of L."""
+        cached = self.__dict__.get("_cross_R0")
+        if cached is None:
+            r = np.ascontiguousarray(self.R0[:, 0])
+            cached = self.__dict__["_cross_R0"] = (_cross_matrix(r), r)
+        M, r = cached
+        k, n = x.shape[:2]
+        if not _contact_module().points_pay(k * n):
+            return self._round_gaps(x, _tangents(phi, self.R0, M))
+        # _tangents' numpy operations, the same calls on the same arrays
+        t2 = np.einsum("...i,...i->...", phi, phi)
+        theta = np.sqrt(t2)
+        small = theta < 0.05
+        ts = np.where(small, 1.0, theta)
+        cos, sin = np.cos(ts), np.sin(ts)
+        pm, pr = phi @ M, phi @ r
+        c, _ = self._contact_geometry()
+        pts = np.empty((k * n, 3))
+        _contact_module().round_points(
+            np.ascontiguousarray(phi).reshape(-1, 3), np.ascontiguousarray(x).reshape(-1, 3),
+            t2.reshape(-1), ts.reshape(-1), cos.reshape(-1), sin.reshape(-1),
+            np.ascontiguousarray(pm).reshape(-1, 3), pr.reshape(-1), small.reshape(-1), r, c,
+            self._clamp_point(), float(self.L), pts,
+        )  # fmt: skip
+        return self._gaps_at(pts, k, n)
+
+    def _clamp_point(self) -> np.ndarray:
+        """The clamp's position (3,) as a C-contiguous float array (the compiled points')."""
+        out = self.__dict__.get("_clamp_c")
+        if out is None:
+            out = self.__dict__["_clamp_c"] = np.ascontiguousarray(self.clamp, dtype=float)
+        return out
+
+    def _remember_gaps(self, U: np.ndarray, gaps: np.ndarray, key=None) -> np.ndarray:
         """Remember the surface gaps (k, n, nc) of states U (k, size) for
         :meth:`_state_gaps` (the last four stacks; a linearization's too: a converged
-        state's event test then needs no search), read-only; returns them."""
+        state's event test then needs no search), read-only; returns them.  ``key``: U's
+        memory key ``(U.shape, U.tobytes())`` if at hand."""
         gaps.flags.writeable = False
-        return _remember(self._gaps_memo, (U.shape, U.tobytes()), gaps, size=4)
+        key = (U.shape, U.tobytes()) if key is None else key
+        return _remember(self._gaps_memo, key, gaps, size=4)
 
     def contact_state(self, U: np.ndarray, frames: np.ndarray | None = None):
         """Contact of states (k, size) at the contact points (:meth:`contact_points`): force
