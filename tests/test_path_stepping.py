@@ -498,6 +498,9 @@ class TestSingularTangent:
         toy = smooth_cubic(1.0, 0.0, 1.0)
         run = follow_load(toy, -np.ones(1), [-0.5, 0.0, 0.5, 1.0], start_scale=-1.0)
         assert run.events == []
+        # after the landing at the inflection the steps grow again (a friction touch-down's
+        # step memory once shared the landing's name: 65588 steps where 76 do)
+        assert run.steps < 200
 
 
 class TestStabilityWindow:

@@ -450,7 +450,7 @@ class _Tracker:
         locating = False  # a change of stability lies ahead: bisect, do not grow the step
         seen_at = None  # the trial scale where the change was seen
         residual = np.inf
-        landed = None  # (scale, force) of the last trial cut for touching too hard
+        touch = None  # (scale, force) of the last trial cut for touching too hard
         resume = None  # the step's length before such cuts (resumed once the points touched)
         while True:
             remaining = target - cur.scale
@@ -476,13 +476,13 @@ class _Tracker:
                 # friction: end the step where the new contact points touch
                 if resume is None:
                     resume = h
-                h = self.touchdown_step(cur, h, s1, force, landed)
-                landed = (s1, force)
+                h = self.touchdown_step(cur, h, s1, force, touch)
+                touch = (s1, force)
                 self.cuts += 1
                 locating, seen_at = True, s1
                 continue
             if ok and force > 0:
-                landed = None  # (touched: the next touch-down is another one)
+                touch = None  # (touched: the next touch-down is another one)
             if ok and opts.stability:
                 stab = float(self.P.stability(res.lin)[0])
                 if self.stable(stab) != self.stable(cur.stability):
@@ -515,7 +515,7 @@ class _Tracker:
                     # next trial often failed past the next touch: at most 64 landing steps)
                     h = math.copysign(min(abs(resume), 64.0 * abs(taken)), h)
                     resume, locating = None, False
-                elif landed is not None:  # short of the touch aimed at: the same step again
+                elif touch is not None:  # short of the touch aimed at: the same step again
                     h = taken
                 continue
             h /= 2.0
