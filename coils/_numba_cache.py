@@ -273,7 +273,7 @@ class Rental:
         Estimated CPU seconds of the numpy calls charged so far (:meth:`charge`).
     ready : bool
         True once compiling has paid (:meth:`pays` returned True): the compiled kernel runs
-        from then on.  Callers that compile anyway set it.
+        from then on.  Callers that compile anyway call :meth:`buy`.
     """
 
     def __init__(self, owner: str, kernel, threshold: str = "COMPILE_AFTER", in_process=False):
@@ -304,7 +304,7 @@ class Rental:
             price = self.threshold
             if self.spent < price and self.spent + seconds <= price and not self.held():
                 return False
-            self._buy()
+            self.buy()
         return True
 
     def rent(self, seconds: float) -> bool:
@@ -326,10 +326,11 @@ class Rental:
         runs from the next call on (compiling once is cheaper than renting to the end).
         The cache is not asked (:meth:`pays` does at the next call)."""
         if not self.ready and self.spent + seconds > self.threshold:
-            self._buy()
+            self.buy()
 
-    def _buy(self) -> None:
-        """The compiled kernel runs from now on; a damaged cache index is removed first
-        (:func:`_check_index`: numba would raise from inside the first call)."""
+    def buy(self) -> None:
+        """The compiled kernel runs from now on (:meth:`pays` calls it when compiling pays; a
+        caller that runs the compiled kernel anyway calls it too); a damaged cache index is
+        removed first (:func:`_check_index`)."""
         _check_index(self._kernel())
         self.ready = True
