@@ -93,9 +93,9 @@ def test_blocked_kernel_equals_the_pointwise_one():
     assert np.abs(B - Bp).max() <= 1e-14 * np.abs(B).max()
     assert np.abs(G - Gp).max() <= 1e-14 * np.abs(G).max()
     np.testing.assert_array_equal(model.B(X), B)
-    X[200] = model.positions[10]
+    X[200] = model.positions[10]  # (beyond the workspace: checked without it)
     with pytest.raises(ValueError, match=r"points\[200\].*on source 2 of Coil_1"):
-        model.gradient(X)
+        model.replace(workspace=None).gradient(X)
 
 
 def test_cardiomag_has_an_offset_field():
@@ -188,7 +188,7 @@ def test_current_limits():
 
 # -- bad input ------------------------------------------------------------------------------------
 def test_point_on_a_source_is_named():
-    model = presets.navion()
+    model = presets.navion().replace(workspace=None)  # (the sources lie beyond it)
     on = model.positions[4]  # Coil_1, its second source
     with pytest.raises(ValueError, match=r"points\[1\].*on source 1 of Coil_1 \(model Navion"):
         model.with_currents([1.0, 1.0, 1.0]).B([[0.0, 0.0, 0.0], on])
@@ -261,3 +261,44 @@ def test_dipole_kernels_compile_once_for_sealed_or_writable_arrays():
         assert np.array_equal(a, b)
     assert len(dipoles._FAST.signatures) == 1
     assert len(dipoles._KERNEL.signatures) == 1
+
+
+def test_a_calibrated_model_refuses_points_far_outside_its_workspace():
+    # h-brk3: 1000 km away Navion answered B ~ 1e-23 T, and currents_for (no limits) ~7.7e21 A.
+    # The workspace is the file's Workspace_Dimensions (read here by PyYAML), accepted up to
+    # half its extent beyond each face; fields, gradients, unit fields and current solves
+    doc = yaml.safe_load(_data_file(NAVION_FILE).read_text())
+    box = np.array(doc["Workspace_Dimensions"], dtype=float)
+    model = presets.navion().with_limits(np.inf)
+    assert model.workspace.tolist() == box.tolist()
+    lo, hi = box.T
+    edge = np.array([hi + 0.5 * (hi - lo), lo - 0.5 * (hi - lo)])  # corners of what is accepted
+    driven = model.with_currents([1.0, -2.0, 0.5])
+    anywhere = driven.replace(workspace=None)
+    np.testing.assert_array_equal(driven.B_and_gradient(edge)[1], anywhere.gradient(edge))
+    beyond = np.array([[0.0, 0.0, 0.0], edge[1] * (1 + 1e-9)])
+    with pytest.raises(
+        ValueError, match=r"points\[1\] = \(-235, -202, -243.2\) mm is outside"
+    ) as err:
+        driven.B(beyond)
+    assert "in mm?" not in str(err.value)
+    far = (1e6, 0.0, 0.0)
+    ws = r"\(1e\+09, 0, 0\) mm is outside the calibrated workspace \(model Navion.*: x in \[-123,"
+    for call in (driven.B, driven.gradient, driven.hessian, model.unit_fields, model.fixed_field):
+        with pytest.raises(ValueError, match=r"points\[0\] = " + ws):
+            call(far)
+    with pytest.raises(ValueError, match=r"at = " + ws):
+        model.currents_for(B=(0.0, 0.0, 0.02), at=far)
+    with pytest.raises(ValueError, match=r"points\[0\] = \(3e\+04, 0, 0\) mm.*points in mm"):
+        driven.B([30.0, 0.0, 0.0])  # 30 mm meant
+    assert np.isfinite(anywhere.B(far)).all()  # without a workspace: the dipole sum anywhere
+
+
+def test_malformed_workspace_is_named(tmp_path):
+    path = tmp_path / "bad_model.yaml"
+    path.write_text(GOOD + "Workspace_Dimensions: [[-0.1, 0.1], [0.1, -0.1], [-0.1, 0.1]]\n")
+    with pytest.raises(ValueError, match=r"bad_model.yaml: Workspace_Dimensions must be .*min bel"):
+        MPEM.from_yaml(path)
+    path.write_text(GOOD + "Workspace_Dimensions: [[-0.1, 0.1], [-0.1, 0.1]]\n")
+    with pytest.raises(ValueError, match=r"bad_model.yaml: Workspace_Dimensions must be 3 pairs"):
+        MPEM.from_yaml(path)
