@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 import yaml
 
+import coils
 from coils import MPEM, presets
 from coils.presets import CARDIOMAG_FILE, NAVION_FILE, OCTOMAG_FILE, _data_file
 
@@ -301,6 +302,11 @@ def test_a_calibrated_model_refuses_points_far_outside_its_workspace():
     with pytest.raises(ValueError, match=r"points\[0\] = \(3e\+04, 0, 0\) mm.*points in mm"):
         driven.B([30.0, 0.0, 0.0])  # 30 mm meant
     assert np.isfinite(anywhere.B(far)).all()  # without a workspace: the dipole sum anywhere
+    # uniformity's default search radius (to the nearest source) stops at the workspace's
+    # nearest face, here x = -123 mm from the centre (the sources are >= 258 mm away: rays
+    # sampled out to them raised)
+    rep = coils.uniformity(driven, 1e-6, directions=4, samples=4)
+    assert rep.sphere <= -box[0, 0]
 
 
 def test_malformed_workspace_is_named(tmp_path):
