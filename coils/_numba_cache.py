@@ -144,7 +144,9 @@ def _guarded_types() -> tuple[type, type]:
                 return super()._load_overload(sig, target_context)
             except Exception as exc:  # noqa: BLE001 -- whatever rebuilding the entry raised
                 key = self._index_key(sig, target_context.codegen())
-                name = self._cache_file._load_index().get(key, "")
+                name = self._cache_file._load_index().get(key)
+                if name is None:  # not from a cache entry: numba's own error
+                    raise
                 path = Path(self._cache_file._data_path(name))
                 _discard(path, "data file", self._cache_file._kernel_name, _reason(exc), self)
                 return None
@@ -169,7 +171,10 @@ def guard(dispatcher) -> None:
     cache_file = getattr(cache, "_cache_file", None)
     if cache_file is None:
         return
-    GuardedCache, GuardedFile = _guarded_types()
+    try:
+        GuardedCache, GuardedFile = _guarded_types()
+    except (ImportError, AttributeError):  # numba internals changed: numba's own cache
+        return
     if type(cache) in (GuardedCache.__base__, GuardedCache):
         cache.__class__ = GuardedCache
     if type(cache_file) in (GuardedFile.__base__, GuardedFile):
@@ -187,8 +192,11 @@ def _install(dispatcher_module) -> None:
     defined from now on (numba's ``Dispatcher.enable_caching``, which ``njit(cache=True)``
     calls, is wrapped; other packages' kernels are left as numba makes them) and those
     defined already."""
-    dispatcher_class = dispatcher_module.Dispatcher
-    enable = dispatcher_class.enable_caching
+    try:
+        dispatcher_class = dispatcher_module.Dispatcher
+        enable = dispatcher_class.enable_caching
+    except AttributeError:  # numba internals changed: numba's own cache
+        return
     if getattr(enable, "_coils_guard", False):
         return
 
@@ -221,9 +229,10 @@ class _AfterNumba(importlib.abc.MetaPathFinder):
             loader = spec.loader
             run = loader.exec_module
 
-            def exec_module(module):
+            def exec_module(module):  # (a loader may serve other modules too)
                 run(module)
-                _install(module)
+                if module.__name__ == self._NAME:
+                    _install(module)
 
             loader.exec_module = exec_module
         return spec
