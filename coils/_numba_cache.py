@@ -3,12 +3,17 @@
 Every compiled kernel of :mod:`coils` and :mod:`coilrod` runs a numpy twin until compiling
 pays (README "Cold start"), except when numba's cache already holds the compiled code
 (loading it costs ~0.1 s): :class:`Rental` keeps that account, :func:`on_disk` looks at the
-cache.  This module does not import numba: it only reads the cache path a dispatcher carries.
+cache, and :func:`guard` makes every kernel's cache entries fail safe (a damaged one is a
+warning and a recompile).  This module does not import numba: it reads the cache path a
+dispatcher carries, and guards numba's kernels once numba is imported.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import importlib.abc
+import importlib.util
 import pickle
 import sys
 import warnings
@@ -57,41 +62,196 @@ def tie_to_sources(dispatcher, *paths) -> None:
             pass
 
 
-def _check_index(dispatcher) -> None:
-    """Before ``dispatcher`` (a ``numba.njit(cache=True)`` function) first compiles or loads:
-    if its index in numba's cache is damaged (numba's own loader would raise from inside the
-    call: it catches only a missing file), remove it with a warning, so that the kernel
-    compiles anew and numba writes a fresh index.  Where it cannot be removed, the cache is
-    off for this kernel in this process.  Reads the index as numba does (a pickled version,
-    then, for this numba's version, the pickled stamp and overloads); compiles nothing."""
+#: Appended to every data file (``.nbc``) numba writes for a guarded kernel: this marker, then
+#: the SHA-256 of the pickle before it.  ``pickle.loads`` stops at the pickle's end, so numba
+#: without the guard (an older coilrod in the same cache) still reads such a file.
+_SEAL = b"\0coilrod-sha256:"
+_SEAL_LEN = len(_SEAL) + 32
+#: Top-level packages whose kernels are guarded when numba defines them (:func:`guard`).
+_PACKAGES = ("coils", "coilrod")
+
+
+def _discard(path: Path, what: str, name: str, reason: str, cache=None) -> None:
+    """Warn that numba's cache ``what`` (index or data file) of kernel ``name`` at ``path``
+    is damaged (``reason``) and remove it; where it cannot be removed, ``cache`` (numba's
+    per-kernel cache object) is disabled for this process."""
     try:
-        cache = dispatcher._cache
-        path, version = Path(cache._cache_file._index_path), cache._cache_file._version
-    except AttributeError:  # not cached, or numba internals changed: nothing to check
-        return
-    try:
-        with open(path, "rb") as fh:
-            found = pickle.load(fh)
-            rest = fh.read()
-        if found == version:  # another version's index is ignored by numba, not read
-            pickle.loads(rest)
-        return
-    except FileNotFoundError:
-        return
-    except Exception as exc:  # noqa: BLE001 -- any unpickling error: what numba would raise
-        reason = f"{type(exc).__name__}: {exc}"
-    name = getattr(dispatcher, "__name__", "a kernel")
-    try:
-        path.unlink()
+        path.unlink(missing_ok=True)
         done = "removed it; the kernel compiles anew and numba writes a fresh one"
     except OSError as exc:
         getattr(cache, "disable", lambda: None)()
         done = f"cannot remove it ({exc.strerror or exc}); numba's cache is off for {name}"
     warnings.warn(
-        f"numba's cache index of {name} {str(path)!r} is damaged ({reason}); {done}",
+        f"numba's cache {what} of {name} {str(path)!r} is damaged ({reason}); {done}",
         RuntimeWarning,
-        stacklevel=3,
+        stacklevel=4,
     )
+
+
+def _unseal(raw: bytes) -> tuple[bytes | None, str | None]:
+    """The pickle of a data file's contents ``raw`` if its seal checks (``_SEAL``), else
+    ``(None, reason)``: ``reason`` is None for an intact file written without a seal (by numba
+    unguarded: nothing vouches for its machine code, so the kernel compiles anew, without a
+    warning), else why the file is damaged."""
+    if raw[-_SEAL_LEN:-32] == _SEAL:
+        body = raw[:-_SEAL_LEN]
+        if hashlib.sha256(body).digest() == raw[-32:]:
+            return body, None
+        return None, "its SHA-256 does not match the one written with it"
+    try:
+        pickle.loads(raw)
+    except Exception as exc:  # noqa: BLE001 -- any unpickling error: what numba would raise
+        return None, f"{type(exc).__name__}: {exc}"
+    return None, None
+
+
+@functools.cache
+def _guarded_types() -> tuple[type, type]:
+    """numba's per-kernel cache and cache-file classes with the guard (imports numba)."""
+    from numba.core import caching
+
+    class GuardedFile(caching.IndexDataCacheFile):
+        """numba's index and data files of one kernel, sealed and checked (:func:`guard`)."""
+
+        _kernel_name = "a kernel"
+
+        def _load_index(self):
+            try:
+                return super()._load_index()
+            except Exception as exc:  # noqa: BLE001 -- numba catches only a missing index
+                _discard(Path(self._index_path), "index", self._kernel_name, _reason(exc))
+                return {}
+
+        def _load_data(self, name):
+            path = Path(self._data_path(name))
+            body, reason = _unseal(path.read_bytes())  # OSError: numba's own "no entry"
+            if body is None:
+                if reason is not None:
+                    _discard(path, "data file", self._kernel_name, reason)
+                return None
+            return pickle.loads(body)
+
+        def _save_data(self, name, data):
+            body = self._dump(data)
+            with self._open_for_write(self._data_path(name)) as fh:
+                fh.write(body + _SEAL + hashlib.sha256(body).digest())
+
+    class GuardedCache(caching.FunctionCache):
+        """numba's cache of one kernel: an entry it cannot rebuild is a miss (:func:`guard`)."""
+
+        def _load_overload(self, sig, target_context):
+            try:
+                return super()._load_overload(sig, target_context)
+            except Exception as exc:  # noqa: BLE001 -- whatever rebuilding the entry raised
+                key = self._index_key(sig, target_context.codegen())
+                name = self._cache_file._load_index().get(key)
+                if name is None:  # not from a cache entry: numba's own error
+                    raise
+                path = Path(self._cache_file._data_path(name))
+                _discard(path, "data file", self._cache_file._kernel_name, _reason(exc), self)
+                return None
+
+    return GuardedCache, GuardedFile
+
+
+def _reason(exc: BaseException) -> str:
+    return f"{type(exc).__name__}: {exc}"
+
+
+def guard(dispatcher) -> None:
+    """Make numba's on-disk cache of ``dispatcher`` (a ``numba.njit(cache=True)`` function)
+    fail safe: a damaged index or data file (truncated, garbled, unreadable by numba or not
+    rebuildable) is removed with a RuntimeWarning and the kernel compiles anew (numba's own
+    loader raises from inside the call), and each data file numba writes is sealed with its
+    SHA-256, so that a changed byte of machine code is never run (a data file without the
+    seal, written by numba unguarded, is compiled anew without a warning).  Every kernel of
+    :mod:`coils` and :mod:`coilrod` is guarded when numba defines it (:func:`_install`);
+    a dispatcher without numba's default cache is left alone.  Compiles nothing."""
+    cache = getattr(dispatcher, "_cache", None)
+    cache_file = getattr(cache, "_cache_file", None)
+    if cache_file is None:
+        return
+    try:
+        GuardedCache, GuardedFile = _guarded_types()
+    except (ImportError, AttributeError):  # numba internals changed: numba's own cache
+        return
+    if type(cache) in (GuardedCache.__base__, GuardedCache):
+        cache.__class__ = GuardedCache
+    if type(cache_file) in (GuardedFile.__base__, GuardedFile):
+        cache_file.__class__ = GuardedFile
+        cache_file._kernel_name = getattr(dispatcher, "__name__", "a kernel")
+
+
+def _ours(dispatcher) -> bool:
+    module = getattr(getattr(dispatcher, "py_func", None), "__module__", None) or ""
+    return module.partition(".")[0] in _PACKAGES
+
+
+def _install(dispatcher_module) -> None:
+    """Guard (:func:`guard`) every cached kernel of :mod:`coils` and :mod:`coilrod`: those
+    defined from now on (numba's ``Dispatcher.enable_caching``, which ``njit(cache=True)``
+    calls, is wrapped; other packages' kernels are left as numba makes them) and those
+    defined already."""
+    try:
+        dispatcher_class = dispatcher_module.Dispatcher
+        enable = dispatcher_class.enable_caching
+    except AttributeError:  # numba internals changed: numba's own cache
+        return
+    if getattr(enable, "_coils_guard", False):
+        return
+
+    def enable_caching(self):
+        enable(self)
+        if _ours(self):
+            guard(self)
+
+    enable_caching._coils_guard = True
+    dispatcher_class.enable_caching = enable_caching
+    for name, module in list(sys.modules.items()):
+        if module is not None and name.partition(".")[0] in _PACKAGES:
+            for value in list(vars(module).values()):
+                if isinstance(value, dispatcher_class) and _ours(value):
+                    guard(value)
+
+
+class _AfterNumba(importlib.abc.MetaPathFinder):
+    """Calls :func:`_install` once numba's dispatcher module is imported (this module does
+    not import numba: importing :mod:`coils` stays quick)."""
+
+    _NAME = "numba.core.dispatcher"
+
+    def find_spec(self, fullname, path, target=None):
+        if fullname != self._NAME:
+            return None
+        sys.meta_path.remove(self)
+        spec = importlib.util.find_spec(fullname)
+        if spec is not None and spec.loader is not None:
+            loader = spec.loader
+            run = loader.exec_module
+
+            def exec_module(module):  # (a loader may serve other modules too)
+                run(module)
+                if module.__name__ == self._NAME:
+                    _install(module)
+
+            loader.exec_module = exec_module
+        return spec
+
+
+if _AfterNumba._NAME in sys.modules:
+    _install(sys.modules[_AfterNumba._NAME])
+elif not any(isinstance(f, _AfterNumba) for f in sys.meta_path):
+    sys.meta_path.insert(0, _AfterNumba())
+
+
+def _check_index(dispatcher) -> None:
+    """Before ``dispatcher`` (a ``numba.njit(cache=True)`` function) first compiles or loads:
+    if its index in numba's cache is damaged, remove it with a warning (:func:`guard`: the
+    kernel compiles anew); guards ``dispatcher`` if not yet.  Compiles nothing."""
+    guard(dispatcher)
+    cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
+    if hasattr(cache_file, "_kernel_name"):
+        cache_file._load_index()
 
 
 class Rental:
@@ -122,7 +282,7 @@ class Rental:
         Estimated CPU seconds of the numpy calls charged so far (:meth:`charge`).
     ready : bool
         True once compiling has paid (:meth:`pays` returned True): the compiled kernel runs
-        from then on.  Callers that compile anyway set it.
+        from then on.  Callers that compile anyway call :meth:`buy`.
     """
 
     def __init__(self, owner: str, kernel, threshold: str = "COMPILE_AFTER", in_process=False):
@@ -153,7 +313,7 @@ class Rental:
             price = self.threshold
             if self.spent < price and self.spent + seconds <= price and not self.held():
                 return False
-            self._buy()
+            self.buy()
         return True
 
     def rent(self, seconds: float) -> bool:
@@ -175,10 +335,11 @@ class Rental:
         runs from the next call on (compiling once is cheaper than renting to the end).
         The cache is not asked (:meth:`pays` does at the next call)."""
         if not self.ready and self.spent + seconds > self.threshold:
-            self._buy()
+            self.buy()
 
-    def _buy(self) -> None:
-        """The compiled kernel runs from now on; a damaged cache index is removed first
-        (:func:`_check_index`: numba would raise from inside the first call)."""
+    def buy(self) -> None:
+        """The compiled kernel runs from now on (:meth:`pays` calls it when compiling pays; a
+        caller that runs the compiled kernel anyway calls it too); a damaged cache index is
+        removed first (:func:`_check_index`)."""
         _check_index(self._kernel())
         self.ready = True

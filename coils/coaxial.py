@@ -207,7 +207,7 @@ class CoaxialCoils(Field):
             center, axis, fil, wind, _, _, params = args
             if near_pass(pts, center, axis, fil, wind, params, flags, factor, B, G, H):
                 return
-        _rental.ready = True  # compiled now anyway: the numpy pass would only cost more
+        _rental.buy()  # compiled now anyway: the numpy pass would only cost more
         err = np.empty(n_err, dtype=np.int64)
         if kernel(pts, *args, flags, factor, B, G, H, err):
             self._raise_point_error(err)

@@ -95,8 +95,13 @@ def largest_fraction(A: np.ndarray, b: np.ndarray, bounds: np.ndarray) -> tuple[
     k, m = A.shape
     cost = np.zeros(m + 1)
     cost[-1] = -1.0  # maximise s
-    A_eq = np.hstack([A, -b[:, None]])
-    var_bounds = [(-u if np.isfinite(u) else None, u if np.isfinite(u) else None) for u in bounds]
+    # in units of the limits (x = u y, |y| <= 1) and of |b|: HiGHS's feasibility tolerances
+    # are absolute (~1e-7), so limits of 1e-12 A and a target of 1e-12 T were "met"
+    finite = np.isfinite(bounds)
+    unit = np.where(finite, bounds, 1.0)
+    size = float(np.linalg.norm(b)) or 1.0
+    A_eq = np.hstack([A * unit, -b[:, None]]) / size
+    var_bounds = [(-1.0, 1.0) if f else (None, None) for f in finite]
     res = linprog(
         cost,
         A_eq=A_eq,
@@ -106,7 +111,7 @@ def largest_fraction(A: np.ndarray, b: np.ndarray, bounds: np.ndarray) -> tuple[
     )
     if res.status != 0:  # cannot happen: x = 0, s = 0 is feasible
         raise RuntimeError(f"the linear program for the current limits failed: {res.message}")
-    return float(res.x[-1]), res.x[:-1]
+    return float(res.x[-1]) + 0.0, unit * res.x[:-1]  # (+ 0.0: no "-0 %")
 
 
 def least_distance(G: np.ndarray, h: np.ndarray) -> np.ndarray | None:

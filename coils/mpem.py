@@ -13,10 +13,13 @@ with ``r = x - x_q`` from the source position ``x_q`` (m), ``d_q`` its unit dire
 ``Offset`` sources (T m^3) make the current-independent field.  :meth:`MPEM.from_yaml` reads
 the YAML calibration files of ETH Zurich's Tesla / mag_manip tools (``Coil_List``, per coil a
 ``Source_List`` of sources with ``Source_Position``, ``Source_Direction``, ``B_Coeff`` and
-``A_Coeff: ~``); :mod:`coils.presets` ships three of them (:func:`coils.presets.cardiomag`,
+``A_Coeff: ~``) and the calibrated workspace (``Workspace_Dimensions``); :mod:`coils.presets`
+ships three of them (:func:`coils.presets.cardiomag`,
 :func:`~coils.presets.navion`, :func:`~coils.presets.octomag`).
 
-B, the gradient and the hessian are exact (:mod:`coils.dipoles`, one compiled pass).
+B, the gradient and the hessian are exact (:mod:`coils.dipoles`, one compiled pass).  A model
+with a workspace refuses points well outside it (:data:`WORKSPACE_MARGIN`): a fit does not
+extrapolate (1000 m away a point-dipole sum would ask for ~1e12 times the currents).
 """
 
 from __future__ import annotations
@@ -40,6 +43,11 @@ ON_SOURCE = 1e-9
 #: Largest accepted deviation of ``|Source_Direction|`` from 1 in a calibration file (the
 #: public files round directions to 3 or more digits); the direction is used as written.
 UNIT_TOL = 1e-3
+#: How far beyond its calibrated workspace a model is evaluated, as a fraction of the
+#: workspace's extent along each axis, on each side (0.5: a box twice the workspace's size):
+#: a fit extrapolates smoothly somewhat beyond the measured region (grids and rods reach past
+#: its faces), not to the coils and beyond; a point farther out is a ``ValueError``.
+WORKSPACE_MARGIN = 0.5
 
 
 class MPEM(AccumulatedField):
@@ -64,13 +72,20 @@ class MPEM(AccumulatedField):
         calibration frame's workspace centre).
     origin : str, optional
         Where the model comes from (a file name), quoted in error messages.
+    workspace : array-like, shape (3, 2), optional
+        The calibrated workspace, ``[[x_min, x_max], [y_min, y_max], [z_min, z_max]]`` in m
+        (``Workspace_Dimensions`` of a calibration file).  Fields, gradients, unit fields and
+        current solves at a point beyond it by more than :data:`WORKSPACE_MARGIN` of its
+        extent along an axis raise ``ValueError`` (naming the point and the workspace).
+        Default None: no workspace, the dipole sum is evaluated anywhere.
 
     Notes
     -----
     Immutable like every source: :meth:`with_currents`, :meth:`with_limits` and
-    ``replace(...)`` return copies.  The model is a fit valid in the calibrated workspace; it
-    is a point-dipole sum, so it grows without bound near a source and a point on a source is
-    refused (``ValueError`` naming the coil and source).
+    ``replace(...)`` return copies.  The model is a fit valid in the calibrated workspace
+    (checked where it is given; ``replace(workspace=None)`` evaluates the dipole sum anywhere,
+    at the caller's risk); it is a point-dipole sum, so it grows without bound near a source
+    and a point on a source is refused (``ValueError`` naming the coil and source).
 
     Examples
     --------
@@ -92,6 +107,7 @@ class MPEM(AccumulatedField):
         names=None,
         center=(0.0, 0.0, 0.0),
         origin=None,
+        workspace=None,
     ):
         if isinstance(coils, str | np.ndarray) or not isinstance(coils, Sequence) or not coils:
             raise ValueError(
@@ -118,6 +134,7 @@ class MPEM(AccumulatedField):
         self.moments = sealed(np.vstack(mom))
         self.channel = sealed(np.concatenate(chan), dtype=np.int64)
         self.center = sealed(as_vector(center, "center"))
+        self.workspace = None if workspace is None else sealed(self._as_workspace(workspace))
         self._currents = sealed(
             np.zeros(m) if currents is None else as_vector(currents, "currents", m)
         )
@@ -136,6 +153,43 @@ class MPEM(AccumulatedField):
         p = as_array(entry[0], f"{name} positions", ("s", 3))
         q = as_array(entry[1], f"{name} moments", (p.shape[0], 3))
         return p, q
+
+    @staticmethod
+    def _as_workspace(workspace, name: str = "workspace") -> np.ndarray:
+        box = as_array(workspace, name, (3, 2))
+        if not np.all(box[:, 0] < box[:, 1]):
+            raise ValueError(
+                f"{name} must be [[x_min, x_max], [y_min, y_max], [z_min, z_max]] m with each "
+                f"min below its max; got {box.tolist()}"
+            )
+        return box
+
+    def _check_workspace(self, pts: np.ndarray, name: str) -> None:
+        """ValueError naming the first of ``pts`` (n, 3) m beyond the workspace by more than
+        :data:`WORKSPACE_MARGIN` of its extent (no workspace: nothing checked)."""
+        if self.workspace is None:
+            return
+        lo, hi = self.workspace.T
+        pad = WORKSPACE_MARGIN * (hi - lo)
+        lo, hi = lo - pad, hi + pad
+        out = np.nonzero(~np.all((pts >= lo) & (pts <= hi), axis=1))[0]
+        if out.size:
+            k = int(out[0])
+            # far out, and inside if read in mm: likely a length in mm
+            far = np.any(np.abs(pts[k] - 0.5 * (lo + hi)) > 10 * (hi - lo))
+            in_mm = far and np.all((1e-3 * pts[k] >= lo) & (1e-3 * pts[k] <= hi))
+            where = f"{name}[{k}]" if name == "points" else name
+            box = ", ".join(
+                f"{axis} in [{1e3 * a:.4g}, {1e3 * b:.4g}] mm"
+                for axis, (a, b) in zip("xyz", self.workspace, strict=True)
+            )
+            raise ValueError(
+                f"{where} = {_fmt_mm(pts[k])} is outside the calibrated workspace"
+                f"{self._where()}: {box} (accepted up to {WORKSPACE_MARGIN:.0%} of its extent "
+                f"beyond each face); the fit does not hold there (use .replace(workspace=None) "
+                f"to evaluate the dipole sum anywhere)"
+                + ("; are the points in mm? coils takes metres" if in_mm else "")
+            )
 
     @staticmethod
     def _as_names(names, m: int) -> tuple[str, ...]:
@@ -236,6 +290,7 @@ class MPEM(AccumulatedField):
         return self.moments * scale[:, None]
 
     def _add_to(self, pts, B, G, H, factor):
+        self._check_workspace(pts, "points")
         self._run(pts, self.positions, factor * self._effective(), B, G, H)
 
     def unit_fields(self, points, *, hessian: bool = False):
@@ -263,6 +318,7 @@ class MPEM(AccumulatedField):
         """
         pts = np.ascontiguousarray(as_points(points))
         hessian = as_bool(hessian, "hessian")
+        self._check_workspace(pts, "points")
         n, m = pts.shape[0], len(self.names)
         B = np.zeros((m, n, 3))
         G = np.zeros((m, n, 3, 3))
@@ -288,6 +344,7 @@ class MPEM(AccumulatedField):
     def fixed_field(self, points) -> tuple[np.ndarray, np.ndarray]:
         """B (n, 3) in T and gradient (n, 3, 3) in T/m of the offset sources at ``points``."""
         pts = np.ascontiguousarray(as_points(points))
+        self._check_workspace(pts, "points")
         n = pts.shape[0]
         B, G = np.zeros((n, 3)), np.zeros((n, 3, 3))
         sel = self.channel < 0
@@ -339,6 +396,7 @@ class MPEM(AccumulatedField):
         from .currents import currents_for_target
 
         point = self.center if at is None else as_vector(at, "at")
+        self._check_workspace(point[None], "at" if at is not None else "center")
         words = {
             "who": f"the model{self._where()}",
             "channels": "coils",
@@ -374,8 +432,9 @@ class MPEM(AccumulatedField):
             and per source ``Source_Position`` (3 values, m), ``Source_Direction`` (3 values,
             unit to within 1e-3; used as written), ``B_Coeff`` (one value, T m^3/A) and
             ``A_Coeff: ~``; optionally ``Offset`` (sources of the current-independent field,
-            ``B_Coeff`` in T m^3).  ``System_Name`` and ``Workspace_Dimensions`` are read and
-            ignored.
+            ``B_Coeff`` in T m^3); optionally ``Workspace_Dimensions`` (3 pairs [min, max], m:
+            the calibrated workspace, see the constructor's ``workspace``).  ``System_Name``
+            is read and ignored.
         max_current, currents, center
             As for the constructor.
 
@@ -389,7 +448,8 @@ class MPEM(AccumulatedField):
             Naming the file, the coil (or ``Offset``), the source and the key: a missing key,
             a wrong length, a non-unit direction, a non-finite number; and for models this
             class does not support, a non-null ``A_Coeff`` (higher-order sources) or
-            saturation functions (the field would not be linear in the currents).
+            saturation functions (the field would not be linear in the currents); a
+            ``Workspace_Dimensions`` that is not 3 pairs [min, max] with min < max.
         """
         import yaml
 
@@ -420,6 +480,16 @@ class MPEM(AccumulatedField):
         offset = (
             cls._read_sources(doc, "Offset", where, per_ampere=False) if "Offset" in doc else None
         )
+        workspace = None
+        if doc.get("Workspace_Dimensions") is not None:
+            rows = doc["Workspace_Dimensions"]
+            key = f"{where}: Workspace_Dimensions"
+            if not isinstance(rows, list) or len(rows) != 3:
+                raise ValueError(
+                    f"{key} must be 3 pairs [min, max] (x, y, z), m; got {_show(rows)}"
+                )
+            rows = [_numbers(row, 2, f"{key}[{i}]") for i, row in enumerate(rows)]
+            workspace = cls._as_workspace(rows, key)
         return cls(
             coils,
             offset,
@@ -428,6 +498,7 @@ class MPEM(AccumulatedField):
             names=[str(n) for n in coil_list],
             center=center,
             origin=path.name,
+            workspace=workspace,
         )
 
     @staticmethod

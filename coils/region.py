@@ -188,7 +188,9 @@ def uniformity(
     points : array-like, shape (n, 3), optional
         Points to examine as well, e.g. the robot's reach (m).
     max_radius : float, optional
-        Search radius, m; default: 0.95 x the distance from the centre to the nearest winding.
+        Search radius, m; default: 0.95 x the distance from the centre to the nearest winding
+        (a calibrated :class:`coils.MPEM`: to its nearest source, at most to the nearest face of
+        its workspace).
     directions : int
         Directions sampled for the sphere (and the mid-plane) radius (>= 1).
     samples : int
@@ -221,6 +223,10 @@ def uniformity(
             max_radius = 0.95 * min(_distance_to_windings(p, c) for p in parts)
         else:
             max_radius = field.length_scale
+        box = getattr(field, "workspace", None)  # a calibrated model (coils.MPEM): its box
+        inside = np.inf if box is None else min(np.min(c - box[:, 0]), np.min(box[:, 1] - c))
+        if 0 < inside < max_radius:
+            max_radius = inside
     max_radius = positive(max_radius, "max_radius")
 
     def dev_minus_tol(p):

@@ -345,6 +345,13 @@ BAD = [
     ({"max_nfev": 0}, "max_nfev"),
     ({"field_angle": np.nan}, "field_angle"),
     ({"solve_options": {"stability": False}}, "solve_options may set"),
+    # angles in degrees (h-brk): a tip more than a full turn from the clamp, a misalignment
+    # beyond a full turn
+    (
+        {"output": "tip_angle", "measured": [5.0, 12.0, 20.0]},
+        r"measured\[2\] = 20 rad .* full turn: tip_angle data are in radians \(degrees\?",
+    ),
+    ({"field_angle": 10.0}, r"field_angle = 10 rad is more than a full turn: it is in radians"),
 ]
 
 
@@ -354,6 +361,16 @@ def test_bad_input(change, message):
     fields, measured = kwargs.pop("fields"), kwargs.pop("measured")
     with pytest.raises(ValueError, match=message):
         calibrate(_rod(), fields, measured, **kwargs)
+
+
+def test_tip_angles_within_a_turn_of_the_clamp_pass():
+    # valid radians are not rejected: within a full turn of the clamp's angle, either way
+    check = calibrate_module._check_radians
+    check(np.array([-6.28, 0.0, 6.28]), "tip_angle", -6.28, {})
+    check(np.array([8.0, -4.2]), "tip_angle", 0.0, {"clamp_angle": 2.0})
+    check(np.array([20.0]), "tip_y", 0.0, {})  # not an angle (the length check is separate)
+    with pytest.raises(ValueError, match=r"measured\[1\] = -4.3 rad .* clamp's angle 2 rad"):
+        check(np.array([8.0, -4.3]), "tip_angle", 0.0, {"clamp_angle": 2.0})
 
 
 def test_bad_rod_and_magnetization():

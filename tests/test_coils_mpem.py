@@ -13,10 +13,13 @@ Cross-checks:
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 import yaml
 
+import coils
 from coils import MPEM, presets
 from coils.presets import CARDIOMAG_FILE, NAVION_FILE, OCTOMAG_FILE, _data_file
 
@@ -62,11 +65,18 @@ MODELS = {
 }
 
 
+@functools.cache
+def _model(name: str) -> MPEM:
+    """The shipped model ``name`` at its defaults, read once (models are immutable; reading
+    CardioMag's file costs ~0.2 s, and the reader is checked against PyYAML above)."""
+    return MODELS[name][0]()
+
+
 # -- physics consistency ------------------------------------------------------------------------
 @pytest.mark.parametrize("name", list(MODELS))
 def test_shipped_models_match_an_independent_dipole_sum(name):
-    build, path = MODELS[name]
-    model = build()
+    path = MODELS[name][1]
+    model = _model(name)
     currents = RNG.uniform(-1, 1, len(model.channels)) * 5.0
     driven = model.with_currents(currents)
     ref = _reference(path, currents)
@@ -85,7 +95,7 @@ def test_blocked_kernel_equals_the_pointwise_one():
     """From 64 points on, B and gradient take the vectorised kernel (sources outer, points in
     blocks): the same sums as the per-point kernel (used below 64 points and for hessians), and
     a point on a source among many is named as well."""
-    model = presets.cardiomag().with_currents(np.linspace(-20, 20, 8))
+    model = _model("cardiomag").with_currents(np.linspace(-20, 20, 8))
     X = RNG.uniform(-0.08, 0.08, size=(300, 3))
     B, G = model.B_and_gradient(X)  # blocked
     parts = [model.B_and_gradient(X[k : k + 50]) for k in range(0, 300, 50)]  # pointwise
@@ -93,17 +103,17 @@ def test_blocked_kernel_equals_the_pointwise_one():
     assert np.abs(B - Bp).max() <= 1e-14 * np.abs(B).max()
     assert np.abs(G - Gp).max() <= 1e-14 * np.abs(G).max()
     np.testing.assert_array_equal(model.B(X), B)
-    X[200] = model.positions[10]
+    X[200] = model.positions[10]  # (beyond the workspace: checked without it)
     with pytest.raises(ValueError, match=r"points\[200\].*on source 2 of Coil_1"):
-        model.gradient(X)
+        model.replace(workspace=None).gradient(X)
 
 
 def test_cardiomag_has_an_offset_field():
     """The CardioMag file's Offset sources: a current-independent field at the centre."""
-    model = presets.cardiomag()
+    model = _model("cardiomag")
     B0 = model.B([0.0, 0.0, 0.0])[0]
     assert 1e-4 < np.linalg.norm(B0) < 1e-2  # the remanence of the cores: about 1.5 mT
-    assert np.abs(presets.navion().B([0.0, 0.0, 0.0])).max() == 0.0
+    assert np.abs(_model("navion").B([0.0, 0.0, 0.0])).max() == 0.0
 
 
 def test_single_source_closed_forms():
@@ -119,7 +129,7 @@ def test_single_source_closed_forms():
 
 @pytest.mark.parametrize("name", ["cardiomag", "navion"])
 def test_gradient_and_hessian_match_finite_differences(name):
-    model = MODELS[name][0]()
+    model = _model(name)
     model = model.with_currents(RNG.uniform(-1, 1, len(model.channels)) * 10.0)
     x = POINTS[:4]
     B, G, H = model.B_gradient_hessian(x)
@@ -134,7 +144,7 @@ def test_gradient_and_hessian_match_finite_differences(name):
 
 @pytest.mark.parametrize("name", list(MODELS))
 def test_curl_and_divergence_free(name):
-    model = MODELS[name][0]()
+    model = _model(name)
     model = model.with_currents(np.linspace(-1, 1, len(model.channels)))
     _, G, H = model.B_gradient_hessian(POINTS)
     # to rounding of the sources' terms (Navion's nearly cancelling pairs: 1e-13 of the sum)
@@ -148,7 +158,7 @@ def test_curl_and_divergence_free(name):
 
 
 def test_unit_fields_hessian_per_ampere():
-    model = presets.navion()
+    model = _model("navion")
     Bu, Gu, Hu = model.unit_fields(POINTS[:3], hessian=True)
     I = np.array([3.0, -2.0, 1.0])
     np.testing.assert_allclose(
@@ -159,7 +169,7 @@ def test_unit_fields_hessian_per_ampere():
 # -- currents for a target ----------------------------------------------------------------------
 def test_currents_for_field_and_gradient_on_cardiomag():
     """Eight coils make 3 field + 5 gradient components at the centre, the offset included."""
-    model = presets.cardiomag()
+    model = _model("cardiomag")
     target_B = np.array([5e-3, -3e-3, 4e-3])
     target_G = np.array([[0.05, 0.02, 0.0], [0.02, -0.1, 0.01], [0.0, 0.01, 0.05]])
     I = model.currents_for(B=target_B, gradient=target_G)
@@ -170,25 +180,25 @@ def test_currents_for_field_and_gradient_on_cardiomag():
 
 def test_currents_for_tells_what_is_missing():
     with pytest.raises(ValueError, match="cannot make this target.*3 coils make 3 of the 8"):
-        presets.navion().currents_for(B=(0, 0, 1e-3), gradient=np.diag([0.1, 0.1, -0.2]))
+        _model("navion").currents_for(B=(0, 0, 1e-3), gradient=np.diag([0.1, 0.1, -0.2]))
     with pytest.raises(ValueError, match="exceeds the current limits.*Coil_"):
-        presets.navion().currents_for(B=(0.0, 0.0, 1.0))
+        _model("navion").currents_for(B=(0.0, 0.0, 1.0))
 
 
 def test_current_limits():
-    assert presets.cardiomag().max_current.tolist() == [20.0] * 8
-    assert presets.navion().max_current.tolist() == [35.0] * 3
+    assert _model("cardiomag").max_current.tolist() == [20.0] * 8
+    assert _model("navion").max_current.tolist() == [35.0] * 3
     with pytest.raises(TypeError, match="max_current"):
         presets.octomag()
     with pytest.raises(ValueError, match=r"currents\[1\] = 40 A exceeds max_current\[1\] = 35"):
-        presets.navion().with_currents([0.0, 40.0, 0.0])
+        _model("navion").with_currents([0.0, 40.0, 0.0])
     with pytest.raises(AttributeError, match="with_currents"):
-        presets.navion().currents = np.zeros(3)
+        _model("navion").currents = np.zeros(3)
 
 
 # -- bad input ------------------------------------------------------------------------------------
 def test_point_on_a_source_is_named():
-    model = presets.navion()
+    model = _model("navion").replace(workspace=None)  # (the sources lie beyond it)
     on = model.positions[4]  # Coil_1, its second source
     with pytest.raises(ValueError, match=r"points\[1\].*on source 1 of Coil_1 \(model Navion"):
         model.with_currents([1.0, 1.0, 1.0]).B([[0.0, 0.0, 0.0], on])
@@ -261,3 +271,49 @@ def test_dipole_kernels_compile_once_for_sealed_or_writable_arrays():
         assert np.array_equal(a, b)
     assert len(dipoles._FAST.signatures) == 1
     assert len(dipoles._KERNEL.signatures) == 1
+
+
+def test_a_calibrated_model_refuses_points_far_outside_its_workspace():
+    # h-brk3: 1000 km away Navion answered B ~ 1e-23 T, and currents_for (no limits) ~7.7e21 A.
+    # The workspace is the file's Workspace_Dimensions (read here by PyYAML), accepted up to
+    # half its extent beyond each face; fields, gradients, unit fields and current solves
+    doc = yaml.safe_load(_data_file(NAVION_FILE).read_text())
+    box = np.array(doc["Workspace_Dimensions"], dtype=float)
+    model = _model("navion").with_limits(np.inf)
+    assert model.workspace.tolist() == box.tolist()
+    lo, hi = box.T
+    edge = np.array([hi + 0.5 * (hi - lo), lo - 0.5 * (hi - lo)])  # corners of what is accepted
+    driven = model.with_currents([1.0, -2.0, 0.5])
+    anywhere = driven.replace(workspace=None)
+    np.testing.assert_array_equal(driven.B_and_gradient(edge)[1], anywhere.gradient(edge))
+    beyond = np.array([[0.0, 0.0, 0.0], edge[1] * (1 + 1e-9)])
+    with pytest.raises(
+        ValueError, match=r"points\[1\] = \(-235, -202, -243.2\) mm is outside"
+    ) as err:
+        driven.B(beyond)
+    assert "in mm?" not in str(err.value)
+    far = (1e6, 0.0, 0.0)
+    ws = r"\(1e\+09, 0, 0\) mm is outside the calibrated workspace \(model Navion.*: x in \[-123,"
+    for call in (driven.B, driven.gradient, driven.hessian, model.unit_fields, model.fixed_field):
+        with pytest.raises(ValueError, match=r"points\[0\] = " + ws):
+            call(far)
+    with pytest.raises(ValueError, match=r"at = " + ws):
+        model.currents_for(B=(0.0, 0.0, 0.02), at=far)
+    with pytest.raises(ValueError, match=r"points\[0\] = \(3e\+04, 0, 0\) mm.*points in mm"):
+        driven.B([30.0, 0.0, 0.0])  # 30 mm meant
+    assert np.isfinite(anywhere.B(far)).all()  # without a workspace: the dipole sum anywhere
+    # uniformity's default search radius (to the nearest source) stops at the workspace's
+    # nearest face, here x = -123 mm from the centre (the sources are >= 258 mm away: rays
+    # sampled out to them raised)
+    rep = coils.uniformity(driven, 1e-6, directions=4, samples=4)
+    assert rep.sphere <= -box[0, 0]
+
+
+def test_malformed_workspace_is_named(tmp_path):
+    path = tmp_path / "bad_model.yaml"
+    path.write_text(GOOD + "Workspace_Dimensions: [[-0.1, 0.1], [0.1, -0.1], [-0.1, 0.1]]\n")
+    with pytest.raises(ValueError, match=r"bad_model.yaml: Workspace_Dimensions must be .*min bel"):
+        MPEM.from_yaml(path)
+    path.write_text(GOOD + "Workspace_Dimensions: [[-0.1, 0.1], [-0.1, 0.1]]\n")
+    with pytest.raises(ValueError, match=r"bad_model.yaml: Workspace_Dimensions must be 3 pairs"):
+        MPEM.from_yaml(path)

@@ -454,3 +454,23 @@ def test_robot_description_keeps_numpy_numbers():
     mags[0] = 0.0  # the profile keeps its own copy
     assert m.magnitude(np.array([0.01, 0.03])).tolist() == [1e5, 2e5]
     assert m2.magnitude(np.array([0.01])).tolist() == [1e5]
+
+
+# -- awkward floats (h-brk3) ----------------------------------------------------------------------
+def test_tiny_current_limits_give_the_largest_fraction_not_a_solver_error():
+    # with 1e-12 A limits and a 1e-12 T target the limits' linear program ran in amperes and
+    # tesla: HiGHS's absolute tolerances (~1e-7) called the target feasible, and the
+    # least-distance step then raised RuntimeError; in units of the limits it is a ValueError
+    # with the fraction the limits allow: B = (4/5)^1.5 mu0 N I / R at a Helmholtz pair's centre
+    from scipy.constants import mu_0
+
+    system = coils.presets.three_axis_helmholtz().with_limits(1e-12)
+    pair = system.channels[0]  # along x
+    per_ampere = 0.8**1.5 * mu_0 * pair.turns / pair.radius
+    with pytest.raises(ValueError, match=rf"at most {100 * per_ampere:.4g} % .*limit 1e-12 A"):
+        system.currents_for(B=(1e-12, 0.0, 0.0))
+    I = system.currents_for(B=(1e-20, 0.0, 0.0))  # within the limits: 5.6e-18 A
+    np.testing.assert_allclose(I, [1e-20 / per_ampere, 0.0, 0.0], rtol=1e-9, atol=1e-30)
+    with pytest.raises(ValueError, match="exceeds the current limits") as err:
+        system.with_limits(10.0).currents_for(B=(1e-3, 0.0, 0.0), at=(1e7, 0.0, 0.0))
+    assert "-0 %" not in str(err.value)  # (10000 km away: none of it, printed as "-0 %")

@@ -654,6 +654,35 @@ def _calibration(model, sol, rejected, initial, data, rank_tol):
     )
 
 
+def _check_radians(measured: np.ndarray, output: str, field_angle: float, options) -> None:
+    """Angles in degrees where radians are meant, where the numbers show it: a measured tip
+    angle more than a full turn (2 pi) from the clamp's angle (a planar rod curled through
+    more than one turn), or a field misalignment beyond a full turn: ValueError naming the
+    argument and saying "radians".  Angles within a turn pass (small angles in degrees
+    cannot be told from radians)."""
+    turn = 2 * np.pi * (1 + 1e-12)
+    if abs(field_angle) > turn:
+        raise ValueError(
+            f"field_angle = {field_angle:g} rad is more than a full turn: it is in radians "
+            f"(degrees? {field_angle:g} deg = {np.radians(field_angle):.4g} rad)"
+        )
+    if output != "tip_angle":
+        return
+    try:
+        clamp = float(options.get("clamp_angle", 0.0))
+    except (TypeError, ValueError):  # solve_rod names the bad clamp_angle
+        return
+    off = np.abs(measured - clamp)
+    worst = int(np.argmax(off))
+    if off[worst] > turn:
+        raise ValueError(
+            f"measured[{worst}] = {measured[worst]:g} rad puts the tip tangent {off[worst]:g} "
+            f"rad from the clamp's angle {clamp:g} rad, more than a full turn: tip_angle data "
+            f"are in radians (degrees? {measured[worst]:g} deg = "
+            f"{np.radians(measured[worst]):.4g} rad)"
+        )
+
+
 def calibrate(
     rod: Rod,
     fields,
@@ -723,7 +752,9 @@ def calibrate(
     ------
     ValueError
         Bad input (shapes, NaN, non-positive values, unknown names, fewer than p + 1 points,
-        a measured tip x or y farther from the clamp than the rod's length);
+        a measured tip x or y farther from the clamp than the rod's length, a measured tip
+        angle more than a full turn from the clamp's or a ``field_angle`` beyond a full
+        turn: angles in degrees);
         a magnetization with an out-of-plane elevation (the planar rod is fitted).
     IdentifiabilityError
         (a ValueError) The Jacobian is rank deficient at the start or at the fit: the data
@@ -787,6 +818,7 @@ def calibrate(
             raise ValueError(f"solve_options may set {list(SOLVE_OPTIONS)}; got {key!r}")
 
     _check_reach(rod, measured, output, options)
+    _check_radians(measured, output, field_angle, options)
     model = _Model(rod, fields, output, fit, field_angle, options)
     initial = model.initial()
     lo, hi = _check_bounds(bounds, fit, initial)
