@@ -354,7 +354,19 @@ class MeshVessel(Obstacle):
         triangle of some points by 1e-4 of the radius and more.)
         """
         bound = self._vtree.query(points)[0]
-        cand = self._ctree.query_ball_point(points, bound * (1 + 1e-9) + self._rmax)
+        radius = bound * (1 + 1e-9) + self._rmax
+        if len(points) * len(self.faces) <= BLOCK:  # (every triangle a candidate: one block)
+            return self._nearest_block(points, radius)
+        blocks = _blocks(self._ctree.query_ball_point(points, radius, return_length=True))
+        if len(blocks) == 1:
+            return self._nearest_block(points, radius)
+        parts = [self._nearest_block(points[b], radius[b]) for b in blocks]
+        return tuple(np.concatenate([part[i] for part in parts]) for i in range(3))
+
+    def _nearest_block(self, points: np.ndarray, radius: np.ndarray):
+        """:meth:`_nearest` of points whose candidates (triangles with centroids within
+        ``radius`` (n,)) fit one vectorised block."""
+        cand = self._ctree.query_ball_point(points, radius)
         lens = np.fromiter((len(c) for c in cand), dtype=np.int64, count=len(points))
         idx = np.concatenate([np.asarray(c, dtype=np.int64) for c in cand])
         owner = np.repeat(np.arange(len(points)), lens)
@@ -367,6 +379,21 @@ class MeshVessel(Obstacle):
     def _evaluate(self, points: np.ndarray, order: int):
         if not self.smooth:
             return self._evaluate_exact(points, order)
+        # (points deep in a finely meshed lumen have thousands of vertices within reach, and
+        # every candidate pair costs ~1 kB of temporaries at order 2: blocks of points)
+        if len(points) * len(self.vertices) <= BLOCK:
+            return self._evaluate_smooth(points, order)
+        blocks = _blocks(self._vtree.query_ball_point(points, self._reach, return_length=True))
+        if len(blocks) == 1:
+            return self._evaluate_smooth(points, order)
+        parts = [self._evaluate_smooth(points[b], order) for b in blocks]
+        return tuple(
+            None if parts[0][i] is None else np.concatenate([part[i] for part in parts])
+            for i in range(3)
+        )
+
+    def _evaluate_smooth(self, points: np.ndarray, order: int):
+        """The smoothed gap and its derivatives up to ``order`` (see the module)."""
         W, A, gW, gA, hW, hA = _smooth_sums(
             points,
             self.vertices,
@@ -496,6 +523,27 @@ PLATEAU = 0.7
 #: The smoothed gap is used alone where the weights sum to more than this (the exact
 #: polyhedral gap alone below half of it: near the lumen's medial axis).
 WEIGHT_FULL = 0.3
+
+
+#: Candidate pairs (point, vertex or triangle) evaluated in one vectorised block: the
+#: temporaries of a block stay near 100 MB however many points are asked at once.
+BLOCK = 100_000
+
+
+def _blocks(counts: np.ndarray, budget: int | None = None) -> list[slice]:
+    """Slices of consecutive points whose candidate ``counts`` (n,) sum to at most
+    ``budget`` (default :data:`BLOCK`; a point with more candidates is a block alone)."""
+    budget = BLOCK if budget is None else budget
+    ends = np.cumsum(counts)
+    if len(ends) == 0 or ends[-1] <= budget:
+        return [slice(0, len(counts))]
+    out, start = [], 0
+    while start < len(ends):
+        base = ends[start - 1] if start else 0
+        stop = max(int(np.searchsorted(ends, base + budget, side="right")), start + 1)
+        out.append(slice(start, stop))
+        start = stop
+    return out
 
 
 #: Largest rounding of single-precision coordinates, as a fraction of the shortest edge,
