@@ -319,3 +319,25 @@ def test_many_points_deep_in_a_fine_mesh_are_measured_in_blocks(monkeypatch):
             assert np.array_equal(a, b)
     np.testing.assert_allclose(whole[0].gap, r * np.cos(np.pi / n), rtol=0, atol=1e-15)
     np.testing.assert_allclose(meshes[0].closest(p)[:, 0], p[:, 0], atol=1e-15)
+
+
+def test_a_short_tube_in_mm_read_as_metres_is_doubted(tmp_path):
+    # a 2.5 mm piece of a 1 mm-radius tube saved in mm, read with the default units="m", is
+    # 2.5 m across: under the 3 m size limit, so it passed silently as a lumen of 1 m radius
+    # (a centreline file's radius over 50 mm is doubted).  Now its mean radius 2 V / A (a
+    # capped tube's r L / (L + r), the lumen built as r = 1 mm, L = 2.5 mm: 0.7 of it) is:
+    # over 50 mm with units="m" a UnitsWarning naming units='mm'; with units="mm" none
+    import warnings
+
+    from coilrod import UnitsWarning
+    from coilrod.contact import Vessel, tessellate
+
+    v, f = tessellate(Vessel.straight(2.5e-3, 1e-3), 12)
+    path = tmp_path / "piece.obj"
+    trimesh.Trimesh(1e3 * v, f).export(path)  # coordinates in mm
+    with pytest.warns(UnitsWarning, match=r"piece.obj' encloses a lumen 0.6\d* m .*units='mm'"):
+        MeshVessel.from_file(path, smooth=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        mesh = MeshVessel.from_file(path, units="mm", smooth=False)
+    assert 2 * mesh.volume / mesh._mesh.area == pytest.approx(1e-3 * 2.5 / 3.5, rel=0.05)

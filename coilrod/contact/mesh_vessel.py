@@ -51,6 +51,10 @@ _UNITS = {"m": 1.0, "mm": 1e-3}
 #: Sizes (m, the largest extent) outside which a mesh file's units are doubted
 #: (coilrod.UnitsWarning): a lumen larger than a body's 3 m, smaller than 0.1 mm.
 MAX_SIZE, MIN_SIZE = 3.0, 1e-4
+#: A closed lumen's mean radius (2 x volume / area: a tube's radius, less at its caps) over
+#: which its file's units are doubted too: the centreline files' widest vessel
+#: (``centerline_file.MAX_RADIUS``, an aorta's 15 mm with a margin).
+MAX_RADIUS = 0.05
 
 
 def phantom_path(name: str = "bend") -> str:
@@ -281,6 +285,13 @@ class MeshVessel(Obstacle):
             :class:`~coils._files.MissingFileError` (a ValueError and a FileNotFoundError), a
             folder :class:`~coils._files.NotAFileError` (a ValueError and an
             IsADirectoryError).
+
+        Warns
+        -----
+        coilrod.UnitsWarning
+            A mesh over :data:`MAX_SIZE` (3 m) or under :data:`MIN_SIZE` (0.1 mm) across, or
+            a closed one whose mean radius (2 x volume / area) is over :data:`MAX_RADIUS`
+            (50 mm) -- most likely a file in mm read as m, or the reverse.
         """
         import trimesh
 
@@ -317,11 +328,11 @@ class MeshVessel(Obstacle):
             raise ValueError(f"mesh file {path!r} has non-finite vertex coordinates")
         if ext in ("stl", "ply"):  # (formats that store single precision)
             _check_precision(vertices, np.asarray(loaded.faces), path)
-        size = _UNITS[units] * float(np.max(np.ptp(vertices, axis=0)))
-        if not MIN_SIZE <= size <= MAX_SIZE:
-            from ..errors import UnitsWarning
+        from ..errors import UnitsWarning
 
-            other = "mm" if units == "m" else "m"
+        size = _UNITS[units] * float(np.max(np.ptp(vertices, axis=0)))
+        other = "mm" if units == "m" else "m"
+        if not MIN_SIZE <= size <= MAX_SIZE:
             warnings.warn(
                 f"mesh file {path!r} is {size:.3g} m across with units={units!r}: no vessel "
                 f"lumen is that {'large' if size > MAX_SIZE else 'small'}; is the file in "
@@ -329,7 +340,7 @@ class MeshVessel(Obstacle):
                 UnitsWarning,
                 stacklevel=2,
             )
-        return cls(
+        mesh = cls(
             vertices * _UNITS[units],
             np.asarray(loaded.faces),
             source=path,
@@ -337,6 +348,18 @@ class MeshVessel(Obstacle):
             smooth=smooth,
             fix_normals=fix_normals,
         )
+        # a short piece in mm read as m (a 2.5 mm tube: 2.5 m across) is not too large, but
+        # its lumen is 1 m wide
+        radius = 2.0 * mesh.volume / float(mesh._mesh.area) if mesh.watertight else 0.0
+        if size <= MAX_SIZE and radius > MAX_RADIUS:
+            warnings.warn(
+                f"mesh file {path!r} encloses a lumen {radius:.3g} m in mean radius (2 x volume "
+                f"/ area) with units={units!r}: no blood vessel is that wide; is the file in "
+                f"{other} (units={other!r})?",
+                UnitsWarning,
+                stacklevel=2,
+            )
+        return mesh
 
     # -- gap ------------------------------------------------------------------------------------
     def closest(self, points) -> np.ndarray:
