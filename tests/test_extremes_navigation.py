@@ -341,3 +341,46 @@ def test_a_short_tube_in_mm_read_as_metres_is_doubted(tmp_path):
         warnings.simplefilter("error")
         mesh = MeshVessel.from_file(path, units="mm", smooth=False)
     assert 2 * mesh.volume / mesh._mesh.area == pytest.approx(1e-3 * 2.5 / 3.5, rel=0.05)
+
+
+def test_a_lumen_with_no_room_at_the_clamp_is_a_scene_error():
+    # the scene check left "no room for the robot's surface at the clamp" to the vessel's
+    # narrowness check, which meshes do not have and which misses a clamp near a wide
+    # vessel's wall: both passed `coilrod check` and failed in the run.  By hand: the bend's
+    # axis 2.5 mm above the clamp leaves 3 - 2.5 = 0.5 mm to its wall, and the 1 mm robot
+    # reaches 0.5 mm into it; the phantom's 12-gon (lumen radius 2 mm) has 2 cos(15 deg) =
+    # 1.932 mm on its axis, 0.168 mm short of a 4.2 mm robot's surface
+    import tomllib
+    from pathlib import Path
+
+    from coilrod.scene.parse import SceneError, parse_scene
+
+    data, path = _nav_scene(rotated=False, vessel_along_y=False)
+    data["obstacles"]["vessel"][0]["start"] = ["-1 mm", "2.5 mm", "0 mm"]
+    with pytest.raises(SceneError, match=r"reaches the lumen's wall at the clamp .*by 0.5 mm"):
+        parse_scene(data, path)
+    phantom = path.replace("navigation_bend", "navigation_phantom")
+    data = tomllib.loads(Path(phantom).read_text())
+    data["robot"]["diameter"] = "4.2 mm"
+    with pytest.raises(SceneError, match=r"2.1 mm from its axis.* clamp .*by 0.168 mm"):
+        parse_scene(data, phantom)
+
+
+def test_the_figure_of_a_scene_whose_runs_all_failed_has_no_legend_warnings():
+    # `coilrod run` of a scene whose insertion failed printed matplotlib's "No artists with
+    # labels found to put in legend" twice under the failure; the figure is drawn silently
+    import warnings
+
+    import matplotlib.pyplot as plt
+
+    from coilrod.scene.navigation import NavigationRun, NavigationSceneResult, plot_navigation
+    from coilrod.scene.parse import parse_scene
+    from coilrod.scene.runner import plan_scene
+
+    scene = parse_scene(*_nav_scene(rotated=False, vessel_along_y=False))
+    result = NavigationSceneResult(scene, plan_scene(scene), [NavigationRun("ideal", 0.1)])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fig = plot_navigation(result)
+    assert fig.axes[0].get_legend() is None
+    plt.close(fig)

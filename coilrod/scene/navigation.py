@@ -271,12 +271,13 @@ def plot_navigation(result, steps: int = 6):
     ax.set_aspect("equal")
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
-    ax.legend(fontsize=6, loc="best")
     ax.set_title(scene.name, fontsize=10)
     axf.axhline(0.0, color="0.7", lw=0.8)
     axf.set_xlabel("free length (mm)")
     axf.set_ylabel("force (mN)")
-    axf.legend(fontsize=7)
+    if any(r.result is not None for r in result.runs):  # (every run failed: nothing to name)
+        ax.legend(fontsize=6, loc="best")
+        axf.legend(fontsize=7)
     return fig
 
 
@@ -360,8 +361,20 @@ def _straight_surface(lumen, rod, rod_options, length: float) -> list[str]:
     s = np.linspace(0.0, length, 65)
     gap = np.asarray(lumen.gap(np.outer(s, tangent)), float) - half
     bad = np.flatnonzero(gap < -1e-12 * length)
-    if bad.size == 0 or bad[0] == 0:  # (none, or no room at the clamp: said elsewhere)
+    if bad.size == 0:
         return []
+    if bad[0] == 0:  # no room at the clamp (a lumen narrower than the robot: said by
+        from .obstacles import _narrowest  # parse_obstacles for vessels, not for meshes)
+
+        narrow = _narrowest(lumen)
+        widest = half if hasattr(sec, "diameter") else 0.5 * np.hypot(sec.width, sec.thickness)
+        if narrow is not None and narrow <= widest:
+            return []
+        return [
+            f"insertion: the robot's surface ({1e3 * half:.4g} mm from its axis) reaches the "
+            f"lumen's wall at the clamp (the introducer; by {1e3 * -gap[0]:.3g} mm): the lumen "
+            "is narrower than the robot there, or the clamp is too close to its wall"
+        ]
     return [
         f"insertion.lengths[0]: the robot starts straight at its first free length "
         f"{1e3 * length:.4g} mm, and its surface ({1e3 * half:.4g} mm from its axis) reaches "
