@@ -384,3 +384,13 @@ def test_the_figure_of_a_scene_whose_runs_all_failed_has_no_legend_warnings():
         fig = plot_navigation(result)
     assert fig.axes[0].get_legend() is None
     plt.close(fig)
+
+
+def test_the_shipped_phantom_is_its_stated_recipe_bit_for_bit():
+    # provenance (phantom_path, data/README.md): the project's bend preset tessellated with
+    # 12 per ring and 1 mm spacing, single precision; the file's triangles are that call's
+    from coilrod.contact import Vessel, phantom_path, tessellate
+
+    v, f = tessellate(Vessel.bend(0.02, np.pi / 2, 2e-3, 0.01, 0.01), 12, 1e-3)
+    shipped = trimesh.load(phantom_path("bend"), process=False)
+    assert np.array_equal(np.asarray(shipped.triangles), v[f].astype(np.float32).astype(float))

@@ -59,9 +59,13 @@ MAX_RADIUS = 0.05
 
 
 def phantom_path(name: str = "bend") -> str:
-    """Path of a phantom shipped with coilrod (``"bend"``: :func:`tessellate` of
-    ``Vessel.bend(0.02, pi/2, 2e-3, 0.01, 0.01, ends="round")`` with 12 vertices
-    per ring and rings 1 mm apart, made by the project, a binary STL in metres)."""
+    """Path of a phantom shipped with coilrod.
+
+    ``"bend"``: ``tessellate(Vessel.bend(0.02, pi/2, 2e-3, 0.01, 0.01), 12, 1e-3)`` (12
+    vertices per ring, rings 0.99 mm apart, the ends capped flat by fans), a binary STL in
+    metres: its triangles are that call's, rounded to single precision, bit for bit.  Made
+    by the project from its own preset (no patient or third-party data); distributed under
+    coilrod's licence (MIT).  ``coilrod/contact/data/README.md`` says the same."""
     name = as_choice(name, "name", ("bend",))
     return str(resources.files("coilrod.contact") / "data" / f"{name}_phantom.stl")
 
