@@ -394,3 +394,19 @@ def test_the_shipped_phantom_is_its_stated_recipe_bit_for_bit():
     v, f = tessellate(Vessel.bend(0.02, np.pi / 2, 2e-3, 0.01, 0.01), 12, 1e-3)
     shipped = trimesh.load(phantom_path("bend"), process=False)
     assert np.array_equal(np.asarray(shipped.triangles), v[f].astype(np.float32).astype(float))
+
+
+def test_tessellate_refuses_a_spacing_that_makes_another_vessel_or_no_memory():
+    # spacing=1.0 (1 m, e.g. meant as 1 mm) on a 51 mm bend made two rings: a straight tube
+    # along the chord, its gap on the bend's axis -10.7 mm (outside), silently; 1e-9 m asked
+    # for 8e8 vertices (a MemoryError).  By hand: the bend from the origin along +x, 10 mm
+    # straight, a 90 deg arc of radius 20 mm about (10, 20) mm, 10 mm straight along +y;
+    # mid-length is mid-arc, (10 + 20 sin 45, 20 - 20 cos 45) mm, and the chord's middle
+    # (15, 15) mm is sqrt(2) (20 sin 45 - 5) = 12.93 mm from it
+    from coilrod.contact import Vessel, tessellate
+
+    bend = Vessel.bend(0.02, np.pi / 2, 2e-3, 0.01, 0.01)
+    with pytest.raises(ValueError, match=r"spacing = 1 m is too coarse .* is 12.93 mm from"):
+        tessellate(bend, 16, 1.0)
+    with pytest.raises(ValueError, match=r"\(8.23e\+08\) exceed 1e\+06 vertices"):
+        tessellate(bend, 16, 1e-9)

@@ -553,6 +553,9 @@ PLATEAU = 0.7
 WEIGHT_FULL = 0.3
 
 
+#: Most vertices :func:`tessellate` makes (a MeshVessel of 2e6 triangles takes a minute and
+#: several GB to build).
+MAX_VERTICES = 1_000_000
 #: Candidate pairs (point, vertex or triangle) evaluated in one vectorised block: the
 #: temporaries of a block stay near 100 MB however many points are asked at once.
 BLOCK = 100_000
@@ -932,6 +935,14 @@ def tessellate(vessel, n_around: int = 16, spacing=None):
         m.
     faces : ndarray, shape (m, 3)
         Outward normals.
+
+    Raises
+    ------
+    ValueError
+        More than :data:`MAX_VERTICES` vertices, or a ``spacing`` so coarse that the chord
+        between two rings (the mesh's axis there) is more than half the narrowest lumen
+        radius from the centreline (the mesh would be another vessel: a 90 deg bend of bend
+        radius 20 mm in two rings is its chord, 12.9 mm from its centreline at mid-bend).
     """
     if not isinstance(vessel, Vessel):
         raise ValueError(f"vessel must be a Vessel; got {type(vessel).__name__}")
@@ -942,9 +953,26 @@ def tessellate(vessel, n_around: int = 16, spacing=None):
     from coils._validate import positive
 
     spacing = positive(spacing, "spacing")
-    n_rings = max(2, int(np.ceil(vessel.length / spacing)) + 1)
+    n_rings = max(2, int(np.ceil(min(vessel.length / spacing, 1e12))) + 1)
+    if n_rings * n_around > MAX_VERTICES:  # (was a MemoryError, or minutes of swapping)
+        raise ValueError(
+            f"tessellate: {n_rings} rings of {n_around} vertices ({n_rings * n_around:.3g}) "
+            f"exceed {MAX_VERTICES:.0e} vertices; give a larger spacing (m; {spacing:.3g} "
+            "now) or a smaller n_around"
+        )
     s = np.linspace(0.0, vessel.length, n_rings)
     x = vessel.position(s)
+    # the mesh's axis is the chords between rings: far from the centreline, another vessel
+    mid = vessel.position(0.5 * (s[:-1] + s[1:]))
+    off = np.linalg.norm(mid - 0.5 * (x[:-1] + x[1:]), axis=1)
+    if off.max() > 0.5 * r_min:
+        k = int(np.argmax(off))
+        raise ValueError(
+            f"tessellate: spacing = {spacing:.3g} m is too coarse for this vessel: between its "
+            f"rings at {_mm(s[k])} and {_mm(s[k + 1])} the mesh's axis (their chord) is "
+            f"{_mm(off[k])} from the centreline, over half the narrowest radius "
+            f"({_mm(r_min)}); give a smaller spacing (m)"
+        )
     t = vessel.tangent(s)
     r = vessel.radius_at(s)
     # rotation-minimising frame along the centreline (double reflection, Wang et al. 2008)
