@@ -105,7 +105,7 @@ def test_a_rotated_clamp_is_checked_along_its_own_direction():
     # 3.2 mm from the clamp), and the same scene turned as a whole was refused.  The turned
     # scene now runs and its answer is the unturned one's turned (tips, wall forces; push
     # forces equal), to round-off
-    from coilrod.scene.navigation import run_navigation
+    from coilrod.scene.navigation import contact_patch_forces, run_navigation
     from coilrod.scene.parse import SceneError, parse_scene
     from coilrod.scene.runner import plan_scene
 
@@ -123,6 +123,9 @@ def test_a_rotated_clamp_is_checked_along_its_own_direction():
     np.testing.assert_allclose(b.tip, a.tip @ Q.T, atol=1e-12 * 0.04)
     np.testing.assert_allclose(b.wall_force, a.wall_force @ Q.T, atol=1e-9 * 1e-3)
     np.testing.assert_allclose(b.push_force, a.push_force, atol=1e-9 * 1e-3)
+    # the contact patches' forces (the figure's) are the wall's on the rod: minus wall_force
+    patches = contact_patch_forces(a, len(a) - 1)
+    np.testing.assert_allclose(patches.sum(axis=0), -a.wall_force[-1], rtol=0, atol=1e-15)
 
 
 # -- insertion ------------------------------------------------------------------------------------
@@ -366,9 +369,33 @@ def test_a_lumen_with_no_room_at_the_clamp_is_a_scene_error():
         parse_scene(data, phantom)
 
 
-def test_the_figure_of_a_scene_whose_runs_all_failed_has_no_legend_warnings():
-    # `coilrod run` of a scene whose insertion failed printed matplotlib's "No artists with
-    # labels found to put in legend" twice under the failure; the figure is drawn silently
+def _point_contact(nodes, force=3.6e-3, length=0.02):
+    """An Insertion of one straight step along x whose wall pushes its middle corner with
+    ``force`` (N) along -y: the force per length there is force over the corner's segment."""
+    from coilrod.contact.insertion import Insertion
+
+    s = np.linspace(0.0, length, nodes + 1)
+    x = np.c_[s, np.zeros((nodes + 1, 2))]
+    f = np.zeros((nodes + 1, 3))
+    f[nodes // 2, 1] = -force / (length / nodes)
+    on = np.zeros(nodes + 1, bool)
+    on[nodes // 2] = True
+    one = np.ones(1)
+    return Insertion(
+        lengths=length * one, tip=x[-1:], wall_force=np.array([[0.0, force, 0.0]]),
+        max_contact_force=force / (length / nodes) * one, contact_nodes=[on], min_gap=0 * one,
+        stable=one > 0, substeps=one.astype(int), push_force=0 * one, _s=[s], _shapes=[x],
+        _frames=[np.tile(np.eye(3), (nodes + 1, 1, 1))], _forces=[f], _points=[x],
+    )  # fmt: skip
+
+
+def test_the_navigation_figure_names_grid_free_forces_and_no_empty_legends():
+    # the figure labelled the contact forces with the largest force per length (N/m): for a
+    # point contact its force over one segment, doubling with the nodes (the bend scene at
+    # 40 mm: 1.0, 2.4, 5.8, 10.5 N/m at 16-128 segments); now the largest contact's force,
+    # (3.58, 3.62, 3.63, 3.64 mN there): a 3.6 mN point force at 8 and 16 segments is 3.6 mN
+    # in both labels.  A scene whose runs all failed printed matplotlib's "No artists with
+    # labels found to put in legend" twice; it is drawn silently
     import warnings
 
     import matplotlib.pyplot as plt
@@ -378,7 +405,14 @@ def test_the_figure_of_a_scene_whose_runs_all_failed_has_no_legend_warnings():
     from coilrod.scene.runner import plan_scene
 
     scene = parse_scene(*_nav_scene(rotated=False, vessel_along_y=False))
-    result = NavigationSceneResult(scene, plan_scene(scene), [NavigationRun("ideal", 0.1)])
+    plan = plan_scene(scene)
+    for nodes in (8, 16):
+        run = NavigationRun("ideal", 0.1, _point_contact(nodes))
+        fig = plot_navigation(NavigationSceneResult(scene, plan, [run]))
+        labels = fig.axes[0].get_legend_handles_labels()[1]
+        assert any("largest contact 3.6 mN" in label for label in labels), labels
+        plt.close(fig)
+    result = NavigationSceneResult(scene, plan, [NavigationRun("ideal", 0.1)])
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         fig = plot_navigation(result)

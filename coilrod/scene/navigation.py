@@ -29,7 +29,13 @@ import numpy as np
 from ..errors import ConvergenceError
 from .tables import SceneError, _Problems, _table, _unknown_keys, _value
 
-__all__ = ["parse_insertion", "push_force", "run_navigation", "NavigationSceneResult"]
+__all__ = [
+    "parse_insertion",
+    "push_force",
+    "contact_patch_forces",
+    "run_navigation",
+    "NavigationSceneResult",
+]
 
 _KEYS = {"lengths", "steps", "withdraw", "nodes"}
 
@@ -96,6 +102,28 @@ def push_force(ins, axis=(1.0, 0.0, 0.0)) -> np.ndarray:
     if given is not None and len(given) == len(ins):
         return np.asarray(given, dtype=float)
     return np.asarray(ins.wall_force, dtype=float) @ np.asarray(axis, dtype=float)
+
+
+def contact_patch_forces(ins, k: int) -> np.ndarray:
+    """Forces of the wall on the rod at step ``k``, one per contact patch, shape (m, 3), N.
+
+    A contact point's force is its force per length (``ins.contact_force(k)``) times its
+    weight (a corner's segment length; half the last segment for the last corner and for the
+    tip), and a patch is a run of consecutive points in contact.  The patches' forces sum to
+    minus ``ins.wall_force[k]`` and converge with the grid whether the contact is distributed
+    or at a point (the force per length of a point contact grows as 1/h: the largest per
+    length is no measure of the force on the wall).
+    """
+    f = ins.contact_force(k)
+    h = np.diff(ins.s(k))
+    w = np.empty(len(f))
+    w[:-2], w[-2:] = h[:-1], 0.5 * h[-1]
+    on = np.flatnonzero(np.asarray(ins.contact_nodes[k], bool))
+    if on.size == 0:
+        return np.zeros((0, 3))
+    force = f * w[:, None]
+    runs = np.split(on, np.flatnonzero(np.diff(on) > 1) + 1)
+    return np.array([force[r].sum(axis=0) for r in runs])
 
 
 @dataclass
@@ -259,10 +287,13 @@ def plot_navigation(result, steps: int = 6):
         if ins.wall_force_magnitude[k] > 0 and np.any(on):
             p = 1e3 * ins.contact_points(k)
             scale = 0.1 * 1e3 * scene.rod.length / np.max(np.linalg.norm(f[on], axis=1))
+            # (the largest contact's force, not the largest per length: a point contact's
+            # force per length is its force over a segment, growing as the grid is refined)
+            most = np.max(np.linalg.norm(contact_patch_forces(ins, k), axis=1), initial=0.0)
             ax.quiver(p[on, 0], p[on, 1], scale * f[on, 0], scale * f[on, 1], angles="xy",
                       scale_units="xy", scale=1, color="tab:red", width=0.004,
-                      label=f"wall on rod at {1e3 * ins.lengths[k]:.0f} mm ({r.field_label}; max "
-                      f"{np.max(np.linalg.norm(f, axis=1)):.3g} N/m)")  # fmt: skip
+                      label=f"wall on rod at {1e3 * ins.lengths[k]:.0f} mm ({r.field_label}; "
+                      f"largest contact {1e3 * most:.3g} mN)")  # fmt: skip
         lengths = 1e3 * ins.lengths
         axf.plot(lengths, 1e3 * push_force(ins, result.axis), ls + "o", ms=3, color="tab:blue",
                  label=f"push force ({r.field_label})")  # fmt: skip
