@@ -367,30 +367,31 @@ def test_a_lumen_with_no_room_at_the_clamp_is_a_scene_error():
         parse_scene(data, phantom)
 
 
-def _point_contact(nodes, force=3.6e-3, length=0.02, steps=1):
-    """An Insertion of ``steps`` equal straight steps along x whose wall pushes the middle
-    corner with ``force`` (N) along -y: the force per length there is force over the corner's
-    segment."""
+def _point_contact(nodes, force=3.6e-3, length=0.02, steps=1, pushes=None):
+    """An Insertion of ``steps`` equal straight steps along x whose wall pushes corner j
+    with ``pushes[j]`` (N along +y; default the middle corner with -``force``): its force per
+    length there is that over the corner's segment."""
     from coilrod.contact.insertion import Insertion
 
+    pushes = {nodes // 2: -force} if pushes is None else pushes
     s = np.linspace(0.0, length, nodes + 1)
     x = np.c_[s, np.zeros((nodes + 1, 2))]
     f = np.zeros((nodes + 1, 3))
-    f[nodes // 2, 1] = -force / (length / nodes)
     on = np.zeros(nodes + 1, bool)
-    on[nodes // 2] = True
+    for j, fy in pushes.items():
+        f[j, 1], on[j] = fy / (length / nodes), True
     one, m = np.ones(steps), steps
     return Insertion(
         lengths=length * one, tip=np.tile(x[-1], (m, 1)),
-        wall_force=np.tile([0.0, force, 0.0], (m, 1)),
-        max_contact_force=force / (length / nodes) * one, contact_nodes=[on] * m,
+        wall_force=np.tile([0.0, -sum(pushes.values()), 0.0], (m, 1)),
+        max_contact_force=np.abs(f).max() * one, contact_nodes=[on] * m,
         min_gap=0 * one, stable=one > 0, substeps=one.astype(int), push_force=0 * one,
         _s=[s] * m, _shapes=[x] * m, _frames=[np.tile(np.eye(3), (nodes + 1, 1, 1))] * m,
         _forces=[f] * m, _points=[x] * m,
     )  # fmt: skip
 
 
-def test_the_navigation_figure_names_grid_free_forces_and_no_empty_legends():
+def test_navigation_outputs_name_grid_free_contact_forces_and_no_empty_legends():
     # the figure labelled the contact forces with the largest force per length (N/m): for a
     # point contact its force over one segment, doubling with the nodes (the bend scene at
     # 40 mm: 1.0, 2.4, 5.8, 10.5 N/m at 16-128 segments); now the largest contact's force,
@@ -413,6 +414,14 @@ def test_the_navigation_figure_names_grid_free_forces_and_no_empty_legends():
         labels = fig.axes[0].get_legend_handles_labels()[1]
         assert any("largest contact 3.6 mN" in label for label in labels), labels
         plt.close(fig)
+    # the table and summary gave the total wall force alone, |sum of the contact forces|: with
+    # the wall pushing at two places (3.6 mN down, 2 mN up) it is 1.6 mN, less than either
+    run = NavigationRun("ideal", 0.1, _point_contact(8, pushes={2: -3.6e-3, 6: 2e-3}))
+    two = NavigationSceneResult(scene, plan, [run])
+    (row,) = two.table()
+    assert row["wall_force_mN"] == pytest.approx(1.6, rel=1e-12)
+    assert row["largest_contact_mN"] == pytest.approx(3.6, rel=1e-12)
+    assert "total wall force max 1.6 mN (largest contact 3.6 mN)" in two.summary()
     result = NavigationSceneResult(scene, plan, [NavigationRun("ideal", 0.1)])
     with warnings.catch_warnings():
         warnings.simplefilter("error")

@@ -14,7 +14,9 @@ centreline; ``obstacles.friction`` is its wall's Coulomb coefficient).  At every
 field is the scene's at its largest load scale.  :func:`run_navigation` runs
 :func:`coilrod.insert` once per field of the plan (the ideal field and the coils') and
 returns a :class:`NavigationSceneResult`: a table per step (free length, tip, total wall
-force, push force at the introducer, contact points), a summary and the figure
+force -- the size of the vector sum of the contact forces, less than the largest contact's
+when the rod touches the wall on two sides --, the largest contact's force, push force at the
+introducer, contact points), a summary and the figure
 ``navigation.png`` (the shapes in the vessel with the contact points and forces, and the
 push and wall forces against the inserted length).
 """
@@ -126,6 +128,11 @@ def contact_patch_forces(ins, k: int) -> np.ndarray:
     return np.array([force[r].sum(axis=0) for r in runs])
 
 
+def _largest_contact(ins, k: int) -> float:
+    """The largest contact patch force of step ``k`` (N; 0 without contact)."""
+    return float(np.max(np.linalg.norm(contact_patch_forces(ins, k), axis=1), initial=0.0))
+
+
 @dataclass
 class NavigationRun:
     """One insertion (in one field): the :class:`~coilrod.contact.Insertion` or the error."""
@@ -156,8 +163,9 @@ class NavigationSceneResult:
         return np.eye(3)[:, 0] if R0 is None else np.asarray(R0, float)[:, 0]
 
     def table(self) -> list[dict]:
-        """One row per (field, step): free length (mm), tip (mm), wall force and push force
-        (mN), contact points in contact."""
+        """One row per (field, step): free length (mm), tip (mm), total wall force (the size
+        of the contact forces' vector sum), the largest contact's force
+        (:func:`contact_patch_forces`) and push force (mN), contact points in contact."""
         rows = []
         for r in self.runs:
             ins = r.result
@@ -174,6 +182,7 @@ class NavigationSceneResult:
                         "tip_y_mm": 1e3 * float(ins.tip[k, 1]),
                         "tip_z_mm": 1e3 * float(ins.tip[k, 2]),
                         "wall_force_mN": 1e3 * float(ins.wall_force_magnitude[k]),
+                        "largest_contact_mN": 1e3 * _largest_contact(ins, k),
                         "push_force_mN": 1e3 * float(push[k]),
                         "contacts": int(np.count_nonzero(ins.contact_nodes[k])),
                         "min_gap_mm": 1e3 * float(ins.min_gap[k]),
@@ -199,10 +208,12 @@ class NavigationSceneResult:
                 continue
             push = push_force(ins, self.axis)
             tip = 1e3 * ins.tip[-1]
+            most = max(_largest_contact(ins, k) for k in range(len(ins)))
             lines.append(
                 f"  {r.field_label:6s} tip ({tip[0]:7.3f}, {tip[1]:7.3f}, {tip[2]:7.3f}) mm "
-                f"at {1e3 * ins.lengths[-1]:g} mm; wall force max "
-                f"{1e3 * ins.wall_force_magnitude.max():.4g} mN, push force "
+                f"at {1e3 * ins.lengths[-1]:g} mm; total wall force max "
+                f"{1e3 * ins.wall_force_magnitude.max():.4g} mN (largest contact "
+                f"{1e3 * most:.4g} mN), push force "
                 f"{1e3 * push.min():.4g} .. {1e3 * push.max():.4g} mN  "
                 f"[{r.seconds:.2f} s, {status}]"
             )
@@ -232,6 +243,9 @@ class NavigationSceneResult:
                         "max_wall_force_mN": None
                         if ins is None
                         else 1e3 * float(ins.wall_force_magnitude.max()),
+                        "max_contact_force_mN": None
+                        if ins is None
+                        else 1e3 * max(_largest_contact(ins, k) for k in range(len(ins))),
                     }
                 )
             write_json(path, {"scene": self.scene.name, "runs": runs})
@@ -289,7 +303,7 @@ def plot_navigation(result, steps: int = 6):
             scale = 0.1 * 1e3 * scene.rod.length / np.max(np.linalg.norm(f[on], axis=1))
             # (the largest contact's force, not the largest per length: a point contact's
             # force per length is its force over a segment, growing as the grid is refined)
-            most = np.max(np.linalg.norm(contact_patch_forces(ins, k), axis=1), initial=0.0)
+            most = _largest_contact(ins, k)
             ax.quiver(p[on, 0], p[on, 1], scale * f[on, 0], scale * f[on, 1], angles="xy",
                       scale_units="xy", scale=1, color="tab:red", width=0.004,
                       label=f"wall on rod at {1e3 * ins.lengths[k]:.0f} mm ({r.field_label}; "
