@@ -61,8 +61,9 @@ MAX_RADIUS = 0.05
 def phantom_path(name: str = "bend") -> str:
     """Path of a phantom shipped with coilrod.
 
-    ``"bend"``: ``tessellate(Vessel.bend(0.02, pi/2, 2e-3, 0.01, 0.01), 12, 1e-3)`` (12
-    vertices per ring, rings 0.99 mm apart, the ends capped flat by fans), a binary STL in
+    ``"bend"``: ``tessellate(Vessel.bend(0.02, pi/2, 2e-3, 0.01, 0.01), 12, 1e-3,
+    caps="fan")`` (12 vertices per ring, rings 0.99 mm apart, the ends capped flat by fans of
+    triangles from their centres), a binary STL in
     metres: its triangles are that call's, rounded to single precision, bit for bit.  Made
     by the project from its own preset (no patient or third-party data); distributed under
     coilrod's licence (MIT).  ``coilrod/contact/data/README.md`` says the same."""
@@ -897,6 +898,18 @@ def _closest_on_triangles(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
     return out
 
 
+def _ring_strip(n_rings: int, n_around: int) -> np.ndarray:
+    """Faces (2 n_around (n_rings - 1), 3) joining consecutive rings of ``n_around`` vertices
+    (ring j's vertices at ``j n_around + k``), each quad cut along a diagonal."""
+    i = np.arange(n_rings - 1)[:, None] * n_around
+    k = np.arange(n_around)[None, :]
+    a0, a1 = i + k, i + (k + 1) % n_around
+    b0, b1 = a0 + n_around, a1 + n_around
+    return np.concatenate(
+        [np.stack([a0, a1, b1], -1).reshape(-1, 3), np.stack([a0, b1, b0], -1).reshape(-1, 3)]
+    )
+
+
 def _barycentric(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
     """Barycentric coordinates (n, 3) of points p (n, 3) in triangles tri (n, 3, 3)."""
     a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
@@ -912,12 +925,12 @@ def _barycentric(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
     return np.stack([1.0 - v - w, v, w], axis=1)
 
 
-def tessellate(vessel, n_around: int = 16, spacing=None):
+def tessellate(vessel, n_around: int = 16, spacing=None, caps: str = "rings"):
     """Triangle mesh of an analytic vessel's wall between its end cross-sections, capped.
 
     Rings of ``n_around`` vertices on the exact wall at arc-length steps of about
     ``spacing`` (the ring's edge length by default), joined by triangles; each end is closed
-    by a fan to its centre.  Vertices lie on the analytic wall, so the mesh's gap tends to the
+    by a flat cap.  Vertices lie on the analytic wall, so the mesh's gap tends to the
     vessel's at second order in the edge length.
 
     Parameters
@@ -928,6 +941,12 @@ def tessellate(vessel, n_around: int = 16, spacing=None):
         Vertices per ring (>= 3).
     spacing : float, optional
         Ring spacing along the centreline, m.
+    caps : {"rings", "fan"}
+        How the end discs are triangulated: concentric rings about one ring edge apart
+        (default), or a fan of triangles from the centre (the shipped phantom's; its edges
+        are a lumen radius long at any ``n_around``, so the smoothed gap's supports of the
+        rim's vertices reach a radius from the cap's sharp edge, and its error near the caps
+        grows as ``n_around`` grows: 0.65 mm outside a branch's junction at 128 per ring).
 
     Returns
     -------
@@ -947,6 +966,7 @@ def tessellate(vessel, n_around: int = 16, spacing=None):
     if not isinstance(vessel, Vessel):
         raise ValueError(f"vessel must be a Vessel; got {type(vessel).__name__}")
     n_around = as_count(n_around, "n_around", minimum=3)
+    caps = as_choice(caps, "caps", ("rings", "fan"))
     r_min = float(np.min(vessel.radius_at(np.linspace(0.0, vessel.length, 65))))
     if spacing is None:
         spacing = 2 * np.pi * r_min / n_around
@@ -995,20 +1015,29 @@ def tessellate(vessel, n_around: int = 16, spacing=None):
         + r[:, None, None]
         * (np.cos(th)[None, :, None] * n[:, None, :] + np.sin(th)[None, :, None] * b[:, None, :])
     ).reshape(-1, 3)
-    vertices = np.vstack([ring, x[0], x[-1]])
-    i = np.arange(n_rings - 1)[:, None] * n_around
-    k = np.arange(n_around)[None, :]
-    a0, a1 = i + k, i + (k + 1) % n_around
-    b0, b1 = a0 + n_around, a1 + n_around
-    side = np.concatenate(
-        [np.stack([a0, a1, b1], -1).reshape(-1, 3), np.stack([a0, b1, b0], -1).reshape(-1, 3)]
-    )
-    c0, c1 = len(ring), len(ring) + 1
-    k = np.arange(n_around)
-    last = (n_rings - 1) * n_around
-    cap0 = np.stack([np.full(n_around, c0), (k + 1) % n_around, k], -1)
-    cap1 = np.stack([np.full(n_around, c1), last + k, last + (k + 1) % n_around], -1)
-    faces = np.concatenate([side, cap0, cap1]).astype(np.int64)
+    if caps == "fan":
+        vertices = np.vstack([ring, x[0], x[-1]])
+        side = _ring_strip(n_rings, n_around)
+        c0, c1 = len(ring), len(ring) + 1
+        k = np.arange(n_around)
+        last = (n_rings - 1) * n_around
+        cap0 = np.stack([np.full(n_around, c0), (k + 1) % n_around, k], -1)
+        cap1 = np.stack([np.full(n_around, c1), last + k, last + (k + 1) % n_around], -1)
+        faces = np.concatenate([side, cap0, cap1]).astype(np.int64)
+    else:  # the end rings shrunk towards the centres in steps of about one ring edge
+        stack = ring.reshape(n_rings, n_around, 3)
+        m = max(1, int(np.ceil(n_around / (2 * np.pi))))
+        q = (np.arange(1, m) / m)[:, None, None]  # from the centre out
+        rings = np.concatenate(
+            [x[0] + (stack[0] - x[0]) * q, stack, x[-1] + (stack[-1] - x[-1]) * q[::-1]]
+        )
+        vertices = np.vstack([x[0], rings.reshape(-1, 3), x[-1]])
+        k = np.arange(n_around)
+        c1, last = len(vertices) - 1, 1 + (len(rings) - 1) * n_around
+        cap0 = np.stack([np.zeros(n_around, np.int64), 1 + (k + 1) % n_around, 1 + k], -1)
+        cap1 = np.stack([np.full(n_around, c1), last + k, last + (k + 1) % n_around], -1)
+        side = 1 + _ring_strip(len(rings), n_around)
+        faces = np.concatenate([side, cap0, cap1]).astype(np.int64)
     # outward: the enclosed volume is positive
     import trimesh
 
