@@ -63,10 +63,10 @@ def phantom_path(name: str = "bend") -> str:
 
     ``"bend"``: ``tessellate(Vessel.bend(0.02, pi/2, 2e-3, 0.01, 0.01), 12, 1e-3,
     caps="fan")`` (12 vertices per ring, rings 0.99 mm apart, the ends capped flat by fans of
-    triangles from their centres), a binary STL in
-    metres: its triangles are that call's, rounded to single precision, bit for bit.  Made
-    by the project from its own preset (no patient or third-party data); distributed under
-    coilrod's licence (MIT).  ``coilrod/contact/data/README.md`` says the same."""
+    triangles from their centres), a binary STL in metres: its triangles are that call's,
+    rounded to single precision, bit for bit.  Made by the project from its own preset (no
+    patient or third-party data); distributed under coilrod's licence (MIT).
+    ``coilrod/contact/data/README.md`` says the same."""
     name = as_choice(name, "name", ("bend",))
     return str(resources.files("coilrod.contact") / "data" / f"{name}_phantom.stl")
 
