@@ -15,8 +15,9 @@ lumen).  Two gaps (> 0 inside):
   are its exact derivatives (C1 across edges: the contact Newton converges against it); near
   the lumen's medial axis, where the weights fade, it blends (C2) into the exact gap.  It
   tends to the sampled surface at second order or better (about fourth on tessellated bends,
-  ``benchmarks/bench_mesh_vessel.py``); too coarse a mesh (8 vertices round a tube) gives a
-  poor curvature fit.
+  ``benchmarks/bench_mesh_vessel.py``; near a curvature jump, such as a bend preset's joints,
+  about 2.6 for the gap and 1.5 for the normal); too coarse a mesh (8 vertices round a tube)
+  gives a poor curvature fit.
 * **exact** (``smooth=False``): the signed distance to the polyhedron: candidate triangles from
   KD-trees over the vertices and the triangle centroids, exact closest points on them
   (vectorised over points and candidates; trimesh reads and checks the mesh), the sign from
@@ -51,12 +52,21 @@ _UNITS = {"m": 1.0, "mm": 1e-3}
 #: Sizes (m, the largest extent) outside which a mesh file's units are doubted
 #: (coilrod.UnitsWarning): a lumen larger than a body's 3 m, smaller than 0.1 mm.
 MAX_SIZE, MIN_SIZE = 3.0, 1e-4
+#: A closed lumen's mean radius (2 x volume / area: a tube's radius, less at its caps) over
+#: which its file's units are doubted too: the centreline files' widest vessel
+#: (``centerline_file.MAX_RADIUS``, an aorta's 15 mm with a margin).
+MAX_RADIUS = 0.05
 
 
 def phantom_path(name: str = "bend") -> str:
-    """Path of a phantom shipped with coilrod (``"bend"``: :func:`tessellate` of
-    ``Vessel.bend(0.02, pi/2, 2e-3, 0.01, 0.01, ends="round")`` with 12 vertices
-    per ring and rings 1 mm apart, made by the project, a binary STL in metres)."""
+    """Path of a phantom shipped with coilrod.
+
+    ``"bend"``: ``tessellate(Vessel.bend(0.02, pi/2, 2e-3, 0.01, 0.01), 12, 1e-3,
+    caps="fan")`` (12 vertices per ring, rings 0.99 mm apart, the ends capped flat by fans of
+    triangles from their centres), a binary STL in metres: its triangles are that call's,
+    rounded to single precision, bit for bit.  Made by the project from its own preset (no
+    patient or third-party data); distributed under coilrod's licence (MIT).
+    ``coilrod/contact/data/README.md`` says the same."""
     name = as_choice(name, "name", ("bend",))
     return str(resources.files("coilrod.contact") / "data" / f"{name}_phantom.stl")
 
@@ -281,6 +291,13 @@ class MeshVessel(Obstacle):
             :class:`~coils._files.MissingFileError` (a ValueError and a FileNotFoundError), a
             folder :class:`~coils._files.NotAFileError` (a ValueError and an
             IsADirectoryError).
+
+        Warns
+        -----
+        coilrod.UnitsWarning
+            A mesh over :data:`MAX_SIZE` (3 m) or under :data:`MIN_SIZE` (0.1 mm) across, or
+            a closed one whose mean radius (2 x volume / area) is over :data:`MAX_RADIUS`
+            (50 mm) -- most likely a file in mm read as m, or the reverse.
         """
         import trimesh
 
@@ -317,11 +334,11 @@ class MeshVessel(Obstacle):
             raise ValueError(f"mesh file {path!r} has non-finite vertex coordinates")
         if ext in ("stl", "ply"):  # (formats that store single precision)
             _check_precision(vertices, np.asarray(loaded.faces), path)
-        size = _UNITS[units] * float(np.max(np.ptp(vertices, axis=0)))
-        if not MIN_SIZE <= size <= MAX_SIZE:
-            from ..errors import UnitsWarning
+        from ..errors import UnitsWarning
 
-            other = "mm" if units == "m" else "m"
+        size = _UNITS[units] * float(np.max(np.ptp(vertices, axis=0)))
+        other = "mm" if units == "m" else "m"
+        if not MIN_SIZE <= size <= MAX_SIZE:
             warnings.warn(
                 f"mesh file {path!r} is {size:.3g} m across with units={units!r}: no vessel "
                 f"lumen is that {'large' if size > MAX_SIZE else 'small'}; is the file in "
@@ -329,7 +346,7 @@ class MeshVessel(Obstacle):
                 UnitsWarning,
                 stacklevel=2,
             )
-        return cls(
+        mesh = cls(
             vertices * _UNITS[units],
             np.asarray(loaded.faces),
             source=path,
@@ -337,6 +354,18 @@ class MeshVessel(Obstacle):
             smooth=smooth,
             fix_normals=fix_normals,
         )
+        # a short piece in mm read as m (a 2.5 mm tube: 2.5 m across) is not too large, but
+        # its lumen is 1 m wide
+        radius = 2.0 * mesh.volume / float(mesh._mesh.area) if mesh.watertight else 0.0
+        if size <= MAX_SIZE and radius > MAX_RADIUS:
+            warnings.warn(
+                f"mesh file {path!r} encloses a lumen {radius:.3g} m in mean radius (2 x volume "
+                f"/ area) with units={units!r}: no blood vessel is that wide; is the file in "
+                f"{other} (units={other!r})?",
+                UnitsWarning,
+                stacklevel=2,
+            )
+        return mesh
 
     # -- gap ------------------------------------------------------------------------------------
     def closest(self, points) -> np.ndarray:
@@ -354,7 +383,19 @@ class MeshVessel(Obstacle):
         triangle of some points by 1e-4 of the radius and more.)
         """
         bound = self._vtree.query(points)[0]
-        cand = self._ctree.query_ball_point(points, bound * (1 + 1e-9) + self._rmax)
+        radius = bound * (1 + 1e-9) + self._rmax
+        if len(points) * len(self.faces) <= BLOCK:  # (every triangle a candidate: one block)
+            return self._nearest_block(points, radius)
+        blocks = _blocks(self._ctree.query_ball_point(points, radius, return_length=True))
+        if len(blocks) == 1:
+            return self._nearest_block(points, radius)
+        parts = [self._nearest_block(points[b], radius[b]) for b in blocks]
+        return tuple(np.concatenate([part[i] for part in parts]) for i in range(3))
+
+    def _nearest_block(self, points: np.ndarray, radius: np.ndarray):
+        """:meth:`_nearest` of points whose candidates (triangles with centroids within
+        ``radius`` (n,)) fit one vectorised block."""
+        cand = self._ctree.query_ball_point(points, radius)
         lens = np.fromiter((len(c) for c in cand), dtype=np.int64, count=len(points))
         idx = np.concatenate([np.asarray(c, dtype=np.int64) for c in cand])
         owner = np.repeat(np.arange(len(points)), lens)
@@ -367,6 +408,21 @@ class MeshVessel(Obstacle):
     def _evaluate(self, points: np.ndarray, order: int):
         if not self.smooth:
             return self._evaluate_exact(points, order)
+        # (points deep in a finely meshed lumen have thousands of vertices within reach, and
+        # every candidate pair costs ~1 kB of temporaries at order 2: blocks of points)
+        if len(points) * len(self.vertices) <= BLOCK:
+            return self._evaluate_smooth(points, order)
+        blocks = _blocks(self._vtree.query_ball_point(points, self._reach, return_length=True))
+        if len(blocks) == 1:
+            return self._evaluate_smooth(points, order)
+        parts = [self._evaluate_smooth(points[b], order) for b in blocks]
+        return tuple(
+            None if parts[0][i] is None else np.concatenate([part[i] for part in parts])
+            for i in range(3)
+        )
+
+    def _evaluate_smooth(self, points: np.ndarray, order: int):
+        """The smoothed gap and its derivatives up to ``order`` (see the module)."""
         W, A, gW, gA, hW, hA = _smooth_sums(
             points,
             self.vertices,
@@ -496,6 +552,30 @@ PLATEAU = 0.7
 #: The smoothed gap is used alone where the weights sum to more than this (the exact
 #: polyhedral gap alone below half of it: near the lumen's medial axis).
 WEIGHT_FULL = 0.3
+
+
+#: Most vertices :func:`tessellate` makes (a MeshVessel of 2e6 triangles takes a minute and
+#: several GB to build).
+MAX_VERTICES = 1_000_000
+#: Candidate pairs (point, vertex or triangle) evaluated in one vectorised block: the
+#: temporaries of a block stay near 100 MB however many points are asked at once.
+BLOCK = 100_000
+
+
+def _blocks(counts: np.ndarray, budget: int | None = None) -> list[slice]:
+    """Slices of consecutive points whose candidate ``counts`` (n,) sum to at most
+    ``budget`` (default :data:`BLOCK`; a point with more candidates is a block alone)."""
+    budget = BLOCK if budget is None else budget
+    ends = np.cumsum(counts)
+    if len(ends) == 0 or ends[-1] <= budget:
+        return [slice(0, len(counts))]
+    out, start = [], 0
+    while start < len(ends):
+        base = ends[start - 1] if start else 0
+        stop = max(int(np.searchsorted(ends, base + budget, side="right")), start + 1)
+        out.append(slice(start, stop))
+        start = stop
+    return out
 
 
 #: Largest rounding of single-precision coordinates, as a fraction of the shortest edge,
@@ -818,6 +898,18 @@ def _closest_on_triangles(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
     return out
 
 
+def _ring_strip(n_rings: int, n_around: int) -> np.ndarray:
+    """Faces (2 n_around (n_rings - 1), 3) joining consecutive rings of ``n_around`` vertices
+    (ring j's vertices at ``j n_around + k``), each quad cut along a diagonal."""
+    i = np.arange(n_rings - 1)[:, None] * n_around
+    k = np.arange(n_around)[None, :]
+    a0, a1 = i + k, i + (k + 1) % n_around
+    b0, b1 = a0 + n_around, a1 + n_around
+    return np.concatenate(
+        [np.stack([a0, a1, b1], -1).reshape(-1, 3), np.stack([a0, b1, b0], -1).reshape(-1, 3)]
+    )
+
+
 def _barycentric(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
     """Barycentric coordinates (n, 3) of points p (n, 3) in triangles tri (n, 3, 3)."""
     a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
@@ -833,12 +925,12 @@ def _barycentric(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
     return np.stack([1.0 - v - w, v, w], axis=1)
 
 
-def tessellate(vessel, n_around: int = 16, spacing=None):
+def tessellate(vessel, n_around: int = 16, spacing=None, caps: str = "rings"):
     """Triangle mesh of an analytic vessel's wall between its end cross-sections, capped.
 
     Rings of ``n_around`` vertices on the exact wall at arc-length steps of about
     ``spacing`` (the ring's edge length by default), joined by triangles; each end is closed
-    by a fan to its centre.  Vertices lie on the analytic wall, so the mesh's gap tends to the
+    by a flat cap.  Vertices lie on the analytic wall, so the mesh's gap tends to the
     vessel's at second order in the edge length.
 
     Parameters
@@ -849,6 +941,12 @@ def tessellate(vessel, n_around: int = 16, spacing=None):
         Vertices per ring (>= 3).
     spacing : float, optional
         Ring spacing along the centreline, m.
+    caps : {"rings", "fan"}
+        How the end discs are triangulated: concentric rings about one ring edge apart
+        (default), or a fan of triangles from the centre (the shipped phantom's; its edges
+        are a lumen radius long at any ``n_around``, so the smoothed gap's supports of the
+        rim's vertices reach a radius from the cap's sharp edge, and its error near the caps
+        grows as ``n_around`` grows: 0.65 mm outside a branch's junction at 128 per ring).
 
     Returns
     -------
@@ -856,19 +954,45 @@ def tessellate(vessel, n_around: int = 16, spacing=None):
         m.
     faces : ndarray, shape (m, 3)
         Outward normals.
+
+    Raises
+    ------
+    ValueError
+        More than :data:`MAX_VERTICES` vertices, or a ``spacing`` so coarse that the chord
+        between two rings (the mesh's axis there) is more than half the narrowest lumen
+        radius from the centreline (the mesh would be another vessel: a 90 deg bend of bend
+        radius 20 mm in two rings is its chord, 12.9 mm from its centreline at mid-bend).
     """
     if not isinstance(vessel, Vessel):
         raise ValueError(f"vessel must be a Vessel; got {type(vessel).__name__}")
     n_around = as_count(n_around, "n_around", minimum=3)
+    caps = as_choice(caps, "caps", ("rings", "fan"))
     r_min = float(np.min(vessel.radius_at(np.linspace(0.0, vessel.length, 65))))
     if spacing is None:
         spacing = 2 * np.pi * r_min / n_around
     from coils._validate import positive
 
     spacing = positive(spacing, "spacing")
-    n_rings = max(2, int(np.ceil(vessel.length / spacing)) + 1)
+    n_rings = max(2, int(np.ceil(min(vessel.length / spacing, 1e12))) + 1)
+    if n_rings * n_around > MAX_VERTICES:  # (was a MemoryError, or minutes of swapping)
+        raise ValueError(
+            f"tessellate: {n_rings} rings of {n_around} vertices ({n_rings * n_around:.3g}) "
+            f"exceed {MAX_VERTICES:.0e} vertices; give a larger spacing (m; {spacing:.3g} "
+            "now) or a smaller n_around"
+        )
     s = np.linspace(0.0, vessel.length, n_rings)
     x = vessel.position(s)
+    # the mesh's axis is the chords between rings: far from the centreline, another vessel
+    mid = vessel.position(0.5 * (s[:-1] + s[1:]))
+    off = np.linalg.norm(mid - 0.5 * (x[:-1] + x[1:]), axis=1)
+    if off.max() > 0.5 * r_min:
+        k = int(np.argmax(off))
+        raise ValueError(
+            f"tessellate: spacing = {spacing:.3g} m is too coarse for this vessel: between its "
+            f"rings at {_mm(s[k])} and {_mm(s[k + 1])} the mesh's axis (their chord) is "
+            f"{_mm(off[k])} from the centreline, over half the narrowest radius "
+            f"({_mm(r_min)}); give a smaller spacing (m)"
+        )
     t = vessel.tangent(s)
     r = vessel.radius_at(s)
     # rotation-minimising frame along the centreline (double reflection, Wang et al. 2008)
@@ -891,20 +1015,29 @@ def tessellate(vessel, n_around: int = 16, spacing=None):
         + r[:, None, None]
         * (np.cos(th)[None, :, None] * n[:, None, :] + np.sin(th)[None, :, None] * b[:, None, :])
     ).reshape(-1, 3)
-    vertices = np.vstack([ring, x[0], x[-1]])
-    i = np.arange(n_rings - 1)[:, None] * n_around
-    k = np.arange(n_around)[None, :]
-    a0, a1 = i + k, i + (k + 1) % n_around
-    b0, b1 = a0 + n_around, a1 + n_around
-    side = np.concatenate(
-        [np.stack([a0, a1, b1], -1).reshape(-1, 3), np.stack([a0, b1, b0], -1).reshape(-1, 3)]
-    )
-    c0, c1 = len(ring), len(ring) + 1
-    k = np.arange(n_around)
-    last = (n_rings - 1) * n_around
-    cap0 = np.stack([np.full(n_around, c0), (k + 1) % n_around, k], -1)
-    cap1 = np.stack([np.full(n_around, c1), last + k, last + (k + 1) % n_around], -1)
-    faces = np.concatenate([side, cap0, cap1]).astype(np.int64)
+    if caps == "fan":
+        vertices = np.vstack([ring, x[0], x[-1]])
+        side = _ring_strip(n_rings, n_around)
+        c0, c1 = len(ring), len(ring) + 1
+        k = np.arange(n_around)
+        last = (n_rings - 1) * n_around
+        cap0 = np.stack([np.full(n_around, c0), (k + 1) % n_around, k], -1)
+        cap1 = np.stack([np.full(n_around, c1), last + k, last + (k + 1) % n_around], -1)
+        faces = np.concatenate([side, cap0, cap1]).astype(np.int64)
+    else:  # the end rings shrunk towards the centres in steps of about one ring edge
+        stack = ring.reshape(n_rings, n_around, 3)
+        m = max(1, int(np.ceil(n_around / (2 * np.pi))))
+        q = (np.arange(1, m) / m)[:, None, None]  # from the centre out
+        rings = np.concatenate(
+            [x[0] + (stack[0] - x[0]) * q, stack, x[-1] + (stack[-1] - x[-1]) * q[::-1]]
+        )
+        vertices = np.vstack([x[0], rings.reshape(-1, 3), x[-1]])
+        k = np.arange(n_around)
+        c1, last = len(vertices) - 1, 1 + (len(rings) - 1) * n_around
+        cap0 = np.stack([np.zeros(n_around, np.int64), 1 + (k + 1) % n_around, 1 + k], -1)
+        cap1 = np.stack([np.full(n_around, c1), last + k, last + (k + 1) % n_around], -1)
+        side = 1 + _ring_strip(len(rings), n_around)
+        faces = np.concatenate([side, cap0, cap1]).astype(np.int64)
     # outward: the enclosed volume is positive
     import trimesh
 

@@ -14,7 +14,9 @@ centreline; ``obstacles.friction`` is its wall's Coulomb coefficient).  At every
 field is the scene's at its largest load scale.  :func:`run_navigation` runs
 :func:`coilrod.insert` once per field of the plan (the ideal field and the coils') and
 returns a :class:`NavigationSceneResult`: a table per step (free length, tip, total wall
-force, push force at the introducer, contact points), a summary and the figure
+force -- the size of the vector sum of the contact forces, less than the largest contact's
+when the rod touches the wall on two sides --, the largest contact's force, push force at the
+introducer, contact points), a summary and the figure
 ``navigation.png`` (the shapes in the vessel with the contact points and forces, and the
 push and wall forces against the inserted length).
 """
@@ -29,7 +31,13 @@ import numpy as np
 from ..errors import ConvergenceError
 from .tables import SceneError, _Problems, _table, _unknown_keys, _value
 
-__all__ = ["parse_insertion", "push_force", "run_navigation", "NavigationSceneResult"]
+__all__ = [
+    "parse_insertion",
+    "push_force",
+    "contact_patch_forces",
+    "run_navigation",
+    "NavigationSceneResult",
+]
 
 _KEYS = {"lengths", "steps", "withdraw", "nodes"}
 
@@ -98,6 +106,33 @@ def push_force(ins, axis=(1.0, 0.0, 0.0)) -> np.ndarray:
     return np.asarray(ins.wall_force, dtype=float) @ np.asarray(axis, dtype=float)
 
 
+def contact_patch_forces(ins, k: int) -> np.ndarray:
+    """Forces of the wall on the rod at step ``k``, one per contact patch, shape (m, 3), N.
+
+    A contact point's force is its force per length (``ins.contact_force(k)``) times its
+    weight (a corner's segment length; half the last segment for the last corner and for the
+    tip), and a patch is a run of consecutive points in contact.  The patches' forces sum to
+    minus ``ins.wall_force[k]`` and converge with the grid whether the contact is distributed
+    or at a point (the force per length of a point contact grows as 1/h: the largest per
+    length is no measure of the force on the wall).
+    """
+    f = ins.contact_force(k)
+    h = np.diff(ins.s(k))
+    w = np.empty(len(f))
+    w[:-2], w[-2:] = h[:-1], 0.5 * h[-1]
+    on = np.flatnonzero(np.asarray(ins.contact_nodes[k], bool))
+    if on.size == 0:
+        return np.zeros((0, 3))
+    force = f * w[:, None]
+    runs = np.split(on, np.flatnonzero(np.diff(on) > 1) + 1)
+    return np.array([force[r].sum(axis=0) for r in runs])
+
+
+def _largest_contact(ins, k: int) -> float:
+    """The largest contact patch force of step ``k`` (N; 0 without contact)."""
+    return float(np.max(np.linalg.norm(contact_patch_forces(ins, k), axis=1), initial=0.0))
+
+
 @dataclass
 class NavigationRun:
     """One insertion (in one field): the :class:`~coilrod.contact.Insertion` or the error."""
@@ -128,8 +163,9 @@ class NavigationSceneResult:
         return np.eye(3)[:, 0] if R0 is None else np.asarray(R0, float)[:, 0]
 
     def table(self) -> list[dict]:
-        """One row per (field, step): free length (mm), tip (mm), wall force and push force
-        (mN), contact points in contact."""
+        """One row per (field, step): free length (mm), tip (mm), total wall force (the size
+        of the contact forces' vector sum), the largest contact's force
+        (:func:`contact_patch_forces`) and push force (mN), contact points in contact."""
         rows = []
         for r in self.runs:
             ins = r.result
@@ -146,6 +182,7 @@ class NavigationSceneResult:
                         "tip_y_mm": 1e3 * float(ins.tip[k, 1]),
                         "tip_z_mm": 1e3 * float(ins.tip[k, 2]),
                         "wall_force_mN": 1e3 * float(ins.wall_force_magnitude[k]),
+                        "largest_contact_mN": 1e3 * _largest_contact(ins, k),
                         "push_force_mN": 1e3 * float(push[k]),
                         "contacts": int(np.count_nonzero(ins.contact_nodes[k])),
                         "min_gap_mm": 1e3 * float(ins.min_gap[k]),
@@ -171,10 +208,12 @@ class NavigationSceneResult:
                 continue
             push = push_force(ins, self.axis)
             tip = 1e3 * ins.tip[-1]
+            most = max(_largest_contact(ins, k) for k in range(len(ins)))
             lines.append(
                 f"  {r.field_label:6s} tip ({tip[0]:7.3f}, {tip[1]:7.3f}, {tip[2]:7.3f}) mm "
-                f"at {1e3 * ins.lengths[-1]:g} mm; wall force max "
-                f"{1e3 * ins.wall_force_magnitude.max():.4g} mN, push force "
+                f"at {1e3 * ins.lengths[-1]:g} mm; total wall force max "
+                f"{1e3 * ins.wall_force_magnitude.max():.4g} mN (largest contact "
+                f"{1e3 * most:.4g} mN), push force "
                 f"{1e3 * push.min():.4g} .. {1e3 * push.max():.4g} mN  "
                 f"[{r.seconds:.2f} s, {status}]"
             )
@@ -204,6 +243,9 @@ class NavigationSceneResult:
                         "max_wall_force_mN": None
                         if ins is None
                         else 1e3 * float(ins.wall_force_magnitude.max()),
+                        "max_contact_force_mN": None
+                        if ins is None
+                        else 1e3 * max(_largest_contact(ins, k) for k in range(len(ins))),
                     }
                 )
             write_json(path, {"scene": self.scene.name, "runs": runs})
@@ -259,10 +301,13 @@ def plot_navigation(result, steps: int = 6):
         if ins.wall_force_magnitude[k] > 0 and np.any(on):
             p = 1e3 * ins.contact_points(k)
             scale = 0.1 * 1e3 * scene.rod.length / np.max(np.linalg.norm(f[on], axis=1))
+            # (the largest contact's force, not the largest per length: a point contact's
+            # force per length is its force over a segment, growing as the grid is refined)
+            most = _largest_contact(ins, k)
             ax.quiver(p[on, 0], p[on, 1], scale * f[on, 0], scale * f[on, 1], angles="xy",
                       scale_units="xy", scale=1, color="tab:red", width=0.004,
-                      label=f"wall on rod at {1e3 * ins.lengths[k]:.0f} mm ({r.field_label}; max "
-                      f"{np.max(np.linalg.norm(f, axis=1)):.3g} N/m)")  # fmt: skip
+                      label=f"wall on rod at {1e3 * ins.lengths[k]:.0f} mm ({r.field_label}; "
+                      f"largest contact {1e3 * most:.3g} mN)")  # fmt: skip
         lengths = 1e3 * ins.lengths
         axf.plot(lengths, 1e3 * push_force(ins, result.axis), ls + "o", ms=3, color="tab:blue",
                  label=f"push force ({r.field_label})")  # fmt: skip
@@ -271,12 +316,13 @@ def plot_navigation(result, steps: int = 6):
     ax.set_aspect("equal")
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
-    ax.legend(fontsize=6, loc="best")
     ax.set_title(scene.name, fontsize=10)
     axf.axhline(0.0, color="0.7", lw=0.8)
     axf.set_xlabel("free length (mm)")
     axf.set_ylabel("force (mN)")
-    axf.legend(fontsize=7)
+    if any(r.result is not None for r in result.runs):  # (every run failed: nothing to name)
+        ax.legend(fontsize=6, loc="best")
+        axf.legend(fontsize=7)
     return fig
 
 
@@ -360,8 +406,20 @@ def _straight_surface(lumen, rod, rod_options, length: float) -> list[str]:
     s = np.linspace(0.0, length, 65)
     gap = np.asarray(lumen.gap(np.outer(s, tangent)), float) - half
     bad = np.flatnonzero(gap < -1e-12 * length)
-    if bad.size == 0 or bad[0] == 0:  # (none, or no room at the clamp: said elsewhere)
+    if bad.size == 0:
         return []
+    if bad[0] == 0:  # no room at the clamp (a lumen narrower than the robot: said by
+        from .obstacles import _narrowest  # parse_obstacles for vessels, not for meshes)
+
+        narrow = _narrowest(lumen)
+        widest = half if hasattr(sec, "diameter") else 0.5 * np.hypot(sec.width, sec.thickness)
+        if narrow is not None and narrow <= widest:
+            return []
+        return [
+            f"insertion: the robot's surface ({1e3 * half:.4g} mm from its axis) reaches the "
+            f"lumen's wall at the clamp (the introducer; by {1e3 * -gap[0]:.3g} mm): the lumen "
+            "is narrower than the robot there, or the clamp is too close to its wall"
+        ]
     return [
         f"insertion.lengths[0]: the robot starts straight at its first free length "
         f"{1e3 * length:.4g} mm, and its surface ({1e3 * half:.4g} mm from its axis) reaches "
