@@ -26,6 +26,9 @@ MAX_HALVINGS = 12
 #: insertion step after which a larger turn is accepted (a snap).
 MAX_STEP_TURN = 1.0
 MAX_JUMP_HALVINGS = 5
+#: With friction, a sub-step in which a point first touches is cut toward the touch
+#: (:func:`_touchdown_force`) while it is longer than this fraction of the insertion step.
+TOUCHDOWN_MIN_STEP = 1e-6
 
 
 @dataclasses.dataclass
@@ -273,14 +276,18 @@ def _carry(prev_problem, prev_u, problem):
     return u.ravel()
 
 
-def _carry_reference(prev_problem, prev_u, problem) -> None:
+def _carry_reference(prev_problem, prev_u, problem) -> np.ndarray | None:
     """Give ``problem`` (a free length grown or shortened by d) the friction reference of
     the solved ``prev_problem``: the material point at arc length s from the clamp was at
     s - d, so each new contact point's reference is where that material point was (on the
     old polygon, exact by linear interpolation between its corners; inside the introducer,
-    on its axis behind the clamp)."""
+    on its axis behind the clamp).
+
+    Returns the normal force per length (EI / L^3 units of ``problem``) each new contact
+    point's material point carried there, (n, nc) (interpolated alike; 0 behind the clamp):
+    a point at 0 was not in contact (:func:`_touchdown_force`).  None without friction."""
     if not problem.nt:
-        return
+        return None
     c_old, _ = prev_problem._contact_geometry()
     c_new, _ = problem._contact_geometry()
     s_old = np.concatenate([[0.0], (prev_problem.mesh.s + c_old) * prev_problem.L])
@@ -295,6 +302,45 @@ def _carry_reference(prev_problem, prev_u, problem) -> None:
     tau = np.concatenate([np.zeros((1, tau.shape[1])), tau]) * (problem.L / prev_problem.L) ** 3
     tau = np.stack([np.interp(s_new, s_old, tau[:, i], left=0.0) for i in range(tau.shape[1])], 1)
     problem.set_reference(ref / problem.L, tau)
+    V = prev_u.reshape(prev_problem.n, prev_problem.nv)
+    lam = np.concatenate([np.zeros((1, problem.nc)), V[:, 9 : 9 + prev_problem.nc]])
+    lam = np.maximum(lam, 0.0) * (problem.L / prev_problem.L) ** 3
+    return np.stack([np.interp(s_new, s_old, lam[:, i], left=0.0) for i in range(problem.nc)], 1)
+
+
+def _touchdown_force(problem, u, lam_ref) -> float:
+    """Largest normal force per length (EI / L^3) in the solved ``u`` (size,) of
+    ``problem`` at the contact points on rough obstacles whose material point carried none
+    in the last accepted state (``lam_ref`` (n, nc), :func:`_carry_reference`): the points
+    that touch in the step (0 if none does, or without friction).
+
+    Their slip is measured from where their material point was before the step, so the
+    tangential part of their approach counts as slip, and a point that should stick where it
+    touches lands on the cone with a friction force set by how far past the touch the step
+    went (:meth:`~coilrod.rod.spatial.SpatialRod.touchdown_force`): :func:`_step` cuts the
+    step until they carry at most the problem's ``touchdown_tol``.  Material fed into a
+    contact zone by the insertion is not such a point (its place before the step lies
+    between corners in contact: it slides in, its slip along the rod)."""
+    if lam_ref is None:
+        return 0.0
+    lam = u.reshape(problem.n, problem.nv)[:, 9 : 9 + problem.nc]
+    new = (lam_ref <= 0.0) & (lam > 0.0) & (problem.mu_f > 0.0)
+    new[0] = False  # (the clamp's point carries no contact)
+    return float(lam[new].max()) if new.any() else 0.0
+
+
+def _touchdown_fraction(t: float, t1: float, force: float, touch, tol: float) -> float:
+    """The next sub-step (a fraction of the insertion step) from ``t`` after the trial at
+    ``t1`` touched with ``force`` > ``tol``: aimed just past the touch that the secant
+    through the last such trial ``touch`` = (t, force) predicts (the normal force grows
+    linearly from 0 at the touch), else half the sub-step (as the load stepping's
+    :meth:`~coilrod.path.stepping._Tracker.touchdown_step`)."""
+    if touch is not None and touch[1] != force and touch[0] != t1:
+        slope = (force - touch[1]) / (t1 - touch[0])
+        aim = t1 - (force - 0.25 * tol) / slope
+        if t < aim < t1:
+            return aim - t
+    return 0.5 * (t1 - t)
 
 
 def insert(
@@ -415,7 +461,9 @@ def insert(
                 return trial
 
             last = (problem, u, prev[0])
-            problem, u, stable, solves = _step(build, problem, u, prev, target, k, before)
+            problem, u, stable, solves = _step(
+                build, problem, u, prev, target, k, before, section=rod.section
+            )
             rec.add(problem, u, stable, solves)
             before, prev = last, target
             if bar is not None:
@@ -490,7 +538,7 @@ def _first_step(free, field, nodes, clamp, R0, vessel, tol):
     return first._solution.problems[0], first._solution.states[0][0], bool(first.stable[0])
 
 
-def _step(build, problem, u, prev, target, k, before=None):
+def _step(build, problem, u, prev, target, k, before=None, section=None):
     """One insertion step from the solved (problem, u) at (length, field) ``prev`` to
     ``target``, halving the step on failure: (problem, state, stable, solves).
 
@@ -512,26 +560,34 @@ def _step(build, problem, u, prev, target, k, before=None):
     reversal = reversal and (target_len - prev_len) * (prev_len - before[2]) < 0
     t, dt, solves, halvings = 0.0, 1.0, 0, 0
     cur_problem, cur_u, cur_lin = problem, u, None
+    touch = None  # (t, force) of the last trial cut for touching too hard (friction)
+    resume = None  # the sub-step before such cuts (resumed once the points touched)
     while t < 1.0:
         t1 = min(1.0, t + dt)
         length = prev_len + t1 * (target_len - prev_len)
         field = target_field if t1 == 1.0 else prev_field * (1 - t1) + target_field * t1
         trial = build(length, field)
-        _carry_reference(cur_problem, cur_u, trial)
+        lam_ref = _carry_reference(cur_problem, cur_u, trial)
         start = carried = _carry(cur_problem, cur_u, trial)
         starts = [_reverse_friction(trial, start)] if reversal and t == 0.0 else []
         # frictionless contact: first the solution of the linearised complementarity
         # problem at the carried shape (its contact set found by an active-set iteration);
         # then (friction, no consistent contact set, or Newton failed from there) the
         # carried shape, from the third step on the secant through the last two
+        # (friction, last: the frictionless prediction with the carried friction forces)
         predicted = active_set_start(trial, start)
         tries = starts if predicted is None else [*starts, predicted]
-        for guess in [*tries, None]:
+        last = [_frictionless_start] if trial.nt and section is not None else []
+        for guess in [*tries, None, *last]:
             if guess is None:
                 guess = start
                 if before is not None and t == 0.0 and t1 == 1.0 and before[2] != prev_len:
                     w = (target_len - prev_len) / (prev_len - before[2])
                     guess = start + w * (start - _carry(before[0], before[1], trial))
+            elif guess is _frictionless_start:
+                guess = _frictionless_start(trial, start, section)
+                if guess is None:
+                    break
             res = newton(trial, guess, 1.0, opts)
             solves += 1
             if res.ok:
@@ -546,9 +602,26 @@ def _step(build, problem, u, prev, target, k, before=None):
             turn = float(trial.distance(res.u - carried)[0])
             if turn > MAX_STEP_TURN:
                 res.ok, why = False, f"; a node turned {turn:.3g} rad in the step"
+        force = _touchdown_force(trial, res.u, lam_ref) if res.ok else 0.0
+        if force > trial.touchdown_tol and t1 - t > TOUCHDOWN_MIN_STEP:
+            # friction: end the sub-step where the new contact points touch, so that their
+            # slip is measured from there (not a halving: the trial converged)
+            resume = dt if resume is None else resume
+            dt = _touchdown_fraction(t, t1, force, touch, trial.touchdown_tol)
+            touch = (t1, force)
+            continue
         if res.ok:  # (its linearization carries the state's stability)
+            taken = t1 - t
             t, cur_problem, cur_u, cur_lin = t1, trial, res.u, res.lin
-            dt = min(1.0 - t, 2 * dt) if t < 1.0 else dt
+            if force > 0.0 and resume is not None:
+                # touched: back toward the sub-step before the cuts (at most 64 times the
+                # landing one: a trial far past the next touch may not converge)
+                dt, touch, resume = min(resume, 64.0 * taken), None, None
+            elif touch is not None:  # short of the touch aimed at: the same sub-step again
+                dt = taken
+            else:
+                dt = 2 * dt
+            dt = min(1.0 - t, dt) if t < 1.0 else dt
             continue
         halvings += 1
         if halvings > MAX_HALVINGS:
@@ -564,6 +637,31 @@ def _step(build, problem, u, prev, target, k, before=None):
         dt /= 2
     stable = np.ravel(cur_problem.stability(cur_lin))[0] > 0
     return cur_problem, cur_u, bool(stable), solves
+
+
+def _frictionless_start(problem, u, section):
+    """A start for the friction ``problem`` from its carried start ``u`` (size,): the
+    frictionless twin's linearised complementarity solution
+    (:func:`~coilrod.rod.contact_predictor.active_set_start`, which a problem with friction
+    rows does not have) with the carried friction forces; None where it has none.  A point
+    landing on the wall from a carried start without contact: plain Newton often fails there
+    (a rising field at a held length: from the carried start every step with a new contact
+    failed, frictionless without the prediction as well), and with friction each such step
+    was halved until the halvings ran out."""
+    from ..rod.spatial import SpatialRod
+
+    twin = SpatialRod(
+        problem.mesh, problem.mu, problem.K, problem.field, problem.L, problem.clamp,
+        problem.R0, problem.tol, False, problem.obstacles, section=section, friction_rows=False,
+    )  # fmt: skip
+    twin.ncp = problem.ncp
+    V = u.reshape(problem.n, problem.nv)
+    predicted = active_set_start(twin, np.ascontiguousarray(V[:, : twin.nv]).ravel())
+    if predicted is None:
+        return None
+    out = V.copy()
+    out[:, : twin.nv] = predicted.reshape(twin.n, twin.nv)
+    return out.ravel()
 
 
 def _reverse_friction(problem, u):
