@@ -308,26 +308,35 @@ def _carry_reference(prev_problem, prev_u, problem) -> np.ndarray | None:
     return np.stack([np.interp(s_new, s_old, lam[:, i], left=0.0) for i in range(problem.nc)], 1)
 
 
-def _touchdown_force(problem, u, lam_ref, carried) -> float:
+def _touchdown_force(problem, u, lam_ref, carried, feed: float = 0.0) -> float:
     """Largest normal force per length (EI / L^3) in the solved ``u`` (size,) of
-    ``problem`` at the contact points on rough obstacles that touch in the step: neither
-    their material point (``lam_ref`` (n, nc), :func:`_carry_reference`) nor their place
-    along the rod (the carried start ``carried`` (size,), :func:`_carry`) carried a normal
-    force in the last accepted state (0 if none touches, or without friction).
+    ``problem`` at the contact points on rough obstacles that touch in the step (0 if none
+    does, or without friction): neither their material point (``lam_ref`` (n, nc),
+    :func:`_carry_reference`) nor their place along the rod (the carried start ``carried``
+    (size,), :func:`_carry`) carried a normal force in the last accepted state, and their
+    motion since then is not the insertion's feed ``feed`` (m, the step's change of the
+    free length) along the rod, to half of it.
 
     Their slip is measured from where their material point was before the step, so the
     tangential part of their approach counts as slip, and a point that should stick where it
     touches lands on the cone with a friction force set by how far past the touch the step
     went (:meth:`~coilrod.rod.spatial.SpatialRod.touchdown_force`): :func:`_step` cuts the
-    step until they carry at most the problem's ``touchdown_tol``.  Material that the
-    insertion feeds into a contact zone is not such a point: its place was in contact, and it
-    slides in along the rod, the way its slip points."""
+    step until they carry at most the problem's ``touchdown_tol``.  A point the feed carries
+    along the wall -- material fed into a contact zone, a tip fed along it -- moved before
+    and after it touched the way the feed goes, so it slips that way either way (its friction
+    force is the same full slip; in 3D up to the direction of the approach): no cut."""
     if lam_ref is None:
         return 0.0
-    lam = u.reshape(problem.n, problem.nv)[:, 9 : 9 + problem.nc]
-    was = carried.reshape(problem.n, problem.nv)[:, 9 : 9 + problem.nc]
+    n, nv, nc = problem.n, problem.nv, problem.nc
+    lam = u.reshape(n, nv)[:, 9 : 9 + nc]
+    was = carried.reshape(n, nv)[:, 9 : 9 + nc]
     new = (lam_ref <= 0.0) & (was <= 0.0) & (lam > 0.0) & (problem.mu_f > 0.0)
     new[0] = False  # (the clamp's point carries no contact)
+    if new.any() and feed != 0.0:
+        frames = problem.frames(u[None])
+        moved = problem.contact_points(u[None], frames)[0] - problem._p_ref  # units of L
+        off = np.linalg.norm(moved - (feed / problem.L) * frames[0, :, :, 0], axis=1)
+        new &= (off > 0.5 * abs(feed) / problem.L)[:, None]
     return float(lam[new].max()) if new.any() else 0.0
 
 
@@ -604,7 +613,10 @@ def _step(build, problem, u, prev, target, k, before=None, section=None):
             turn = float(trial.distance(res.u - carried)[0])
             if turn > MAX_STEP_TURN:
                 res.ok, why = False, f"; a node turned {turn:.3g} rad in the step"
-        force = _touchdown_force(trial, res.u, lam_ref, carried) if res.ok else 0.0
+        force = 0.0
+        if res.ok and lam_ref is not None:
+            feed = length - (prev_len + t * (target_len - prev_len))
+            force = _touchdown_force(trial, res.u, lam_ref, carried, feed)
         if force > trial.touchdown_tol and t1 - t > TOUCHDOWN_MIN_STEP:
             # friction: end the sub-step where the new contact points touch, so that their
             # slip is measured from there (not a halving: the trial converged)
