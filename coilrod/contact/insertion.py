@@ -42,12 +42,14 @@ class Insertion:
     tip : ndarray, shape (m, 3)
         Tip positions, m.
     wall_force : ndarray, shape (m, 3)
-        Total force the rod exerts on the vessel wall, N: a vector per step, so
-        ``wall_force.max()`` is its largest *component*; the size of the force is
-        :attr:`wall_force_magnitude` (``wall_force_magnitude.max()``: the largest total
-        wall force along the insertion).
+        Total force the rod exerts on the vessel wall, N, in world axes (the normal forces
+        and, with friction, the friction forces: on the wall they point the way the rod
+        slides): a vector per step, so ``wall_force.max()`` is its largest *component*; the
+        size of the force is :attr:`wall_force_magnitude` (``wall_force_magnitude.max()``:
+        the largest total wall force along the insertion).
     max_contact_force : ndarray, shape (m,)
-        Largest contact force per unit length along the rod, N/m.
+        Largest size of the contact force per unit length along the rod (normal force plus
+        friction), N/m.
     contact_nodes : list of ndarray of bool
         Contact points in contact with the wall, per step (n_k,): the corners of the rod's
         polygon half a segment after each node, and the tip (:meth:`contact_points`).
@@ -59,10 +61,13 @@ class Insertion:
         Newton solves each step took (1 without step cutting).
     push_force : ndarray, shape (m,)
         The push force at the introducer, N: the axial component of the force the clamp
-        exerts on the rod, ``-F_0 . t_0`` (F_0 the rod's internal force at the clamp, t_0
-        the introducer's axis); > 0 pushes the rod in, < 0 pulls it back.  With friction
-        the force depends on the direction of the motion: insertion then withdrawal draws
-        a hysteresis loop (frictionless: one curve).
+        exerts on the rod, ``-F_0 . t_0`` (F_0 the force the free part exerts on the clamp,
+        t_0 the introducer's axis, pointing into the vessel); > 0 pushes the rod in, < 0
+        pulls it back.  It balances the axial part of the wall's and the field's forces on
+        the free part (a tip sliding on a flat wall parallel to the axis in a uniform field:
+        ``+mu N`` on the way in, ``-mu N`` on the way out).  With friction the force depends
+        on the direction of the motion: insertion then withdrawal through the same lengths
+        draws a hysteresis loop; frictionless the two are one curve (the same states).
     """
 
     lengths: np.ndarray
@@ -109,7 +114,8 @@ class Insertion:
 
     def contact_force(self, k: int) -> np.ndarray:
         """Contact force per unit length on the rod at the contact points of step ``k``
-        (:meth:`contact_points`), (n_k, 3), N/m."""
+        (:meth:`contact_points`), (n_k, 3), N/m, in world axes: the wall's normal force
+        plus, with friction, the friction force (on the rod: against its sliding)."""
         return self._forces[k].copy()
 
     def axial_force(self, k: int) -> np.ndarray:
@@ -383,8 +389,13 @@ def insert(
     since the previous step); a step that fails is split in halves (free length and field
     blended linearly), up to :data:`MAX_HALVINGS` times -- also a step that turns a node
     more than :data:`MAX_STEP_TURN` from its start (Newton jumped to another branch; with
-    friction the state depends on the path), up to :data:`MAX_JUMP_HALVINGS` times.  The
-    first step is loaded from the straight rod by :func:`~coilrod.solve_rod`.
+    friction the state depends on the path), up to :data:`MAX_JUMP_HALVINGS` times.  With
+    friction, a step (or part of one) in which a point first touches the wall, other than
+    one the feed carries along it, is cut toward the touch until that point carries at most
+    ``SpatialRod.touchdown_tol`` (its slip is then measured from where it touched: the
+    answer does not move with the number of steps), and a failed try is repeated from the
+    frictionless prediction.  The first step is loaded from the straight rod by
+    :func:`~coilrod.solve_rod`.
 
     Parameters
     ----------
@@ -558,7 +569,13 @@ def _step(build, problem, u, prev, target, k, before=None, section=None):
     (:func:`~coilrod.rod.contact_predictor.active_set_start`).  ``before`` (problem,
     state, length) is the step solved before ``prev``: the (next) try then starts from the
     secant through the two states (each carried to the new length, extrapolated linearly in
-    the free length); a halved step starts from the carried state alone."""
+    the free length); a halved step starts from the carried state alone.
+
+    With friction, a try that failed is repeated from the frictionless twin's prediction
+    (:func:`_frictionless_start`), and a part of the step in which a point first touches
+    (:func:`_touchdown_force`) is cut toward the touch -- a secant on that point's normal
+    force (:func:`_touchdown_fraction`), not counted as a halving -- until it ends where the
+    point touches (to ``touchdown_tol``); the step then resumes its length."""
     # semi-smooth Newton: the error may stall for a few iterations while the contact set
     # settles (then it converges quadratically)
     opts = NewtonOptions(max_iter=40, stagnation=12)
