@@ -209,11 +209,15 @@ def test_capstan_round_a_bend(mu, steps):
                          straight_after=0.06).with_friction(mu)  # fmt: skip
     mag = Magnetization.segments([0.09, 0.01], [0.0, 128e3], [0.0, 0.0])
     rod = Rod(0.1, 1e3, Circle(1e-3), mag)
-    lengths = [*np.linspace(0.015, 0.08, steps), 0.079, 0.078, 0.08]  # in, back 2 mm, in again
-    moments = [5.0] * steps + [150.0] * 3  # the magnet's pull (T) raised for the withdrawal
+    # in, back 2 mm, in again (the reversals once, at 7 steps: at 12 and frictionless they
+    # repeated those states and checks; the way in is what failed there)
+    back = [0.079, 0.078, 0.08] if steps == 7 else []
+    lengths = [*np.linspace(0.015, 0.08, steps), *back]
+    moments = [5.0] * steps + [150.0] * len(back)  # the magnet's pull (T) raised for the withdrawal
     fields = [coils.Dipole(moment=(0, m, 0), center=(0.04, 0.14, 0)) for m in moments]
     ins = coilrod.insert(rod, vessel, lengths, fields, nodes=16)
-    for k, sign in ((steps - 1, 1.0), (steps + 1, -1.0), (steps + 2, 1.0)):
+    states = ((steps - 1, 1.0), (steps + 1, -1.0), (steps + 2, 1.0))[: 1 + 2 * bool(back)]
+    for k, sign in states:
         s, axial = ins.s(k)[:-1], ins.axial_force(k)
         chord = np.diff(ins.centerline(k), axis=0)
         angle = np.arctan2(chord[:, 1], chord[:, 0])
@@ -225,6 +229,8 @@ def test_capstan_round_a_bend(mu, steps):
         assert abs((t_out / t_in) ** sign / np.exp(mu * theta) - 1) < (5e-3 if mu else 8e-3)
         assert (t_out / t_in) ** sign > (1.3 if mu else 0.99)  # frictionless, it is 1
     assert np.abs(np.diff(angle)).max() < 0.5  # not folded (a chord turns 0.1-0.3 rad)
+    chord = np.diff(ins.centerline(steps - 1), axis=0)  # (and at the end of the way in)
+    assert np.abs(np.diff(np.arctan2(chord[:, 1], chord[:, 0]))).max() < 0.5
 
 
 def test_stick_is_exact_at_several_sticking_points():
