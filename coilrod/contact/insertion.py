@@ -589,6 +589,7 @@ def _step(build, problem, u, prev, target, k, before=None, section=None):
     t, dt, solves, halvings = 0.0, 1.0, 0, 0
     cur_problem, cur_u, cur_lin = problem, u, None
     touch = None  # (t, force) of the last trial cut for touching too hard (friction)
+    twin_first = False  # (friction: try the frictionless prediction before the carried start)
     resume = None  # the sub-step before such cuts (resumed once the points touched)
     while t < 1.0:
         t1 = min(1.0, t + dt)
@@ -605,20 +606,24 @@ def _step(build, problem, u, prev, target, k, before=None, section=None):
         # (friction, last: the frictionless prediction with the carried friction forces)
         predicted = active_set_start(trial, start)
         tries = starts if predicted is None else [*starts, predicted]
+        # (once it converged where the carried start failed -- a landing -- it goes first for
+        # the rest of the step: the cuts toward the touch land again)
         last = [_frictionless_start] if trial.nt and section is not None else []
-        for guess in [*tries, None, *last]:
+        for guess in [*tries, *last, None] if twin_first else [*tries, None, *last]:
+            twin = guess is _frictionless_start
             if guess is None:
                 guess = start
                 if before is not None and t == 0.0 and t1 == 1.0 and before[2] != prev_len:
                     w = (target_len - prev_len) / (prev_len - before[2])
                     guess = start + w * (start - _carry(before[0], before[1], trial))
-            elif guess is _frictionless_start:
+            elif twin:
                 guess = _frictionless_start(trial, start, section)
                 if guess is None:
-                    break
+                    continue
             res = newton(trial, guess, 1.0, opts)
             solves += 1
             if res.ok:
+                twin_first = twin_first or twin
                 break
         why = _reason(trial)
         if res.ok and dt > 2.0**-MAX_JUMP_HALVINGS:
