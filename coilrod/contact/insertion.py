@@ -663,9 +663,9 @@ def _step(build, problem, u, prev, target, k, before=None, section=None):
         if halvings > MAX_HALVINGS:
             raise ConvergenceError(
                 f"insert could not reach free length {target_len:.6g} m (step {k}): it "
-                f"stopped at {prev_len + t * (target_len - prev_len):.6g} m after "
-                f"{MAX_HALVINGS} halvings (error {float(res.error):.3g} of the "
-                f"tolerance){why}",
+                f"stopped at {prev_len + t * (target_len - prev_len):.6g} m, {t:.3g} of the "
+                f"way from step {k - 1} in length and field, after {MAX_HALVINGS} halvings "
+                f"(error {float(res.error):.3g} of the tolerance){why}",
                 reached=prev_len + t * (target_len - prev_len),
                 target=target_len,
                 residual=float(res.error),
