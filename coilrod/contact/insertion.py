@@ -572,7 +572,8 @@ def _step(build, problem, u, prev, target, k, before=None, section=None):
     the free length); a halved step starts from the carried state alone.
 
     With friction, a try that failed is repeated from the frictionless twin's prediction
-    (:func:`_frictionless_start`), and a part of the step in which a point first touches
+    (:func:`_frictionless_start`; first for the rest of the step once it converged there),
+    and a part of the step in which a point first touches
     (:func:`_touchdown_force`) is cut toward the touch -- a secant on that point's normal
     force (:func:`_touchdown_fraction`), not counted as a halving -- until it ends where the
     point touches (to ``touchdown_tol``); the step then resumes its length."""
