@@ -19,12 +19,22 @@ push force on a flat wall.
 3. A tip bent onto a flat wall parallel to the introducer slides along it: the push force
    at the introducer is mu times the wall's normal reaction (insertion) and minus it
    (withdrawal), exactly.
+4. A touch-down within an insertion step: ``insert`` at a held length (the whole 40 mm
+   rod of ``tests/test_friction.py``, d = 2 mm, E = 1 MPa, M axial) in a uniform field
+   rising from lambda = 0.3 to 1.5, 3 and 4.5 (each interval in 1, 2, 3, 5 or 8 steps):
+   its tip touches the rough wall y = 0.2 L (mu = 0.3) within the first interval.  After
+   the touch the frictionless shape does not change with the field, so the frictionless
+   state is the exact answer with friction too (no friction force): columns
+   ``max |f_t / f_n|`` and the tip's largest distance from the frictionless tip (units of
+   L), by step count.  Before the touch-down cut both moved with the step count (or the
+   insertion failed at the landing).
 
 Every kernel runs compiled (ski-rental thresholds 0, ``_machine.compile_at_once``): the CPU
 columns are a warm process's; ``bench_coldstart.py`` measures what a fresh one pays.
 
-Run: ``python benchmarks/bench_friction.py`` (prints markdown tables; ~45 s);
-``--quick``: 16 segments, the first pull and step count only.
+Run: ``python benchmarks/bench_friction.py`` (prints markdown tables; ~50 s);
+``--quick``: 16 segments, the first pull and step count only (touch-down: 8 segments, 1
+and 3 steps).
 """
 
 from __future__ import annotations
@@ -42,6 +52,7 @@ import numpy as np  # noqa: E402
 
 import coils  # noqa: E402
 from coilrod import Circle, Magnetization, Rod, Vessel, Wall, insert  # noqa: E402
+from coilrod.errors import ConvergenceError  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 from _machine import bench_args, compile_at_once, machine_info  # noqa: E402
@@ -93,6 +104,33 @@ def flat_wall():
     return lengths, ins.push_force, ins.wall_force[:, 1]
 
 
+def touchdown(nodes: int, steps: int, mu: float = 0.3):
+    """(max |f_t / f_n| over the steps in contact, largest |tip - frictionless tip| / L) of
+    the held-length insertion in a rising field (docstring, item 4) with ``steps`` steps per
+    interval; ``mu = 0``: the frictionless insertion itself."""
+    L = 0.04
+    rod = Rod(L, 1e6, Circle(2e-3), Magnetization(128e3, 0.0))
+
+    def run(mu, steps):
+        knots = np.array([0.3, 1.5, 3.0, 4.5])
+        grid = np.linspace(0.0, 1.0, steps + 1)[1:]
+        lam = [knots[0], *(knots[:-1, None] + np.diff(knots)[:, None] * grid).ravel()]
+        fields = [coils.UniformField(B=(0, rod.field_for_lambda(v), 0)) for v in lam]
+        wall = Wall((0, 0.2 * L, 0), (0, -1, 0), friction=mu)
+        ins = insert(rod, wall, [L] * len(lam), fields, clamp_position=(0, 0, 0),
+                     clamp_rotation=np.eye(3), nodes=nodes)  # fmt: skip
+        return ins.wall_force[::steps], ins.tip[::steps]
+
+    _, free = run(0.0, 1)
+    try:
+        wall, tip = run(mu, steps)
+    except ConvergenceError:
+        return None
+    touching = wall[:, 1] > 0
+    ratio = float(np.abs(wall[touching, 0] / wall[touching, 1]).max())
+    return ratio, float(np.abs(tip - free).max() / L)
+
+
 def main():
     quick = bench_args(__doc__).quick
     compile_at_once()
@@ -115,6 +153,16 @@ def main():
     for steps in step_counts:
         *_, ratio, ref, err, cpu = capstan(16, 150.0, steps)[-1]
         print(f"| {steps} | {ratio:.5f} | {ref:.5f} | {err:+.1e} | {cpu:.2f} |")
+    print("\n## A touch-down within an insertion step (held length, rising field, mu = 0.3)\n")
+    mults = (1, 3) if quick else (1, 2, 3, 5, 8)
+    print("| segments | " + " | ".join(f"{m} step{'s' * (m > 1)}" for m in mults) + " |")
+    print("|---|" + "---|" * len(mults))
+    for nodes in (8,) if quick else (8, 16, 32):
+        cells = []
+        for m in mults:
+            got = touchdown(nodes, m)
+            cells.append("fails" if got is None else f"{got[0]:.1e} / {got[1]:.1e}")
+        print(f"| {nodes} | " + " | ".join(cells) + " |")
     print(f"\n## Push force on a flat wall (mu = {MU})\n")
     print("| free length mm | push mN | normal reaction mN | push / (mu N) |")
     print("|---|---|---|---|")

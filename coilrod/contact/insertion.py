@@ -26,6 +26,9 @@ MAX_HALVINGS = 12
 #: insertion step after which a larger turn is accepted (a snap).
 MAX_STEP_TURN = 1.0
 MAX_JUMP_HALVINGS = 5
+#: With friction, a sub-step in which a point first touches is cut toward the touch
+#: (:func:`_touchdown_force`) while it is longer than this fraction of the insertion step.
+TOUCHDOWN_MIN_STEP = 1e-6
 
 
 @dataclasses.dataclass
@@ -39,12 +42,14 @@ class Insertion:
     tip : ndarray, shape (m, 3)
         Tip positions, m.
     wall_force : ndarray, shape (m, 3)
-        Total force the rod exerts on the vessel wall, N: a vector per step, so
-        ``wall_force.max()`` is its largest *component*; the size of the force is
-        :attr:`wall_force_magnitude` (``wall_force_magnitude.max()``: the largest total
-        wall force along the insertion).
+        Total force the rod exerts on the vessel wall, N, in world axes (the normal forces
+        and, with friction, the friction forces: on the wall they point the way the rod
+        slides): a vector per step, so ``wall_force.max()`` is its largest *component*; the
+        size of the force is :attr:`wall_force_magnitude` (``wall_force_magnitude.max()``:
+        the largest total wall force along the insertion).
     max_contact_force : ndarray, shape (m,)
-        Largest contact force per unit length along the rod, N/m.
+        Largest size of the contact force per unit length along the rod (normal force plus
+        friction), N/m.
     contact_nodes : list of ndarray of bool
         Contact points in contact with the wall, per step (n_k,): the corners of the rod's
         polygon half a segment after each node, and the tip (:meth:`contact_points`).
@@ -56,10 +61,13 @@ class Insertion:
         Newton solves each step took (1 without step cutting).
     push_force : ndarray, shape (m,)
         The push force at the introducer, N: the axial component of the force the clamp
-        exerts on the rod, ``-F_0 . t_0`` (F_0 the rod's internal force at the clamp, t_0
-        the introducer's axis); > 0 pushes the rod in, < 0 pulls it back.  With friction
-        the force depends on the direction of the motion: insertion then withdrawal draws
-        a hysteresis loop (frictionless: one curve).
+        exerts on the rod, ``-F_0 . t_0`` (F_0 the force the free part exerts on the clamp,
+        t_0 the introducer's axis, pointing into the vessel); > 0 pushes the rod in, < 0
+        pulls it back.  It balances the axial part of the wall's and the field's forces on
+        the free part (a tip sliding on a flat wall parallel to the axis in a uniform field:
+        ``+mu N`` on the way in, ``-mu N`` on the way out).  With friction the force depends
+        on the direction of the motion: insertion then withdrawal through the same lengths
+        draws a hysteresis loop; frictionless the two are one curve (the same states).
     """
 
     lengths: np.ndarray
@@ -106,7 +114,8 @@ class Insertion:
 
     def contact_force(self, k: int) -> np.ndarray:
         """Contact force per unit length on the rod at the contact points of step ``k``
-        (:meth:`contact_points`), (n_k, 3), N/m."""
+        (:meth:`contact_points`), (n_k, 3), N/m, in world axes: the wall's normal force
+        plus, with friction, the friction force (on the rod: against its sliding)."""
         return self._forces[k].copy()
 
     def axial_force(self, k: int) -> np.ndarray:
@@ -273,14 +282,18 @@ def _carry(prev_problem, prev_u, problem):
     return u.ravel()
 
 
-def _carry_reference(prev_problem, prev_u, problem) -> None:
+def _carry_reference(prev_problem, prev_u, problem) -> np.ndarray | None:
     """Give ``problem`` (a free length grown or shortened by d) the friction reference of
     the solved ``prev_problem``: the material point at arc length s from the clamp was at
     s - d, so each new contact point's reference is where that material point was (on the
     old polygon, exact by linear interpolation between its corners; inside the introducer,
-    on its axis behind the clamp)."""
+    on its axis behind the clamp).
+
+    Returns the normal force per length (EI / L^3 units of ``problem``) each new contact
+    point's material point carried there, (n, nc) (interpolated alike; 0 behind the clamp):
+    a point at 0 was not in contact (:func:`_touchdown_force`).  None without friction."""
     if not problem.nt:
-        return
+        return None
     c_old, _ = prev_problem._contact_geometry()
     c_new, _ = problem._contact_geometry()
     s_old = np.concatenate([[0.0], (prev_problem.mesh.s + c_old) * prev_problem.L])
@@ -295,6 +308,56 @@ def _carry_reference(prev_problem, prev_u, problem) -> None:
     tau = np.concatenate([np.zeros((1, tau.shape[1])), tau]) * (problem.L / prev_problem.L) ** 3
     tau = np.stack([np.interp(s_new, s_old, tau[:, i], left=0.0) for i in range(tau.shape[1])], 1)
     problem.set_reference(ref / problem.L, tau)
+    V = prev_u.reshape(prev_problem.n, prev_problem.nv)
+    lam = np.concatenate([np.zeros((1, problem.nc)), V[:, 9 : 9 + prev_problem.nc]])
+    lam = np.maximum(lam, 0.0) * (problem.L / prev_problem.L) ** 3
+    return np.stack([np.interp(s_new, s_old, lam[:, i], left=0.0) for i in range(problem.nc)], 1)
+
+
+def _touchdown_force(problem, u, lam_ref, carried, feed: float = 0.0) -> float:
+    """Largest normal force per length (EI / L^3) in the solved ``u`` (size,) of
+    ``problem`` at the contact points on rough obstacles that touch in the step (0 if none
+    does, or without friction): neither their material point (``lam_ref`` (n, nc),
+    :func:`_carry_reference`) nor their place along the rod (the carried start ``carried``
+    (size,), :func:`_carry`) carried a normal force in the last accepted state, and their
+    motion since then is not the insertion's feed ``feed`` (m, the step's change of the
+    free length) along the rod, to half of it.
+
+    Their slip is measured from where their material point was before the step, so the
+    tangential part of their approach counts as slip, and a point that should stick where it
+    touches lands on the cone with a friction force set by how far past the touch the step
+    went (:meth:`~coilrod.rod.spatial.SpatialRod.touchdown_force`): :func:`_step` cuts the
+    step until they carry at most the problem's ``touchdown_tol``.  A point the feed carries
+    along the wall -- material fed into a contact zone, a tip fed along it -- moved before
+    and after it touched the way the feed goes, so it slips that way either way (its friction
+    force is the same full slip; in 3D up to the direction of the approach): no cut."""
+    if lam_ref is None:
+        return 0.0
+    n, nv, nc = problem.n, problem.nv, problem.nc
+    lam = u.reshape(n, nv)[:, 9 : 9 + nc]
+    was = carried.reshape(n, nv)[:, 9 : 9 + nc]
+    new = (lam_ref <= 0.0) & (was <= 0.0) & (lam > 0.0) & (problem.mu_f > 0.0)
+    new[0] = False  # (the clamp's point carries no contact)
+    if new.any() and feed != 0.0:
+        frames = problem.frames(u[None])
+        moved = problem.contact_points(u[None], frames)[0] - problem._p_ref  # units of L
+        off = np.linalg.norm(moved - (feed / problem.L) * frames[0, :, :, 0], axis=1)
+        new &= (off > 0.5 * abs(feed) / problem.L)[:, None]
+    return float(lam[new].max()) if new.any() else 0.0
+
+
+def _touchdown_fraction(t: float, t1: float, force: float, touch, tol: float) -> float:
+    """The next sub-step (a fraction of the insertion step) from ``t`` after the trial at
+    ``t1`` touched with ``force`` > ``tol``: aimed just past the touch that the secant
+    through the last such trial ``touch`` = (t, force) predicts (the normal force grows
+    linearly from 0 at the touch), else half the sub-step (as the load stepping's
+    :meth:`~coilrod.path.stepping._Tracker.touchdown_step`)."""
+    if touch is not None and touch[1] != force and touch[0] != t1:
+        slope = (force - touch[1]) / (t1 - touch[0])
+        aim = t1 - (force - 0.25 * tol) / slope
+        if t < aim < t1:
+            return aim - t
+    return 0.5 * (t1 - t)
 
 
 def insert(
@@ -326,8 +389,13 @@ def insert(
     since the previous step); a step that fails is split in halves (free length and field
     blended linearly), up to :data:`MAX_HALVINGS` times -- also a step that turns a node
     more than :data:`MAX_STEP_TURN` from its start (Newton jumped to another branch; with
-    friction the state depends on the path), up to :data:`MAX_JUMP_HALVINGS` times.  The
-    first step is loaded from the straight rod by :func:`~coilrod.solve_rod`.
+    friction the state depends on the path), up to :data:`MAX_JUMP_HALVINGS` times.  With
+    friction, a step (or part of one) in which a point first touches the wall, other than
+    one the feed carries along it, is cut toward the touch until that point carries at most
+    ``SpatialRod.touchdown_tol`` (its slip is then measured from where it touched: the
+    answer does not move with the number of steps), and a failed try is repeated from the
+    frictionless prediction.  The first step is loaded from the straight rod by
+    :func:`~coilrod.solve_rod`.
 
     Parameters
     ----------
@@ -415,7 +483,9 @@ def insert(
                 return trial
 
             last = (problem, u, prev[0])
-            problem, u, stable, solves = _step(build, problem, u, prev, target, k, before)
+            problem, u, stable, solves = _step(
+                build, problem, u, prev, target, k, before, section=rod.section
+            )
             rec.add(problem, u, stable, solves)
             before, prev = last, target
             if bar is not None:
@@ -490,7 +560,7 @@ def _first_step(free, field, nodes, clamp, R0, vessel, tol):
     return first._solution.problems[0], first._solution.states[0][0], bool(first.stable[0])
 
 
-def _step(build, problem, u, prev, target, k, before=None):
+def _step(build, problem, u, prev, target, k, before=None, section=None):
     """One insertion step from the solved (problem, u) at (length, field) ``prev`` to
     ``target``, halving the step on failure: (problem, state, stable, solves).
 
@@ -499,7 +569,14 @@ def _step(build, problem, u, prev, target, k, before=None):
     (:func:`~coilrod.rod.contact_predictor.active_set_start`).  ``before`` (problem,
     state, length) is the step solved before ``prev``: the (next) try then starts from the
     secant through the two states (each carried to the new length, extrapolated linearly in
-    the free length); a halved step starts from the carried state alone."""
+    the free length); a halved step starts from the carried state alone.
+
+    With friction, a try that failed is repeated from the frictionless twin's prediction
+    (:func:`_frictionless_start`; first for the rest of the step once it converged there),
+    and a part of the step in which a point first touches
+    (:func:`_touchdown_force`) is cut toward the touch -- a secant on that point's normal
+    force (:func:`_touchdown_fraction`), not counted as a halving -- until it ends where the
+    point touches (to ``touchdown_tol``); the step then resumes its length."""
     # semi-smooth Newton: the error may stall for a few iterations while the contact set
     # settles (then it converges quadratically)
     opts = NewtonOptions(max_iter=40, stagnation=12)
@@ -512,29 +589,42 @@ def _step(build, problem, u, prev, target, k, before=None):
     reversal = reversal and (target_len - prev_len) * (prev_len - before[2]) < 0
     t, dt, solves, halvings = 0.0, 1.0, 0, 0
     cur_problem, cur_u, cur_lin = problem, u, None
+    touch = None  # (t, force) of the last trial cut for touching too hard (friction)
+    twin_first = False  # (friction: try the frictionless prediction before the carried start)
+    resume = None  # the sub-step before such cuts (resumed once the points touched)
     while t < 1.0:
         t1 = min(1.0, t + dt)
         length = prev_len + t1 * (target_len - prev_len)
         field = target_field if t1 == 1.0 else prev_field * (1 - t1) + target_field * t1
         trial = build(length, field)
-        _carry_reference(cur_problem, cur_u, trial)
+        lam_ref = _carry_reference(cur_problem, cur_u, trial)
         start = carried = _carry(cur_problem, cur_u, trial)
         starts = [_reverse_friction(trial, start)] if reversal and t == 0.0 else []
         # frictionless contact: first the solution of the linearised complementarity
         # problem at the carried shape (its contact set found by an active-set iteration);
         # then (friction, no consistent contact set, or Newton failed from there) the
         # carried shape, from the third step on the secant through the last two
+        # (friction, last: the frictionless prediction with the carried friction forces)
         predicted = active_set_start(trial, start)
         tries = starts if predicted is None else [*starts, predicted]
-        for guess in [*tries, None]:
+        # (once it converged where the carried start failed -- a landing -- it goes first for
+        # the rest of the step: the cuts toward the touch land again)
+        last = [_frictionless_start] if trial.nt and section is not None else []
+        for guess in [*tries, *last, None] if twin_first else [*tries, None, *last]:
+            twin = guess is _frictionless_start
             if guess is None:
                 guess = start
                 if before is not None and t == 0.0 and t1 == 1.0 and before[2] != prev_len:
                     w = (target_len - prev_len) / (prev_len - before[2])
                     guess = start + w * (start - _carry(before[0], before[1], trial))
+            elif twin:
+                guess = _frictionless_start(trial, start, section)
+                if guess is None:
+                    continue
             res = newton(trial, guess, 1.0, opts)
             solves += 1
             if res.ok:
+                twin_first = twin_first or twin
                 break
         why = _reason(trial)
         if res.ok and dt > 2.0**-MAX_JUMP_HALVINGS:
@@ -546,17 +636,37 @@ def _step(build, problem, u, prev, target, k, before=None):
             turn = float(trial.distance(res.u - carried)[0])
             if turn > MAX_STEP_TURN:
                 res.ok, why = False, f"; a node turned {turn:.3g} rad in the step"
+        force = 0.0
+        if res.ok and lam_ref is not None:
+            feed = length - (prev_len + t * (target_len - prev_len))
+            force = _touchdown_force(trial, res.u, lam_ref, carried, feed)
+        if force > trial.touchdown_tol and t1 - t > TOUCHDOWN_MIN_STEP:
+            # friction: end the sub-step where the new contact points touch, so that their
+            # slip is measured from there (not a halving: the trial converged)
+            resume = dt if resume is None else resume
+            dt = _touchdown_fraction(t, t1, force, touch, trial.touchdown_tol)
+            touch = (t1, force)
+            continue
         if res.ok:  # (its linearization carries the state's stability)
+            taken = t1 - t
             t, cur_problem, cur_u, cur_lin = t1, trial, res.u, res.lin
-            dt = min(1.0 - t, 2 * dt) if t < 1.0 else dt
+            if force > 0.0 and resume is not None:
+                # touched: back toward the sub-step before the cuts (at most 64 times the
+                # landing one: a trial far past the next touch may not converge)
+                dt, touch, resume = min(resume, 64.0 * taken), None, None
+            elif touch is not None:  # short of the touch aimed at: the same sub-step again
+                dt = taken
+            else:
+                dt = 2 * dt
+            dt = min(1.0 - t, dt) if t < 1.0 else dt
             continue
         halvings += 1
         if halvings > MAX_HALVINGS:
             raise ConvergenceError(
                 f"insert could not reach free length {target_len:.6g} m (step {k}): it "
-                f"stopped at {prev_len + t * (target_len - prev_len):.6g} m after "
-                f"{MAX_HALVINGS} halvings (error {float(res.error):.3g} of the "
-                f"tolerance){why}",
+                f"stopped at {prev_len + t * (target_len - prev_len):.6g} m, {t:.3g} of the "
+                f"way from step {k - 1} in length and field, after {MAX_HALVINGS} halvings "
+                f"(error {float(res.error):.3g} of the tolerance){why}",
                 reached=prev_len + t * (target_len - prev_len),
                 target=target_len,
                 residual=float(res.error),
@@ -564,6 +674,31 @@ def _step(build, problem, u, prev, target, k, before=None):
         dt /= 2
     stable = np.ravel(cur_problem.stability(cur_lin))[0] > 0
     return cur_problem, cur_u, bool(stable), solves
+
+
+def _frictionless_start(problem, u, section):
+    """A start for the friction ``problem`` from its carried start ``u`` (size,): the
+    frictionless twin's linearised complementarity solution
+    (:func:`~coilrod.rod.contact_predictor.active_set_start`, which a problem with friction
+    rows does not have) with the carried friction forces; None where it has none.  A point
+    landing on the wall from a carried start without contact: plain Newton often fails there
+    (a rising field at a held length: from the carried start every step with a new contact
+    failed, frictionless without the prediction as well), and with friction each such step
+    was halved until the halvings ran out."""
+    from ..rod.spatial import SpatialRod
+
+    twin = SpatialRod(
+        problem.mesh, problem.mu, problem.K, problem.field, problem.L, problem.clamp,
+        problem.R0, problem.tol, False, problem.obstacles, section=section, friction_rows=False,
+    )  # fmt: skip
+    twin.ncp = problem.ncp
+    V = u.reshape(problem.n, problem.nv)
+    predicted = active_set_start(twin, np.ascontiguousarray(V[:, : twin.nv]).ravel())
+    if predicted is None:
+        return None
+    out = V.copy()
+    out[:, : twin.nv] = predicted.reshape(twin.n, twin.nv)
+    return out.ravel()
 
 
 def _reverse_friction(problem, u):
