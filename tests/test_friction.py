@@ -312,3 +312,24 @@ def test_a_tip_that_touches_within_an_insertion_step_sticks_where_it_touched():
     # the frictionless tip, in 1 or 3 steps to the touch (2.7e-6 L before)
     np.testing.assert_allclose(tips[0.3, 1], tips[0.0, 1], rtol=0, atol=1e-9 * L)
     np.testing.assert_allclose(tips[0.3, 3], tips[0.0, 1], rtol=0, atol=1e-9 * L)
+
+
+def test_an_insertion_that_lands_on_a_rough_bend_does_not_depend_on_its_steps():
+    # h-brk5's reproducer: a 4 mm catheter fed into a rough bend (mu 0.2) lands on the outer
+    # wall between 15.7 and 18.8 mm of free length; at 48 segments the landing step failed
+    # (ConvergenceError after 12 halvings at 15.6953 mm, as at 56-128 segments).  The
+    # quasi-static answer of a feed that keeps every point sliding one way does not depend on
+    # the number of insertion steps: 9 and 17 steps agree at the common lengths.
+    rod = Rod(0.04, 1e6, Circle(2e-3), Magnetization(128e3, 0))
+    bend = Vessel.bend(0.02, np.pi / 2, 0.003, 0.005, 0.03, start=(-1e-3, 0, 0))
+    field = coils.UniformField(B=(0, 8e-3, 0))
+    runs = [
+        coilrod.insert(rod, bend.with_friction(0.2), np.linspace(0.006, 0.04, k), field, nodes=48)
+        for k in (9, 17)
+    ]
+    coarse, fine = runs
+    assert np.abs(coarse.push_force).max() > 1e-3  # N: the wall is reached and pushed on
+    np.testing.assert_allclose(coarse.tip, fine.tip[::2], rtol=0, atol=1e-9 * 0.04)
+    np.testing.assert_allclose(
+        coarse.push_force, fine.push_force[::2], rtol=0, atol=1e-9 * np.abs(coarse.push_force).max()
+    )
