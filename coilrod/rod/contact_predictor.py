@@ -27,6 +27,11 @@ __all__ = ["event_fraction", "piecewise_prediction"]
 #: (its sign change is left to Newton: ending a step there would stall the stepping).
 _RELEASE_FLOOR = 1e-6
 
+#: A converged state's prediction takes the every-rows band of the last tangent at its scale
+#: where no node's rotation differs from the state's by more than this (rad): Newton's last
+#: chord steps (1e-9 to 1e-5 rad in the bend state), not a fresh linearization.
+_NEAR = 1e-3
+
 
 def event_fraction(problem, U: np.ndarray, dU: np.ndarray) -> np.ndarray:
     """Fraction (k,) of the changes ``dU`` (k, size) of states ``U`` (k, size) at which the
@@ -114,7 +119,9 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     # force and moment rows depend on the multipliers alone (not on which rows are active),
     # and each rate below overwrites all the contact rows by the active set's, so this one
     # tangent serves every switch.
-    kept = problem._every_active_band(u, scale)  # the converged step's blocks, if at u
+    # the converged step's blocks, if at u or within a chord step of it (the prediction's
+    # tangent: the path rate's own is that one)
+    kept = problem._every_active_band(u, scale, near=_NEAR)
     if kept is None:
         every = _every_rows_linearization(problem, u, scale)
         if not bool(every.ok[0]):
@@ -165,27 +172,42 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     switched = set()
     flipped = None  # the points switched at the last event (flat indices in (n-1, nc))
     g0 = g[1:]
+    end_gaps = _end_gaps(problem)
+    # a round section's surface gap is 1-Lipschitz in its contact point p = x + c t (a
+    # signed distance, units of L), and |dt| <= |d phi| (t = exp(phi) R0 e1): a release
+    # before any open point can reach the wall needs no gaps at the segment's end
+    c = problem._contact_geometry()[0][1:] if problem._round else None
+    kappa = problem.kappa
     with np.errstate(all="ignore"):  # (one context for the loop: its entry costs as an op)
         for _ in range(max_events):
             r = rate(active, flipped)
             if r is None:
                 return None
             d = left * ds * r
-            xd = x + d
-            g1 = problem._state_gaps(xd[None])[0, 1:]
-            l0, l1 = x.reshape(n, nv)[1:, 9 : 9 + nc], xd.reshape(n, nv)[1:, 9 : 9 + nc]
-            closing = ~active & (g1 < 0.0) & (g1 < g0)
-            f_close = _fractions(closing, g0, g1)
+            X, D = x.reshape(n, nv)[1:], d.reshape(n, nv)[1:]
+            l0 = X[:, 9 : 9 + nc]
+            l1 = l0 + D[:, 9 : 9 + nc]
             releasing = active & (l1 < 0.0) & (l1 < l0)
             f_rel = _fractions(releasing, l0, l1)
-            f = min(float(f_close.min()), float(f_rel.min()))
-            if not f < 1.0:
-                return xd
+            f = float(f_rel.min())
+            if f < 1.0 and c is not None and _clear(g0, active, D, c, f):
+                # the release comes first: the gaps at it from their linearization at u
+                # (the band's contact rows, kappa times the gap's gradient)
+                f_close = None
+                g0 = g0 + f * np.einsum("jow,jow->jo", active_rows, d[ci]) / kappa
+            else:
+                xd = x + d
+                g1 = end_gaps(xd)
+                closing = ~active & (g1 < 0.0) & (g1 < g0)
+                f_close = _fractions(closing, g0, g1)
+                f = min(float(f_close.min()), f)
+                if not f < 1.0:
+                    return xd
+                g0 = g0 + f * (g1 - g0)  # the gaps at the event, to the order of the prediction
             x = x + f * d
             left *= 1.0 - f
-            g0 = g0 + f * (g1 - g0)  # the gaps at the event, to the order of the prediction
             released = f_rel <= f
-            at = (f_close <= f) | released
+            at = released if f_close is None else (f_close <= f) | released
             where = round(left, 12)
             flipped = np.flatnonzero(at)
             for p in flipped.tolist():
@@ -196,6 +218,27 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
             active = active ^ at
             x.reshape(n, nv)[1:, 9 : 9 + nc][released] = 0.0
     return None
+
+
+def _clear(g0: np.ndarray, active: np.ndarray, D: np.ndarray, c: np.ndarray, f: float) -> bool:
+    """Whether no open contact point of a round section can reach the wall within the
+    fraction ``f`` of a segment that changes the free nodes' unknowns by ``D`` (n - 1, nv):
+    each point's gaps ``g0`` (n - 1, nc) (units of L) against the bound ``f (|dx| + c |dphi|)``
+    on its displacement (``c`` (n - 1,): the points' offsets along the tangents, units of L)."""
+    dx, dp = D[:, 0:3], D[:, 3:6]
+    reach = np.sqrt(np.einsum("ji,ji->j", dx, dx)) + c * np.sqrt(np.einsum("ji,ji->j", dp, dp))
+    return not bool(np.any((g0 <= f * reach[:, None]) & ~active))
+
+
+def _end_gaps(problem):
+    """The surface gaps (n - 1, nc) of the free nodes' contact points of a state (size,) of
+    ``problem``: :meth:`SpatialRod._state_gaps`' numbers, not remembered (a prediction's
+    segment ends are not asked for again)."""
+    if not problem._round:
+        return lambda v: problem._state_gaps(v[None])[0, 1:]
+    return lambda v: problem._round_state_gaps(
+        problem.rotations(v[None]), problem.node_positions(v[None])
+    )[0, 1:]
 
 
 def active_set_start(problem, u: np.ndarray, scale: float = 1.0, max_rounds: int = 16):

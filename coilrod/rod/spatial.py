@@ -711,24 +711,30 @@ class SpatialRod(DiscreteRod):
 
         return event_fraction(self, U, dU)
 
-    def _every_active_band(self, u: np.ndarray, scale: float):
+    def _every_active_band(self, u: np.ndarray, scale: float, near: float = 0.0):
         """The band storage and load rate (1, size) of the linearization at the state ``u``
         (size,) and ``scale`` with every contact row the gap's (kappa times its gradient), from
         the kept blocks of this problem's last one-state tangent if it was at that state
         (a converged load step's: the prediction that follows starts there), else None.  The
         force and moment rows depend on the multipliers alone, not on the complementarity
         function, so the band is the one a linearization with every row active would build,
-        bitwise; None too where that linearization was not admissible."""
+        bitwise; None too where that linearization was not admissible.  ``near`` (rad): the
+        kept tangent of another state at the same scale is taken too where no node's rotation
+        differs from ``u``'s by more (a Newton solve that ends with chord steps keeps the
+        tangent of an iterate a chord step before its last: the band and load rate are
+        then that iterate's)."""
         kept = self._kept
         if kept is None:
             return None
         key, skey, blocks, every, R1, R = kept
         c_x, c_phi = every if blocks is not None else (every, None)
-        if not (
-            skey == np.array([scale], float).tobytes()
-            and key == np.asarray(u, float)[None].tobytes()
-        ):
+        if skey != np.array([scale], float).tobytes():
             return None
+        if key != np.asarray(u, float)[None].tobytes():
+            at = np.frombuffer(key)
+            if not (at.shape == np.shape(u) and self.distance((at - u)[None])[0] <= near):
+                return None
+            u = at
         phi = self.rotations(np.asarray(u, float))
         turned = np.sqrt(np.einsum("ni,ni->n", phi, phi)).max()
         if not (np.isfinite(R).all() and turned <= self.max_turn):  # (linearize's ok)
