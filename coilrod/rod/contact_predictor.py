@@ -17,6 +17,8 @@ it cycles on the flat support from 64 segments.)
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .mesh import _remember
@@ -54,6 +56,15 @@ def event_fraction(problem, U: np.ndarray, dU: np.ndarray) -> np.ndarray:
     with np.errstate(all="ignore"):
         release = np.where(releasing, lam / -d_lam, 1.0)
     return np.minimum(frac, release.min(axis=(1, 2)))
+
+
+def _reach(D: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """A bound (m,) on how far m nodes' contact points ``x + c t`` move (units of L) under a
+    change ``D`` (m, nv) of their unknowns: ``|dx| + c |dphi|`` (``c`` (m,): the offsets
+    along the tangents, units of L; ``|dt| <= |dphi|`` for ``t = exp(phi) R0 e1``: the left
+    Jacobian of SO(3)'s exponential map has norm 1 at most)."""
+    dx, dp = D[:, 0:3], D[:, 3:6]
+    return np.sqrt(np.einsum("ji,ji->j", dx, dx)) + c * np.sqrt(np.einsum("ji,ji->j", dp, dp))
 
 
 def _every_rows_linearization(problem, u: np.ndarray, scale: float):
@@ -122,6 +133,7 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     # the converged step's blocks, if at u or within a chord step of it (the prediction's
     # tangent: the path rate's own is that one)
     kept = problem._every_active_band(u, scale, near=_NEAR)
+    factors = None if kept is None else problem._kept_factors()
     if kept is None:
         every = _every_rows_linearization(problem, u, scale)
         if not bool(every.ok[0]):
@@ -133,38 +145,46 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     active_rows = base[bi, ci]  # (n-1, nc, 6 + nc)
     inactive_rows = np.zeros_like(active_rows)
     inactive_rows[..., 6:] = np.eye(nc)
-    rhs = -np.asarray(load_rate, float)  # (1, size)
+    rhs = -np.asarray(load_rate, float).reshape(-1, 1)  # (size, 1)
     kl, ku = problem.kl, problem.ku
-    band = base.copy(order="F")  # the rates' band, unfactorised: the last rate's contact rows
+    # the rates' band, unfactorised: the last rate's contact rows (base is this call's own)
+    band = np.asfortranarray(base)
     last = []  # the last rate's active set, factors and pivots
+    x_rate = np.empty_like(rhs)  # each rate's solve (its result is used before the next)
 
     w = 6 + nc  # the flat views of the contact rows' entries: one row of w per point
     bf, cf = bi.reshape(-1, w), ci.reshape(-1, w)
-    af, nf = active_rows.reshape(-1, w), inactive_rows.reshape(-1, w)
+    rows = np.stack([inactive_rows.reshape(-1, w), active_rows.reshape(-1, w)])  # (2, ., w)
 
     def rate(active, flipped=None):
         if not last:
             band[bi, ci] = np.where(active[..., None], active_rows, inactive_rows)
-            ab, ipiv, start = band.copy(order="F"), np.empty(band.shape[1], np.int64), 0
+            if factors is not None and np.array_equal(active, factors[0]):
+                # the band of the kept tangent (the same blocks and contact rows): its
+                # factors, Newton's (band_lu from column 0 gives them, bitwise)
+                ab, ipiv = factors[1].copy(order="F"), factors[2].copy()
+                start = band.shape[1]
+            else:
+                ab, ipiv, start = band.copy(order="F"), np.empty(band.shape[1], np.int64), 0
         else:
-            # an event switches a few contact rows (flipped: the points' flat indices): the
-            # factors' columns before the first column of those rows' entries are the last
-            # rate's, kept (band_lu restarts there, bitwise the factorisation from column
-            # 0); the others the new band's
+            # an event switches a few contact rows (flipped: the points' flat indices,
+            # ascending): the factors' columns before the first column of those rows'
+            # entries (the first flipped point's node's first unknown) are the last rate's,
+            # kept (band_lu restarts there, bitwise the factorisation from column 0); the
+            # others the new band's
             _, ab, ipiv = last
-            cols = cf[flipped]
-            band[bf[flipped], cols] = np.where(active.reshape(-1)[flipped, None], af[flipped],
-                                               nf[flipped])  # fmt: skip
-            start = int(cols.min()) if flipped.size else band.shape[1]
+            band[bf[flipped], cf[flipped]] = rows[active.reshape(-1)[flipped].view(np.int8),
+                                                  flipped]  # fmt: skip
+            start = int(cf[flipped[0], 0]) if flipped.size else band.shape[1]
             ab[:, start:] = band[:, start:]
         last[:] = ()
         if band_lu(ab, kl, ku, ipiv, start) > 0:  # an exactly zero pivot: singular
             return None
         last[:] = active, ab, ipiv
-        x = np.array(rhs).reshape(-1, 1)
-        band_solve(ab, kl, ku, ipiv, x)
-        r = x.reshape(-1)
-        return r if np.isfinite(r).all() else None
+        np.copyto(x_rate, rhs)
+        band_solve(ab, kl, ku, ipiv, x_rate)
+        r = x_rate.reshape(-1)
+        return r if math.isfinite(r.sum()) else None  # (a NaN or inf anywhere: not finite)
 
     lam0 = u.reshape(n, nv)[1:, 9 : 9 + nc]
     active = problem.kappa * g[1:] < lam0
@@ -223,11 +243,10 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
 def _clear(g0: np.ndarray, active: np.ndarray, D: np.ndarray, c: np.ndarray, f: float) -> bool:
     """Whether no open contact point of a round section can reach the wall within the
     fraction ``f`` of a segment that changes the free nodes' unknowns by ``D`` (n - 1, nv):
-    each point's gaps ``g0`` (n - 1, nc) (units of L) against the bound ``f (|dx| + c |dphi|)``
-    on its displacement (``c`` (n - 1,): the points' offsets along the tangents, units of L)."""
-    dx, dp = D[:, 0:3], D[:, 3:6]
-    reach = np.sqrt(np.einsum("ji,ji->j", dx, dx)) + c * np.sqrt(np.einsum("ji,ji->j", dp, dp))
-    return not bool(np.any((g0 <= f * reach[:, None]) & ~active))
+    each inactive point's gap ``g0`` (n - 1, nc) (units of L) above ``f`` times the bound
+    :func:`_reach` on its displacement (``c`` (n - 1,): the points' offsets along the
+    tangents, units of L)."""
+    return not bool(np.any((g0 <= f * _reach(D, c)[:, None]) & ~active))
 
 
 def _end_gaps(problem):
