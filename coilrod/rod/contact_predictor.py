@@ -121,7 +121,7 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     complementarity problem along the step: a piecewise-linear path, one new tangent per
     event, all at the tangent matrix of ``u``).  Returns the predicted state (size,), or None
     when it cannot be formed (a singular tangent, more than ``max_events`` switches)."""
-    from ._compiled import band_lu, band_solve
+    from ._compiled import band_lu, band_solve, event_step, events_pay, rate_step
 
     n, nv, nc = problem.n, problem.nv, problem.nc
     if max_events is None:
@@ -156,7 +156,15 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     bf, cf = bi.reshape(-1, w), ci.reshape(-1, w)
     rows = np.stack([inactive_rows.reshape(-1, w), active_rows.reshape(-1, w)])  # (2, ., w)
 
-    def rate(active, flipped=None):
+    def rate(active, flipped=None, fast=False):
+        if last and fast:  # the steps below for an event, compiled
+            _, ab, ipiv = last
+            last[:] = ()
+            if rate_step(band, ab, ipiv, bf, cf, rows, flat, flipped, flipped.size, kl, ku, rhs,
+                         x_rate):  # fmt: skip
+                return None  # (a zero pivot, or not finite)
+            last[:] = active, ab, ipiv
+            return x_rate.reshape(-1)
         if not last:
             band[bi, ci] = np.where(active[..., None], active_rows, inactive_rows)
             if factors is not None and np.array_equal(active, factors[0]):
@@ -187,57 +195,101 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
         return r if math.isfinite(r.sum()) else None  # (a NaN or inf anywhere: not finite)
 
     lam0 = u.reshape(n, nv)[1:, 9 : 9 + nc]
-    active = problem.kappa * g[1:] < lam0
+    npts = (n - 1) * nc
+    flat = (problem.kappa * g[1:] < lam0).reshape(-1)  # the active set, by point
+    active = flat.reshape(n - 1, nc)  # (a view: the event steps switch points in place)
     x, left = u.copy(), 1.0
     switched = set()
     flipped = None  # the points switched at the last event (flat indices in (n-1, nc))
-    g0 = g[1:]
+    g0 = g[1:].reshape(-1).copy()  # the gaps at the segment's start (the last event)
+    g1, xd = np.empty(npts), np.empty_like(x)
+    f_rel, f_close, at = np.empty(npts), np.empty(npts), np.empty(npts, np.int64)
+    lin, cols = np.ascontiguousarray(active_rows.reshape(npts, w)), ci.reshape(npts, w)
     end_gaps = _end_gaps(problem)
     # a round section's surface gap is 1-Lipschitz in its contact point p = x + c t (a
     # signed distance, units of L), and |dt| <= |d phi| (t = exp(phi) R0 e1): a release
     # before any open point can reach the wall needs no gaps at the segment's end
-    c = problem._contact_geometry()[0][1:] if problem._round else None
+    c = problem._contact_geometry()[0][1:] if problem._round else np.empty(0)
     kappa = problem.kappa
     with np.errstate(all="ignore"):  # (one context for the loop: its entry costs as an op)
         for _ in range(max_events):
-            r = rate(active, flipped)
+            fast = events_pay()
+            r = rate(active, flipped, fast)
             if r is None:
                 return None
-            d = left * ds * r
-            X, D = x.reshape(n, nv)[1:], d.reshape(n, nv)[1:]
-            l0 = X[:, 9 : 9 + nc]
-            l1 = l0 + D[:, 9 : 9 + nc]
-            releasing = active & (l1 < 0.0) & (l1 < l0)
-            f_rel = _fractions(releasing, l0, l1)
-            f = float(f_rel.min())
-            if f < 1.0 and c is not None and _clear(g0, active, D, c, f):
-                # the release comes first: the gaps at it from their linearization at u
-                # (the band's contact rows, kappa times the gap's gradient)
-                f_close = None
-                g0 = g0 + f * np.einsum("jow,jow->jo", active_rows, d[ci]) / kappa
-            else:
-                xd = x + d
-                g1 = end_gaps(xd)
-                closing = ~active & (g1 < 0.0) & (g1 < g0)
-                f_close = _fractions(closing, g0, g1)
-                f = min(float(f_close.min()), f)
-                if not f < 1.0:
-                    return xd
-                g0 = g0 + f * (g1 - g0)  # the gaps at the event, to the order of the prediction
-            x = x + f * d
+            step = event_step if fast else _event_step
+            args = (x, r, left * ds, flat, g0, g1, xd, lin, cols, c, nv, nc, kappa, f_rel,
+                    f_close, at)  # fmt: skip
+            code, f, count = step(False, *args)
+            if code == 1:  # the gaps at the segment's end decide
+                np.copyto(g1, end_gaps(xd).reshape(-1))
+                code, f, count = step(True, *args)
+            if code == 0:
+                return xd.copy()
             left *= 1.0 - f
-            released = f_rel <= f
-            at = released if f_close is None else (f_close <= f) | released
             where = round(left, 12)
-            flipped = np.flatnonzero(at)
+            flipped = at[:count].copy()
             for p in flipped.tolist():
                 key = (p, where)
                 if key in switched:  # back and forth at one scale: degenerate, give up
                     return None
                 switched.add(key)
-            active = active ^ at
-            x.reshape(n, nv)[1:, 9 : 9 + nc][released] = 0.0
     return None
+
+
+def _event_step(gaps, x, r, scale, active, g0, g1, xd, lin, cols, c, nv, nc, kappa, f_rel,
+                f_close, flipped):  # fmt: skip
+    """One segment of :func:`piecewise_prediction`'s event loop (the numpy twin of the
+    compiled :func:`coilrod.rod._compiled.event_step`): the segment from the state ``x``
+    (size,) along ``scale`` times the rate ``r`` (size,) ends at its first contact event,
+    found in two calls.
+
+    ``gaps`` False: the fractions of the releases (an active point's multiplier reaching
+    zero, linear) into ``f_rel`` (npts,) (inf where none).  If the least, f, is below 1 and
+    no open point can reach the wall before it (a round section: ``c`` (n - 1,) its points'
+    offsets along the tangents, units of L, else empty; the gaps ``g0`` (npts,) at the
+    segment's start against f times :func:`_reach`), the event is applied with the gaps at
+    it from their linearization (``lin`` (npts, w): kappa times each point's gap gradient in
+    the state's entries ``cols`` (npts, w)): returns ``(2, f, count)``.  Else the segment's
+    end ``x + scale r`` is written into ``xd``: returns ``(1, f, 0)``.
+
+    ``gaps`` True (after ``(1, ...)``; ``g1`` (npts,): the gaps at ``xd``): the fractions of
+    the closings (an open point's gap reaching zero, interpolated between g0 and g1) into
+    ``f_close``; no event before the end: returns ``(0, f, 0)``; else the gaps at the event
+    (interpolated) into g0 and the event applied: ``(2, f, count)``.
+
+    An event at the fraction f moves x there, switches the points whose fractions are f in
+    ``active`` (npts,) (their flat indices into ``flipped[:count]``, ascending) and zeroes the
+    released points' multipliers.  Fractions where the least is not positive are clipped to
+    [0, 1] (:func:`_fractions`)."""
+    n = x.shape[0] // nv
+    d = scale * r
+    X, D = x.reshape(n, nv)[1:], d.reshape(n, nv)[1:]
+    closings = gaps
+    if not gaps:
+        l0 = X[:, 9 : 9 + nc].reshape(-1)
+        l1 = l0 + D[:, 9 : 9 + nc].reshape(-1)
+        f_rel[:] = _fractions(active & (l1 < 0.0) & (l1 < l0), l0, l1)
+        f = float(f_rel.min())
+        if f < 1.0 and c.shape[0] and _clear(g0.reshape(-1, nc), active.reshape(-1, nc), D, c, f):
+            g0 += f * np.einsum("pw,pw->p", lin, d[cols]) / kappa
+        else:
+            np.add(x, d, out=xd)
+            return 1, f, 0
+    else:
+        f_close[:] = _fractions(~active & (g1 < 0.0) & (g1 < g0), g0, g1)
+        f = min(float(f_close.min()), float(f_rel.min()))
+        if not f < 1.0:
+            return 0, f, 0
+        g0 += f * (g1 - g0)  # the gaps at the event, to the order of the prediction
+    x += f * d
+    released = f_rel <= f
+    at = (f_close <= f) | released if closings else released
+    count = int(np.count_nonzero(at))
+    flipped[:count] = np.flatnonzero(at)
+    active ^= at
+    X[:, 9 : 9 + nc][released.reshape(-1, nc)] = 0.0
+    return 2, f, count
 
 
 def _clear(g0: np.ndarray, active: np.ndarray, D: np.ndarray, c: np.ndarray, f: float) -> bool:
