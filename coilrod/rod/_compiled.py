@@ -586,9 +586,16 @@ _events_rental = Rental(__name__, lambda: event_step, "EVENTS_COMPILE_AFTER", in
 
 
 def events_pay() -> bool:
-    """Whether :func:`event_step` should run the next event step of a contact prediction:
-    True once compiling pays, else the numpy twin's estimated cost is charged."""
+    """Whether :func:`event_step`, :func:`rate_step` and :func:`rate_solve` should run a
+    contact prediction's event loop (decided once per prediction): True once compiling
+    pays, else the numpy twin's estimated cost of one event step is charged
+    (:func:`events_charge` the others')."""
     return _events_rental.ready or _events_rental.rent(_EVENT_STEP_S)
+
+
+def events_charge() -> None:
+    """Charge the estimated cost of one numpy event step to :func:`events_pay`'s rental."""
+    _events_rental.charge(_EVENT_STEP_S)
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -685,15 +692,16 @@ def _event_apply(x, r, scale, f, active, f_rel, f_close, closings, nv, nc, flipp
 
 
 @nb.njit(cache=True, error_model="numpy")
-def rate_step(band, ab, ipiv, bf, cf, rows, active, flipped, count, kl, ku, rhs, x):
+def rate_step(band, ab, ipiv, bf, cf, rows, active, flipped, count, kl, ku, rhs, x, keep):
     """The contact predictor's rate after an event, compiled (the numpy twin: the same steps
     in :func:`coilrod.rod.contact_predictor.piecewise_prediction`'s ``rate``; under
     :func:`events_pay`'s rental): the rows of the ``count`` points ``flipped`` (flat indices)
     rewritten in the unfactorised ``band`` (entries ``bf``, ``cf`` (npts, w) of each point's
     row; ``rows[1]`` where ``active``, ``rows[0]`` elsewhere), the factors ``ab``, ``ipiv``
     restarted at the first column those rows reach (:func:`band_lu`), and the solve of the
-    right-hand side ``rhs`` (size, 1) into ``x`` (size, 1).  Returns band_lu's info, or -1
-    if x is not finite."""
+    right-hand side ``rhs`` (size, 1) into ``x`` (size, 1) restarted there too
+    (:func:`rate_solve`, ``keep`` the last solve's).  Returns band_lu's info, or -1 if x is
+    not finite."""
     n = band.shape[1]
     start = n
     for k in range(count):
@@ -708,10 +716,67 @@ def rate_step(band, ab, ipiv, bf, cf, rows, active, flipped, count, kl, ku, rhs,
     info = band_lu(ab, kl, ku, ipiv, start)
     if info > 0:
         return info
-    for i in range(x.shape[0]):
-        x[i, 0] = rhs[i, 0]
-    band_solve(ab, kl, ku, ipiv, x)
+    return rate_solve(ab, kl, ku, ipiv, rhs, x, start, keep)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def rate_solve(ab, kl, ku, ipiv, rhs, x, start, keep):
+    """:func:`band_solve` of one right-hand side ``rhs`` (size, 1) into ``x`` (size, 1) that
+    keeps its forward sweep and restarts it (the contact predictor's rates, under
+    :func:`events_pay`'s rental; band_solve itself is unchanged: one compiled version for
+    its callers).  ``keep`` (2, n): on return ``keep[0]`` holds the forward result
+    (L^-1 P rhs) and ``keep[1, j]`` the value the row exchange of step j sent to row
+    ``ipiv[j]``.  A restart (``start`` > 0, at most n, after a :func:`band_lu` restarted
+    there; the same rhs, ``keep`` the last solve's, the factors' columns and pivots before
+    ``start`` unchanged since) keeps the forward result's rows before ``start``, replays the
+    last kl steps before it on the rows from ``start`` on (the exchanges into them and the
+    updates with the kept results, in the same order) and sweeps on from ``start``: bitwise
+    the solve from column 0.  The back substitution runs over every row.  Returns 0, or -1
+    if x is not finite."""
+    n = ab.shape[1]
+    kv = ku + kl
+    b = x[:, 0]
+    for i in range(n):
+        b[i] = rhs[i, 0]
+    y, c = keep[0], keep[1]
+    j0 = 0
+    if start > 0:
+        j0 = min(start, n - 1)
+        for i in range(start):
+            b[i] = y[i]
+        for j in range(max(0, start - kl), j0):  # replay: the steps reaching rows >= start
+            lm = min(kl, n - 1 - j)
+            p = ipiv[j]
+            if p != j and p >= start:
+                b[p] = c[j]
+            xj = y[j]
+            for i in range(start - j, lm + 1):
+                f = ab[kv + i, j]
+                if f != 0.0:
+                    b[j + i] -= f * xj
+    for j in range(j0, n - 1):  # L, with the row interchanges as they were made
+        lm = min(kl, n - 1 - j)
+        p = ipiv[j]
+        if p != j:
+            tmp = b[p]
+            b[p] = b[j]
+            b[j] = tmp
+            c[j] = b[p]
+        xj = b[j]
+        for i in range(1, lm + 1):
+            f = ab[kv + i, j]
+            if f != 0.0:
+                b[j + i] -= f * xj
+    for i in range(start, n):
+        y[i] = b[i]
+    for j in range(n - 1, -1, -1):  # U, bandwidth kl + ku
+        b[j] /= ab[kv, j]
+        xj = b[j]
+        for i in range(max(0, j - kv), j):
+            f = ab[kv + i - j, j]
+            if f != 0.0:
+                b[i] -= f * xj
     total = 0.0
-    for i in range(x.shape[0]):
-        total += x[i, 0]
+    for i in range(n):
+        total += b[i]
     return 0 if math.isfinite(total) else -1

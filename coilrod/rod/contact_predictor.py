@@ -121,7 +121,15 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     complementarity problem along the step: a piecewise-linear path, one new tangent per
     event, all at the tangent matrix of ``u``).  Returns the predicted state (size,), or None
     when it cannot be formed (a singular tangent, more than ``max_events`` switches)."""
-    from ._compiled import band_lu, band_solve, event_step, events_pay, rate_step
+    from ._compiled import (
+        band_lu,
+        band_solve,
+        event_step,
+        events_charge,
+        events_pay,
+        rate_solve,
+        rate_step,
+    )
 
     n, nv, nc = problem.n, problem.nv, problem.nc
     if max_events is None:
@@ -151,17 +159,19 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     band = np.asfortranarray(base)
     last = []  # the last rate's active set, factors and pivots
     x_rate = np.empty_like(rhs)  # each rate's solve (its result is used before the next)
+    fast = events_pay()  # the event loop compiled (its ski rental): for the whole loop
+    keep = np.empty((2, rhs.shape[0]))  # the last solve's forward sweep (rate_solve)
 
     w = 6 + nc  # the flat views of the contact rows' entries: one row of w per point
     bf, cf = bi.reshape(-1, w), ci.reshape(-1, w)
     rows = np.stack([inactive_rows.reshape(-1, w), active_rows.reshape(-1, w)])  # (2, ., w)
 
-    def rate(active, flipped=None, fast=False):
-        if last and fast:  # the steps below for an event, compiled
+    def rate(active, flipped=None):
+        if last and fast:  # the steps below for an event, compiled (the solve restarted too)
             _, ab, ipiv = last
             last[:] = ()
             if rate_step(band, ab, ipiv, bf, cf, rows, flat, flipped, flipped.size, kl, ku, rhs,
-                         x_rate):  # fmt: skip
+                         x_rate, keep):  # fmt: skip
                 return None  # (a zero pivot, or not finite)
             last[:] = active, ab, ipiv
             return x_rate.reshape(-1)
@@ -189,6 +199,9 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
         if band_lu(ab, kl, ku, ipiv, start) > 0:  # an exactly zero pivot: singular
             return None
         last[:] = active, ab, ipiv
+        if fast:  # (its forward sweep kept for the restarts)
+            singular = rate_solve(ab, kl, ku, ipiv, rhs, x_rate, 0, keep)
+            return None if singular else x_rate.reshape(-1)
         np.copyto(x_rate, rhs)
         band_solve(ab, kl, ku, ipiv, x_rate)
         r = x_rate.reshape(-1)
@@ -213,10 +226,11 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     kappa = problem.kappa
     with np.errstate(all="ignore"):  # (one context for the loop: its entry costs as an op)
         for _ in range(max_events):
-            fast = events_pay()
-            r = rate(active, flipped, fast)
+            r = rate(active, flipped)
             if r is None:
                 return None
+            if not fast:
+                events_charge()
             step = event_step if fast else _event_step
             args = (x, r, left * ds, flat, g0, g1, xd, lin, cols, c, nv, nc, kappa, f_rel,
                     f_close, at)  # fmt: skip
