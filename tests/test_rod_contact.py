@@ -747,14 +747,17 @@ def test_piecewise_prediction_across_the_tip_closing(monkeypatch):
         np.testing.assert_allclose(P._state_gaps(u[None]), ref, rtol=0, atol=1e-15)
 
 
-def test_event_step_kernel_is_its_numpy_twin():
+def test_event_step_kernel_is_its_numpy_twin(monkeypatch):
     # the contact predictor's event step (coilrod.rod._compiled.event_step, through .py_func:
     # no compiled version for the test) against its numpy twin on a small stack of points: a
     # release first with the open points clear of the wall (gaps by their linearization), one
     # that an open point could precede (the end's gaps asked for), a closing before the end
     # (gaps interpolated), none before it, and fractions clipped where one is negative
-    from coilrod.rod._compiled import event_step
+    import coilrod.rod._compiled as rc
     from coilrod.rod.contact_predictor import _event_step
+
+    event_step = rc.event_step
+    monkeypatch.setattr(rc, "_event_apply", rc._event_apply.py_func)  # (not compiled either)
 
     rng = np.random.default_rng(3)
     n, nv, nc = 6, 11, 2
