@@ -511,6 +511,7 @@ class SpatialRod(DiscreteRod):
             U, S = u, scale  # (the engine's stacks: no conversion)
         else:
             U, S = self._stack(u, scale)
+        kept = self._kept  # (a one-state contact tangent below keeps its blocks anew)
         if self.nc or _compiled_core() is None:  # numpy passes and contact terms may warn
             with np.errstate(all="ignore"):
                 R, R1, ab, sym = self._assemble(U, S, tangent)
@@ -543,7 +544,7 @@ class SpatialRod(DiscreteRod):
             tan.bad = ~ok  # (a new tangent: no member flagged yet)
             tan.blocks = sym  # (diagonal, upper) blocks of the second variation
             if self.nc and U.shape[0] == 1:  # the kept blocks' tangent (_kept_factors)
-                plain = self.ncp == "min" and not self._every_rows and not self.nt
+                plain = self.ncp == "min" and not self._every_rows and self._kept is not kept
                 self._kept_tangent = (self._kept, tan) if plain else None
         lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
         lin.load_rate = R1
@@ -736,7 +737,8 @@ class SpatialRod(DiscreteRod):
             return None
         if key != np.asarray(u, float)[None].tobytes():
             at = np.frombuffer(key)
-            if not (at.shape == np.shape(u) and self.distance((at - u)[None])[0] <= near):
+            if not (near > 0 and at.shape == np.shape(u)
+                    and self.distance((at - u)[None])[0] <= near):  # fmt: skip
                 return None
             u = at
         phi = self.rotations(np.asarray(u, float))
