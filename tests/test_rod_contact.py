@@ -690,6 +690,9 @@ def test_piecewise_prediction_across_the_tip_closing(monkeypatch):
     import coilrod.rod._compiled as rc
 
     starts, band_lu = [], rc.band_lu
+    # the event loop's numpy twin whatever numba's cache holds (its compiled rate calls
+    # band_lu inside the kernel: test_rod_physics's rate_step test)
+    monkeypatch.setattr(rc, "events_pay", lambda: False)
 
     def counted(ab, kl, ku, ipiv, start):
         starts.append(start)
@@ -720,6 +723,20 @@ def test_piecewise_prediction_across_the_tip_closing(monkeypatch):
     kept = P._every_active_band(u0, 0.05)
     assert kept is not None
     assert P._every_active_band(u0, 0.15) is None  # another scale: not the kept tangent's
+    # a state a chord step away (Newton's last iterate): the kept tangent's with ``near``
+    off = u0.copy()
+    off.reshape(P.n, P.nv)[-1, 3:6] += 1e-6  # (the tip node turned by 1e-6 rad)
+    assert P._every_active_band(off, 0.05) is None
+    np.testing.assert_array_equal(P._every_active_band(off, 0.05, near=1e-3)[0], kept[0])
+    assert P._every_active_band(off, 0.05, near=1e-7) is None
+    # the first rate takes the factors of that tangent (factorised by the solve above: its
+    # active set, none, is the rate's), not band_lu from column 0: the same prediction
+    assert not P._kept_factors()[0].any()
+    starts.clear()
+    monkeypatch.setattr(rc, "band_lu", counted)
+    np.testing.assert_array_equal(P.piecewise_prediction(u0, 0.05, 0.1), pred)
+    monkeypatch.setattr(rc, "band_lu", band_lu)
+    assert starts == [P.size, P.nv * (P.n - 1)]
     P._every_rows = True
     every = P.linearize(u0[None], np.array([0.05]))
     del P._every_rows
@@ -731,3 +748,81 @@ def test_piecewise_prediction_across_the_tip_closing(monkeypatch):
     for u in (u0, u1):
         ref = P.surface_gaps(P.node_positions(u[None]), P.frames(u[None]))
         np.testing.assert_allclose(P._state_gaps(u[None]), ref, rtol=0, atol=1e-15)
+
+
+def test_event_step_kernel_is_its_numpy_twin(monkeypatch):
+    # the contact predictor's event step (coilrod.rod._compiled.event_step, through .py_func:
+    # no compiled version for the test) against its numpy twin on a small stack of points: a
+    # release first with the open points clear of the wall (gaps by their linearization), one
+    # that an open point could precede (the end's gaps asked for), a closing before the end
+    # (gaps interpolated), none before it, and fractions clipped where one is negative
+    import coilrod.rod._compiled as rc
+    from coilrod.rod.contact_predictor import _event_step
+
+    event_step = rc.event_step
+    monkeypatch.setattr(rc, "_event_apply", rc._event_apply.py_func)  # (not compiled either)
+
+    rng = np.random.default_rng(3)
+    n, nv, nc = 6, 11, 2
+    npts, w = (n - 1) * nc, 6 + nc
+    cols = (
+        (nv * np.arange(1, n)[:, None, None] + np.r_[0:6, 9 : 9 + nc][None, None])
+        .repeat(nc, axis=1)
+        .reshape(npts, w)
+    )
+    lin = rng.normal(size=(npts, w))
+    c = np.full(n - 1, 0.1)
+
+    def case(lam, d_lam, g0, g1, scale=0.5):
+        x, r = rng.normal(size=n * nv) * 0.01, rng.normal(size=n * nv) * 0.01
+        x.reshape(n, nv)[1:, 9:] = np.reshape(lam, (n - 1, nc))
+        r.reshape(n, nv)[1:, 9:] = np.reshape(d_lam, (n - 1, nc)) / scale
+        return [x, r, scale, np.asarray(lam) > 0, np.asarray(g0, float), np.asarray(g1, float)]
+
+    zero = np.zeros(npts)
+    lam = zero.copy()
+    lam[[7, 9]] = 2.0, 1.0
+    d_lam = zero.copy()
+    d_lam[[7, 9]] = -8.0, 0.5  # point 7 releases at 1/4
+    far, near = np.full(npts, 1.0), np.full(npts, 1.0)
+    near[5] = 2.0**-13  # an open point within reach of the wall
+    g1 = np.full(npts, 0.5)
+    g1[5] = -7 * 2.0**-13  # it closes at 1/8 of the segment (interpolated)
+    g1[7] = g1[9] = -1.0  # (active points: their gaps do not count)
+    late = g1.copy()
+    late[5] = 1e-5  # no closing
+    neg = near.copy()
+    neg[5] = -1e-3  # an open point through the wall, deeper at the end: clipped to 0
+    g1_neg = late.copy()
+    g1_neg[5] = -2e-3
+    cases = [case(lam, d_lam, far, g1), case(lam, d_lam, near, g1), case(lam, d_lam, near, late),
+             case(lam, zero, near, g1), case(lam, zero, neg, g1_neg)]  # fmt: skip
+    found = []
+    for x, r, scale, active, g0, g1 in cases:
+        outs = []
+        for step in (event_step.py_func, _event_step):
+            args = [x.copy(), r, scale, active.copy(), g0.copy(), g1, np.zeros_like(x), lin,
+                    cols, c, nv, nc, 100.0, np.zeros(npts), np.zeros(npts),
+                    np.zeros(npts, np.int64)]  # fmt: skip
+            with np.errstate(all="ignore"):  # (the event loop's: 0 / 0 off the events)
+                codes = [step(False, *args)]
+                if codes[0][0] == 1:
+                    codes.append(step(True, *args))
+            outs.append((codes, args))
+        (codes, a), (codes_np, b) = outs
+        assert [k for k, _, _ in codes] == [k for k, _, _ in codes_np]
+        np.testing.assert_allclose([f for _, f, _ in codes], [f for _, f, _ in codes_np],
+                                   rtol=1e-15)  # fmt: skip
+        count = codes[-1][2]
+        assert count == codes_np[-1][2]
+        for i in (0, 3, 4, 6, 15):  # x, active, g0, xd, the switched points
+            end = count if i == 15 else None
+            np.testing.assert_allclose(a[i][:end], b[i][:end], rtol=1e-14, atol=1e-17)
+        found.append(([k for k, _, _ in codes], round(codes[-1][1], 12), a[15][:count].tolist()))
+    assert found == [
+        ([2], 0.25, [7]),  # the release, no gaps asked for
+        ([1, 2], 0.125, [5]),  # the gaps asked for: point 5 closes before 7 releases
+        ([1, 2], 0.25, [7]),  # the release alone
+        ([1, 2], 0.125, [5]),  # a closing before the end
+        ([1, 2], 0.0, [5]),  # clipped to 0
+    ]

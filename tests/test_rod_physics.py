@@ -436,6 +436,60 @@ def test_band_lu_restarts_from_a_column_bitwise():
     np.testing.assert_allclose(x2, np.linalg.solve(A, b), rtol=1e-10, atol=1e-12)
 
 
+def test_rate_step_restarts_the_factors_and_the_solve_bitwise(monkeypatch):
+    # the contact predictor's compiled rate after an event (coilrod.rod._compiled.rate_step,
+    # and rate_solve in it; their .py_func, band_lu's too: no compiled version for the test):
+    # a point's row of a band matrix switched (its entries rewritten in the unfactorised
+    # band), the factors restarted at the row's first column and the solve restarted there
+    # (the last solve's forward sweep kept) are bitwise band_lu from column 0 and band_solve
+    # of the new matrix (rows exchanged before and after the restart), and numpy's dense solve
+    import coilrod.rod._compiled as rc
+
+    monkeypatch.setattr(rc, "band_lu", rc.band_lu.py_func)
+    monkeypatch.setattr(rc, "rate_solve", rc.rate_solve.py_func)
+    n, kl, ku = 20, 3, 2
+    rng = np.random.default_rng(7)
+    A = sum(
+        np.diag(rng.uniform(-1.0, 1.0, n - abs(d)) * (4.0 if d < 0 else 1.0), d)
+        for d in range(-kl, ku + 1)
+    )
+    rhs = rng.normal(size=(n, 1))
+    points = np.array([[5, 6, 7], [12, 13, 14]])  # (the rows 6 and 13: their entries' columns)
+    bf, cf = kl + ku + points.mean(axis=1, keepdims=True).astype(np.int64) - points, points
+    rows = np.stack([A[[6, 13]][np.arange(2)[:, None], points], rng.normal(size=(2, 3))])
+    band = _band_storage(A, kl, ku)
+    ab, ipiv = band.copy(order="F"), np.zeros(n, np.int64)
+    assert rc.band_lu(ab, kl, ku, ipiv, 0) == 0
+    keep, x = np.full((2, n), np.nan), np.empty((n, 1))
+    assert rc.rate_solve(ab, kl, ku, ipiv, rhs, x, 0, keep) == 0
+    x_ref = rhs.copy()
+    rc.band_solve.py_func(ab, kl, ku, ipiv, x_ref)
+    assert np.array_equal(x, x_ref)  # (the solve from row 0: band_solve's)
+    active = np.array([False, True])  # point 1 switched to its other row
+    flipped = np.array([1])
+    assert rc.rate_step.py_func(band, ab, ipiv, bf, cf, rows, active, flipped, 1, kl, ku, rhs,
+                                x, keep) == 0  # fmt: skip
+    B = A.copy()
+    B[13, 12:15] = rows[1, 1]
+    assert np.array_equal(band, _band_storage(B, kl, ku))
+    ab_ref, ipiv_ref = _band_storage(B, kl, ku), np.zeros(n, np.int64)
+    assert rc.band_lu(ab_ref, kl, ku, ipiv_ref, 0) == 0
+    assert np.count_nonzero(ipiv_ref != np.arange(n)) >= 3
+    assert np.array_equal(ab, ab_ref)
+    assert np.array_equal(ipiv, ipiv_ref)
+    x_ref = rhs.copy()
+    rc.band_solve.py_func(ab_ref, kl, ku, ipiv_ref, x_ref)
+    assert np.array_equal(x, x_ref)
+    np.testing.assert_allclose(x, np.linalg.solve(B, rhs), rtol=1e-10, atol=1e-12)
+    # point 0 back (and no switch at all: the solve alone, every row kept)
+    active[:] = False
+    B[6, 5:8] = rows[0, 0]
+    for flips in (np.array([0]), np.array([], np.int64)):
+        assert rc.rate_step.py_func(band, ab, ipiv, bf, cf, rows, active, flips, flips.size,
+                                    kl, ku, rhs, x, keep) == 0  # fmt: skip
+        np.testing.assert_allclose(x, np.linalg.solve(B, rhs), rtol=1e-10, atol=1e-12)
+
+
 def test_band_kernels_compile_once_for_either_band_order():
     # issue 19: a C-ordered band (a member sliced out of a stack) and the assembled
     # Fortran-ordered one reach band_lu / band_solve in one layout (one compiled version each);

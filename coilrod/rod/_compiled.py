@@ -573,3 +573,210 @@ def _odd_blocks_compiled(U, S, mu, h, w, inv_h, k1, k2, L, B, G, H, has_h, D, E)
                 hn = 0.5 * h[f + 1]
                 E[j, f, 2, 1] = -hn * s
                 E[j, f, 3, 1] = hn * c
+
+
+#: Estimated CPU seconds of the contact predictor's numpy event steps
+#: (:func:`coilrod.rod.contact_predictor._event_step`) after which :func:`event_step` is
+#: used (ski rental, its own); 0 compiles at the first call, ``math.inf`` never.
+EVENTS_COMPILE_AFTER = 1.0
+#: Measured cost of one numpy event step, s (~40 numpy calls).
+_EVENT_STEP_S = 5e-5
+#: The ski rental of :func:`event_step`.
+_events_rental = Rental(__name__, lambda: event_step, "EVENTS_COMPILE_AFTER", in_process=True)
+
+
+def events_pay() -> bool:
+    """Whether :func:`event_step`, :func:`rate_step` and :func:`rate_solve` should run a
+    contact prediction's event loop (decided once per prediction): True once compiling
+    pays, else the numpy twin's estimated cost of one event step is charged
+    (:func:`events_charge` the others')."""
+    return _events_rental.ready or _events_rental.rent(_EVENT_STEP_S)
+
+
+def events_charge() -> None:
+    """Charge the estimated cost of one numpy event step to :func:`events_pay`'s rental."""
+    _events_rental.charge(_EVENT_STEP_S)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def event_step(gaps, x, r, scale, active, g0, g1, xd, lin, cols, c, nv, nc, kappa, f_rel,
+               f_close, flipped):  # fmt: skip
+    """One segment of the contact predictor's event loop, compiled: the numpy twin is
+    :func:`coilrod.rod.contact_predictor._event_step` (the same steps; see there for the
+    arguments and the codes returned).  Returns ``(code, f, count)``."""
+    size, npts = x.shape[0], active.shape[0]
+    inf = math.inf
+    if not gaps:
+        least = inf
+        for p in range(npts):
+            i = (p // nc + 1) * nv + 9 + p % nc
+            l0 = x[i]
+            l1 = l0 + scale * r[i]
+            v = l0 / (l0 - l1) if active[p] and l1 < 0.0 and l1 < l0 else inf
+            f_rel[p] = v
+            least = min(least, v)
+        if not least > 0.0:  # (np.clip where the least is not positive)
+            least = inf
+            for p in range(npts):
+                if f_rel[p] < inf:
+                    f_rel[p] = min(max(f_rel[p], 0.0), 1.0)
+                least = min(least, f_rel[p])
+        f = least
+        if f < 1.0 and c.shape[0] > 0:
+            clear = True
+            for j in range(1, size // nv):
+                b = j * nv
+                dx = 0.0
+                dp = 0.0
+                for e in range(3):
+                    dx += (scale * r[b + e]) ** 2
+                    dp += (scale * r[b + 3 + e]) ** 2
+                reach = math.sqrt(dx) + c[j - 1] * math.sqrt(dp)
+                for o in range(nc):
+                    p = (j - 1) * nc + o
+                    if not active[p] and g0[p] <= f * reach:
+                        clear = False
+                if not clear:
+                    break
+            if clear:  # a release first: the gaps at it from their linearization
+                for p in range(npts):
+                    s = 0.0
+                    for e in range(lin.shape[1]):
+                        s += lin[p, e] * (scale * r[cols[p, e]])
+                    g0[p] = g0[p] + f * s / kappa
+                return 2, f, _event_apply(x, r, scale, f, active, f_rel, f_close, False, nv,
+                                          nc, flipped)  # fmt: skip
+        for i in range(size):
+            xd[i] = x[i] + scale * r[i]
+        return 1, f, 0
+    least = inf
+    for p in range(npts):
+        v = inf
+        if not active[p] and g1[p] < 0.0 and g1[p] < g0[p]:
+            v = g0[p] / (g0[p] - g1[p])
+        f_close[p] = v
+        least = min(least, v)
+    if not least > 0.0:
+        least = inf
+        for p in range(npts):
+            if f_close[p] < inf:
+                f_close[p] = min(max(f_close[p], 0.0), 1.0)
+            least = min(least, f_close[p])
+    f = least
+    for p in range(npts):
+        f = min(f, f_rel[p])
+    if not f < 1.0:
+        return 0, f, 0
+    for p in range(npts):
+        g0[p] = g0[p] + f * (g1[p] - g0[p])
+    return 2, f, _event_apply(x, r, scale, f, active, f_rel, f_close, True, nv, nc, flipped)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _event_apply(x, r, scale, f, active, f_rel, f_close, closings, nv, nc, flipped):
+    """:func:`event_step`'s event at the fraction f of the segment: the state moved there,
+    the points whose fractions are f switched (their flat indices into ``flipped``, their
+    count returned), the released points' multipliers zeroed."""
+    for i in range(x.shape[0]):
+        x[i] = x[i] + f * (scale * r[i])
+    count = 0
+    for p in range(active.shape[0]):
+        released = f_rel[p] <= f
+        if released or (closings and f_close[p] <= f):
+            flipped[count] = p
+            count += 1
+            active[p] = not active[p]
+        if released:
+            x[(p // nc + 1) * nv + 9 + p % nc] = 0.0
+    return count
+
+
+@nb.njit(cache=True, error_model="numpy")
+def rate_step(band, ab, ipiv, bf, cf, rows, active, flipped, count, kl, ku, rhs, x, keep):
+    """The contact predictor's rate after an event, compiled (the numpy twin: the same steps
+    in :func:`coilrod.rod.contact_predictor.piecewise_prediction`'s ``rate``; under
+    :func:`events_pay`'s rental): the rows of the ``count`` points ``flipped`` (flat indices)
+    rewritten in the unfactorised ``band`` (entries ``bf``, ``cf`` (npts, w) of each point's
+    row; ``rows[1]`` where ``active``, ``rows[0]`` elsewhere), the factors ``ab``, ``ipiv``
+    restarted at the first column those rows reach (:func:`band_lu`), and the solve of the
+    right-hand side ``rhs`` (size, 1) into ``x`` (size, 1) restarted there too
+    (:func:`rate_solve`, ``keep`` the last solve's).  Returns band_lu's info, or -1 if x is
+    not finite."""
+    n = band.shape[1]
+    start = n
+    for k in range(count):
+        p = flipped[k]
+        a = 1 if active[p] else 0
+        for e in range(bf.shape[1]):
+            band[bf[p, e], cf[p, e]] = rows[a, p, e]
+        start = min(start, cf[p, 0])
+    for col in range(start, n):
+        for i in range(band.shape[0]):
+            ab[i, col] = band[i, col]
+    info = band_lu(ab, kl, ku, ipiv, start)
+    if info > 0:
+        return info
+    return rate_solve(ab, kl, ku, ipiv, rhs, x, start, keep)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def rate_solve(ab, kl, ku, ipiv, rhs, x, start, keep):
+    """:func:`band_solve` of one right-hand side ``rhs`` (size, 1) into ``x`` (size, 1) that
+    keeps its forward sweep and restarts it (the contact predictor's rates, under
+    :func:`events_pay`'s rental; band_solve itself is unchanged: one compiled version for
+    its callers).  ``keep`` (2, n): on return ``keep[0]`` holds the forward result
+    (L^-1 P rhs) and ``keep[1, j]`` the value the row exchange of step j sent to row
+    ``ipiv[j]``.  A restart (``start`` > 0, at most n, after a :func:`band_lu` restarted
+    there; the same rhs, ``keep`` the last solve's, the factors' columns and pivots before
+    ``start`` unchanged since) keeps the forward result's rows before ``start``, replays the
+    last kl steps before it on the rows from ``start`` on (the exchanges into them and the
+    updates with the kept results, in the same order) and sweeps on from ``start``: bitwise
+    the solve from column 0.  The back substitution runs over every row.  Returns 0, or -1
+    if x is not finite."""
+    n = ab.shape[1]
+    kv = ku + kl
+    b = x[:, 0]
+    for i in range(n):
+        b[i] = rhs[i, 0]
+    y, c = keep[0], keep[1]
+    j0 = 0
+    if start > 0:
+        j0 = min(start, n - 1)
+        for i in range(start):
+            b[i] = y[i]
+        for j in range(max(0, start - kl), j0):  # replay: the steps reaching rows >= start
+            lm = min(kl, n - 1 - j)
+            p = ipiv[j]
+            if p != j and p >= start:
+                b[p] = c[j]
+            xj = y[j]
+            for i in range(start - j, lm + 1):
+                f = ab[kv + i, j]
+                if f != 0.0:
+                    b[j + i] -= f * xj
+    for j in range(j0, n - 1):  # L, with the row interchanges as they were made
+        lm = min(kl, n - 1 - j)
+        p = ipiv[j]
+        if p != j:
+            tmp = b[p]
+            b[p] = b[j]
+            b[j] = tmp
+            c[j] = b[p]
+        xj = b[j]
+        for i in range(1, lm + 1):
+            f = ab[kv + i, j]
+            if f != 0.0:
+                b[j + i] -= f * xj
+    for i in range(start, n):
+        y[i] = b[i]
+    for j in range(n - 1, -1, -1):  # U, bandwidth kl + ku
+        b[j] /= ab[kv, j]
+        xj = b[j]
+        for i in range(max(0, j - kv), j):
+            f = ab[kv + i - j, j]
+            if f != 0.0:
+                b[i] -= f * xj
+    total = 0.0
+    for i in range(n):
+        total += b[i]
+    return 0 if math.isfinite(total) else -1

@@ -17,6 +17,8 @@ it cycles on the flat support from 64 segments.)
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .mesh import _remember
@@ -26,6 +28,11 @@ __all__ = ["event_fraction", "piecewise_prediction"]
 #: An active multiplier below this fraction of the largest one is taken as already released
 #: (its sign change is left to Newton: ending a step there would stall the stepping).
 _RELEASE_FLOOR = 1e-6
+
+#: A converged state's prediction takes the every-rows band of the last tangent at its scale
+#: where no node's rotation differs from the state's by more than this (rad): Newton's last
+#: chord steps (1e-9 to 1e-5 rad in the bend state), not a fresh linearization.
+_NEAR = 1e-3
 
 
 def event_fraction(problem, U: np.ndarray, dU: np.ndarray) -> np.ndarray:
@@ -49,6 +56,15 @@ def event_fraction(problem, U: np.ndarray, dU: np.ndarray) -> np.ndarray:
     with np.errstate(all="ignore"):
         release = np.where(releasing, lam / -d_lam, 1.0)
     return np.minimum(frac, release.min(axis=(1, 2)))
+
+
+def _reach(D: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """A bound (m,) on how far m nodes' contact points ``x + c t`` move (units of L) under a
+    change ``D`` (m, nv) of their unknowns: ``|dx| + c |dphi|`` (``c`` (m,): the offsets
+    along the tangents, units of L; ``|dt| <= |dphi|`` for ``t = exp(phi) R0 e1``: the left
+    Jacobian of SO(3)'s exponential map has norm 1 at most)."""
+    dx, dp = D[:, 0:3], D[:, 3:6]
+    return np.sqrt(np.einsum("ji,ji->j", dx, dx)) + c * np.sqrt(np.einsum("ji,ji->j", dp, dp))
 
 
 def _every_rows_linearization(problem, u: np.ndarray, scale: float):
@@ -105,7 +121,15 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     complementarity problem along the step: a piecewise-linear path, one new tangent per
     event, all at the tangent matrix of ``u``).  Returns the predicted state (size,), or None
     when it cannot be formed (a singular tangent, more than ``max_events`` switches)."""
-    from ._compiled import band_lu, band_solve
+    from ._compiled import (
+        band_lu,
+        band_solve,
+        event_step,
+        events_charge,
+        events_pay,
+        rate_solve,
+        rate_step,
+    )
 
     n, nv, nc = problem.n, problem.nv, problem.nc
     if max_events is None:
@@ -114,7 +138,10 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     # force and moment rows depend on the multipliers alone (not on which rows are active),
     # and each rate below overwrites all the contact rows by the active set's, so this one
     # tangent serves every switch.
-    kept = problem._every_active_band(u, scale)  # the converged step's blocks, if at u
+    # the converged step's blocks, if at u or within a chord step of it (the prediction's
+    # tangent: the path rate's own is that one)
+    kept = problem._every_active_band(u, scale, near=_NEAR)
+    factors = None if kept is None else problem._kept_factors()
     if kept is None:
         every = _every_rows_linearization(problem, u, scale)
         if not bool(every.ok[0]):
@@ -126,76 +153,177 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     active_rows = base[bi, ci]  # (n-1, nc, 6 + nc)
     inactive_rows = np.zeros_like(active_rows)
     inactive_rows[..., 6:] = np.eye(nc)
-    rhs = -np.asarray(load_rate, float)  # (1, size)
+    rhs = -np.asarray(load_rate, float).reshape(-1, 1)  # (size, 1)
     kl, ku = problem.kl, problem.ku
-    band = base.copy(order="F")  # the rates' band, unfactorised: the last rate's contact rows
+    # the rates' band, unfactorised: the last rate's contact rows (base is this call's own)
+    band = np.asfortranarray(base)
     last = []  # the last rate's active set, factors and pivots
+    x_rate = np.empty_like(rhs)  # each rate's solve (its result is used before the next)
+    fast = events_pay()  # the event loop compiled (its ski rental): for the whole loop
+    keep = np.empty((2, rhs.shape[0]))  # the last solve's forward sweep (rate_solve)
 
     w = 6 + nc  # the flat views of the contact rows' entries: one row of w per point
     bf, cf = bi.reshape(-1, w), ci.reshape(-1, w)
-    af, nf = active_rows.reshape(-1, w), inactive_rows.reshape(-1, w)
+    rows = np.stack([inactive_rows.reshape(-1, w), active_rows.reshape(-1, w)])  # (2, ., w)
 
     def rate(active, flipped=None):
+        if last and fast:  # the steps below for an event, compiled (the solve restarted too)
+            _, ab, ipiv = last
+            last[:] = ()
+            if rate_step(band, ab, ipiv, bf, cf, rows, flat, flipped, flipped.size, kl, ku, rhs,
+                         x_rate, keep):  # fmt: skip
+                return None  # (a zero pivot, or not finite)
+            last[:] = active, ab, ipiv
+            return x_rate.reshape(-1)
         if not last:
             band[bi, ci] = np.where(active[..., None], active_rows, inactive_rows)
-            ab, ipiv, start = band.copy(order="F"), np.empty(band.shape[1], np.int64), 0
+            if factors is not None and np.array_equal(active, factors[0]):
+                # the band of the kept tangent (the same blocks and contact rows): its
+                # factors, Newton's (band_lu from column 0 gives them, bitwise)
+                ab, ipiv = factors[1].copy(order="F"), factors[2].copy()
+                start = band.shape[1]
+            else:
+                ab, ipiv, start = band.copy(order="F"), np.empty(band.shape[1], np.int64), 0
         else:
-            # an event switches a few contact rows (flipped: the points' flat indices): the
-            # factors' columns before the first column of those rows' entries are the last
-            # rate's, kept (band_lu restarts there, bitwise the factorisation from column
-            # 0); the others the new band's
+            # an event switches a few contact rows (flipped: the points' flat indices,
+            # ascending): the factors' columns before the first column of those rows'
+            # entries (the first flipped point's node's first unknown) are the last rate's,
+            # kept (band_lu restarts there, bitwise the factorisation from column 0); the
+            # others the new band's
             _, ab, ipiv = last
-            cols = cf[flipped]
-            band[bf[flipped], cols] = np.where(active.reshape(-1)[flipped, None], af[flipped],
-                                               nf[flipped])  # fmt: skip
-            start = int(cols.min()) if flipped.size else band.shape[1]
+            band[bf[flipped], cf[flipped]] = rows[active.reshape(-1)[flipped].view(np.int8),
+                                                  flipped]  # fmt: skip
+            start = int(cf[flipped[0], 0]) if flipped.size else band.shape[1]
             ab[:, start:] = band[:, start:]
         last[:] = ()
         if band_lu(ab, kl, ku, ipiv, start) > 0:  # an exactly zero pivot: singular
             return None
         last[:] = active, ab, ipiv
-        x = np.array(rhs).reshape(-1, 1)
-        band_solve(ab, kl, ku, ipiv, x)
-        r = x.reshape(-1)
-        return r if np.isfinite(r).all() else None
+        if fast:  # (its forward sweep kept for the restarts)
+            singular = rate_solve(ab, kl, ku, ipiv, rhs, x_rate, 0, keep)
+            return None if singular else x_rate.reshape(-1)
+        np.copyto(x_rate, rhs)
+        band_solve(ab, kl, ku, ipiv, x_rate)
+        r = x_rate.reshape(-1)
+        return r if math.isfinite(r.sum()) else None  # (a NaN or inf anywhere: not finite)
 
     lam0 = u.reshape(n, nv)[1:, 9 : 9 + nc]
-    active = problem.kappa * g[1:] < lam0
+    npts = (n - 1) * nc
+    flat = (problem.kappa * g[1:] < lam0).reshape(-1)  # the active set, by point
+    active = flat.reshape(n - 1, nc)  # (a view: the event steps switch points in place)
     x, left = u.copy(), 1.0
     switched = set()
     flipped = None  # the points switched at the last event (flat indices in (n-1, nc))
-    g0 = g[1:]
+    g0 = g[1:].reshape(-1).copy()  # the gaps at the segment's start (the last event)
+    g1, xd = np.empty(npts), np.empty_like(x)
+    f_rel, f_close, at = np.empty(npts), np.empty(npts), np.empty(npts, np.int64)
+    lin, cols = np.ascontiguousarray(active_rows.reshape(npts, w)), ci.reshape(npts, w)
+    end_gaps = _end_gaps(problem)
+    # a round section's surface gap is 1-Lipschitz in its contact point p = x + c t (a
+    # signed distance, units of L), and |dt| <= |d phi| (t = exp(phi) R0 e1): a release
+    # before any open point can reach the wall needs no gaps at the segment's end
+    c = problem._contact_geometry()[0][1:] if problem._round else np.empty(0)
+    kappa = problem.kappa
     with np.errstate(all="ignore"):  # (one context for the loop: its entry costs as an op)
         for _ in range(max_events):
             r = rate(active, flipped)
             if r is None:
                 return None
-            d = left * ds * r
-            xd = x + d
-            g1 = problem._state_gaps(xd[None])[0, 1:]
-            l0, l1 = x.reshape(n, nv)[1:, 9 : 9 + nc], xd.reshape(n, nv)[1:, 9 : 9 + nc]
-            closing = ~active & (g1 < 0.0) & (g1 < g0)
-            f_close = _fractions(closing, g0, g1)
-            releasing = active & (l1 < 0.0) & (l1 < l0)
-            f_rel = _fractions(releasing, l0, l1)
-            f = min(float(f_close.min()), float(f_rel.min()))
-            if not f < 1.0:
-                return xd
-            x = x + f * d
+            if not fast:
+                events_charge()
+            step = event_step if fast else _event_step
+            args = (x, r, left * ds, flat, g0, g1, xd, lin, cols, c, nv, nc, kappa, f_rel,
+                    f_close, at)  # fmt: skip
+            code, f, count = step(False, *args)
+            if code == 1:  # the gaps at the segment's end decide
+                np.copyto(g1, end_gaps(xd).reshape(-1))
+                code, f, count = step(True, *args)
+            if code == 0:
+                return xd.copy()
             left *= 1.0 - f
-            g0 = g0 + f * (g1 - g0)  # the gaps at the event, to the order of the prediction
-            released = f_rel <= f
-            at = (f_close <= f) | released
             where = round(left, 12)
-            flipped = np.flatnonzero(at)
+            flipped = at[:count].copy()
             for p in flipped.tolist():
                 key = (p, where)
                 if key in switched:  # back and forth at one scale: degenerate, give up
                     return None
                 switched.add(key)
-            active = active ^ at
-            x.reshape(n, nv)[1:, 9 : 9 + nc][released] = 0.0
     return None
+
+
+def _event_step(gaps, x, r, scale, active, g0, g1, xd, lin, cols, c, nv, nc, kappa, f_rel,
+                f_close, flipped):  # fmt: skip
+    """One segment of :func:`piecewise_prediction`'s event loop (the numpy twin of the
+    compiled :func:`coilrod.rod._compiled.event_step`): the segment from the state ``x``
+    (size,) along ``scale`` times the rate ``r`` (size,) ends at its first contact event,
+    found in two calls.
+
+    ``gaps`` False: the fractions of the releases (an active point's multiplier reaching
+    zero, linear) into ``f_rel`` (npts,) (inf where none).  If the least, f, is below 1 and
+    no open point can reach the wall before it (a round section: ``c`` (n - 1,) its points'
+    offsets along the tangents, units of L, else empty; the gaps ``g0`` (npts,) at the
+    segment's start against f times :func:`_reach`), the event is applied with the gaps at
+    it from their linearization (``lin`` (npts, w): kappa times each point's gap gradient in
+    the state's entries ``cols`` (npts, w)): returns ``(2, f, count)``.  Else the segment's
+    end ``x + scale r`` is written into ``xd``: returns ``(1, f, 0)``.
+
+    ``gaps`` True (after ``(1, ...)``; ``g1`` (npts,): the gaps at ``xd``): the fractions of
+    the closings (an open point's gap reaching zero, interpolated between g0 and g1) into
+    ``f_close``; no event before the end: returns ``(0, f, 0)``; else the gaps at the event
+    (interpolated) into g0 and the event applied: ``(2, f, count)``.
+
+    An event at the fraction f moves x there, switches the points whose fractions are f in
+    ``active`` (npts,) (their flat indices into ``flipped[:count]``, ascending) and zeroes the
+    released points' multipliers.  Fractions where the least is not positive are clipped to
+    [0, 1] (:func:`_fractions`)."""
+    n = x.shape[0] // nv
+    d = scale * r
+    X, D = x.reshape(n, nv)[1:], d.reshape(n, nv)[1:]
+    closings = gaps
+    if not gaps:
+        l0 = X[:, 9 : 9 + nc].reshape(-1)
+        l1 = l0 + D[:, 9 : 9 + nc].reshape(-1)
+        f_rel[:] = _fractions(active & (l1 < 0.0) & (l1 < l0), l0, l1)
+        f = float(f_rel.min())
+        if f < 1.0 and c.shape[0] and _clear(g0.reshape(-1, nc), active.reshape(-1, nc), D, c, f):
+            g0 += f * np.einsum("pw,pw->p", lin, d[cols]) / kappa
+        else:
+            np.add(x, d, out=xd)
+            return 1, f, 0
+    else:
+        f_close[:] = _fractions(~active & (g1 < 0.0) & (g1 < g0), g0, g1)
+        f = min(float(f_close.min()), float(f_rel.min()))
+        if not f < 1.0:
+            return 0, f, 0
+        g0 += f * (g1 - g0)  # the gaps at the event, to the order of the prediction
+    x += f * d
+    released = f_rel <= f
+    at = (f_close <= f) | released if closings else released
+    count = int(np.count_nonzero(at))
+    flipped[:count] = np.flatnonzero(at)
+    active ^= at
+    X[:, 9 : 9 + nc][released.reshape(-1, nc)] = 0.0
+    return 2, f, count
+
+
+def _clear(g0: np.ndarray, active: np.ndarray, D: np.ndarray, c: np.ndarray, f: float) -> bool:
+    """Whether no open contact point of a round section can reach the wall within the
+    fraction ``f`` of a segment that changes the free nodes' unknowns by ``D`` (n - 1, nv):
+    each inactive point's gap ``g0`` (n - 1, nc) (units of L) above ``f`` times the bound
+    :func:`_reach` on its displacement (``c`` (n - 1,): the points' offsets along the
+    tangents, units of L)."""
+    return not bool(np.any((g0 <= f * _reach(D, c)[:, None]) & ~active))
+
+
+def _end_gaps(problem):
+    """The surface gaps (n - 1, nc) of the free nodes' contact points of a state (size,) of
+    ``problem``: :meth:`SpatialRod._state_gaps`' numbers, not remembered (a prediction's
+    segment ends are not asked for again)."""
+    if not problem._round:
+        return lambda v: problem._state_gaps(v[None])[0, 1:]
+    return lambda v: problem._round_state_gaps(
+        problem.rotations(v[None]), problem.node_positions(v[None])
+    )[0, 1:]
 
 
 def active_set_start(problem, u: np.ndarray, scale: float = 1.0, max_rounds: int = 16):

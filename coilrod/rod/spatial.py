@@ -353,6 +353,7 @@ class SpatialRod(DiscreteRod):
         self._p_ref = self._tau_ref = None
         # the blocks of the last one-state contact tangent (:meth:`_every_active_band`)
         self._kept = None
+        self._kept_tangent = None  # (_kept, its tangent) where its rows are min's (_kept_factors)
         self._gaps_memo: dict = {}  # state -> surface gaps (_state_gaps)
         if self.nt:  # the reference of the friction: the straight rod until a state is accepted
             self._p_ref = self.contact_points(self.straight()[None])[0]
@@ -510,6 +511,7 @@ class SpatialRod(DiscreteRod):
             U, S = u, scale  # (the engine's stacks: no conversion)
         else:
             U, S = self._stack(u, scale)
+        kept = self._kept  # (a one-state contact tangent below keeps its blocks anew)
         if self.nc or _compiled_core() is None:  # numpy passes and contact terms may warn
             with np.errstate(all="ignore"):
                 R, R1, ab, sym = self._assemble(U, S, tangent)
@@ -541,6 +543,9 @@ class SpatialRod(DiscreteRod):
             tan = RodTangent(U.shape[0], self.size, False, ab, R1, self.kl, self.ku)
             tan.bad = ~ok  # (a new tangent: no member flagged yet)
             tan.blocks = sym  # (diagonal, upper) blocks of the second variation
+            if self.nc and U.shape[0] == 1:  # the kept blocks' tangent (_kept_factors)
+                plain = self.ncp == "min" and not self._every_rows and self._kept is not kept
+                self._kept_tangent = (self._kept, tan) if plain else None
         lin = Linearization(u=U, scale=S, residual=R, ok=ok, tangent=tan)
         lin.load_rate = R1
         lin.pair = (self._pair, R, R1, stats)  # (R and R1 views of it: error, _error_one)
@@ -711,24 +716,31 @@ class SpatialRod(DiscreteRod):
 
         return event_fraction(self, U, dU)
 
-    def _every_active_band(self, u: np.ndarray, scale: float):
+    def _every_active_band(self, u: np.ndarray, scale: float, near: float = 0.0):
         """The band storage and load rate (1, size) of the linearization at the state ``u``
         (size,) and ``scale`` with every contact row the gap's (kappa times its gradient), from
         the kept blocks of this problem's last one-state tangent if it was at that state
         (a converged load step's: the prediction that follows starts there), else None.  The
         force and moment rows depend on the multipliers alone, not on the complementarity
         function, so the band is the one a linearization with every row active would build,
-        bitwise; None too where that linearization was not admissible."""
+        bitwise; None too where that linearization was not admissible.  ``near`` (rad): the
+        kept tangent of another state at the same scale is taken too where no node's rotation
+        differs from ``u``'s by more (a Newton solve that ends with chord steps keeps the
+        tangent of an iterate a chord step before its last: the band and load rate are
+        then that iterate's)."""
         kept = self._kept
         if kept is None:
             return None
         key, skey, blocks, every, R1, R = kept
         c_x, c_phi = every if blocks is not None else (every, None)
-        if not (
-            skey == np.array([scale], float).tobytes()
-            and key == np.asarray(u, float)[None].tobytes()
-        ):
+        if skey != np.array([scale], float).tobytes():
             return None
+        if key != np.asarray(u, float)[None].tobytes():
+            at = np.frombuffer(key)
+            if not (near > 0 and at.shape == np.shape(u)
+                    and self.distance((at - u)[None])[0] <= near):  # fmt: skip
+                return None
+            u = at
         phi = self.rotations(np.asarray(u, float))
         turned = np.sqrt(np.einsum("ni,ni->n", phi, phi)).max()
         if not (np.isfinite(R).all() and turned <= self.max_turn):  # (linearize's ok)
@@ -740,6 +752,29 @@ class SpatialRod(DiscreteRod):
         c_lam = np.zeros_like(blocks["c_lam"])
         every = {**blocks, "c_x": c_x, "c_phi": c_phi, "c_lam": c_lam}
         return self._scatter(1, every), R1
+
+    def _kept_factors(self):
+        """``(active, ab, ipiv)``: the LU factors (band storage, pivots) of the one-state
+        tangent whose blocks :meth:`_every_active_band` keeps, and its active contact set
+        (n - 1, nc) (its contact rows: kappa times the gap's gradient where active, the
+        multiplier's identity elsewhere: :meth:`_ncp`'s "min"), once that tangent is
+        factorised (a Newton solve's); None otherwise (not factorised, a singular or flagged
+        member, another complementarity function, friction).  The factors are the tangent's
+        own: copy before changing them."""
+        pair, kept = self._kept_tangent, self._kept
+        if pair is None or kept is None or pair[0] is not kept:
+            return None
+        tan = pair[1]
+        lu = tan._lu
+        if lu is None or tan._per_member or np.count_nonzero(tan.bad):
+            return None
+        blocks, every = kept[2], kept[3]
+        if blocks is None:  # the compiled kernel's inputs: (lam, gaps, normals, hess), ...
+            lam, gaps = every[0][0], every[0][1]
+            active = (self.kappa * gaps < lam)[0, 1:]
+        else:  # the numpy blocks: the multipliers' own entries are 0 where active
+            active = np.diagonal(blocks["c_lam"][0], axis1=-2, axis2=-1) == 0.0
+        return active, lu[0], lu[1]
 
     def piecewise_prediction(self, u, scale, ds):
         """Prediction (size,) of the state at ``scale + ds`` from the converged state ``u``
