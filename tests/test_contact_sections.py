@@ -1,0 +1,96 @@
+"""Contact edge cases of the rod's section and start: a rectangle's face on a (nearly)
+parallel wall, a vessel exactly as wide as the rod, the start check's messages."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import coils
+from coilrod import Circle, Magnetization, Rod, Vessel, Wall, solve_rod
+
+L = 0.04
+
+
+def _round_rod():
+    return Rod(L, 1e6, Circle(2e-3), Magnetization(128e3, 0.0))
+
+
+class _Plane:
+    """A plane with the gap interface alone (no check_start, no words of its own)."""
+
+    def __init__(self, point, normal):
+        self.p, self.n = np.asarray(point, float), np.asarray(normal, float)
+
+    def gap(self, x):
+        return (np.asarray(x) - self.p) @ self.n
+
+    def gap_gradient(self, x):
+        return np.broadcast_to(self.n, np.shape(x)).copy()
+
+    def gap_hessian(self, x):
+        return np.zeros(np.shape(x) + (3,))
+
+
+# -- the start check ----------------------------------------------------------------------------
+def test_a_vessel_exactly_as_wide_as_the_rod_is_a_start_error():
+    # a 2 mm rod on the axis of a straight tube of radius r: r = 1 mm has no room (its
+    # surface touches the wall all round, the contact normal at the axis is undefined:
+    # this was a ConvergenceError at scale 0); so has 1 ulp more (the tube's gap rounds
+    # to -1.5e-18 m there, the same failure) -- the boundary is the check's round-off,
+    # 1e-12 L on both sides: half of it wider is an error, twice it a valid start, whose
+    # tip then rests on the wall (tip height = clearance, by hand)
+    rod, field = _round_rod(), coils.UniformField(B=(0, 1e-3, 0))
+    tol = 1e-12 * L
+    for wider in (0.0, np.spacing(1e-3), 0.5 * tol):
+        tube = Vessel.straight(2 * L, 1e-3 + wider, start=(-0.5 * L, 0, 0))
+        with pytest.raises(ValueError, match=r"obstacles\[0\] \(Vessel\) leaves no room .*"
+                           r"touches it on both sides .* as wide as the rod"):  # fmt: skip
+            solve_rod(rod, field, [1.0], nodes=4, obstacles=[tube], richardson=False)
+    tube = Vessel.straight(2 * L, 1e-3 + 2 * tol, start=(-0.5 * L, 0, 0))
+    res = solve_rod(rod, field, [1.0], nodes=4, obstacles=[tube], richardson=False,
+                    stability=False)  # fmt: skip
+    assert abs(res.tip[0, 1] / (2 * tol) - 1) < 1e-3
+    # narrower is the error it was
+    tube = Vessel.straight(2 * L, 1e-3 - 2 * tol, start=(-0.5 * L, 0, 0))
+    with pytest.raises(ValueError, match=r"thicker than the vessel"):
+        solve_rod(rod, field, [1.0], nodes=4, obstacles=[tube], richardson=False)
+    # a rod touching a single wall at the start has room: solved as before
+    res = solve_rod(rod, field, [1.0], nodes=4, obstacles=[Wall((0, -1e-3, 0), (0, 1, 0))],
+                    richardson=False, stability=False)  # fmt: skip
+    assert res.tip[0, 1] > 0
+
+
+def test_the_start_check_names_the_node_its_arc_length_and_the_obstacle():
+    # a clamp at y = 2.5 mm turned to +y inside a tube of radius 3 mm round the x axis: by
+    # hand node j (5 mm segments) is at y = 2.5 + 5 j mm, node 1 at 7.5 mm lies 4.5 mm
+    # outside, the deepest is the tip (node 8, y = 42.5 mm, by 39.5 mm); it named
+    # "points[1]" (which points? at what arc length?)
+    rod, field = _round_rod(), coils.UniformField(B=(1e-3, 0, 0))
+    kw = dict(nodes=8, richardson=False, clamp_position=(0, 2.5e-3, 0), clamp_angle=np.pi / 2)
+    tube = Vessel.straight(2 * L, 3e-3, start=(-0.5 * L, 0, 0))
+    with pytest.raises(ValueError, match=(
+        r"^obstacles\[0\] \(Vessel\) leaves no admissible straight start: the unloaded rod's "
+        r"node 1 \(of 0\.\.8\) at s = 0\.005 m, \(0, 7\.5, 0\) mm, lies 4\.5 mm outside the "
+        r"vessel \(8 of 9 nodes are; the deepest, node 8 at s = 0\.04 m, by 39\.5 mm\)$"
+    )):  # fmt: skip
+        solve_rod(rod, field, [1.0], obstacles=[tube], **kw)
+    # a wall y = 20 mm facing -y: nodes 4.. (y = 22.5 mm ...) behind it; a plain object
+    # with the gap interface alone: "inside it"
+    for ob, words in ((Wall((0, 0.02, 0), (0, -1, 0)), r"\(Wall\) .* behind the wall"),
+                      (_Plane((0, 0.02, 0), (0, -1, 0)), r"\(_Plane\) .* inside it")):  # fmt: skip
+        with pytest.raises(ValueError, match=(
+            words.replace(" .* ", r" leaves no admissible straight start: the unloaded "
+                          r"rod's node 4 \(of 0\.\.8\) at s = 0\.02 m, \(0, 22\.5, 0\) mm, lies "
+                          r"2\.5 mm ")
+        )):  # fmt: skip
+            solve_rod(rod, field, [1.0], obstacles=[Vessel.straight(0.1, 0.05), ob], **kw)
+    # the surface check names the contact point and its arc length: the rod along +x at
+    # y = 2.5 mm in that tube: its axis inside, its 1 mm surface 0.5 mm into the wall; the
+    # first contact point is node 0's corner, s = h / 2 = 2.5 mm
+    kw["clamp_angle"] = 0.0
+    with pytest.raises(ValueError, match=(
+        r"obstacles\[0\] \(Vessel\) leaves no room for the rod's surface: the straight rod's "
+        r"section \(half-extents 1 x 1 mm\) at contact point 0 \(s = 0\.0025 m\) reaches 0\.5 mm"
+    )):  # fmt: skip
+        solve_rod(rod, field, [1.0], obstacles=[tube], **kw)
