@@ -94,3 +94,33 @@ def test_the_start_check_names_the_node_its_arc_length_and_the_obstacle():
         r"section \(half-extents 1 x 1 mm\) at contact point 0 \(s = 0\.0025 m\) reaches 0\.5 mm"
     )):  # fmt: skip
         solve_rod(rod, field, [1.0], obstacles=[tube], **kw)
+
+
+# -- centreline files ---------------------------------------------------------------------------
+_VTP = """<?xml version="1.0"?><VTKFile type="PolyData"><PolyData><Piece NumberOfPoints="NPTS">
+<Points><DataArray NumberOfComponents="3" format="ascii">PTS</DataArray></Points>
+<PointData><DataArray Name="radius" format="ascii">RAD</DataArray></PointData>LINES
+</Piece></PolyData></VTKFile>"""
+_LINES = """<Lines><DataArray Name="connectivity" format="ascii">CONN</DataArray>
+<DataArray Name="offsets" format="ascii">OFFS</DataArray></Lines>"""
+
+
+def test_a_one_point_vtp_centreline_is_too_short(tmp_path):
+    # the CSV reader's words ("has 1 point; at least 2 needed") for a VTP of fewer than two
+    # points, or whose first polyline has one (it was an error about the line offsets)
+    from coilrod.contact import read_centerline
+
+    for pts, rad, conn, offs, match in [
+        ("0 0 0", "1", "0", "1", "has 1 point; at least 2 needed"),  # was: "offset is 1"
+        ("0 0 0", "1", None, None, "has 1 point; at least 2 needed"),
+        ("", "", None, None, "has 0 points; at least 2 needed"),
+        ("0 0 0 1 0 0 2 0 0", "1 1 1", "1 0 2", "1 3", "its first line has 1 point; at least 2"),
+    ]:
+        lines = "" if conn is None else _LINES.replace("CONN", conn).replace("OFFS", offs)
+        text = _VTP.replace("PTS", pts).replace("RAD", rad).replace("LINES", lines)
+        (tmp_path / "one.vtp").write_text(text.replace("NPTS", str(len(pts.split()) // 3)))
+        with pytest.raises(ValueError, match=f"one.vtp.* {match}"):
+            read_centerline(tmp_path / "one.vtp")
+    (tmp_path / "one.csv").write_text("x,y,z,radius\n0,0,0,1\n")
+    with pytest.raises(ValueError, match="one.csv.* has 1 point; at least 2 needed"):
+        read_centerline(tmp_path / "one.csv")
