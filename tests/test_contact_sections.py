@@ -124,3 +124,26 @@ def test_a_one_point_vtp_centreline_is_too_short(tmp_path):
     (tmp_path / "one.csv").write_text("x,y,z,radius\n0,0,0,1\n")
     with pytest.raises(ValueError, match="one.csv.* has 1 point; at least 2 needed"):
         read_centerline(tmp_path / "one.csv")
+
+
+# -- scene checks: the FEM element count ----------------------------------------------------------
+def test_scene_checks_count_the_elements_the_mesh_builder_makes():
+    # the scene check's element count against the meshes rod_mesh builds (their elements
+    # counted): a thin rectangle's graded clamp layers (20 layers asked, 23 made) and a 2D
+    # mesh with more magnetization segments than layers asked; the count was the product
+    # of the numbers given (20 x 1 x 1, 2 x 2)
+    from _scenes import scene_with
+
+    from coilrod.fem.mesh import rod_mesh
+    from coilrod.scene import parse_scene
+    from coilrod.scene.checks import fem_cells
+
+    seg = {"segments": [{"length": x, "magnitude": "64 kA/m"} for x in ("5 mm", "10 mm", "25 mm")]}
+    thin = {"length": "40 mm", "width": "0.4 mm", "thickness": "0.8 mm",
+            "youngs_modulus": "1 MPa", "magnetization": {"preset": "M1"}}  # fmt: skip
+    for robot, dim, elements in ((thin, 3, (20, 1, 1)), (seg, 2, (2, 2)), (seg, 3, (4, 1, 1))):
+        key = "robot" if "length" in robot else "robot__magnetization"
+        scene = parse_scene(scene_with(**{key: robot}))
+        made = rod_mesh(scene.rod, dim, elements, 2).t.shape[1]
+        assert fem_cells(scene, dim, elements) == made
+        assert made > np.prod(elements)
