@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 import coils
 from coilrod import Circle, Magnetization, Rod, Vessel, Wall, solve_rod
@@ -147,3 +148,88 @@ def test_scene_checks_count_the_elements_the_mesh_builder_makes():
         made = rod_mesh(scene.rod, dim, elements, 2).t.shape[1]
         assert fem_cells(scene, dim, elements) == made
         assert made > np.prod(elements)
+
+
+# -- a rectangle's face on a (nearly) parallel wall -----------------------------------------------
+def _strip_on_a_floor(tilt=0.0, Q=None):
+    """A strip (thickness 1 mm in the bending plane, width 3 mm across it) laid by a uniform
+    body force q per length (a gradient field on M along the axis) on a floor 1e-3 L below
+    its face, the floor tilted by ``tilt`` (rad) about the rod's axis; clamp, field and floor
+    turned by Q together.  Returns the solve at 16 segments, q (N/m) and the touchdown
+    a (m) of beam theory, a = (72 EI delta / q)^(1/4)."""
+    from coilrod import Rectangle
+
+    Q = np.eye(3) if Q is None else Q
+    rod = Rod(L, 1e6, Rectangle(width=3e-3, thickness=1e-3), Magnetization(128e3, 0.0))
+    EI = rod.bending_stiffness
+    q = EI / L**3
+    G = np.zeros((3, 3))
+    G[0, 1] = -q / (rod.area * 128e3)
+    delta = 1e-3 * L
+    floor = Wall(Q @ [0, -delta - 0.5e-3, 0], Q @ [0, np.cos(tilt), np.sin(tilt)])
+    field = coils.LinearField(B0=(0, 0, 0), gradient=Q @ G @ Q.T)
+    res = solve_rod(rod, field, [1.0], nodes=16, richardson=False, obstacles=[floor],
+                    stability=False, clamp_rotation=Q)  # fmt: skip
+    return res, q, (72 * EI * delta / q) ** 0.25
+
+
+def test_a_face_on_a_nearly_parallel_wall_is_the_flat_support():
+    # The support of a rectangle along the contact normal was one corner (|n . d_a| and
+    # sign(n . d_a)): under a tilt of 1e-12 rad about the axis the corner flipped from
+    # side to side of the face and Newton did not converge (ConvergenceError at scale 0.008).
+    # Reference: the flat support's closed form -- beyond the touchdown the strip lies flat
+    # and the contact force per length is the load q (exact on the corner mesh); a tilt
+    # tau changes it at order tau (tau^2 here: the wall's normal turns by tau)
+    for tilt, tol in ((0.0, 1e-9), (1e-12, 1e-9), (1e-9, 1e-9), (1e-3, 1e-3)):
+        res, q, a = _strip_on_a_floor(tilt)
+        s = res.contact_s
+        inner = (s > a + 0.1 * L) & (s < 0.95 * L)
+        assert inner.sum() >= 4
+        assert res.contact_set(0)[inner, 0].all()
+        f = res.contact_force(0)[inner]
+        n = np.array([0, np.cos(tilt), np.sin(tilt)])
+        assert np.abs(f @ n / q - 1).max() < tol  # (the normal force alone: frictionless)
+        assert res.gaps(0).min() >= -1e-12 * L
+        if tilt == 0.0:
+            flat = res
+        else:
+            assert np.abs(res.tip - flat.tip).max() < max(tilt, 1e-12) * L
+    # the same, turned: clamp, field and floor rotated together by Q (whose face cosines are
+    # rounding, not 0: the old corner flipped there too) give the rotated answer
+    Q = Rotation.from_rotvec([0.3, -0.5, 0.8]).as_matrix()
+    turned, q, a = _strip_on_a_floor(0.0, Q)
+    np.testing.assert_allclose(turned.tip, flat.tip @ Q.T, rtol=0, atol=1e-12 * L)
+    np.testing.assert_allclose(turned.contact_force(0), flat.contact_force(0) @ Q.T, rtol=0,
+                               atol=1e-9 * q)  # fmt: skip
+
+
+def test_the_face_rounding_in_the_contact_jacobian(monkeypatch):
+    # the rounded face's curvature (the touching point moving across the face as it turns)
+    # in the contact blocks, against central differences of the residual: a strip at a
+    # random state against a wall nearly parallel to its faces, with the rounding widened
+    # to 0.2 so that it matters at the step of the differences (without its term the
+    # blocks are off by 8e-4 of the largest)
+    import coilrod.rod.spatial as spatial
+    from coilrod import Rectangle
+    from coilrod.rod.solve import build_spatial_problem, make_mesh
+
+    monkeypatch.setattr(spatial, "FACE_ROUNDING", 0.2)
+    rod = Rod(L, 1e6, Rectangle(3e-3, 1e-3), Magnetization(128e3, 0.0))
+    field = coils.LinearField(B0=(0, 0.01, 0.002), gradient=0.4 * np.diag([-0.5, 1, -0.5]))
+    wall = Wall((0, 0.01, 0), (0, -1, 0.02))
+    P = build_spatial_problem(rod, field, make_mesh(rod, 5), np.array([0.02, 0, 0]), np.eye(3),
+                              obstacles=[wall])  # fmt: skip
+    rng = np.random.default_rng(0)
+    u = P.straight().reshape(P.n, P.nv)
+    u[:, 0:3] += 0.01 * rng.standard_normal((P.n, 3))
+    u[:, 3:6] += 0.02 * rng.standard_normal((P.n, 3))
+    u[:, 6:] = rng.standard_normal((P.n, P.nv - 6))
+    u = u.ravel()
+    J = P.dense_jacobian(u, 0.7)
+
+    def residual(v):
+        return P.linearize(v[None], 0.7, tangent=False).residual[0]
+
+    fd = np.array([(residual(u + 1e-6 * e) - residual(u - 1e-6 * e)) / 2e-6
+                   for e in np.eye(P.size)]).T  # fmt: skip
+    assert np.abs(J - fd).max() < 1e-9 * np.abs(J).max()
