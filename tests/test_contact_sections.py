@@ -233,3 +233,31 @@ def test_the_face_rounding_in_the_contact_jacobian(monkeypatch):
     fd = np.array([(residual(u + 1e-6 * e) - residual(u - 1e-6 * e)) / 2e-6
                    for e in np.eye(P.size)]).T  # fmt: skip
     assert np.abs(J - fd).max() < 1e-9 * np.abs(J).max()
+
+
+# -- Richardson with friction -------------------------------------------------------------------
+def test_richardson_with_friction_is_an_extrapolation():
+    # A Richardson solve with friction gave the same answer to ~8 digits at 8 and 16
+    # segments: not a skipped extrapolation but a fourth-order one (the errors below: 5.0e-6,
+    # 3.1e-7, 1.9e-8 of the force at 4, 8, 16 segments; one mesh: 1.0e-3, 2.5e-4, 6.2e-5).
+    # A tip pressed on a rough wall (mu = 0.3) sticks where it touched, so its state is the
+    # frictionless one: the closed-form elastica whose tip height is the wall's, loaded by
+    # the wall force F = (lambda - lambda_eff) EI / L^2.  The extrapolation at 8 segments is
+    # 200x closer to it than the halved mesh alone (which a skipped one would return)
+    from scipy.optimize import brentq
+
+    from coilrod.rod.elastica import elastica
+
+    rod = _round_rod()
+    lam, d = 10.0, 0.2 * L - 1e-3  # the axis' tip height: the wall minus the radius
+    lam_eff = brentq(lambda x: elastica(x, np.pi / 2, length=L).tip[1] - d, 1e-9, lam,
+                     xtol=1e-15, rtol=1e-14)  # fmt: skip
+    F = (lam - lam_eff) * rod.bending_stiffness / L**2
+    x_tip = elastica(lam_eff, np.pi / 2, length=L).tip[0]
+    wall = Wall((0, 0.2 * L, 0), (0, -1, 0), friction=0.3)
+    field = coils.UniformField(B=(0, rod.field_for_lambda(lam), 0))
+    res = solve_rod(rod, field, [1.0], nodes=8, obstacles=[wall], stability=False)
+    assert abs(res.obstacle_forces(0)[0][1] / F - 1) < 1e-6  # (3.1e-7; 16 segments: 6.2e-5)
+    assert abs(res.tip[0, 0] - x_tip) < 1e-6 * L  # (1.6e-7 L; 16 segments: 3.7e-5 L)
+    assert abs(res.tip[0, 1] - d) < 1e-12 * L
+    assert np.abs(res.contact_force(0)[:, [0, 2]]).max() < 1e-6 * F / L  # sticks: f_t = 0

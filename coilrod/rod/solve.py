@@ -182,7 +182,12 @@ def solve_rod(
         :data:`MAX_SEGMENTS`); a node is placed at every magnetization breakpoint.
     richardson : bool
         Solve on the mesh and on its halving and extrapolate (fourth order).  False: one mesh,
-        second order.
+        second order.  With obstacles a state is extrapolated where both meshes have the
+        same contact set and the extrapolated rod is admissible, else the halved mesh's
+        state is returned (second order); with friction each mesh follows the load path
+        itself (the answer is path dependent) and the extrapolation stays fourth order (a
+        tip pressed on a rough wall: errors 5.0e-6, 3.1e-7, 1.9e-8 of the wall force at 4,
+        8, 16 segments -- so two meshes' answers agree to 6-8 digits).
     clamp_position : array-like, shape (3,)
         Clamp position, m.  The rod moves in the plane z = clamp_position[2].
     clamp_angle : float
