@@ -110,22 +110,22 @@ def _outer(a, b):
 
 #: Rounding of a rectangle's section for contact (relative to its half-extents): the support
 #: of the section along a contact normal n is ``sum_a half_a f(n . d_a)`` with ``f(x) =
-#: sqrt((1 - e^2) x^2 + e^2)`` (the support of a thin ellipsoid: the section is the Minkowski
-#: sum of two, a rectangle with its corners rounded and its faces bulging by ``e half_a``), not
-#: ``|x|``: smooth where a face is parallel to the wall, so a face contact is a force that
-#: moves continuously across the face (``|x|``'s corner flipped under a tilt of 1e-12 rad and
-#: Newton did not converge); exact for a face along the normal (x = 1), ``e half_a`` off for
-#: one across it (x = 0), ``e^2 / (2 |x|)`` off otherwise.
+#: sqrt((1 - e^2) x^2 + e^2) - e (1 - x^2)`` (e this number: convex, the support of a thin
+#: ellipsoid per axis, shifted), not ``|x|``: smooth where a face is parallel to the wall, so
+#: a face contact's force moves continuously across the face (``|x|``'s corner flipped under
+#: a tilt of 1e-12 rad and Newton did not converge).  Exact for faces along and across the
+#: normal (x = 0, +-1), within ``e half_a`` otherwise.
 FACE_ROUNDING = 1e-8
 
 
 def _face_support(x: np.ndarray, order: int = 1) -> tuple:
     """``f(x)`` of :data:`FACE_ROUNDING` and its derivatives up to ``order`` (1 or 2), of the
     cosines x (...) of a contact normal with a section axis."""
-    e2 = FACE_ROUNDING**2
-    r = np.sqrt((1.0 - e2) * x * x + e2)
-    out = (r, (1.0 - e2) * x / r)
-    return out if order < 2 else (*out, (1.0 - e2) * e2 / r**3)
+    e = FACE_ROUNDING
+    a = 1.0 - e * e
+    r = np.sqrt(a * x * x + e * e)
+    out = (r - e * (1.0 - x * x), a * x / r + 2.0 * e * x)
+    return out if order < 2 else (*out, a * e * e / r**3 + 2.0 * e)
 
 
 #: The small-angle series of :func:`_tangents`, rows sin(t)/t and (1 - cos t)/t^2 side by
