@@ -115,7 +115,7 @@ def _outer(a, b):
 #: a face contact's force moves continuously across the face (``|x|``'s corner flipped under
 #: a tilt of 1e-12 rad and Newton did not converge).  Exact for faces along and across the
 #: normal (x = 0, +-1), within ``e half_a`` otherwise.
-FACE_ROUNDING = 1e-8
+FACE_ROUNDING = 3e-8
 
 
 def _face_support(x: np.ndarray, order: int = 1) -> tuple:
