@@ -32,6 +32,12 @@ MAX_RADIUS, MIN_RADIUS = 0.05, 2e-6
 _RADIUS_NAMES = ("maximuminscribedsphereradius", "radius", "r")
 
 
+def _at_least_two(label: str, n: int) -> None:
+    """ValueError unless a centreline (its file, or its first line) has n >= 2 points."""
+    if n < 2:
+        raise ValueError(f"{label} has {n} point{'' if n == 1 else 's'}; at least 2 needed")
+
+
 def _read_csv(path: str):
     text = read_text(path, "centreline file")
     try:
@@ -108,6 +114,7 @@ def _read_vtp(path: str):
             f"centreline file {path!r}: Points holds {pts.size} numbers, not 3 per point"
         )
     pts = pts.reshape(-1, 3)
+    _at_least_two(f"centreline file {path!r}", len(pts))  # (before its lines' offsets)
     rnode = None
     for node in piece.findall("./PointData/DataArray"):
         if (node.get("Name") or "").lower() in _RADIUS_NAMES:
@@ -125,6 +132,8 @@ def _read_vtp(path: str):
             raise ValueError(f"centreline file {path!r}: line indices must be whole numbers")
         c, o = c.astype(np.int64), o.astype(np.int64)
         if len(o):
+            if o[0] == 1:
+                _at_least_two(f"centreline file {path!r}: its first line", 1)
             if not 2 <= o[0] <= len(c):
                 raise ValueError(
                     f"centreline file {path!r}: the first line's offset is {o[0]}; it must be "
@@ -150,8 +159,7 @@ def read_table(path, units: str = "m"):
         pts, radius = _read_vtp(path)
     else:
         raise ValueError(f"{label}: the format must be .csv or .vtp")
-    if len(pts) < 2:
-        raise ValueError(f"{label} has {len(pts)} points; at least 2 needed")
+    _at_least_two(label, len(pts))
     if not (np.all(np.isfinite(pts)) and np.all(np.isfinite(radius))):
         raise ValueError(f"{label} has non-finite values")
     if np.any(radius <= 0):

@@ -108,6 +108,26 @@ def _outer(a, b):
     return a[..., :, None] * b[..., None, :]
 
 
+#: Rounding of a rectangle's section for contact (relative to its half-extents): the support
+#: of the section along a contact normal n is ``sum_a half_a f(n . d_a)`` with ``f(x) =
+#: sqrt((1 - e^2) x^2 + e^2) - e (1 - x^2)`` (e this number: convex, the support of a thin
+#: ellipsoid per axis, shifted), not ``|x|``: smooth where a face is parallel to the wall, so
+#: a face contact's force moves continuously across the face (``|x|``'s corner flipped under
+#: a tilt of 1e-12 rad and Newton did not converge).  Exact for faces along and across the
+#: normal (x = 0, +-1), within ``e half_a`` otherwise.
+FACE_ROUNDING = 3e-8
+
+
+def _face_support(x: np.ndarray, order: int = 1) -> tuple:
+    """``f(x)`` of :data:`FACE_ROUNDING` and its derivatives up to ``order`` (1 or 2), of the
+    cosines x (...) of a contact normal with a section axis."""
+    e = FACE_ROUNDING
+    a = 1.0 - e * e
+    r = np.sqrt(a * x * x + e * e)
+    out = (r - e * (1.0 - x * x), a * x / r + 2.0 * e * x)
+    return out if order < 2 else (*out, a * e * e / r**3 + 2.0 * e)
+
+
 #: The small-angle series of :func:`_tangents`, rows sin(t)/t and (1 - cos t)/t^2 side by
 #: side: ``C0 - t^2/C3 (1 - t^2/C2 (1 - t^2/C1))`` (so3's, term by term).
 _SERIES_C0 = np.array([[1.0], [0.5]])
@@ -250,8 +270,9 @@ class SpatialRod(DiscreteRod):
         The cross-section (m): contact is with the rod's surface, the gap of a contact point
         minus the section's half-extent along the contact normal (a circle's radius; a
         rectangle's ``(thickness |n . d_2| + width |n . d_3|) / 2`` with d_2, d_3 the
-        section's axes), the force applied at the section's touching point.  None: the
-        centreline.
+        section's axes, its faces rounded by :data:`FACE_ROUNDING`), the force applied at
+        the section's touching point (a corner; on a face parallel to the wall a point
+        across the face).  None: the centreline.
     friction_rows : bool, optional
         Carry the friction unknowns and rows (:meth:`_friction_rows`); default (None): if an
         obstacle's ``friction`` is > 0.  True with every ``friction`` 0 gives the frictionless
@@ -684,7 +705,36 @@ class SpatialRod(DiscreteRod):
             np.minimum(lim, 1.0, out=lim)
         if self.nc and not self.uniform and self.close_first:
             lim = np.minimum(lim, self.closing_fraction(np.atleast_2d(u), np.atleast_2d(du)))
+        if self.nc and not self._round:
+            lim = np.minimum(lim, self.face_fraction(np.atleast_2d(u), np.atleast_2d(du)))
         return lim
+
+    def face_fraction(self, U, dU):
+        """Fraction (k,) of each change dU (k, size) of states U (k, size) at which the first
+        pressed face of a rectangle turns parallel to its wall, 1 if none does: a cosine
+        ``n . d_a`` of a point with a positive multiplier that would change sign, from beyond
+        100 :data:`FACE_ROUNDING` to beyond it on the other side.  A Newton step from a
+        corner's linearization (the rounding's curvature ~0 there) overshoots the face's
+        equilibrium by the whole twist the corner's moment makes; limited to it, the step
+        ends where the next one sees the rounding (the rectangle on a nearly parallel wall)."""
+        k = U.shape[0]
+        cos = []
+        for W in (U, U + dU):
+            V = W.reshape(k, self.n, self.nv)
+            frames = self.frames(W)
+            c, _ = self._contact_geometry()
+            pts = self.points(V[:, :, 0:3] + c[:, None] * frames[..., :, 0]).reshape(-1, 3)
+            normals = np.stack(
+                [np.asarray(self._evaluate_at(o, pts, 1)[1], float) for o in range(self.nc)], 1
+            ).reshape(k, self.n, self.nc, 3)
+            cos.append(np.einsum("knoi,knia->knoa", normals, frames[..., :, 1:3]))
+        d0, d1 = cos
+        e = FACE_ROUNDING
+        pressed = (U.reshape(k, self.n, self.nv)[:, :, 9 : 9 + self.nc] > 0)[..., None]
+        turning = pressed & (np.abs(d0) > 100 * e) & (d0 * d1 < 0) & (np.abs(d1) > e)
+        with np.errstate(all="ignore"):
+            frac = np.where(turning, d0 / (d0 - d1), 1.0)
+        return frac.min(axis=(1, 2, 3))
 
     #: Newton steps end where the first open contact point would close (see
     #: :meth:`closing_fraction`).  Off by default: the load stepping already predicts across
@@ -874,8 +924,9 @@ class SpatialRod(DiscreteRod):
         the rod's surface (k, n, nc) (units of L), unit normals (k, n, nc, 3), gap hessians
         (k, n, nc, 3, 3) (1/m, times L: per unit of L) at the contact points
         ``x_j + c_j t_j`` (node positions x, frames (k, n, 3, 3)), and the offset of a
-        rectangle's touching corner from the contact point, ``-arm`` (k, n, nc, 3) in units
-        of L (None for a round section: it touches along the normal)."""
+        rectangle's touching point from the contact point, ``-arm`` (k, n, nc, 3) in units
+        of L (a corner, or a point across a face nearly parallel to the wall:
+        :data:`FACE_ROUNDING`; None for a round section: it touches along the normal)."""
         k, n = V.shape[0], self.n
         c, _ = self._contact_geometry()
         pts = self.points(x + c[:, None] * frames[..., :, 0]).reshape(-1, 3)
@@ -892,10 +943,11 @@ class SpatialRod(DiscreteRod):
         arm = None
         if self._round:
             gaps -= self._half[0]
-        else:  # support of the rectangle along the normal: arm = sum_a half_a sign(n.d_a) d_a
+        else:  # support of the rectangle along the normal: arm = sum_a half_a f'(n.d_a) d_a
             d = np.einsum("knoi,knia->knoa", normals, frames[..., :, 1:3])  # (k, n, nc, 2)
-            gaps -= np.abs(d) @ self._half
-            arm = np.einsum("knoa,knia->knoi", np.sign(d) * self._half, frames[..., :, 1:3])
+            f, df = _face_support(d)  # (|n.d_a| and sign(n.d_a), rounded: FACE_ROUNDING)
+            gaps -= f @ self._half
+            arm = np.einsum("knoa,knia->knoi", df * self._half, frames[..., :, 1:3])
         return lam, gaps, normals, hess, arm
 
     def surface_gaps(self, x: np.ndarray, frames: np.ndarray) -> np.ndarray:
@@ -1407,7 +1459,7 @@ class SpatialRod(DiscreteRod):
             friction = self._friction_rows(V, X, frames, lam, normals, hess)
         f_c, m_c = self._normal_force(lam, normals, tt, friction)
         m_arm = 0.0
-        if arm is not None:  # the normal force acts at the rectangle's corner, p - arm
+        if arm is not None:  # the normal force acts at the rectangle's touching point, p - arm
             m_arm = om[:, None] * np.einsum("kno,knoi->kni", lam, cross(arm, normals))
         R[:, :-1, 6:9] -= om[1:, None] * f_c[:, 1:]
         R[:, 1:, 3:6] += (m_c + m_arm)[:, 1:]
@@ -1613,6 +1665,17 @@ class SpatialRod(DiscreteRod):
             frame_turn = np.einsum("kno,knoij,knojl->knil", lam[:, 1:], hat(normals[:, 1:]),
                                    ahat)  # fmt: skip
             arm_d = om[1:, None, None] * (frame_turn - cc[1:, None, None] * aLH @ That)
+            # the arm's own turn as the cosines d_a = n . d_a change (FACE_ROUNDING):
+            # d(arm) = sum_a half_a f''(d_a) d(d_a) d_a, d(d_a) = w_a . dx + v_a . d with
+            # w_a = L H d_a, v_a = c t x w_a + d_a x n (a face turning against the wall)
+            axes = np.swapaxes(frames[:, 1:, :, 1:3], -1, -2)  # (k, n-1, 2, 3)
+            d = np.einsum("knoi,knai->knoa", normals[:, 1:], axes)
+            kap = om[1:, None, None] * lam[:, 1:, :, None] * _face_support(d, 2)[2] * self._half
+            e_ = cross(axes[:, :, None], normals[:, 1:, :, None])  # (k, n-1, nc, 2, 3)
+            w_a = L * np.einsum("knoij,knaj->knoai", hess[:, 1:], axes)
+            v_a = cc[1:, None, None, None] * cross(tt[:, :, None, None, :], w_a) + e_
+            m_x = m_x + np.einsum("knoa,knoai,knoaj->knij", kap, e_, w_a)
+            arm_d = arm_d + np.einsum("knoa,knoai,knoaj->knij", kap, e_, v_a)
             mc_d = mc_d + arm_d  # (a derivative of the row: no hat(m) / 2 term)
             # the second variation (stability) takes its symmetric part and the whole
             # moment's hat(m)/2 (zero at an equilibrium with the core's)

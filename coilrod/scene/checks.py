@@ -27,7 +27,13 @@ import numpy as np
 from coils.coaxial import coaxial_parts
 
 from ..fem.mesh import DEFAULT_ELEMENTS as FEM_DEFAULT_ELEMENTS
-from ..fem.mesh import default_elements, linear_circle_problem
+from ..fem.mesh import (
+    clamp_layer,
+    default_elements,
+    element_count,
+    length_layers,
+    linear_circle_problem,
+)
 from ..fem.solve import NU_GAP as FEM_NU_GAP
 from ..robot.sections import Circle
 from . import limits
@@ -76,13 +82,15 @@ def _fem_elements(scene, dim: int) -> tuple[tuple[int, ...], bool]:
 
 
 def fem_cells(scene, dim: int, elements) -> int:
-    """Number of elements of the FEM mesh ``elements`` builds (see ``coilrod.fem.rod_mesh``)."""
-    if dim == 2:
-        return elements[0] * elements[1]
-    if isinstance(scene.rod.section, Circle):  # O-grid: core square and four ring blocks
-        n, core, ring = elements
-        return n * (core * core + 4 * core * ring)
-    return elements[0] * elements[1] * elements[2]
+    """Number of elements of the FEM mesh ``elements`` builds (:func:`coilrod.fem.rod_mesh`):
+    its layers along the length by the builder's own rule (:func:`~coilrod.fem.length_layers`:
+    one piece per magnetization segment at least, and in 3D the layers graded at the clamp to
+    :func:`~coilrod.fem.mesh.clamp_layer`, a few more for a thin rod) times the section's
+    (:func:`~coilrod.fem.mesh.element_count`)."""
+    rod = scene.rod
+    clamp = clamp_layer(rod.section) if dim == 3 else None
+    layers = length_layers(rod.length, elements[0], rod.magnetization.breakpoints, clamp).size - 1
+    return element_count(rod.section, dim, (layers, *elements[1:]))
 
 
 # -- the checks ---------------------------------------------------------------------------------
