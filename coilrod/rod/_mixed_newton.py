@@ -325,6 +325,10 @@ def _make_kernel(digest: int):
     return newton_kernel
 
 
+#: The kernel's steps: inlined into it in numba's IR (compiled with it, as one function: what
+#: compiling them apart and linking them would add, ~10 s of CPU on a cold cache, is saved)
+_step = nb.njit(inline="always", error_model="numpy")
+
 # The kernel's steps below pass its arrays in tuples:
 #   model = (mu, h, w, clamp, fpar, fa, pts, pts_ro, T): the problem and the per-node scratch
 #   cur / trial = (U, R, R1, B, G, G3, H, H4, ab): states, residuals, dR/dscale, the field at
@@ -340,7 +344,7 @@ def _make_kernel(digest: int):
 #       zero pivot
 
 
-@nb.njit(cache=True, error_model="numpy")
+@_step
 def _bookkeeping(k, chord_start):
     """``book`` and ``marks`` (above) at the start of k members (``chord_start``: their
     first iteration may be a chord step)."""
@@ -363,7 +367,7 @@ def _bookkeeping(k, chord_start):
     return book, marks
 
 
-@nb.njit(cache=True, error_model="numpy")
+@_step
 def _trial_arrays(k, n, tab):
     """``trial`` (above): the line search's arrays for k members of n nodes, its band
     ``tab``."""
@@ -382,7 +386,7 @@ def _trial_arrays(k, n, tab):
     )
 
 
-@nb.njit(cache=True, error_model="numpy")
+@_step
 def _linearize_into(arrays, j, s, tangent, model):
     """:func:`_linearize` of member j of ``arrays`` (``cur`` or ``trial``) at scale s."""
     U, R, R1, B, G, G3, H, H4, ab = arrays
@@ -392,7 +396,7 @@ def _linearize_into(arrays, j, s, tangent, model):
     )
 
 
-@nb.njit(cache=True, error_model="numpy")
+@_step
 def _tangent_at(j, s, yes, model, cur, RT1, marks):
     """A fresh tangent of member j at its current state (its residual and load derivative
     too); returns :func:`_linearize`'s code."""
@@ -408,13 +412,13 @@ def _tangent_at(j, s, yes, model, cur, RT1, marks):
     return st
 
 
-@nb.njit(cache=True, error_model="numpy")
+@_step
 def _error_of(arrays, j, norm, fpar, ok, e1):
     """:func:`_error` of member j of ``arrays``."""
     return _error(arrays[1], arrays[0], j, norm[0], norm[1], norm[2], fpar, ok, e1)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@_step
 def _start(S, yes, model, cur, norm, RT1, book, marks):
     """Every member's start, with its tangent and error; True if the coils could not
     evaluate a point."""
@@ -428,7 +432,7 @@ def _start(S, yes, model, cur, norm, RT1, book, marks):
     return False
 
 
-@nb.njit(cache=True, error_model="numpy")
+@_step
 def _iterate(S, yes, model, cur, trial, norm, ipiv, RT1, book, marks, ipar):
     """The Newton iterations from the start: per iteration the members that still iterate
     share the chord decision (a chord step when each one's last error contraction is at
@@ -482,7 +486,7 @@ def _iterate(S, yes, model, cur, trial, norm, ipiv, RT1, book, marks, ipar):
     return 1 if owners_all else 0
 
 
-@nb.njit(cache=True, error_model="numpy")
+@_step
 def _newton_steps(cur, ipiv, DU, book, marks):
     """The Newton step ``-J^-1 R`` of every member that still iterates into its row of DU,
     with its tangent (factorised here once); a member without a finite step stops.  Marks
@@ -515,7 +519,7 @@ def _newton_steps(cur, ipiv, DU, book, marks):
     return n_step
 
 
-@nb.njit(cache=True, error_model="numpy")
+@_step
 def _line_search(j, s, chord, backtracks, model, cur, trial, norm, DU, RT1, e1, book, marks):
     """Member j's backtracking line search along its step (limited to the largest rotation
     ``max_rotation``; a chord step's trials without their tangent); the accepted trial
@@ -568,7 +572,7 @@ def _line_search(j, s, chord, backtracks, model, cur, trial, norm, DU, RT1, e1, 
     return 0
 
 
-@nb.njit(cache=True, error_model="numpy")
+@_step
 def _report(j, keep_h, book, marks, M):
     """Member j's error, iterations, finite residual and hessian flags into its row of M
     (``keep_h``: H holds the hessian where ``has_h`` says so)."""
@@ -578,7 +582,7 @@ def _report(j, keep_h, book, marks, M):
     M[j, 5] = 1.0 if (keep_h and marks[2][j]) else 0.0
 
 
-@nb.njit(cache=True, error_model="numpy")
+@_step
 def _rate_and_sign(j, ab, ipiv, R1, rate, M, marks):
     """Member j's returned tangent factorised, its badness, its path rate ``-J^-1 R1`` (NaN
     where bad) and the sign of its determinant into M."""
