@@ -287,27 +287,69 @@ def _make_kernel(digest: int):
             return -1
         k, size = U.shape
         n = size // 5
-        want_tangent, want_3d = ipar[5] != 0, ipar[6] != 0
-        linear = fpar[9] != 0.0  # (a linear field has no hessian)
         yes = ipar[0] >= 0  # (True, typed as any bool: one compiled version of _linearize)
         model = (mu, h, w, clamp, fpar, fa, pts, pts_ro, np.empty((14, n)))
         cur = (U, R, R1, B, G, G.reshape((k * n, 3, 3)), H, H.reshape((k * n, 3, 3, 3)), ab)
-        norm = (inv_w, inv_h, bend_scale)
-        book, marks = _bookkeeping(k, ipar[4] != 0 and ipar[3] != 0)
-        if _start(S, yes, model, cur, norm, RT1, book, marks):
-            return 1
         trial = _trial_arrays(k, n, tab)
-        owners_all = _iterate(S, yes, model, cur, trial, norm, ipiv, RT1, book, marks, ipar)
-        if owners_all < 0:
-            return 1
-        all_fresh = marks[0].all()
-        if want_tangent and owners_all == 0:  # the engine linearizes every member again
-            for j in range(k):
-                if not marks[0][j]:  # (a fresh member's tangent is at its state: the same)
-                    if _tangent_at(j, S[j], yes, model, cur, RT1, marks) == 2:
+        Ut, Rt = trial[0], trial[1]
+        book, marks = _bookkeeping(k, ipar[4] != 0 and ipar[3] != 0)
+        err, alive, moved, fresh = book[0], book[1], book[5], marks[0]
+        e1 = np.empty(1)
+        DU = np.empty((k, size))
+        for j in range(k):  # the start, with its tangent
+            st = _linearize_into(cur, j, S[j], yes, model)
+            if st == 2:
+                return 1
+            _new_tangent(j, st, RT1, R1, marks)
+            err[j] = _error(R, U, j, inv_w, inv_h, bend_scale, fpar, st == 0, e1)
+            alive[j] = err[j] < math.inf
+        owners_all = True  # the tangent covers every member
+        for _ in range(ipar[0]):
+            n_act, worst, stale = _active(book, fresh)
+            if n_act == 0:
+                break
+            chord = ipar[3] != 0 and worst <= fpar[6]
+            if not chord and stale:  # a new tangent at the current states
+                for j in range(k):  # (a fresh member's is its tangent's: the same numbers)
+                    if alive[j] and err[j] > 1.0 and not fresh[j]:
+                        st = _linearize_into(cur, j, S[j], yes, model)
+                        if st == 2:
+                            return 1
+                        _new_tangent(j, st, RT1, R1, marks)
+                owners_all = n_act == k
+            if _newton_steps(U, R, ab, ipiv, DU, book, marks) == 0:
+                break
+            n_moved = 0
+            for j in range(k):  # the line searches along the steps
+                if not moved[j]:
+                    continue
+                alpha = full = _step_limit(j, DU, fpar[4], moved)
+                for _r in range(ipar[1] + 1):
+                    _trial_state(j, alpha, U, DU, Ut)
+                    st = _linearize_into(trial, j, S[j], not chord, model)
+                    if st == 2:
                         return 1
+                    e_new = _error(Rt, Ut, j, inv_w, inv_h, bend_scale, fpar, st == 0, e1)
+                    if _accepted(j, e_new, alpha == full, st, chord, fpar[5], cur, trial, RT1,
+                                 book, marks):  # fmt: skip
+                        n_moved += 1
+                        break
+                    alpha = 0.5 * alpha
+                _stopped(j, book)
+            if not chord and n_moved > 0:
+                owners_all = n_moved == k
+            _stagnation(book, ipar[2])
+        want_tangent, want_3d, linear = ipar[5] != 0, ipar[6] != 0, fpar[9] != 0.0
+        all_fresh = fresh.all()
+        if want_tangent and not owners_all:  # the engine linearizes every member again
+            for j in range(k):
+                if not fresh[j]:  # (a fresh member's tangent is at its state: the same)
+                    st = _linearize_into(cur, j, S[j], yes, model)
+                    if st == 2:
+                        return 1
+                    _new_tangent(j, st, RT1, R1, marks)
         # (else the engine's residuals have no hessian; a linear field has none)
-        keep_h = (owners_all == 0 or all_fresh) and not linear
+        keep_h = (not owners_all or all_fresh) and not linear
         if want_tangent and want_3d and not linear and not keep_h:  # the 3D count's hessian
             for j in range(k):
                 if not _hessian(U, j, fpar, clamp, fa, pts, pts_ro, B, G, H):
@@ -325,16 +367,15 @@ def _make_kernel(digest: int):
     return newton_kernel
 
 
-#: The kernel's steps: inlined into it in numba's IR (compiled with it, as one function: what
-#: compiling them apart and linking them would add, ~10 s of CPU on a cold cache, is saved)
+#: The kernel's steps: inlined into it in numba's IR (compiled with it as one function: each
+#: compiled apart would add its own optimisation and machine code to the kernel's cold compile)
 _step = nb.njit(inline="always", error_model="numpy")
 
-# The kernel's steps below pass its arrays in tuples:
+# The kernel passes its arrays to its steps in tuples:
 #   model = (mu, h, w, clamp, fpar, fa, pts, pts_ro, T): the problem and the per-node scratch
 #   cur / trial = (U, R, R1, B, G, G3, H, H4, ab): states, residuals, dR/dscale, the field at
 #       the nodes (G3, H4: G, H as (k n, 3, 3[, 3]) views) and the band of the current states
 #       (the tangent) / of the line search's trial states
-#   norm = (inv_w, inv_h, bend_scale): the error's scales
 #   book = (err, alive, iters, slow, ratio, moved): per member its error, whether it still
 #       iterates, its iterations, its slow contractions in a row, its last error contraction,
 #       whether it moved in this iteration
@@ -397,101 +438,39 @@ def _linearize_into(arrays, j, s, tangent, model):
 
 
 @_step
-def _tangent_at(j, s, yes, model, cur, RT1, marks):
-    """A fresh tangent of member j at its current state (its residual and load derivative
-    too); returns :func:`_linearize`'s code."""
+def _new_tangent(j, st, RT1, R1, marks):
+    """Member j's current state was linearized with its tangent (:func:`_linearize`'s code
+    ``st``): the marks, and the tangent's load derivative."""
     fresh, cur_ok, has_h, t_ok, t_lu, _t_bad = marks
-    st = _linearize_into(cur, j, s, yes, model)
-    if st == 2:
-        return st
     cur_ok[j] = t_ok[j] = st == 0
     t_lu[j] = False
     fresh[j] = True
     has_h[j] = True
-    _copy_row(RT1, cur[2], j)
-    return st
+    _copy_row(RT1, R1, j)
 
 
 @_step
-def _error_of(arrays, j, norm, fpar, ok, e1):
-    """:func:`_error` of member j of ``arrays``."""
-    return _error(arrays[1], arrays[0], j, norm[0], norm[1], norm[2], fpar, ok, e1)
+def _active(book, fresh):
+    """The members that still iterate (alive, error above 1): their number, their largest
+    last error contraction, and whether one's tangent is not at its current state."""
+    err, alive, _iters, _slow, ratio, _moved = book
+    n_act = 0
+    worst = 0.0
+    stale = False
+    for j in range(err.shape[0]):
+        if alive[j] and err[j] > 1.0:
+            n_act += 1
+            worst = max(worst, ratio[j])
+            if not fresh[j]:
+                stale = True
+    return n_act, worst, stale
 
 
 @_step
-def _start(S, yes, model, cur, norm, RT1, book, marks):
-    """Every member's start, with its tangent and error; True if the coils could not
-    evaluate a point."""
-    err, alive = book[0], book[1]
-    e1 = np.empty(1)
-    for j in range(cur[0].shape[0]):
-        if _tangent_at(j, S[j], yes, model, cur, RT1, marks) == 2:
-            return True
-        err[j] = _error_of(cur, j, norm, model[4], marks[1][j], e1)
-        alive[j] = err[j] < math.inf
-    return False
-
-
-@_step
-def _iterate(S, yes, model, cur, trial, norm, ipiv, RT1, book, marks, ipar):
-    """The Newton iterations from the start: per iteration the members that still iterate
-    share the chord decision (a chord step when each one's last error contraction is at
-    most ``opts.chord``), a fresh tangent at the current states when a full step follows
-    chord steps, the steps, the line searches and the stagnation test.  Returns -1 if the
-    coils could not evaluate a point, else 1 if the last tangent covers every member, 0 if
-    not."""
-    err, alive, _iters, slow, ratio, moved = book
-    fresh = marks[0]
-    k = err.shape[0]
-    fpar = model[4]
-    max_iter, backtracks, stagnation, chords = ipar[0], ipar[1], ipar[2], ipar[3] != 0
-    DU = np.empty(cur[0].shape)
-    e1 = np.empty(1)
-    owners_all = True  # the tangent covers every member
-    for _ in range(max_iter):
-        n_act = 0
-        worst = 0.0
-        stale = False
-        for j in range(k):
-            if alive[j] and err[j] > 1.0:
-                n_act += 1
-                worst = max(worst, ratio[j])
-                if not fresh[j]:
-                    stale = True
-        if n_act == 0:
-            break
-        chord = chords and worst <= fpar[6]
-        if not chord and stale:  # a new tangent at the current states
-            for j in range(k):  # (a fresh member's is its tangent's: the same numbers)
-                if alive[j] and err[j] > 1.0 and not fresh[j]:
-                    if _tangent_at(j, S[j], yes, model, cur, RT1, marks) == 2:
-                        return -1
-            owners_all = n_act == k
-        if _newton_steps(cur, ipiv, DU, book, marks) == 0:
-            break
-        n_moved = 0
-        for j in range(k):
-            if moved[j]:
-                st = _line_search(
-                    j, S[j], chord, backtracks, model, cur, trial, norm, DU, RT1, e1, book, marks
-                )
-                if st < 0:
-                    return -1
-                n_moved += st
-        if not chord and n_moved > 0:
-            owners_all = n_moved == k
-        for j in range(k):
-            if moved[j] and slow[j] >= stagnation and err[j] > 1.0:
-                alive[j] = False
-    return 1 if owners_all else 0
-
-
-@_step
-def _newton_steps(cur, ipiv, DU, book, marks):
+def _newton_steps(U, R, ab, ipiv, DU, book, marks):
     """The Newton step ``-J^-1 R`` of every member that still iterates into its row of DU,
     with its tangent (factorised here once); a member without a finite step stops.  Marks
     the members with a step as moved; returns their number."""
-    U, R, ab = cur[0], cur[1], cur[8]
     err, alive, _iters, _slow, _ratio, moved = book
     _fresh, _cur_ok, _has_h, t_ok, t_lu, t_bad = marks
     k, size = U.shape
@@ -520,56 +499,74 @@ def _newton_steps(cur, ipiv, DU, book, marks):
 
 
 @_step
-def _line_search(j, s, chord, backtracks, model, cur, trial, norm, DU, RT1, e1, book, marks):
-    """Member j's backtracking line search along its step (limited to the largest rotation
-    ``max_rotation``; a chord step's trials without their tangent); the accepted trial
-    becomes its current state (after a full step with its tangent).  Returns 1 if it
-    moved, 0 if not (it then stops), -1 if the coils could not evaluate a point."""
-    err, alive, iters, slow, ratio, moved = book
-    fresh, cur_ok, has_h, t_ok, t_lu, _t_bad = marks
-    U, R, R1, B, G, _G3, H, _H4, ab = cur
-    Ut, Rt, R1t, Bt, Gt, _Gt3, Ht, _Ht4, tab = trial
-    fpar = model[4]
-    n = U.shape[1] // 5
+def _step_limit(j, DU, max_rotation, moved):
+    """Member j's first step length: 1, or less where its step turns a node by more than
+    ``max_rotation``; it has not moved yet."""
     moved[j] = False
     rot = 0.0
-    for i in range(n):
+    for i in range(DU.shape[1] // 5):
         a = abs(DU[j, 5 * i + 2])
         if a > rot:
             rot = a
-    full = min(1.0, fpar[4] / rot) if rot > 0 else 1.0
-    alpha = full
+    return min(1.0, max_rotation / rot) if rot > 0 else 1.0
+
+
+@_step
+def _trial_state(j, alpha, U, DU, Ut):
+    """Member j's trial state ``U + alpha DU``."""
+    for q in range(U.shape[1]):
+        Ut[j, q] = U[j, q] + alpha * DU[j, q]
+
+
+@_step
+def _accepted(j, e_new, full, st, chord, growth, cur, trial, RT1, book, marks):
+    """Whether member j's trial (error ``e_new``; ``full``: at its first step length) is
+    accepted -- its error falls or is at most 1, or at the first length it grows by at
+    most ``growth`` -- and then the trial becomes its current state (after a full step
+    with its tangent)."""
+    err, _alive, iters, slow, ratio, moved = book
+    fresh, cur_ok, has_h, t_ok, t_lu, _t_bad = marks
+    U, R, R1, B, G, _G3, H, _H4, ab = cur
+    Ut, Rt, R1t, Bt, Gt, _Gt3, Ht, _Ht4, tab = trial
     e_old = err[j]
-    for _r in range(backtracks + 1):
-        for q in range(U.shape[1]):
-            Ut[j, q] = U[j, q] + alpha * DU[j, q]
-        st = _linearize_into(trial, j, s, not chord, model)
-        if st == 2:
-            return -1
-        e_new = _error_of(trial, j, norm, fpar, st == 0, e1)
-        accept = e_new < e_old or e_new <= 1.0
-        if not accept:
-            accept = alpha == full and e_new <= fpar[5] * e_old and e_new < math.inf
-        if accept:
-            slow[j] = slow[j] + 1 if e_new > 0.5 * e_old else 0
-            ratio[j] = e_new / e_old if e_old > 0 else 0.0
-            _accept(j, not chord, U, Ut, R, Rt, R1, R1t, B, Bt, G, Gt, H, Ht, ab, tab)
-            err[j] = e_new
-            iters[j] += 1
-            cur_ok[j] = st == 0
-            has_h[j] = not chord
-            fresh[j] = False
-            if not chord:  # the trial's linearization carries its tangent
-                _copy_row(RT1, R1, j)
-                t_ok[j] = st == 0
-                t_lu[j] = False
-                fresh[j] = True
-            moved[j] = True
-            return 1
-        alpha = 0.5 * alpha
-    alive[j] = False
+    accept = e_new < e_old or e_new <= 1.0
+    if not accept:
+        accept = full and e_new <= growth * e_old and e_new < math.inf
+    if not accept:
+        return False
+    slow[j] = slow[j] + 1 if e_new > 0.5 * e_old else 0
+    ratio[j] = e_new / e_old if e_old > 0 else 0.0
+    _accept(j, not chord, U, Ut, R, Rt, R1, R1t, B, Bt, G, Gt, H, Ht, ab, tab)
+    err[j] = e_new
     iters[j] += 1
-    return 0
+    cur_ok[j] = st == 0
+    has_h[j] = not chord
+    fresh[j] = False
+    if not chord:  # the trial's linearization carries its tangent
+        _copy_row(RT1, R1, j)
+        t_ok[j] = st == 0
+        t_lu[j] = False
+        fresh[j] = True
+    moved[j] = True
+    return True
+
+
+@_step
+def _stopped(j, book):
+    """Member j stops where its line search failed (the failed search counts)."""
+    if not book[5][j]:
+        book[1][j] = False
+        book[2][j] += 1
+
+
+@_step
+def _stagnation(book, stagnation):
+    """The members that moved stop after ``stagnation`` slow contractions in a row (error
+    still above 1)."""
+    err, alive, _iters, slow, _ratio, moved = book
+    for j in range(err.shape[0]):
+        if moved[j] and slow[j] >= stagnation and err[j] > 1.0:
+            alive[j] = False
 
 
 @_step
