@@ -11,8 +11,10 @@ stays its twin: the same piece and parameter, values to rounding (~1e-15 relativ
 are not numpy's).  The twin runs until compiling pays (:class:`coils._numba_cache.Rental`,
 :data:`COMPILE_AFTER`) or numba's cache holds the kernel.
 
-The kernel is one function with no compiled helpers, so that ``closed_form_search.py_func``
-runs it as plain Python (the tests check it so, without compiling it).
+The kernel's helpers (a line's and an arc's closed form, the ranking, the centreline's
+derivatives, the normal, the hessian) are plain Python functions that numba compiles for it
+(``register_jitable``), so that ``closed_form_search.py_func`` runs it all as plain Python (the
+tests check it so, without compiling it).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import math
 
 import numba as nb
 import numpy as np
+from numba.extending import register_jitable
 
 from coils._numba_cache import Rental
 
@@ -99,8 +102,6 @@ def closed_form_search(p, order, kind, geom, scale, on_line, g, col, u, grad, he
         Out (order 2): the gap's hessian, 1/m.
     """
     n, K = p.shape[0], kind.shape[0]
-    eps = 2.220446049250313e-16
-    two_pi = 2.0 * math.pi
     G = np.empty(K)
     U = np.empty(K)
     x = np.empty(3)  # the centreline's point and derivatives at the chosen pair
@@ -110,113 +111,168 @@ def closed_form_search(p, order, kind, geom, scale, on_line, g, col, u, grad, he
     w = np.empty(3)
     for i in range(n):
         p0, p1, p2 = p[i, 0], p[i, 1], p[i, 2]
-        # every candidate's maximiser and gap (the closed forms of Pieces.start_guess)
-        for k in range(K):
-            q0, q1, q2 = p0 - geom[k, A], p1 - geom[k, A + 1], p2 - geom[k, A + 2]
-            b0, b1, b2 = geom[k, B], geom[k, B + 1], geom[k, B + 2]
+        for k in range(K):  # every candidate's maximiser and gap
             if kind[k] == 0:
-                along = q0 * b0 + q1 * b1 + q2 * b2
-                cone = geom[k, CONE]
-                if cone != 0.0:
-                    r0, r1, r2 = q0 - along * b0, q1 - along * b1, q2 - along * b2
-                    across = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
-                    along = along + cone * across / math.sqrt(1.0 - cone * cone)
-                uk = min(max(geom[k, REF] + along, geom[k, LO]), geom[k, HI])
-                t = uk - geom[k, REF]
-                d0 = p0 - (geom[k, A] + b0 * t)
-                d1 = p1 - (geom[k, A + 1] + b1 * t)
-                d2 = p2 - (geom[k, A + 2] + b2 * t)
+                uk, d0, d1, d2 = _line_foot(p0, p1, p2, geom, k)
             else:
-                c0, c1, c2 = geom[k, C], geom[k, C + 1], geom[k, C + 2]
-                rho = geom[k, ARC]
-                phi = math.atan2(q0 * c0 + q1 * c1 + q2 * c2, q0 * b0 + q1 * b1 + q2 * b2)
-                if phi < 0.0:
-                    phi = phi + two_pi
-                span = (geom[k, HI] - geom[k, LO]) / rho
-                if phi > span:  # outside the arc's angles: the end nearer along the circle
-                    phi = 0.0 if two_pi - phi < phi - span else span
-                uk = min(max(geom[k, LO] + rho * phi, geom[k, LO]), geom[k, HI])
-                ang = (uk - geom[k, REF]) / rho
-                cs, sn = math.cos(ang), math.sin(ang)
-                d0 = p0 - (geom[k, A] + rho * (cs * b0 + sn * c0))
-                d1 = p1 - (geom[k, A + 1] + rho * (cs * b1 + sn * c1))
-                d2 = p2 - (geom[k, A + 2] + rho * (cs * b2 + sn * c2))
+                uk, d0, d1, d2 = _arc_foot(p0, p1, p2, geom, k)
             U[k] = uk
             rho_k = geom[k, VALUE] + geom[k, SLOPE] * (uk - geom[k, ANCHOR])
             G[k] = rho_k - math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        # the ranking: a piece whose maximiser is interior, within rounding; else the best
-        best = G[0]
-        first = 0
-        for k in range(1, K):
-            if G[k] > best:
-                best = G[k]
-                first = k
-        tol = 64 * eps * (abs(best) + scale + max(abs(p0), abs(p1), abs(p2)))
-        kb = -1
-        for k in range(K):
-            if U[k] > geom[k, LO] and U[k] < geom[k, HI] and G[k] >= best - tol:
-                if kb < 0 or G[k] > G[kb]:
-                    kb = k
-        if kb < 0:
-            kb = first
+        kb = _ranked(p0, p1, p2, G, U, geom, scale)
         uk = U[kb]
         g[i] = G[kb]
         col[i] = kb
         u[i] = uk
         if order == 0:
             continue
-        # the centreline's point and derivatives at the chosen pair (Pieces.curve)
-        if kind[kb] == 0:
-            t = uk - geom[kb, REF]
-            for e in range(3):
-                x[e] = geom[kb, A + e] + geom[kb, B + e] * t
-                xu[e] = geom[kb, B + e]
-                xuu[e] = 0.0
-        else:
-            rho = geom[kb, ARC]
-            ang = (uk - geom[kb, REF]) / rho
-            cs, sn = math.cos(ang), math.sin(ang)
-            for e in range(3):
-                radial = cs * geom[kb, B + e] + sn * geom[kb, C + e]
-                x[e] = geom[kb, A + e] + rho * radial
-                xu[e] = cs * geom[kb, C + e] - sn * geom[kb, B + e]
-                xuu[e] = -radial / rho
-        # the gradient: minus the unit normal from the centreline (Vessel._evaluate)
-        r0, r1, r2 = p0 - x[0], p1 - x[1], p2 - x[2]
-        d = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
-        if d < on_line:  # on the centreline: a unit normal to the tangent, xu x e_axis
-            v0, v1, v2 = abs(xu[0]), abs(xu[1]), abs(xu[2])
-            if v0 <= v1 and v0 <= v2:
-                w[0], w[1], w[2] = 0.0, xu[2], -xu[1]
-            elif v1 <= v2:
-                w[0], w[1], w[2] = -xu[2], 0.0, xu[0]
-            else:
-                w[0], w[1], w[2] = xu[1], -xu[0], 0.0
-            nw = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
-            for e in range(3):
-                rh[e] = w[e] / nw
-        else:
-            rh[0], rh[1], rh[2] = r0 / d, r1 / d, r2 / d
+        _curve(kind[kb], geom, kb, uk, x, xu, xuu)
+        d = _unit_normal(p0, p1, p2, x, xu, on_line, rh, w)
         for e in range(3):
             grad[i, e] = -rh[e]
         if order == 1:
             continue
-        # the hessian: the cone point's -P/d, and the curvature term where the maximiser is
-        # interior and the gap concave in u
-        ds = max(d, 1e-15 * (geom[kb, VALUE] + geom[kb, SLOPE] * (uk - geom[kb, ANCHOR])))
+        _gap_hessian(d, geom, kb, uk, rh, xu, xuu, w, hess[i])
+
+
+def _helper(fn):
+    """``fn`` as a helper of the compiled search: plain Python where called from Python (so
+    ``closed_form_search.py_func`` runs as Python, nothing compiled), compiled for the kernel
+    where it calls it (numba's ``register_jitable``; no Python entry and no cache entry of its
+    own: the kernel's holds it)."""
+    return register_jitable(error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True)(fn)
+
+
+@_helper
+def _line_foot(p0, p1, p2, geom, k):
+    """Line (round cone) k's maximiser u for the point (p0, p1, p2) and the point minus the
+    centreline's point there (the closed form of ``Pieces.start_guess``)."""
+    q0, q1, q2 = p0 - geom[k, A], p1 - geom[k, A + 1], p2 - geom[k, A + 2]
+    b0, b1, b2 = geom[k, B], geom[k, B + 1], geom[k, B + 2]
+    along = q0 * b0 + q1 * b1 + q2 * b2
+    cone = geom[k, CONE]
+    if cone != 0.0:
+        r0, r1, r2 = q0 - along * b0, q1 - along * b1, q2 - along * b2
+        across = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+        along = along + cone * across / math.sqrt(1.0 - cone * cone)
+    uk = min(max(geom[k, REF] + along, geom[k, LO]), geom[k, HI])
+    t = uk - geom[k, REF]
+    d0 = p0 - (geom[k, A] + b0 * t)
+    d1 = p1 - (geom[k, A + 1] + b1 * t)
+    d2 = p2 - (geom[k, A + 2] + b2 * t)
+    return uk, d0, d1, d2
+
+
+@_helper
+def _arc_foot(p0, p1, p2, geom, k):
+    """Arc k's maximiser u for the point (p0, p1, p2) (outside the arc's angles: the end
+    nearer along the circle) and the point minus the centreline's point there."""
+    two_pi = 2.0 * math.pi
+    q0, q1, q2 = p0 - geom[k, A], p1 - geom[k, A + 1], p2 - geom[k, A + 2]
+    b0, b1, b2 = geom[k, B], geom[k, B + 1], geom[k, B + 2]
+    c0, c1, c2 = geom[k, C], geom[k, C + 1], geom[k, C + 2]
+    rho = geom[k, ARC]
+    phi = math.atan2(q0 * c0 + q1 * c1 + q2 * c2, q0 * b0 + q1 * b1 + q2 * b2)
+    if phi < 0.0:
+        phi = phi + two_pi
+    span = (geom[k, HI] - geom[k, LO]) / rho
+    if phi > span:
+        phi = 0.0 if two_pi - phi < phi - span else span
+    uk = min(max(geom[k, LO] + rho * phi, geom[k, LO]), geom[k, HI])
+    ang = (uk - geom[k, REF]) / rho
+    cs, sn = math.cos(ang), math.sin(ang)
+    d0 = p0 - (geom[k, A] + rho * (cs * b0 + sn * c0))
+    d1 = p1 - (geom[k, A + 1] + rho * (cs * b1 + sn * c1))
+    d2 = p2 - (geom[k, A + 2] + rho * (cs * b2 + sn * c2))
+    return uk, d0, d1, d2
+
+
+@_helper
+def _ranked(p0, p1, p2, G, U, geom, scale):
+    """The chosen candidate: the best gap G among those whose maximiser U is interior,
+    within rounding of the best of all; else the best (ties to the first)."""
+    eps = 2.220446049250313e-16
+    best = G[0]
+    first = 0
+    for k in range(1, G.shape[0]):
+        if G[k] > best:
+            best = G[k]
+            first = k
+    tol = 64 * eps * (abs(best) + scale + max(abs(p0), abs(p1), abs(p2)))
+    kb = -1
+    for k in range(G.shape[0]):
+        if U[k] > geom[k, LO] and U[k] < geom[k, HI] and G[k] >= best - tol:
+            if kb < 0 or G[k] > G[kb]:
+                kb = k
+    if kb < 0:
+        kb = first
+    return kb
+
+
+@_helper
+def _curve(kind, geom, kb, uk, x, xu, xuu):
+    """Candidate kb's centreline point x and its derivatives xu, xuu in u at uk
+    (``Pieces.curve``)."""
+    if kind == 0:
+        t = uk - geom[kb, REF]
+        for e in range(3):
+            x[e] = geom[kb, A + e] + geom[kb, B + e] * t
+            xu[e] = geom[kb, B + e]
+            xuu[e] = 0.0
+    else:
+        rho = geom[kb, ARC]
+        ang = (uk - geom[kb, REF]) / rho
+        cs, sn = math.cos(ang), math.sin(ang)
+        for e in range(3):
+            radial = cs * geom[kb, B + e] + sn * geom[kb, C + e]
+            x[e] = geom[kb, A + e] + rho * radial
+            xu[e] = cs * geom[kb, C + e] - sn * geom[kb, B + e]
+            xuu[e] = -radial / rho
+
+
+@_helper
+def _unit_normal(p0, p1, p2, x, xu, on_line, rh, w):
+    """The unit normal rh from the centreline point x to the point (minus the gap's
+    gradient, ``Vessel._evaluate``; on the centreline, below ``on_line``: a unit normal to
+    the tangent xu, ``xu x`` the axis of its smallest component); returns the distance d
+    (w: scratch)."""
+    r0, r1, r2 = p0 - x[0], p1 - x[1], p2 - x[2]
+    d = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+    if d < on_line:
+        v0, v1, v2 = abs(xu[0]), abs(xu[1]), abs(xu[2])
+        if v0 <= v1 and v0 <= v2:
+            w[0], w[1], w[2] = 0.0, xu[2], -xu[1]
+        elif v1 <= v2:
+            w[0], w[1], w[2] = -xu[2], 0.0, xu[0]
+        else:
+            w[0], w[1], w[2] = xu[1], -xu[0], 0.0
+        nw = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+        for e in range(3):
+            rh[e] = w[e] / nw
+    else:
+        rh[0], rh[1], rh[2] = r0 / d, r1 / d, r2 / d
+    return d
+
+
+@_helper
+def _gap_hessian(d, geom, kb, uk, rh, xu, xuu, w, H):
+    """The gap's hessian H (3, 3) at distance d along the unit normal rh from candidate kb's
+    centreline (at uk, tangent xu, xuu): the cone point's -P/d, and the curvature term where
+    the maximiser is interior and the gap concave in u (w: scratch)."""
+    ds = max(d, 1e-15 * (geom[kb, VALUE] + geom[kb, SLOPE] * (uk - geom[kb, ANCHOR])))
+    for e in range(3):
+        for f in range(3):
+            H[e, f] = -((1.0 if e == f else 0.0) - rh[e] * rh[f]) / ds
+    for e in range(3):
+        w[e] = (
+            ((1.0 if e == 0 else 0.0) - rh[e] * rh[0]) * xu[0]
+            + ((1.0 if e == 1 else 0.0) - rh[e] * rh[1]) * xu[1]
+            + ((1.0 if e == 2 else 0.0) - rh[e] * rh[2]) * xu[2]
+        )
+    curv = rh[0] * xuu[0] + rh[1] * xuu[1] + rh[2] * xuu[2]
+    dguu = ds * curv - (xu[0] * w[0] + xu[1] * w[1] + xu[2] * w[2])
+    if uk > geom[kb, LO] and uk < geom[kb, HI] and dguu < 0.0:
+        den = ds * dguu
         for e in range(3):
             for f in range(3):
-                hess[i, e, f] = -((1.0 if e == f else 0.0) - rh[e] * rh[f]) / ds
-        for e in range(3):
-            w[e] = (
-                ((1.0 if e == 0 else 0.0) - rh[e] * rh[0]) * xu[0]
-                + ((1.0 if e == 1 else 0.0) - rh[e] * rh[1]) * xu[1]
-                + ((1.0 if e == 2 else 0.0) - rh[e] * rh[2]) * xu[2]
-            )
-        curv = rh[0] * xuu[0] + rh[1] * xuu[1] + rh[2] * xuu[2]
-        dguu = ds * curv - (xu[0] * w[0] + xu[1] * w[1] + xu[2] * w[2])
-        if uk > geom[kb, LO] and uk < geom[kb, HI] and dguu < 0.0:
-            den = ds * dguu
-            for e in range(3):
-                for f in range(3):
-                    hess[i, e, f] -= w[e] * w[f] / den
+                H[e, f] -= w[e] * w[f] / den
