@@ -161,7 +161,12 @@ def contact_core(
     d_lam = np.empty((n, nc))
     d_gap = np.empty((n, nc))
     vecs = np.empty((4, 3))
+    t, tmp, tn, gd = vecs[0], vecs[1], vecs[2], vecs[3]
     mats = np.empty((11, 3, 3))
+    Q, Jl, K, K2, That, LH, M1, M2, mc_d, out, S = (
+        mats[0], mats[1], mats[2], mats[3], mats[4], mats[5], mats[6], mats[7], mats[8],
+        mats[9], mats[10],
+    )  # fmt: skip
     for m in range(k):
         _contact_rows(
             lam[m], gaps[m], normals[m], frames[m], cc, om, kappa, mode, R[m], m_c[m], f_c, d_lam,
@@ -169,21 +174,88 @@ def contact_core(
         )  # fmt: skip
         if not tangent:
             continue
-        off = m * size  # the band: the clamp's and the constant blocks are the template's
+        # -- the band: the clamp's and the constant blocks are the template's
+        off = m * size
         for j in range(1, n):
-            _node_terms(lam[m, j], hess[m, j], frames[m, j], phi[m, j], L, vecs, mats)
+            for a in range(3):
+                t[a] = frames[m, j, a, 0]
+            _exp_and_jl(phi[m, j], Q, Jl, K, K2, True)
+            _hat(t, That)
+            for a in range(3):
+                for b in range(3):
+                    acc = 0.0
+                    for o in range(nc):
+                        acc += lam[m, j, o] * hess[m, j, o, a, b]
+                    LH[a, b] = L * acc
             oc = om[j] * cc[j]
             r0, rp, rf = off + nv * j, off + nv * j + 3, off + nv * (j - 1) + 6
             cx, cp, cf, cl = off + nv * j, off + nv * j + 3, off + nv * j + 6, off + nv * j + 9
-            _free_blocks(ab, kv, blk[m, j], j, n, nv, r0, rp, cp, cf)
-            _force_blocks(ab, kv, blk[m, j], var[m, j], oc, om[j], rf, rp, cx, cp, mats)
-            _moment_block(
-                ab, kv, blk[m, j], var[m, j], vecs[0], f_c[j], m_c[m, j], oc, cc[j], rp, cp, mats
-            )
-            _multiplier_entries(
-                ab, kv, normals[m, j], turn[m, j], d_lam[j], d_gap[j], kappa, om[j], oc, cc[j],
-                mats[1], rf, rp, cx, cp, cl, vecs,
-            )  # fmt: skip
+            # the free rod's blocks of this node, unchanged
+            _put(ab, kv, rp, cp - nv, blk[m, j, 0])  # m_prev
+            if j <= n - 2:
+                _put(ab, kv, rp, cp + nv, blk[m, j, 2])  # m_next
+                _put(ab, kv, rp, cf, blk[m, j, 7])  # m_F
+            _put(ab, kv, r0, cp - nv, blk[m, j, 3])  # p_phiprev
+            _put(ab, kv, r0, cp, blk[m, j, 4])  # p_phi
+            _put(ab, kv, rp, cf - nv, blk[m, j, 6])  # m_Fprev
+            # force row j - 1 wrt x_j and phi_j: - om LH; + oc (LH That) J_l
+            _mm(LH, That, M1)  # fc_d / oc
+            for a in range(3):
+                for b in range(3):
+                    M1[a, b] = oc * M1[a, b]
+                    var[m, j, 0, a, b] = M1[a, b]
+                    out[a, b] = blk[m, j, 8, a, b] - om[j] * LH[a, b]
+                    var[m, j, 2, a, b] = out[a, b]
+            _put(ab, kv, rf, cx, out)  # f_xnext
+            _mm(M1, Jl, M2)
+            for a in range(3):
+                for b in range(3):
+                    out[a, b] = blk[m, j, 9, a, b] + M2[a, b]
+            _put(ab, kv, rf, cp, out)  # f_phinext
+            # moment row j wrt x_j: - oc That LH
+            _mm(That, LH, M1)
+            for a in range(3):
+                for b in range(3):
+                    out[a, b] = blk[m, j, 5, a, b] - oc * M1[a, b]
+            _put(ab, kv, rp, cx, out)  # m_x
+            # moment row j wrt phi_j: (-oc sym(t, f_c) + oc c That LH That - hat(m_c)/2) J_l
+            for a in range(3):
+                for b in range(3):
+                    S[a, b] = 0.0
+            _sym_term(t, f_c[j], 1.0, S)
+            _mm(M1, That, M2)  # That LH That
+            _hat(m_c[m, j], K)
+            occ = oc * cc[j]
+            for a in range(3):
+                for b in range(3):
+                    sym = -oc * S[a, b] + occ * M2[a, b]
+                    var[m, j, 1, a, b] = sym
+                    mc_d[a, b] = sym - 0.5 * K[a, b]
+            _mm(mc_d, Jl, M1)
+            for a in range(3):
+                for b in range(3):
+                    out[a, b] = blk[m, j, 1, a, b] + M1[a, b]
+            _put(ab, kv, rp, cp, out)  # m_diag
+            # the multipliers' columns and the contact rows
+            for o in range(nc):
+                for a in range(3):
+                    tmp[a] = normals[m, j, o, a]
+                _cross(t, tmp, tn)
+                ck = d_gap[j, o] * kappa
+                for a in range(3):
+                    ab[kv + rf + a - (cl + o), cl + o] = -om[j] * tmp[a]  # f_lamnext
+                    turn[m, j, o, a] = -oc * tn[a]
+                    ab[kv + rp + a - (cl + o), cl + o] = turn[m, j, o, a]  # m_lam
+                    gd[a] = ck * (cc[j] * tn[a])
+                rc = cl + o
+                for b in range(3):
+                    ab[kv + rc - (cx + b), cx + b] = ck * tmp[b]  # c_x
+                    acc = 0.0
+                    for q in range(3):
+                        acc += gd[q] * Jl[q, b]
+                    ab[kv + rc - (cp + b), cp + b] = acc  # c_phi
+                for p in range(nc):
+                    ab[kv + rc - (cl + p), cl + p] = d_lam[j, o] if p == o else 0.0  # c_lam
 
 
 def _helper(fn):
@@ -235,118 +307,6 @@ def _contact_rows(lam, gaps, normals, frames, cc, om, kappa, mode, R, m_c, f_c, 
                 dl, dg = 0.0, 1.0
             d_lam[j, o], d_gap[j, o] = dl, dg
             R[j, 9 + o] = val if j >= 1 else x
-
-
-@_helper
-def _node_terms(lam, hess, frame, phi, L, vecs, mats):
-    """A node's tangent t (``vecs[0]``), ``exp(hat(phi))`` and ``J_l(phi)`` (``mats[0]``,
-    ``mats[1]``), ``hat(t)`` (``mats[4]``) and the multipliers' gap-hessian sum
-    ``LH = L sum_o lam_o hess_o`` (``mats[5]``)."""
-    t = vecs[0]
-    Q, Jl, K, K2, That, LH = mats[0], mats[1], mats[2], mats[3], mats[4], mats[5]
-    for a in range(3):
-        t[a] = frame[a, 0]
-    _exp_and_jl(phi, Q, Jl, K, K2, True)
-    _hat(t, That)
-    for a in range(3):
-        for b in range(3):
-            acc = 0.0
-            for o in range(lam.shape[0]):
-                acc += lam[o] * hess[o, a, b]
-            LH[a, b] = L * acc
-
-
-@_helper
-def _free_blocks(ab, kv, blk, j, n, nv, r0, rp, cp, cf):
-    """The free rod's blocks of node j (``blk`` (10, 3, 3): the spatial pass's), unchanged."""
-    _put(ab, kv, rp, cp - nv, blk[0])  # m_prev
-    if j <= n - 2:
-        _put(ab, kv, rp, cp + nv, blk[2])  # m_next
-        _put(ab, kv, rp, cf, blk[7])  # m_F
-    _put(ab, kv, r0, cp - nv, blk[3])  # p_phiprev
-    _put(ab, kv, r0, cp, blk[4])  # p_phi
-    _put(ab, kv, rp, cf - nv, blk[6])  # m_Fprev
-
-
-@_helper
-def _force_blocks(ab, kv, blk, var, oc, om, rf, rp, cx, cp, mats):
-    """The force row j - 1 in x_j and phi_j (- om LH; + oc (LH That) J_l) and the moment row
-    j in x_j (- oc That LH), added to the free rod's ``blk``; ``var[0]``, ``var[2]`` of the
-    second variation.  Leaves ``That LH`` in ``mats[6]``."""
-    Jl, That, LH, M1, M2, out = mats[1], mats[4], mats[5], mats[6], mats[7], mats[9]
-    _mm(LH, That, M1)  # fc_d / oc
-    for a in range(3):
-        for b in range(3):
-            M1[a, b] = oc * M1[a, b]
-            var[0, a, b] = M1[a, b]
-            out[a, b] = blk[8, a, b] - om * LH[a, b]
-            var[2, a, b] = out[a, b]
-    _put(ab, kv, rf, cx, out)  # f_xnext
-    _mm(M1, Jl, M2)
-    for a in range(3):
-        for b in range(3):
-            out[a, b] = blk[9, a, b] + M2[a, b]
-    _put(ab, kv, rf, cp, out)  # f_phinext
-    _mm(That, LH, M1)
-    for a in range(3):
-        for b in range(3):
-            out[a, b] = blk[5, a, b] - oc * M1[a, b]
-    _put(ab, kv, rp, cx, out)  # m_x
-
-
-@_helper
-def _moment_block(ab, kv, blk, var, t, f_c, m_c, oc, c, rp, cp, mats):
-    """The moment row j in phi_j: (-oc sym(t, f_c) + oc c That LH That - hat(m_c)/2) J_l
-    added to the free rod's; its symmetric part is ``var[1]`` (``That LH`` in ``mats[6]``
-    from :func:`_force_blocks`, ``That`` in ``mats[4]``)."""
-    Jl, K, That, M1, M2 = mats[1], mats[2], mats[4], mats[6], mats[7]
-    mc_d, out, S = mats[8], mats[9], mats[10]
-    for a in range(3):
-        for b in range(3):
-            S[a, b] = 0.0
-    _sym_term(t, f_c, 1.0, S)
-    _mm(M1, That, M2)  # That LH That
-    _hat(m_c, K)
-    occ = oc * c
-    for a in range(3):
-        for b in range(3):
-            sym = -oc * S[a, b] + occ * M2[a, b]
-            var[1, a, b] = sym
-            mc_d[a, b] = sym - 0.5 * K[a, b]
-    _mm(mc_d, Jl, M1)
-    for a in range(3):
-        for b in range(3):
-            out[a, b] = blk[1, a, b] + M1[a, b]
-    _put(ab, kv, rp, cp, out)  # m_diag
-
-
-@_helper
-def _multiplier_entries(
-    ab, kv, normals, turn, d_lam, d_gap, kappa, om, oc, c, Jl, rf, rp, cx, cp, cl, vecs
-):
-    """Node j's multipliers' columns (the force and moment rows in them; ``turn`` the moment
-    rows' transposed) and its contact rows (in x_j, phi_j and the multipliers)."""
-    t, tmp, tn, gd = vecs[0], vecs[1], vecs[2], vecs[3]
-    nc = normals.shape[0]
-    for o in range(nc):
-        for a in range(3):
-            tmp[a] = normals[o, a]
-        _cross(t, tmp, tn)
-        ck = d_gap[o] * kappa
-        for a in range(3):
-            ab[kv + rf + a - (cl + o), cl + o] = -om * tmp[a]  # f_lamnext
-            turn[o, a] = -oc * tn[a]
-            ab[kv + rp + a - (cl + o), cl + o] = turn[o, a]  # m_lam
-            gd[a] = ck * (c * tn[a])
-        rc = cl + o
-        for b in range(3):
-            ab[kv + rc - (cx + b), cx + b] = ck * tmp[b]  # c_x
-            acc = 0.0
-            for q in range(3):
-                acc += gd[q] * Jl[q, b]
-            ab[kv + rc - (cp + b), cp + b] = acc  # c_phi
-        for p in range(nc):
-            ab[kv + rc - (cl + p), cl + p] = d_lam[o] if p == o else 0.0  # c_lam
 
 
 @_inner
