@@ -11,10 +11,10 @@ stays its twin: the same piece and parameter, values to rounding (~1e-15 relativ
 are not numpy's).  The twin runs until compiling pays (:class:`coils._numba_cache.Rental`,
 :data:`COMPILE_AFTER`) or numba's cache holds the kernel.
 
-The kernel's helpers (a line's and an arc's closed form, the ranking, the centreline's
-derivatives, the normal, the hessian) are plain Python functions that numba compiles for it
-(``register_jitable``), so that ``closed_form_search.py_func`` runs it all as plain Python (the
-tests check it so, without compiling it).
+The kernel's steps after the candidates' closed forms (the ranking, the centreline's
+derivatives, the normal, the hessian) are inlined into it in numba's IR; the tests run the
+kernel as plain Python (``closed_form_search.py_func`` with the steps' ``.py_func``,
+:data:`HELPERS`), without compiling it.
 """
 
 from __future__ import annotations
@@ -23,7 +23,6 @@ import math
 
 import numba as nb
 import numpy as np
-from numba.extending import register_jitable
 
 from coils._numba_cache import Rental
 
@@ -102,6 +101,7 @@ def closed_form_search(p, order, kind, geom, scale, on_line, g, col, u, grad, he
         Out (order 2): the gap's hessian, 1/m.
     """
     n, K = p.shape[0], kind.shape[0]
+    two_pi = 2.0 * math.pi
     G = np.empty(K)
     U = np.empty(K)
     x = np.empty(3)  # the centreline's point and derivatives at the chosen pair
@@ -111,11 +111,37 @@ def closed_form_search(p, order, kind, geom, scale, on_line, g, col, u, grad, he
     w = np.empty(3)
     for i in range(n):
         p0, p1, p2 = p[i, 0], p[i, 1], p[i, 2]
-        for k in range(K):  # every candidate's maximiser and gap
+        # every candidate's maximiser and gap (the closed forms of Pieces.start_guess)
+        for k in range(K):
+            q0, q1, q2 = p0 - geom[k, A], p1 - geom[k, A + 1], p2 - geom[k, A + 2]
+            b0, b1, b2 = geom[k, B], geom[k, B + 1], geom[k, B + 2]
             if kind[k] == 0:
-                uk, d0, d1, d2 = _line_foot(p0, p1, p2, geom, k)
+                along = q0 * b0 + q1 * b1 + q2 * b2
+                cone = geom[k, CONE]
+                if cone != 0.0:
+                    r0, r1, r2 = q0 - along * b0, q1 - along * b1, q2 - along * b2
+                    across = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+                    along = along + cone * across / math.sqrt(1.0 - cone * cone)
+                uk = min(max(geom[k, REF] + along, geom[k, LO]), geom[k, HI])
+                t = uk - geom[k, REF]
+                d0 = p0 - (geom[k, A] + b0 * t)
+                d1 = p1 - (geom[k, A + 1] + b1 * t)
+                d2 = p2 - (geom[k, A + 2] + b2 * t)
             else:
-                uk, d0, d1, d2 = _arc_foot(p0, p1, p2, geom, k)
+                c0, c1, c2 = geom[k, C], geom[k, C + 1], geom[k, C + 2]
+                rho = geom[k, ARC]
+                phi = math.atan2(q0 * c0 + q1 * c1 + q2 * c2, q0 * b0 + q1 * b1 + q2 * b2)
+                if phi < 0.0:
+                    phi = phi + two_pi
+                span = (geom[k, HI] - geom[k, LO]) / rho
+                if phi > span:  # outside the arc's angles: the end nearer along the circle
+                    phi = 0.0 if two_pi - phi < phi - span else span
+                uk = min(max(geom[k, LO] + rho * phi, geom[k, LO]), geom[k, HI])
+                ang = (uk - geom[k, REF]) / rho
+                cs, sn = math.cos(ang), math.sin(ang)
+                d0 = p0 - (geom[k, A] + rho * (cs * b0 + sn * c0))
+                d1 = p1 - (geom[k, A + 1] + rho * (cs * b1 + sn * c1))
+                d2 = p2 - (geom[k, A + 2] + rho * (cs * b2 + sn * c2))
             U[k] = uk
             rho_k = geom[k, VALUE] + geom[k, SLOPE] * (uk - geom[k, ANCHOR])
             G[k] = rho_k - math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
@@ -135,56 +161,10 @@ def closed_form_search(p, order, kind, geom, scale, on_line, g, col, u, grad, he
         _gap_hessian(d, geom, kb, uk, rh, xu, xuu, w, hess[i])
 
 
-def _helper(fn):
-    """``fn`` as a helper of the compiled search: plain Python where called from Python (so
-    ``closed_form_search.py_func`` runs as Python, nothing compiled), compiled for the kernel
-    where it calls it (numba's ``register_jitable``; no Python entry and no cache entry of its
-    own: the kernel's holds it)."""
-    return register_jitable(error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True)(fn)
-
-
-@_helper
-def _line_foot(p0, p1, p2, geom, k):
-    """Line (round cone) k's maximiser u for the point (p0, p1, p2) and the point minus the
-    centreline's point there (the closed form of ``Pieces.start_guess``)."""
-    q0, q1, q2 = p0 - geom[k, A], p1 - geom[k, A + 1], p2 - geom[k, A + 2]
-    b0, b1, b2 = geom[k, B], geom[k, B + 1], geom[k, B + 2]
-    along = q0 * b0 + q1 * b1 + q2 * b2
-    cone = geom[k, CONE]
-    if cone != 0.0:
-        r0, r1, r2 = q0 - along * b0, q1 - along * b1, q2 - along * b2
-        across = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
-        along = along + cone * across / math.sqrt(1.0 - cone * cone)
-    uk = min(max(geom[k, REF] + along, geom[k, LO]), geom[k, HI])
-    t = uk - geom[k, REF]
-    d0 = p0 - (geom[k, A] + b0 * t)
-    d1 = p1 - (geom[k, A + 1] + b1 * t)
-    d2 = p2 - (geom[k, A + 2] + b2 * t)
-    return uk, d0, d1, d2
-
-
-@_helper
-def _arc_foot(p0, p1, p2, geom, k):
-    """Arc k's maximiser u for the point (p0, p1, p2) (outside the arc's angles: the end
-    nearer along the circle) and the point minus the centreline's point there."""
-    two_pi = 2.0 * math.pi
-    q0, q1, q2 = p0 - geom[k, A], p1 - geom[k, A + 1], p2 - geom[k, A + 2]
-    b0, b1, b2 = geom[k, B], geom[k, B + 1], geom[k, B + 2]
-    c0, c1, c2 = geom[k, C], geom[k, C + 1], geom[k, C + 2]
-    rho = geom[k, ARC]
-    phi = math.atan2(q0 * c0 + q1 * c1 + q2 * c2, q0 * b0 + q1 * b1 + q2 * b2)
-    if phi < 0.0:
-        phi = phi + two_pi
-    span = (geom[k, HI] - geom[k, LO]) / rho
-    if phi > span:
-        phi = 0.0 if two_pi - phi < phi - span else span
-    uk = min(max(geom[k, LO] + rho * phi, geom[k, LO]), geom[k, HI])
-    ang = (uk - geom[k, REF]) / rho
-    cs, sn = math.cos(ang), math.sin(ang)
-    d0 = p0 - (geom[k, A] + rho * (cs * b0 + sn * c0))
-    d1 = p1 - (geom[k, A + 1] + rho * (cs * b1 + sn * c1))
-    d2 = p2 - (geom[k, A + 2] + rho * (cs * b2 + sn * c2))
-    return uk, d0, d1, d2
+#: The kernel's steps: inlined into it in numba's IR (one function, as compiled before they
+#: were split out: no call in its loops, no compile of their own); the tests run them as
+#: Python with the kernel (``.py_func`` of each, :data:`HELPERS`)
+_helper = nb.njit(inline="always", error_model="numpy")
 
 
 @_helper
@@ -276,3 +256,7 @@ def _gap_hessian(d, geom, kb, uk, rh, xu, xuu, w, H):
         for e in range(3):
             for f in range(3):
                 H[e, f] -= w[e] * w[f] / den
+
+
+#: The names of the kernel's steps (the tests run them as Python: their ``.py_func``).
+HELPERS = ("_ranked", "_curve", "_unit_normal", "_gap_hessian")
