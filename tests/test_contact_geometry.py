@@ -299,7 +299,7 @@ def _twin_cases():
     return [bend, tapered, *Vessel.branch(0.04, 2e-3, 0.02, 1.5e-3, math.pi / 3).vessels]
 
 
-def test_compiled_search_is_the_numpy_search(monkeypatch):
+def test_compiled_search_is_the_numpy_search():
     """The compiled search and evaluation (run here as plain Python: ``py_func``, nothing is
     compiled) against its numpy twin (the all-pairs search, the generic derivatives): the
     same piece and parameter, gaps, gradients and hessians to rounding (of the points'
@@ -307,9 +307,6 @@ def test_compiled_search_is_the_numpy_search(monkeypatch):
     (normal undefined), the gap, piece and parameter."""
     from coilrod.contact import _compiled_search as cs
     from coils._immutable import kernel_input
-
-    for name in cs.HELPERS:  # the kernel's steps as Python too
-        monkeypatch.setattr(cs, name, getattr(cs, name).py_func)
 
     rng = np.random.default_rng(7)
     for v in _twin_cases():
@@ -359,8 +356,6 @@ def test_vessel_takes_the_compiled_search_when_it_pays(monkeypatch):
     from coilrod.contact import _compiled_search as cs
 
     calls, plain = [], cs.closed_form_search.py_func
-    for name in cs.HELPERS:  # the kernel's steps as Python too
-        monkeypatch.setattr(cs, name, getattr(cs, name).py_func)
 
     def kernel(*args):
         calls.append(len(args[0]))

@@ -11,10 +11,10 @@ stays its twin: the same piece and parameter, values to rounding (~1e-15 relativ
 are not numpy's).  The twin runs until compiling pays (:class:`coils._numba_cache.Rental`,
 :data:`COMPILE_AFTER`) or numba's cache holds the kernel.
 
-The kernel's steps after the candidates' closed forms (the ranking, the centreline's
-derivatives, the normal, the hessian) are inlined into it in numba's IR; the tests run the
-kernel as plain Python (``closed_form_search.py_func`` with the steps' ``.py_func``,
-:data:`HELPERS`), without compiling it.
+The kernel searches every point, then :func:`_derivatives` takes the gap's derivatives at the
+chosen pairs; that helper is a plain Python function that numba compiles for the kernel
+(``register_jitable``), so that ``closed_form_search.py_func`` runs it all as plain Python (the
+tests check it so, without compiling it).
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ import math
 
 import numba as nb
 import numpy as np
+from numba.extending import register_jitable
 
 from coils._numba_cache import Rental
 
@@ -101,14 +102,10 @@ def closed_form_search(p, order, kind, geom, scale, on_line, g, col, u, grad, he
         Out (order 2): the gap's hessian, 1/m.
     """
     n, K = p.shape[0], kind.shape[0]
+    eps = 2.220446049250313e-16
     two_pi = 2.0 * math.pi
     G = np.empty(K)
     U = np.empty(K)
-    x = np.empty(3)  # the centreline's point and derivatives at the chosen pair
-    xu = np.empty(3)
-    xuu = np.empty(3)
-    rh = np.empty(3)
-    w = np.empty(3)
     for i in range(n):
         p0, p1, p2 = p[i, 0], p[i, 1], p[i, 2]
         # every candidate's maximiser and gap (the closed forms of Pieces.start_guess)
@@ -145,118 +142,98 @@ def closed_form_search(p, order, kind, geom, scale, on_line, g, col, u, grad, he
             U[k] = uk
             rho_k = geom[k, VALUE] + geom[k, SLOPE] * (uk - geom[k, ANCHOR])
             G[k] = rho_k - math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        kb = _ranked(p0, p1, p2, G, U, geom, scale)
+        # the ranking: a piece whose maximiser is interior, within rounding; else the best
+        best = G[0]
+        first = 0
+        for k in range(1, K):
+            if G[k] > best:
+                best = G[k]
+                first = k
+        tol = 64 * eps * (abs(best) + scale + max(abs(p0), abs(p1), abs(p2)))
+        kb = -1
+        for k in range(K):
+            if U[k] > geom[k, LO] and U[k] < geom[k, HI] and G[k] >= best - tol:
+                if kb < 0 or G[k] > G[kb]:
+                    kb = k
+        if kb < 0:
+            kb = first
         uk = U[kb]
         g[i] = G[kb]
         col[i] = kb
         u[i] = uk
-        if order == 0:
-            continue
-        _curve(kind[kb], geom, kb, uk, x, xu, xuu)
-        d = _unit_normal(p0, p1, p2, x, xu, on_line, rh, w)
+    if order > 0:
+        _derivatives(p, order, kind, geom, on_line, col, u, grad, hess)
+
+
+@register_jitable(error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True)
+def _derivatives(p, order, kind, geom, on_line, col, u, grad, hess):
+    """The gap's gradient (order >= 1) and hessian (order 2) at each point, from its chosen
+    candidate ``col`` and parameter ``u`` (the search's): the centreline's point and
+    derivatives there (``Pieces.curve``), minus the unit normal from it, and the hessian's
+    cone and curvature terms (``Vessel._evaluate``).  Plain Python where called from Python
+    (``closed_form_search.py_func``), compiled for the kernel where it calls it (numba's
+    ``register_jitable``: no entry of its own)."""
+    x = np.empty(3)  # the centreline's point and derivatives at the chosen pair
+    xu = np.empty(3)
+    xuu = np.empty(3)
+    rh = np.empty(3)
+    w = np.empty(3)
+    for i in range(p.shape[0]):
+        p0, p1, p2 = p[i, 0], p[i, 1], p[i, 2]
+        kb = col[i]
+        uk = u[i]
+        # the centreline's point and derivatives at the chosen pair (Pieces.curve)
+        if kind[kb] == 0:
+            t = uk - geom[kb, REF]
+            for e in range(3):
+                x[e] = geom[kb, A + e] + geom[kb, B + e] * t
+                xu[e] = geom[kb, B + e]
+                xuu[e] = 0.0
+        else:
+            rho = geom[kb, ARC]
+            ang = (uk - geom[kb, REF]) / rho
+            cs, sn = math.cos(ang), math.sin(ang)
+            for e in range(3):
+                radial = cs * geom[kb, B + e] + sn * geom[kb, C + e]
+                x[e] = geom[kb, A + e] + rho * radial
+                xu[e] = cs * geom[kb, C + e] - sn * geom[kb, B + e]
+                xuu[e] = -radial / rho
+        # the gradient: minus the unit normal from the centreline (Vessel._evaluate)
+        r0, r1, r2 = p0 - x[0], p1 - x[1], p2 - x[2]
+        d = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+        if d < on_line:  # on the centreline: a unit normal to the tangent, xu x e_axis
+            v0, v1, v2 = abs(xu[0]), abs(xu[1]), abs(xu[2])
+            if v0 <= v1 and v0 <= v2:
+                w[0], w[1], w[2] = 0.0, xu[2], -xu[1]
+            elif v1 <= v2:
+                w[0], w[1], w[2] = -xu[2], 0.0, xu[0]
+            else:
+                w[0], w[1], w[2] = xu[1], -xu[0], 0.0
+            nw = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+            for e in range(3):
+                rh[e] = w[e] / nw
+        else:
+            rh[0], rh[1], rh[2] = r0 / d, r1 / d, r2 / d
         for e in range(3):
             grad[i, e] = -rh[e]
         if order == 1:
             continue
-        _gap_hessian(d, geom, kb, uk, rh, xu, xuu, w, hess[i])
-
-
-#: The kernel's steps: inlined into it in numba's IR (one function, as compiled before they
-#: were split out: no call in its loops, no compile of their own); the tests run them as
-#: Python with the kernel (``.py_func`` of each, :data:`HELPERS`)
-_helper = nb.njit(inline="always", error_model="numpy")
-
-
-@_helper
-def _ranked(p0, p1, p2, G, U, geom, scale):
-    """The chosen candidate: the best gap G among those whose maximiser U is interior,
-    within rounding of the best of all; else the best (ties to the first)."""
-    eps = 2.220446049250313e-16
-    best = G[0]
-    first = 0
-    for k in range(1, G.shape[0]):
-        if G[k] > best:
-            best = G[k]
-            first = k
-    tol = 64 * eps * (abs(best) + scale + max(abs(p0), abs(p1), abs(p2)))
-    kb = -1
-    for k in range(G.shape[0]):
-        if U[k] > geom[k, LO] and U[k] < geom[k, HI] and G[k] >= best - tol:
-            if kb < 0 or G[k] > G[kb]:
-                kb = k
-    if kb < 0:
-        kb = first
-    return kb
-
-
-@_helper
-def _curve(kind, geom, kb, uk, x, xu, xuu):
-    """Candidate kb's centreline point x and its derivatives xu, xuu in u at uk
-    (``Pieces.curve``)."""
-    if kind == 0:
-        t = uk - geom[kb, REF]
-        for e in range(3):
-            x[e] = geom[kb, A + e] + geom[kb, B + e] * t
-            xu[e] = geom[kb, B + e]
-            xuu[e] = 0.0
-    else:
-        rho = geom[kb, ARC]
-        ang = (uk - geom[kb, REF]) / rho
-        cs, sn = math.cos(ang), math.sin(ang)
-        for e in range(3):
-            radial = cs * geom[kb, B + e] + sn * geom[kb, C + e]
-            x[e] = geom[kb, A + e] + rho * radial
-            xu[e] = cs * geom[kb, C + e] - sn * geom[kb, B + e]
-            xuu[e] = -radial / rho
-
-
-@_helper
-def _unit_normal(p0, p1, p2, x, xu, on_line, rh, w):
-    """The unit normal rh from the centreline point x to the point (minus the gap's
-    gradient, ``Vessel._evaluate``; on the centreline, below ``on_line``: a unit normal to
-    the tangent xu, ``xu x`` the axis of its smallest component); returns the distance d
-    (w: scratch)."""
-    r0, r1, r2 = p0 - x[0], p1 - x[1], p2 - x[2]
-    d = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
-    if d < on_line:
-        v0, v1, v2 = abs(xu[0]), abs(xu[1]), abs(xu[2])
-        if v0 <= v1 and v0 <= v2:
-            w[0], w[1], w[2] = 0.0, xu[2], -xu[1]
-        elif v1 <= v2:
-            w[0], w[1], w[2] = -xu[2], 0.0, xu[0]
-        else:
-            w[0], w[1], w[2] = xu[1], -xu[0], 0.0
-        nw = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
-        for e in range(3):
-            rh[e] = w[e] / nw
-    else:
-        rh[0], rh[1], rh[2] = r0 / d, r1 / d, r2 / d
-    return d
-
-
-@_helper
-def _gap_hessian(d, geom, kb, uk, rh, xu, xuu, w, H):
-    """The gap's hessian H (3, 3) at distance d along the unit normal rh from candidate kb's
-    centreline (at uk, tangent xu, xuu): the cone point's -P/d, and the curvature term where
-    the maximiser is interior and the gap concave in u (w: scratch)."""
-    ds = max(d, 1e-15 * (geom[kb, VALUE] + geom[kb, SLOPE] * (uk - geom[kb, ANCHOR])))
-    for e in range(3):
-        for f in range(3):
-            H[e, f] = -((1.0 if e == f else 0.0) - rh[e] * rh[f]) / ds
-    for e in range(3):
-        w[e] = (
-            ((1.0 if e == 0 else 0.0) - rh[e] * rh[0]) * xu[0]
-            + ((1.0 if e == 1 else 0.0) - rh[e] * rh[1]) * xu[1]
-            + ((1.0 if e == 2 else 0.0) - rh[e] * rh[2]) * xu[2]
-        )
-    curv = rh[0] * xuu[0] + rh[1] * xuu[1] + rh[2] * xuu[2]
-    dguu = ds * curv - (xu[0] * w[0] + xu[1] * w[1] + xu[2] * w[2])
-    if uk > geom[kb, LO] and uk < geom[kb, HI] and dguu < 0.0:
-        den = ds * dguu
+        # the hessian: the cone point's -P/d, and the curvature term where the maximiser is
+        # interior and the gap concave in u
+        ds = max(d, 1e-15 * (geom[kb, VALUE] + geom[kb, SLOPE] * (uk - geom[kb, ANCHOR])))
         for e in range(3):
             for f in range(3):
-                H[e, f] -= w[e] * w[f] / den
-
-
-#: The names of the kernel's steps (the tests run them as Python: their ``.py_func``).
-HELPERS = ("_ranked", "_curve", "_unit_normal", "_gap_hessian")
+                hess[i, e, f] = -((1.0 if e == f else 0.0) - rh[e] * rh[f]) / ds
+        for e in range(3):
+            w[e] = (
+                ((1.0 if e == 0 else 0.0) - rh[e] * rh[0]) * xu[0]
+                + ((1.0 if e == 1 else 0.0) - rh[e] * rh[1]) * xu[1]
+                + ((1.0 if e == 2 else 0.0) - rh[e] * rh[2]) * xu[2]
+            )
+        curv = rh[0] * xuu[0] + rh[1] * xuu[1] + rh[2] * xuu[2]
+        dguu = ds * curv - (xu[0] * w[0] + xu[1] * w[1] + xu[2] * w[2])
+        if uk > geom[kb, LO] and uk < geom[kb, HI] and dguu < 0.0:
+            den = ds * dguu
+            for e in range(3):
+                for f in range(3):
+                    hess[i, e, f] -= w[e] * w[f] / den
