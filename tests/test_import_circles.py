@@ -45,24 +45,37 @@ def _runtime_imports(tree):
 
 
 @functools.cache
-def _parsed(path: Path) -> ast.Module:
-    """The module at ``path``, parsed (once for both checks)."""
-    return ast.parse(path.read_text(encoding="utf-8"))
+def _facts(path: Path) -> tuple[list, list]:
+    """What both checks read of the module at ``path``, from one parse (the tree itself is not
+    kept: a thousand modules' trees held alive slow the garbage collector for the rest of the
+    run): its imports that run, as (level, module, names) -- level None for ``import x`` --
+    and :func:`function_lengths`."""
+    source = path.read_text(encoding="utf-8")
+    tree = ast.parse(source)
+    imports = [
+        (
+            None if isinstance(node, ast.Import) else node.level,
+            None if isinstance(node, ast.Import) else node.module,
+            [a.name for a in node.names],
+        )
+        for node in _runtime_imports(tree)
+    ]
+    return imports, function_lengths(source, tree)
 
 
 def sibling_imports(path: Path, package: str, siblings: set[str]) -> set[str]:
     """The sibling modules of ``package`` that the module at ``path`` imports."""
     out = set()
-    for node in _runtime_imports(_parsed(path)):
-        if isinstance(node, ast.Import):
-            names = [a.name for a in node.names if a.name.startswith(package + ".")]
+    for level, module, names in _facts(path)[0]:
+        if level is None:  # import x.y
+            names = [n for n in names if n.startswith(package + ".")]
             out |= {n[len(package) + 1 :].split(".")[0] for n in names}
-        elif node.level == 1 and node.module is None:
-            out |= {a.name for a in node.names}
-        elif node.level == 1:
-            out.add(node.module.split(".")[0])
-        elif node.level == 0 and node.module and node.module.startswith(package + "."):
-            out.add(node.module[len(package) + 1 :].split(".")[0])
+        elif level == 1 and module is None:
+            out |= set(names)
+        elif level == 1:
+            out.add(module.split(".")[0])
+        elif level == 0 and module and module.startswith(package + "."):
+            out.add(module[len(package) + 1 :].split(".")[0])
     return (out & siblings) - {path.stem}
 
 
@@ -172,7 +185,7 @@ def long_functions(root: Path, limit: int = MAX_LINES) -> list[str]:
     'path:line name (lines)'."""
     found = []
     for path in sorted([*(root / "coils").rglob("*.py"), *(root / "coilrod").rglob("*.py")]):
-        for line, name, n in function_lengths(path.read_text(encoding="utf-8"), _parsed(path)):
+        for line, name, n in _facts(path)[1]:
             if n > limit:
                 found.append(f"{path.relative_to(root).as_posix()}:{line} {name} ({n})")
     return found
