@@ -11,8 +11,10 @@ stays its twin: the same piece and parameter, values to rounding (~1e-15 relativ
 are not numpy's).  The twin runs until compiling pays (:class:`coils._numba_cache.Rental`,
 :data:`COMPILE_AFTER`) or numba's cache holds the kernel.
 
-The kernel is one function with no compiled helpers, so that ``closed_form_search.py_func``
-runs it as plain Python (the tests check it so, without compiling it).
+The kernel searches every point, then :func:`_derivatives` takes the gap's derivatives at the
+chosen pairs; that helper is a plain Python function that numba compiles for the kernel
+(``register_jitable``), so that ``closed_form_search.py_func`` runs it all as plain Python (the
+tests check it so, without compiling it).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import math
 
 import numba as nb
 import numpy as np
+from numba.extending import register_jitable
 
 from coils._numba_cache import Rental
 
@@ -103,11 +106,6 @@ def closed_form_search(p, order, kind, geom, scale, on_line, g, col, u, grad, he
     two_pi = 2.0 * math.pi
     G = np.empty(K)
     U = np.empty(K)
-    x = np.empty(3)  # the centreline's point and derivatives at the chosen pair
-    xu = np.empty(3)
-    xuu = np.empty(3)
-    rh = np.empty(3)
-    w = np.empty(3)
     for i in range(n):
         p0, p1, p2 = p[i, 0], p[i, 1], p[i, 2]
         # every candidate's maximiser and gap (the closed forms of Pieces.start_guess)
@@ -163,8 +161,27 @@ def closed_form_search(p, order, kind, geom, scale, on_line, g, col, u, grad, he
         g[i] = G[kb]
         col[i] = kb
         u[i] = uk
-        if order == 0:
-            continue
+    if order > 0:
+        _derivatives(p, order, kind, geom, on_line, col, u, grad, hess)
+
+
+@register_jitable(error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True)
+def _derivatives(p, order, kind, geom, on_line, col, u, grad, hess):
+    """The gap's gradient (order >= 1) and hessian (order 2) at each point, from its chosen
+    candidate ``col`` and parameter ``u`` (the search's): the centreline's point and
+    derivatives there (``Pieces.curve``), minus the unit normal from it, and the hessian's
+    cone and curvature terms (``Vessel._evaluate``).  Plain Python where called from Python
+    (``closed_form_search.py_func``), compiled for the kernel where it calls it (numba's
+    ``register_jitable``: no entry of its own)."""
+    x = np.empty(3)  # the centreline's point and derivatives at the chosen pair
+    xu = np.empty(3)
+    xuu = np.empty(3)
+    rh = np.empty(3)
+    w = np.empty(3)
+    for i in range(p.shape[0]):
+        p0, p1, p2 = p[i, 0], p[i, 1], p[i, 2]
+        kb = col[i]
+        uk = u[i]
         # the centreline's point and derivatives at the chosen pair (Pieces.curve)
         if kind[kb] == 0:
             t = uk - geom[kb, REF]

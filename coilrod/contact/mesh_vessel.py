@@ -136,14 +136,23 @@ class MeshVessel(Obstacle):
         smooth: bool = True,
         fix_normals: bool = False,
     ):
-        import trimesh
-        from scipy.spatial import cKDTree
-
         label = "mesh" if source is None else f"mesh {source!r}"
         self.source = source
         self.friction = as_friction(friction)
         self.smooth = as_bool(smooth, "smooth")
         fix_normals = as_bool(fix_normals, "fix_normals")
+        mesh = self._checked(vertices, faces, label)
+        mesh = self._oriented(mesh, label, fix_normals)
+        self._index(mesh)
+
+    @staticmethod
+    def _checked(vertices, faces, label: str):
+        """The trimesh of ``vertices`` and ``faces`` (duplicate vertices merged), checked: at
+        least 4 of each, valid indices, no degenerate face, manifold (no edge of more than two
+        faces, no vertex pinching two sheets), consistently wound; else ValueError naming the
+        problem (``label``: the mesh's name in it)."""
+        import trimesh
+
         v = as_points(vertices, "vertices")
         f = np.asarray(faces)
         if f.ndim != 2 or f.shape[1] != 3 or not np.issubdtype(f.dtype, np.integer):
@@ -176,6 +185,14 @@ class MeshVessel(Obstacle):
                 "joins two sheets of faces that share no edge there (two surfaces touching "
                 "at a point); separate them"
             )
+        return mesh
+
+    def _oriented(self, mesh, label: str, fix_normals: bool):
+        """``mesh`` with its normals pointing out of the lumen (closed: every component's
+        orientation checked, inverted ones turned around with ``fix_normals``, else
+        ValueError); sets :attr:`watertight` and :attr:`volume` (NaN if open: warned)."""
+        import trimesh
+
         self.watertight = bool(mesh.is_watertight)
         if self.watertight:
             # every closed component by itself: the winding number just outside each one's
@@ -209,9 +226,16 @@ class MeshVessel(Obstacle):
             warnings.warn(
                 f"{label} is not watertight (open boundary edges): its orientation cannot be "
                 "checked and beyond its open ends the gap is not a lumen's",
-                stacklevel=2,
+                stacklevel=3,
             )
             self.volume = float("nan")
+        return mesh
+
+    def _index(self, mesh) -> None:
+        """The oriented ``mesh``'s arrays, normals, search trees and the smoothed gap's vertex
+        supports, depths and reach."""
+        from scipy.spatial import cKDTree
+
         self._mesh = mesh
         self.vertices = np.array(mesh.vertices, dtype=float)
         self.faces = np.array(mesh.faces, dtype=np.int64)

@@ -32,6 +32,7 @@ import math
 
 import numba as nb
 import numpy as np
+from numba.extending import register_jitable
 
 from coils._numba_cache import Rental, tie_to_sources
 
@@ -167,41 +168,10 @@ def contact_core(
         mats[9], mats[10],
     )  # fmt: skip
     for m in range(k):
-        # -- the rows
-        for j in range(n):
-            for a in range(3):
-                acc = 0.0
-                for o in range(nc):
-                    acc += lam[m, j, o] * normals[m, j, o, a]
-                f_c[j, a] = acc
-                t[a] = frames[m, j, a, 0]
-            _cross(t, f_c[j], tmp)
-            oc = om[j] * cc[j]
-            for a in range(3):
-                m_c[m, j, a] = -oc * tmp[a]
-            if j >= 1:
-                for a in range(3):
-                    R[m, j - 1, 6 + a] -= om[j] * f_c[j, a]
-                    R[m, j, 3 + a] += m_c[m, j, a]
-            for o in range(nc):
-                x = lam[m, j, o]
-                g = gaps[m, j, o]
-                y = kappa * g
-                if mode == 1:  # Fischer-Burmeister
-                    r = math.hypot(x, y)
-                    if r > 0:
-                        val, dl, dg = x + y - r, 1.0 - x / r, 1.0 - y / r
-                    else:
-                        val, dl, dg = x + y - r, 1.0 - 2**-0.5, 1.0 - 2**-0.5
-                elif mode == 0:  # min (NaN propagates, as np.minimum)
-                    pick = y < x
-                    val = y if (pick or y != y) else x
-                    dl, dg = (0.0, 1.0) if pick else (1.0, 0.0)
-                else:  # every row the gap's (the value unused: min(lam, g))
-                    val = g if (g < x or g != g) else x
-                    dl, dg = 0.0, 1.0
-                d_lam[j, o], d_gap[j, o] = dl, dg
-                R[m, j, 9 + o] = val if j >= 1 else x
+        _contact_rows(
+            lam[m], gaps[m], normals[m], frames[m], cc, om, kappa, mode, R[m], m_c[m], f_c, d_lam,
+            d_gap, vecs,
+        )  # fmt: skip
         if not tangent:
             continue
         # -- the band: the clamp's and the constant blocks are the template's
@@ -286,6 +256,57 @@ def contact_core(
                     ab[kv + rc - (cp + b), cp + b] = acc  # c_phi
                 for p in range(nc):
                     ab[kv + rc - (cl + p), cl + p] = d_lam[j, o] if p == o else 0.0  # c_lam
+
+
+def _helper(fn):
+    """``fn`` as a helper of :func:`contact_core`: plain Python where called from Python (so
+    ``contact_core.py_func`` runs as Python, nothing compiled), compiled for the kernel where
+    it calls it (numba's ``register_jitable``; no Python entry and no cache entry of its own:
+    the kernel's holds it)."""
+    return register_jitable(error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True)(fn)
+
+
+@_helper
+def _contact_rows(lam, gaps, normals, frames, cc, om, kappa, mode, R, m_c, f_c, d_lam, d_gap, vecs):
+    """One member's contact rows: the normal forces f_c (n, 3) at the corners, their moments
+    ``m_c``, both added to the force and moment rows of R (n, nv), and the complementarity
+    rows with their partials in the multiplier and the gap (d_lam, d_gap; vecs: scratch)."""
+    n, nc = lam.shape
+    t, tmp = vecs[0], vecs[1]
+    for j in range(n):
+        for a in range(3):
+            acc = 0.0
+            for o in range(nc):
+                acc += lam[j, o] * normals[j, o, a]
+            f_c[j, a] = acc
+            t[a] = frames[j, a, 0]
+        _cross(t, f_c[j], tmp)
+        oc = om[j] * cc[j]
+        for a in range(3):
+            m_c[j, a] = -oc * tmp[a]
+        if j >= 1:
+            for a in range(3):
+                R[j - 1, 6 + a] -= om[j] * f_c[j, a]
+                R[j, 3 + a] += m_c[j, a]
+        for o in range(nc):
+            x = lam[j, o]
+            g = gaps[j, o]
+            y = kappa * g
+            if mode == 1:  # Fischer-Burmeister
+                r = math.hypot(x, y)
+                if r > 0:
+                    val, dl, dg = x + y - r, 1.0 - x / r, 1.0 - y / r
+                else:
+                    val, dl, dg = x + y - r, 1.0 - 2**-0.5, 1.0 - 2**-0.5
+            elif mode == 0:  # min (NaN propagates, as np.minimum)
+                pick = y < x
+                val = y if (pick or y != y) else x
+                dl, dg = (0.0, 1.0) if pick else (1.0, 0.0)
+            else:  # every row the gap's (the value unused: min(lam, g))
+                val = g if (g < x or g != g) else x
+                dl, dg = 0.0, 1.0
+            d_lam[j, o], d_gap[j, o] = dl, dg
+            R[j, 9 + o] = val if j >= 1 else x
 
 
 @_inner

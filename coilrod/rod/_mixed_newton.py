@@ -287,296 +287,324 @@ def _make_kernel(digest: int):
             return -1
         k, size = U.shape
         n = size // 5
-        growth, chord_at = fpar[5], fpar[6]
-        max_iter, backtracks, stagnation = ipar[0], ipar[1], ipar[2]
-        chords, chord_start, want_tangent = ipar[3] != 0, ipar[4] != 0, ipar[5] != 0
-        want_3d = ipar[6] != 0  # the out-of-plane count of the 3D stability
-        linear = fpar[9] != 0.0
-        want_h = want_3d and not linear  # ... needs the field's hessian
         yes = ipar[0] >= 0  # (True, typed as any bool: one compiled version of _linearize)
-        G3 = G.reshape((k * n, 3, 3))
-        H4 = H.reshape((k * n, 3, 3, 3))
-        Ut = np.empty((k, size))
-        Rt = np.empty((k, size))
-        R1t = np.empty((k, size))
-        Bt = np.zeros((k * n, 3))
-        Gt = np.zeros((k * n, 9))
-        Ht = np.zeros((k * n, 27))
-        Gt3 = Gt.reshape((k * n, 3, 3))
-        Ht4 = Ht.reshape((k * n, 3, 3, 3))
-        T = np.empty((14, n))
-        DU = np.empty((k, size))
-        rhs = np.empty(size)
+        model = (mu, h, w, clamp, fpar, fa, pts, pts_ro, np.empty((14, n)))
+        cur = (U, R, R1, B, G, G.reshape((k * n, 3, 3)), H, H.reshape((k * n, 3, 3, 3)), ab)
+        trial = _trial_arrays(k, n, tab)
+        Ut, Rt = trial[0], trial[1]
+        book, marks = _bookkeeping(k, ipar[4] != 0 and ipar[3] != 0)
+        err, alive, moved, fresh = book[0], book[1], book[5], marks[0]
         e1 = np.empty(1)
-        err = np.empty(k)
-        alive = np.zeros(k, dtype=np.bool_)
-        fresh = np.ones(k, dtype=np.bool_)  # a member's current state is its tangent's
-        cur_ok = np.zeros(k, dtype=np.bool_)  # its current residual is finite
-        has_h = np.ones(k, dtype=np.bool_)  # H holds the hessian at its current state
-        t_ok = np.zeros(k, dtype=np.bool_)  # its tangent's state was finite
-        t_lu = np.zeros(k, dtype=np.bool_)  # its tangent is factorised
-        t_bad = np.zeros(k, dtype=np.bool_)  # ... with an exactly zero pivot
-        iters = np.zeros(k, dtype=np.int64)
-        slow = np.zeros(k, dtype=np.int64)
-        ratio = np.full(k, 0.0 if (chord_start and chords) else 1.0)
-        moved = np.zeros(k, dtype=np.bool_)
+        DU = np.empty((k, size))
         for j in range(k):  # the start, with its tangent
-            st = _linearize(
-                U,
-                j,
-                S[j],
-                yes,
-                mu,
-                h,
-                w,
-                clamp,
-                fpar,
-                fa,
-                pts,
-                pts_ro,
-                R,
-                R1,
-                B,
-                G,
-                G3,
-                H,
-                H4,
-                ab,
-                T,
-            )
+            st = _linearize_into(cur, j, S[j], yes, model)
             if st == 2:
                 return 1
-            cur_ok[j] = t_ok[j] = st == 0
-            _copy_row(RT1, R1, j)
-            err[j] = _error(R, U, j, inv_w, inv_h, bend_scale, fpar, cur_ok[j], e1)
+            _new_tangent(j, st, RT1, R1, marks)
+            err[j] = _error(R, U, j, inv_w, inv_h, bend_scale, fpar, st == 0, e1)
             alive[j] = err[j] < math.inf
         owners_all = True  # the tangent covers every member
-        for _ in range(max_iter):
-            n_act = 0
-            worst = 0.0
-            stale = False
-            for j in range(k):
-                if alive[j] and err[j] > 1.0:
-                    n_act += 1
-                    worst = max(worst, ratio[j])
-                    if not fresh[j]:
-                        stale = True
+        for _ in range(ipar[0]):
+            n_act, worst, stale = _active(book, fresh)
             if n_act == 0:
                 break
-            chord = chords and worst <= chord_at
+            chord = ipar[3] != 0 and worst <= fpar[6]
             if not chord and stale:  # a new tangent at the current states
                 for j in range(k):  # (a fresh member's is its tangent's: the same numbers)
                     if alive[j] and err[j] > 1.0 and not fresh[j]:
-                        st = _linearize(
-                            U,
-                            j,
-                            S[j],
-                            yes,
-                            mu,
-                            h,
-                            w,
-                            clamp,
-                            fpar,
-                            fa,
-                            pts,
-                            pts_ro,
-                            R,
-                            R1,
-                            B,
-                            G,
-                            G3,
-                            H,
-                            H4,
-                            ab,
-                            T,
-                        )
+                        st = _linearize_into(cur, j, S[j], yes, model)
                         if st == 2:
                             return 1
-                        cur_ok[j] = t_ok[j] = st == 0
-                        t_lu[j] = False
-                        fresh[j] = True
-                        has_h[j] = True
-                        _copy_row(RT1, R1, j)
+                        _new_tangent(j, st, RT1, R1, marks)
                 owners_all = n_act == k
-            n_step = 0
-            for j in range(k):  # the Newton steps
-                moved[j] = False
-                if not (alive[j] and err[j] > 1.0):
-                    continue
-                _factor(ab, ipiv, j, size, t_ok, t_lu, t_bad)
-                ok = t_ok[j] and not t_bad[j]
-                if ok:
-                    for q in range(size):
-                        rhs[q] = -R[j, q]
-                    _band_solve(ab, ipiv, j * size, size, rhs)
-                    for q in range(size):
-                        DU[j, q] = rhs[q]
-                        if not math.isfinite(rhs[q]):
-                            ok = False
-                if not ok:
-                    alive[j] = False
-                    continue
-                moved[j] = True  # (for now: has a step)
-                n_step += 1
-            if n_step == 0:
+            if _newton_steps(U, R, ab, ipiv, DU, book, marks) == 0:
                 break
             n_moved = 0
-            for j in range(k):  # the line searches
+            for j in range(k):  # the line searches along the steps
                 if not moved[j]:
                     continue
-                moved[j] = False
-                rot = 0.0
-                for i in range(n):
-                    a = abs(DU[j, 5 * i + 2])
-                    if a > rot:
-                        rot = a
-                full = min(1.0, fpar[4] / rot) if rot > 0 else 1.0
-                alpha = full
-                e_old = err[j]
-                for _r in range(backtracks + 1):
-                    for q in range(size):
-                        Ut[j, q] = U[j, q] + alpha * DU[j, q]
-                    st = _linearize(
-                        Ut,
-                        j,
-                        S[j],
-                        not chord,
-                        mu,
-                        h,
-                        w,
-                        clamp,
-                        fpar,
-                        fa,
-                        pts,
-                        pts_ro,
-                        Rt,
-                        R1t,
-                        Bt,
-                        Gt,
-                        Gt3,
-                        Ht,
-                        Ht4,
-                        tab,
-                        T,
-                    )
+                alpha = full = _step_limit(j, DU, fpar[4], moved)
+                for _r in range(ipar[1] + 1):
+                    _trial_state(j, alpha, U, DU, Ut)
+                    st = _linearize_into(trial, j, S[j], not chord, model)
                     if st == 2:
                         return 1
                     e_new = _error(Rt, Ut, j, inv_w, inv_h, bend_scale, fpar, st == 0, e1)
-                    accept = e_new < e_old or e_new <= 1.0
-                    if not accept:
-                        accept = alpha == full and e_new <= growth * e_old and e_new < math.inf
-                    if accept:
-                        slow[j] = slow[j] + 1 if e_new > 0.5 * e_old else 0
-                        ratio[j] = e_new / e_old if e_old > 0 else 0.0
-                        _accept(j, not chord, U, Ut, R, Rt, R1, R1t, B, Bt, G, Gt, H, Ht, ab, tab)
-                        err[j] = e_new
-                        iters[j] += 1
-                        cur_ok[j] = st == 0
-                        has_h[j] = not chord
-                        fresh[j] = False
-                        if not chord:  # the trial's linearization carries its tangent
-                            _copy_row(RT1, R1, j)
-                            t_ok[j] = st == 0
-                            t_lu[j] = False
-                            fresh[j] = True
-                        moved[j] = True
+                    if _accepted(j, e_new, alpha == full, st, chord, fpar[5], cur, trial, RT1,
+                                 book, marks):  # fmt: skip
                         n_moved += 1
                         break
                     alpha = 0.5 * alpha
-                if not moved[j]:
-                    alive[j] = False
-                    iters[j] += 1
+                _stopped(j, book)
             if not chord and n_moved > 0:
                 owners_all = n_moved == k
-            for j in range(k):
-                if moved[j] and slow[j] >= stagnation and err[j] > 1.0:
-                    alive[j] = False
-        all_fresh = True
-        for j in range(k):
-            all_fresh = all_fresh and fresh[j]
+            _stagnation(book, ipar[2])
+        want_tangent, want_3d, linear = ipar[5] != 0, ipar[6] != 0, fpar[9] != 0.0
+        all_fresh = fresh.all()
         if want_tangent and not owners_all:  # the engine linearizes every member again
             for j in range(k):
-                if fresh[j]:  # (its tangent is at its state: the same numbers)
-                    continue
-                st = _linearize(
-                    U,
-                    j,
-                    S[j],
-                    yes,
-                    mu,
-                    h,
-                    w,
-                    clamp,
-                    fpar,
-                    fa,
-                    pts,
-                    pts_ro,
-                    R,
-                    R1,
-                    B,
-                    G,
-                    G3,
-                    H,
-                    H4,
-                    ab,
-                    T,
-                )
-                if st == 2:
-                    return 1
-                cur_ok[j] = t_ok[j] = st == 0
-                t_lu[j] = False
-                has_h[j] = True
-                _copy_row(RT1, R1, j)
+                if not fresh[j]:  # (a fresh member's tangent is at its state: the same)
+                    st = _linearize_into(cur, j, S[j], yes, model)
+                    if st == 2:
+                        return 1
+                    _new_tangent(j, st, RT1, R1, marks)
         # (else the engine's residuals have no hessian; a linear field has none)
         keep_h = (not owners_all or all_fresh) and not linear
-        if want_tangent and want_h and not keep_h:  # the hessian the 3D count needs, here
+        if want_tangent and want_3d and not linear and not keep_h:  # the 3D count's hessian
             for j in range(k):
-                if not _hessian(
-                    U,
-                    j,
-                    fpar,
-                    clamp,
-                    fa,
-                    pts,
-                    pts_ro,
-                    B,
-                    G,
-                    H,
-                ):
+                if not _hessian(U, j, fpar, clamp, fa, pts, pts_ro, B, G, H):
                     return 1
-                has_h[j] = True
+                marks[2][j] = True
             keep_h = True
         for j in range(k):
-            M[j, 0] = err[j]
-            M[j, 1] = iters[j]
-            M[j, 2] = 1.0 if cur_ok[j] else 0.0
-            M[j, 5] = 1.0 if (keep_h and has_h[j]) else 0.0
-            if not want_tangent:
-                continue
-            _factor(ab, ipiv, j, size, t_ok, t_lu, t_bad)
-            bad = not t_ok[j] or t_bad[j]
-            M[j, 4] = 1.0 if bad else 0.0
-            if bad:
-                for q in range(size):
-                    rate[j, q] = math.nan
-                continue
-            for q in range(size):
-                rhs[q] = R1[j, q]
-            _band_solve(ab, ipiv, j * size, size, rhs)
-            odd = 0
-            for q in range(size):
-                rate[j, q] = -rhs[q]
-                c = j * size + q
-                if ab[_D, c] < 0.0:
-                    odd += 1
-                if ipiv[c] != c:
-                    odd += 1
-            M[j, 3] = 1.0 if odd % 2 == 0 else -1.0
+            _report(j, keep_h, book, marks, M)
+            if want_tangent:
+                _rate_and_sign(j, ab, ipiv, R1, rate, M, marks)
         if want_tangent and want_3d:  # the out-of-plane count of the 3D stability
             _odd_counts(U, S, mu, h, w, inv_h, fpar, B, G, H, M)
         return 0
 
     return newton_kernel
+
+
+#: The kernel's steps: inlined into it in numba's IR (compiled with it as one function: each
+#: compiled apart would add its own optimisation and machine code to the kernel's cold compile)
+_step = nb.njit(inline="always", error_model="numpy")
+
+# The kernel passes its arrays to its steps in tuples:
+#   model = (mu, h, w, clamp, fpar, fa, pts, pts_ro, T): the problem and the per-node scratch
+#   cur / trial = (U, R, R1, B, G, G3, H, H4, ab): states, residuals, dR/dscale, the field at
+#       the nodes (G3, H4: G, H as (k n, 3, 3[, 3]) views) and the band of the current states
+#       (the tangent) / of the line search's trial states
+#   book = (err, alive, iters, slow, ratio, moved): per member its error, whether it still
+#       iterates, its iterations, its slow contractions in a row, its last error contraction,
+#       whether it moved in this iteration
+#   marks = (fresh, cur_ok, has_h, t_ok, t_lu, t_bad): per member whether its current state
+#       is its tangent's, its current residual is finite, H holds the hessian at its current
+#       state, its tangent's state was finite, its tangent is factorised, ... with an exactly
+#       zero pivot
+
+
+@_step
+def _bookkeeping(k, chord_start):
+    """``book`` and ``marks`` (above) at the start of k members (``chord_start``: their
+    first iteration may be a chord step)."""
+    book = (
+        np.empty(k),
+        np.zeros(k, dtype=np.bool_),
+        np.zeros(k, dtype=np.int64),
+        np.zeros(k, dtype=np.int64),
+        np.full(k, 0.0 if chord_start else 1.0),
+        np.zeros(k, dtype=np.bool_),
+    )
+    marks = (
+        np.ones(k, dtype=np.bool_),
+        np.zeros(k, dtype=np.bool_),
+        np.ones(k, dtype=np.bool_),
+        np.zeros(k, dtype=np.bool_),
+        np.zeros(k, dtype=np.bool_),
+        np.zeros(k, dtype=np.bool_),
+    )
+    return book, marks
+
+
+@_step
+def _trial_arrays(k, n, tab):
+    """``trial`` (above): the line search's arrays for k members of n nodes, its band
+    ``tab``."""
+    Gt = np.zeros((k * n, 9))
+    Ht = np.zeros((k * n, 27))
+    return (
+        np.empty((k, 5 * n)),
+        np.empty((k, 5 * n)),
+        np.empty((k, 5 * n)),
+        np.zeros((k * n, 3)),
+        Gt,
+        Gt.reshape((k * n, 3, 3)),
+        Ht,
+        Ht.reshape((k * n, 3, 3, 3)),
+        tab,
+    )
+
+
+@_step
+def _linearize_into(arrays, j, s, tangent, model):
+    """:func:`_linearize` of member j of ``arrays`` (``cur`` or ``trial``) at scale s."""
+    U, R, R1, B, G, G3, H, H4, ab = arrays
+    mu, h, w, clamp, fpar, fa, pts, pts_ro, T = model
+    return _linearize(
+        U, j, s, tangent, mu, h, w, clamp, fpar, fa, pts, pts_ro, R, R1, B, G, G3, H, H4, ab, T
+    )
+
+
+@_step
+def _new_tangent(j, st, RT1, R1, marks):
+    """Member j's current state was linearized with its tangent (:func:`_linearize`'s code
+    ``st``): the marks, and the tangent's load derivative."""
+    fresh, cur_ok, has_h, t_ok, t_lu, _t_bad = marks
+    cur_ok[j] = t_ok[j] = st == 0
+    t_lu[j] = False
+    fresh[j] = True
+    has_h[j] = True
+    _copy_row(RT1, R1, j)
+
+
+@_step
+def _active(book, fresh):
+    """The members that still iterate (alive, error above 1): their number, their largest
+    last error contraction, and whether one's tangent is not at its current state."""
+    err, alive, _iters, _slow, ratio, _moved = book
+    n_act = 0
+    worst = 0.0
+    stale = False
+    for j in range(err.shape[0]):
+        if alive[j] and err[j] > 1.0:
+            n_act += 1
+            worst = max(worst, ratio[j])
+            if not fresh[j]:
+                stale = True
+    return n_act, worst, stale
+
+
+@_step
+def _newton_steps(U, R, ab, ipiv, DU, book, marks):
+    """The Newton step ``-J^-1 R`` of every member that still iterates into its row of DU,
+    with its tangent (factorised here once); a member without a finite step stops.  Marks
+    the members with a step as moved; returns their number."""
+    err, alive, _iters, _slow, _ratio, moved = book
+    _fresh, _cur_ok, _has_h, t_ok, t_lu, t_bad = marks
+    k, size = U.shape
+    rhs = np.empty(size)
+    n_step = 0
+    for j in range(k):
+        moved[j] = False
+        if not (alive[j] and err[j] > 1.0):
+            continue
+        _factor(ab, ipiv, j, size, t_ok, t_lu, t_bad)
+        ok = t_ok[j] and not t_bad[j]
+        if ok:
+            for q in range(size):
+                rhs[q] = -R[j, q]
+            _band_solve(ab, ipiv, j * size, size, rhs)
+            for q in range(size):
+                DU[j, q] = rhs[q]
+                if not math.isfinite(rhs[q]):
+                    ok = False
+        if not ok:
+            alive[j] = False
+            continue
+        moved[j] = True  # (for now: has a step)
+        n_step += 1
+    return n_step
+
+
+@_step
+def _step_limit(j, DU, max_rotation, moved):
+    """Member j's first step length: 1, or less where its step turns a node by more than
+    ``max_rotation``; it has not moved yet."""
+    moved[j] = False
+    rot = 0.0
+    for i in range(DU.shape[1] // 5):
+        a = abs(DU[j, 5 * i + 2])
+        if a > rot:
+            rot = a
+    return min(1.0, max_rotation / rot) if rot > 0 else 1.0
+
+
+@_step
+def _trial_state(j, alpha, U, DU, Ut):
+    """Member j's trial state ``U + alpha DU``."""
+    for q in range(U.shape[1]):
+        Ut[j, q] = U[j, q] + alpha * DU[j, q]
+
+
+@_step
+def _accepted(j, e_new, full, st, chord, growth, cur, trial, RT1, book, marks):
+    """Whether member j's trial (error ``e_new``; ``full``: at its first step length) is
+    accepted -- its error falls or is at most 1, or at the first length it grows by at
+    most ``growth`` -- and then the trial becomes its current state (after a full step
+    with its tangent)."""
+    err, _alive, iters, slow, ratio, moved = book
+    fresh, cur_ok, has_h, t_ok, t_lu, _t_bad = marks
+    U, R, R1, B, G, _G3, H, _H4, ab = cur
+    Ut, Rt, R1t, Bt, Gt, _Gt3, Ht, _Ht4, tab = trial
+    e_old = err[j]
+    accept = e_new < e_old or e_new <= 1.0
+    if not accept:
+        accept = full and e_new <= growth * e_old and e_new < math.inf
+    if not accept:
+        return False
+    slow[j] = slow[j] + 1 if e_new > 0.5 * e_old else 0
+    ratio[j] = e_new / e_old if e_old > 0 else 0.0
+    _accept(j, not chord, U, Ut, R, Rt, R1, R1t, B, Bt, G, Gt, H, Ht, ab, tab)
+    err[j] = e_new
+    iters[j] += 1
+    cur_ok[j] = st == 0
+    has_h[j] = not chord
+    fresh[j] = False
+    if not chord:  # the trial's linearization carries its tangent
+        _copy_row(RT1, R1, j)
+        t_ok[j] = st == 0
+        t_lu[j] = False
+        fresh[j] = True
+    moved[j] = True
+    return True
+
+
+@_step
+def _stopped(j, book):
+    """Member j stops where its line search failed (the failed search counts)."""
+    if not book[5][j]:
+        book[1][j] = False
+        book[2][j] += 1
+
+
+@_step
+def _stagnation(book, stagnation):
+    """The members that moved stop after ``stagnation`` slow contractions in a row (error
+    still above 1)."""
+    err, alive, _iters, slow, _ratio, moved = book
+    for j in range(err.shape[0]):
+        if moved[j] and slow[j] >= stagnation and err[j] > 1.0:
+            alive[j] = False
+
+
+@_step
+def _report(j, keep_h, book, marks, M):
+    """Member j's error, iterations, finite residual and hessian flags into its row of M
+    (``keep_h``: H holds the hessian where ``has_h`` says so)."""
+    M[j, 0] = book[0][j]
+    M[j, 1] = book[2][j]
+    M[j, 2] = 1.0 if marks[1][j] else 0.0
+    M[j, 5] = 1.0 if (keep_h and marks[2][j]) else 0.0
+
+
+@_step
+def _rate_and_sign(j, ab, ipiv, R1, rate, M, marks):
+    """Member j's returned tangent factorised, its badness, its path rate ``-J^-1 R1`` (NaN
+    where bad) and the sign of its determinant into M."""
+    _fresh, _cur_ok, _has_h, t_ok, t_lu, t_bad = marks
+    size = R1.shape[1]
+    _factor(ab, ipiv, j, size, t_ok, t_lu, t_bad)
+    bad = not t_ok[j] or t_bad[j]
+    M[j, 4] = 1.0 if bad else 0.0
+    if bad:
+        for q in range(size):
+            rate[j, q] = math.nan
+        return
+    rhs = np.empty(size)
+    for q in range(size):
+        rhs[q] = R1[j, q]
+    _band_solve(ab, ipiv, j * size, size, rhs)
+    odd = 0
+    for q in range(size):
+        rate[j, q] = -rhs[q]
+        c = j * size + q
+        if ab[_D, c] < 0.0:
+            odd += 1
+        if ipiv[c] != c:
+            odd += 1
+    M[j, 3] = 1.0 if odd % 2 == 0 else -1.0
 
 
 @nb.njit(cache=True, error_model="numpy")

@@ -685,6 +685,43 @@ def _parse_control_scene(data: dict, robot, info, scales, models, p: _Problems):
     return parse_control(data["control"], robot, info, steps, p)
 
 
+def _rod_obstacles(data: dict, source: str, robot, models, rod_options, p: _Problems):
+    """The rod options checked against the models (a rotated clamp is the rod's alone) with
+    the scene's ``[[obstacles]]`` parsed into them (for the straight robot at its first free
+    length, its section's half width, along its clamp's tangent); ``_BAD`` where invalid."""
+    if _ok(rod_options, models) and "clamp_rotation" in rod_options:
+        fem = [m for m in models if m != "rod"]
+        if fem:
+            p.add(
+                f"rod.clamp_rotation: the continuum models ({', '.join(fem)}) clamp the robot "
+                "along +x; a rotated clamp applies to rod runs only -- run the rod alone"
+            )
+            rod_options = _BAD
+    if "obstacles" in data and _ok(rod_options, models):
+        from .obstacles import parse_obstacles
+
+        if [m for m in models if m != "rod"]:
+            p.add("obstacles: contact is modelled by the rod only -- run the rod alone")
+        length = robot[0].length if _ok(robot) else None
+        if "insertion" in data:  # the robot starts straight at its first free length
+            from .navigation import first_length
+
+            length = first_length(data["insertion"]) or length
+        half = None
+        if _ok(robot):
+            sec = robot[0].section
+            half = sec.diameter / 2 if hasattr(sec, "diameter") else None
+            if hasattr(sec, "width"):
+                half = 0.5 * float(np.hypot(sec.width, sec.thickness))
+        tangent = None  # the straight robot's direction: +x or the rotated clamp's
+        if _ok(rod_options) and "clamp_rotation" in rod_options:
+            tangent = np.asarray(rod_options["clamp_rotation"])[:, 0]
+        found = p.take(parse_obstacles, data["obstacles"], source, length, half, tangent)
+        if _ok(found):
+            rod_options = {**rod_options, "obstacles": found[0]}
+    return rod_options
+
+
 def parse_scene(data: dict, source: str = "<embedded>") -> Scene:
     """Validate a scene given as a dict (as read from TOML) and build its objects.
 
@@ -763,36 +800,7 @@ def parse_scene(data: dict, source: str = "<embedded>") -> Scene:
     scales = p.take(_parse_load, data.get("load", {}), p)
     models = p.take(_parse_models, data.get("models", {"run": ["rod"]}), p)
     rod_options = p.take(_parse_rod_options, data.get("rod", {}), p)
-    if _ok(rod_options, models) and "clamp_rotation" in rod_options:
-        fem = [m for m in models if m != "rod"]
-        if fem:
-            p.add(
-                f"rod.clamp_rotation: the continuum models ({', '.join(fem)}) clamp the robot "
-                "along +x; a rotated clamp applies to rod runs only -- run the rod alone"
-            )
-            rod_options = _BAD
-    if "obstacles" in data and _ok(rod_options, models):
-        from .obstacles import parse_obstacles
-
-        if [m for m in models if m != "rod"]:
-            p.add("obstacles: contact is modelled by the rod only -- run the rod alone")
-        length = robot[0].length if _ok(robot) else None
-        if "insertion" in data:  # the robot starts straight at its first free length
-            from .navigation import first_length
-
-            length = first_length(data["insertion"]) or length
-        half = None
-        if _ok(robot):
-            sec = robot[0].section
-            half = sec.diameter / 2 if hasattr(sec, "diameter") else None
-            if hasattr(sec, "width"):
-                half = 0.5 * float(np.hypot(sec.width, sec.thickness))
-        tangent = None  # the straight robot's direction: +x or the rotated clamp's
-        if _ok(rod_options) and "clamp_rotation" in rod_options:
-            tangent = np.asarray(rod_options["clamp_rotation"])[:, 0]
-        found = p.take(parse_obstacles, data["obstacles"], source, length, half, tangent)
-        if _ok(found):
-            rod_options = {**rod_options, "obstacles": found[0]}
+    rod_options = _rod_obstacles(data, source, robot, models, rod_options, p)
     if "insertion" in data:
         from .navigation import check_insertion
 
