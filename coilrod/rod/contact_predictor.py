@@ -114,6 +114,91 @@ def _fractions(events: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
+class _Rates:
+    """The path rates of :func:`piecewise_prediction`'s active sets, all at one tangent
+    matrix: ``base`` (band storage, this prediction's own: its contact rows are overwritten)
+    with every contact row the gap's, its ``load_rate`` (size,), and ``factors`` (the active
+    set, LU factors and pivots of Newton's kept tangent, or None).  A call gives the rate
+    (size,) of an active set, or None where its tangent is singular or the rate not finite;
+    after the first, each call switches the points ``flipped`` only, restarting the band LU
+    (and, compiled, the solve's forward sweep) from their first column: bitwise the
+    factorisation from column 0."""
+
+    def __init__(self, problem, base, load_rate, factors):
+        from ._compiled import events_pay
+
+        nc = problem.nc
+        self.bi, self.ci = _contact_entries(problem)
+        self.active_rows = base[self.bi, self.ci]  # (n-1, nc, 6 + nc)
+        self.inactive_rows = np.zeros_like(self.active_rows)
+        self.inactive_rows[..., 6:] = np.eye(nc)
+        self.rhs = -np.asarray(load_rate, float).reshape(-1, 1)  # (size, 1)
+        self.kl, self.ku = problem.kl, problem.ku
+        # the rates' band, unfactorised: the last rate's contact rows
+        self.band = np.asfortranarray(base)
+        self.factors = factors
+        self.last = None  # the last rate's factors and pivots
+        self.x = np.empty_like(self.rhs)  # each rate's solve (used before the next)
+        self.fast = events_pay()  # the event loop compiled (its ski rental): for the whole loop
+        self.keep = np.empty((2, self.rhs.shape[0]))  # the last solve's forward sweep
+        w = 6 + nc  # the flat views of the contact rows' entries: one row of w per point
+        self.bf, self.cf = self.bi.reshape(-1, w), self.ci.reshape(-1, w)
+        self.rows = np.stack(  # (2, n-1 nc, w): inactive, active
+            [self.inactive_rows.reshape(-1, w), self.active_rows.reshape(-1, w)]
+        )
+
+    def __call__(self, active, flat, flipped=None):
+        """The rate (size,) of the active set ``active`` (n - 1, nc) (``flat``: the same
+        array, (n - 1) nc), the points ``flipped`` (flat indices, ascending) switched since
+        the last call; None where singular or not finite."""
+        from ._compiled import band_lu, band_solve, rate_solve, rate_step
+
+        band, kl, ku = self.band, self.kl, self.ku
+        if self.last is not None and self.fast:  # an event's steps compiled (solve restarted)
+            ab, ipiv = self.last
+            self.last = None
+            if rate_step(band, ab, ipiv, self.bf, self.cf, self.rows, flat, flipped,
+                         flipped.size, kl, ku, self.rhs, self.x, self.keep):  # fmt: skip
+                return None  # (a zero pivot, or not finite)
+            self.last = ab, ipiv
+            return self.x.reshape(-1)
+        if self.last is None:
+            band[self.bi, self.ci] = np.where(
+                active[..., None], self.active_rows, self.inactive_rows
+            )
+            factors = self.factors
+            if factors is not None and np.array_equal(active, factors[0]):
+                # the band of the kept tangent (the same blocks and contact rows): its
+                # factors, Newton's (band_lu from column 0 gives them, bitwise)
+                ab, ipiv = factors[1].copy(order="F"), factors[2].copy()
+                start = band.shape[1]
+            else:
+                ab, ipiv, start = band.copy(order="F"), np.empty(band.shape[1], np.int64), 0
+        else:
+            # an event switches a few contact rows: the factors' columns before the first
+            # column of those rows' entries (the first flipped point's node's first unknown)
+            # are the last rate's, kept (band_lu restarts there, bitwise the factorisation
+            # from column 0); the others the new band's
+            ab, ipiv = self.last
+            bf, cf = self.bf, self.cf
+            band[bf[flipped], cf[flipped]] = self.rows[
+                active.reshape(-1)[flipped].view(np.int8), flipped
+            ]
+            start = int(cf[flipped[0], 0]) if flipped.size else band.shape[1]
+            ab[:, start:] = band[:, start:]
+        self.last = None
+        if band_lu(ab, kl, ku, ipiv, start) > 0:  # an exactly zero pivot: singular
+            return None
+        self.last = ab, ipiv
+        if self.fast:  # (its forward sweep kept for the restarts)
+            singular = rate_solve(ab, kl, ku, ipiv, self.rhs, self.x, 0, self.keep)
+            return None if singular else self.x.reshape(-1)
+        np.copyto(self.x, self.rhs)
+        band_solve(ab, kl, ku, ipiv, self.x)
+        r = self.x.reshape(-1)
+        return r if math.isfinite(r.sum()) else None  # (a NaN or inf anywhere: not finite)
+
+
 def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_events=None):
     """Prediction of the state at ``scale + ds`` from the converged state ``u`` (size,) of the
     spatial rod ``problem``, following the path tangent of the active contact set and
@@ -121,15 +206,7 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     complementarity problem along the step: a piecewise-linear path, one new tangent per
     event, all at the tangent matrix of ``u``).  Returns the predicted state (size,), or None
     when it cannot be formed (a singular tangent, more than ``max_events`` switches)."""
-    from ._compiled import (
-        band_lu,
-        band_solve,
-        event_step,
-        events_charge,
-        events_pay,
-        rate_solve,
-        rate_step,
-    )
+    from ._compiled import event_step, events_charge
 
     n, nv, nc = problem.n, problem.nv, problem.nc
     if max_events is None:
@@ -148,65 +225,7 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
             return None
         kept = every.tangent.parts, every.load_rate
     g = problem._state_gaps(u[None])[0]
-    bi, ci = _contact_entries(problem)
-    base, load_rate = kept
-    active_rows = base[bi, ci]  # (n-1, nc, 6 + nc)
-    inactive_rows = np.zeros_like(active_rows)
-    inactive_rows[..., 6:] = np.eye(nc)
-    rhs = -np.asarray(load_rate, float).reshape(-1, 1)  # (size, 1)
-    kl, ku = problem.kl, problem.ku
-    # the rates' band, unfactorised: the last rate's contact rows (base is this call's own)
-    band = np.asfortranarray(base)
-    last = []  # the last rate's active set, factors and pivots
-    x_rate = np.empty_like(rhs)  # each rate's solve (its result is used before the next)
-    fast = events_pay()  # the event loop compiled (its ski rental): for the whole loop
-    keep = np.empty((2, rhs.shape[0]))  # the last solve's forward sweep (rate_solve)
-
-    w = 6 + nc  # the flat views of the contact rows' entries: one row of w per point
-    bf, cf = bi.reshape(-1, w), ci.reshape(-1, w)
-    rows = np.stack([inactive_rows.reshape(-1, w), active_rows.reshape(-1, w)])  # (2, ., w)
-
-    def rate(active, flipped=None):
-        if last and fast:  # the steps below for an event, compiled (the solve restarted too)
-            _, ab, ipiv = last
-            last[:] = ()
-            if rate_step(band, ab, ipiv, bf, cf, rows, flat, flipped, flipped.size, kl, ku, rhs,
-                         x_rate, keep):  # fmt: skip
-                return None  # (a zero pivot, or not finite)
-            last[:] = active, ab, ipiv
-            return x_rate.reshape(-1)
-        if not last:
-            band[bi, ci] = np.where(active[..., None], active_rows, inactive_rows)
-            if factors is not None and np.array_equal(active, factors[0]):
-                # the band of the kept tangent (the same blocks and contact rows): its
-                # factors, Newton's (band_lu from column 0 gives them, bitwise)
-                ab, ipiv = factors[1].copy(order="F"), factors[2].copy()
-                start = band.shape[1]
-            else:
-                ab, ipiv, start = band.copy(order="F"), np.empty(band.shape[1], np.int64), 0
-        else:
-            # an event switches a few contact rows (flipped: the points' flat indices,
-            # ascending): the factors' columns before the first column of those rows'
-            # entries (the first flipped point's node's first unknown) are the last rate's,
-            # kept (band_lu restarts there, bitwise the factorisation from column 0); the
-            # others the new band's
-            _, ab, ipiv = last
-            band[bf[flipped], cf[flipped]] = rows[active.reshape(-1)[flipped].view(np.int8),
-                                                  flipped]  # fmt: skip
-            start = int(cf[flipped[0], 0]) if flipped.size else band.shape[1]
-            ab[:, start:] = band[:, start:]
-        last[:] = ()
-        if band_lu(ab, kl, ku, ipiv, start) > 0:  # an exactly zero pivot: singular
-            return None
-        last[:] = active, ab, ipiv
-        if fast:  # (its forward sweep kept for the restarts)
-            singular = rate_solve(ab, kl, ku, ipiv, rhs, x_rate, 0, keep)
-            return None if singular else x_rate.reshape(-1)
-        np.copyto(x_rate, rhs)
-        band_solve(ab, kl, ku, ipiv, x_rate)
-        r = x_rate.reshape(-1)
-        return r if math.isfinite(r.sum()) else None  # (a NaN or inf anywhere: not finite)
-
+    rates = _Rates(problem, *kept, factors)
     lam0 = u.reshape(n, nv)[1:, 9 : 9 + nc]
     npts = (n - 1) * nc
     flat = (problem.kappa * g[1:] < lam0).reshape(-1)  # the active set, by point
@@ -217,7 +236,9 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     g0 = g[1:].reshape(-1).copy()  # the gaps at the segment's start (the last event)
     g1, xd = np.empty(npts), np.empty_like(x)
     f_rel, f_close, at = np.empty(npts), np.empty(npts), np.empty(npts, np.int64)
-    lin, cols = np.ascontiguousarray(active_rows.reshape(npts, w)), ci.reshape(npts, w)
+    w = 6 + nc
+    lin = np.ascontiguousarray(rates.active_rows.reshape(npts, w))
+    cols = rates.ci.reshape(npts, w)
     end_gaps = _end_gaps(problem)
     # a round section's surface gap is 1-Lipschitz in its contact point p = x + c t (a
     # signed distance, units of L), and |dt| <= |d phi| (t = exp(phi) R0 e1): a release
@@ -226,12 +247,12 @@ def piecewise_prediction(problem, u: np.ndarray, scale: float, ds: float, max_ev
     kappa = problem.kappa
     with np.errstate(all="ignore"):  # (one context for the loop: its entry costs as an op)
         for _ in range(max_events):
-            r = rate(active, flipped)
+            r = rates(active, flat, flipped)
             if r is None:
                 return None
-            if not fast:
+            if not rates.fast:
                 events_charge()
-            step = event_step if fast else _event_step
+            step = event_step if rates.fast else _event_step
             args = (x, r, left * ds, flat, g0, g1, xd, lin, cols, c, nv, nc, kappa, f_rel,
                     f_close, at)  # fmt: skip
             code, f, count = step(False, *args)
