@@ -121,7 +121,8 @@ class TestIdealModel:
 
 class TestUnreachable:
     @pytest.fixture(scope="class")
-    def beyond(self):
+    @classmethod
+    def beyond(cls):
         """The one solve the limit tests read: a target the compact system cannot reach within
         0.5 A (the ConvergenceError it raises), from a warm start that cannot reach it either
         (then a fresh one), and the forward solves counted where they are made."""

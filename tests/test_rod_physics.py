@@ -146,9 +146,13 @@ def test_scale_invariance_metres_millimetres_and_E_B():
     res_m = solve_rod(rod_m, field_m, [0.5, 1.0], nodes=24)
     # millimetres, newtons, amperes: E in N/mm^2, M in A/mm, B in N/(A mm), G in N/(A mm^2)
     L_mm = 40.0
-    rod_mm = Rod(
-        L_mm, 1e6 * 1e-6, Circle(L_mm / 20), presets.M2(length=L_mm, variant="b", M0=640e3 * 1e-3)
-    )
+    with pytest.warns(UnitsWarning):  # (the units check sees mm as metres: it warns)
+        rod_mm = Rod(
+            L_mm,
+            1e6 * 1e-6,
+            Circle(L_mm / 20),
+            presets.M2(length=L_mm, variant="b", M0=640e3 * 1e-3),
+        )
     field_mm = coils.LinearField(
         B0=(2e-6, 6e-6, 0.0), gradient=coils.maxwell_gradient(0.3e-6), origin=(10.0, 4.0, 0.0)
     )
