@@ -293,7 +293,7 @@ def optimize_magnetization(
     >>> from coilrod import presets, optimize_magnetization
     >>> rod = presets.seed_rod(presets.M1())
     >>> best = optimize_magnetization(rod, segments=1, b_max=0.01, budget=6, starts=1,
-    ...                               directions=12, magnitudes=3, refine=2)
+    ...                               directions=8, magnitudes=3, refine=1)
     >>> best.solves <= 6 and best.area > 0
     True
     """
