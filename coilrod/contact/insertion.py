@@ -13,6 +13,7 @@ from coils.field import Field
 
 from ..errors import ConvergenceError
 from ..path.corrector import NewtonOptions, newton
+from ..path.stepping import touchdown_secant
 from ..robot.rod import Rod
 from ..rod.contact_predictor import active_set_start
 from ._parts import StepProblems, free_part
@@ -346,20 +347,6 @@ def _touchdown_force(problem, u, lam_ref, carried, feed: float = 0.0) -> float:
     return float(lam[new].max()) if new.any() else 0.0
 
 
-def _touchdown_fraction(t: float, t1: float, force: float, touch, tol: float) -> float:
-    """The next sub-step (a fraction of the insertion step) from ``t`` after the trial at
-    ``t1`` touched with ``force`` > ``tol``: aimed just past the touch that the secant
-    through the last such trial ``touch`` = (t, force) predicts (the normal force grows
-    linearly from 0 at the touch), else half the sub-step (as the load stepping's
-    :meth:`~coilrod.path.stepping._Tracker.touchdown_step`)."""
-    if touch is not None and touch[1] != force and touch[0] != t1:
-        slope = (force - touch[1]) / (t1 - touch[0])
-        aim = t1 - (force - 0.25 * tol) / slope
-        if t < aim < t1:
-            return aim - t
-    return 0.5 * (t1 - t)
-
-
 def insert(
     rod: Rod,
     vessel,
@@ -575,8 +562,9 @@ def _step(build, problem, u, prev, target, k, before=None, section=None):
     (:func:`_frictionless_start`; first for the rest of the step once it converged there),
     and a part of the step in which a point first touches
     (:func:`_touchdown_force`) is cut toward the touch -- a secant on that point's normal
-    force (:func:`_touchdown_fraction`), not counted as a halving -- until it ends where the
-    point touches (to ``touchdown_tol``); the step then resumes its length."""
+    force (:func:`~coilrod.path.stepping.touchdown_secant`), not counted as a halving --
+    until it ends where the point touches (to ``touchdown_tol``); the step then resumes its
+    length."""
     # semi-smooth Newton: the error may stall for a few iterations while the contact set
     # settles (then it converges quadratically)
     opts = NewtonOptions(max_iter=40, stagnation=12)
@@ -644,7 +632,7 @@ def _step(build, problem, u, prev, target, k, before=None, section=None):
             # friction: end the sub-step where the new contact points touch, so that their
             # slip is measured from there (not a halving: the trial converged)
             resume = dt if resume is None else resume
-            dt = _touchdown_fraction(t, t1, force, touch, trial.touchdown_tol)
+            dt = touchdown_secant(t, t1 - t, t1, force, touch, trial.touchdown_tol)
             touch = (t1, force)
             continue
         if res.ok:  # (its linearization carries the state's stability)

@@ -175,6 +175,22 @@ class PathRun:
     cuts: int = 0
 
 
+def touchdown_secant(s0: float, h: float, s1: float, force: float, landed, tol: float) -> float:
+    """The next trial step from ``s0`` after the trial step ``h`` to ``s1`` ended with a newly
+    touching contact point carrying ``force`` > ``tol`` (its normal force per length, the
+    model's ``touchdown_tol``): aimed just past the touch (a quarter of ``tol``) that the
+    secant through the last such trial ``landed`` = (s, force) predicts -- the normal force
+    grows linearly from 0 at the touch -- where that lies strictly between ``s0`` and ``s1``,
+    else half the step.  The load stepping (:meth:`_Tracker.touchdown_step`) and
+    :func:`coilrod.insert`'s steps use it."""
+    if landed is not None and landed[1] != force and landed[0] != s1:
+        slope = (force - landed[1]) / (s1 - landed[0])
+        aim = s1 - (force - 0.25 * tol) / slope
+        if (aim - s0) * h > 0 and abs(aim - s0) < abs(s1 - s0):
+            return aim - s0
+    return h / 2.0
+
+
 class _Tracker:
     """State of one run (the current and previous points, the counters)."""
 
@@ -403,15 +419,8 @@ class _Tracker:
 
     def touchdown_step(self, cur: PathPoint, h: float, s1: float, force: float, landed):
         """The next trial step after the trial at ``s1`` touched with ``force`` (> the
-        model's ``touchdown_tol``): aimed just past the touch that the secant through the
-        last such trial ``landed`` = (scale, force) predicts (the normal force grows
-        linearly from 0 at the touch), else half the step."""
-        if landed is not None and landed[1] != force and landed[0] != s1:
-            slope = (force - landed[1]) / (s1 - landed[0])
-            aim = s1 - (force - 0.25 * self.touchdown_tol) / slope
-            if (aim - cur.scale) * h > 0 and abs(aim - cur.scale) < abs(s1 - cur.scale):
-                return aim - cur.scale
-        return h / 2.0
+        model's ``touchdown_tol``): :func:`touchdown_secant`."""
+        return touchdown_secant(cur.scale, h, s1, force, landed, self.touchdown_tol)
 
     def near_fold(self, cur: PathPoint) -> bool:
         """The model says ``cur`` is close to a limit point (failing steps then mean a fold)."""
