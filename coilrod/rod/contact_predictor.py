@@ -125,7 +125,12 @@ class _Rates:
     factorisation from column 0."""
 
     def __init__(self, problem, base, load_rate, factors):
-        from ._compiled import events_pay
+        from . import _compiled
+
+        # the band kernels, looked up once per prediction (not per event)
+        self._lu, self._solve = _compiled.band_lu, _compiled.band_solve
+        self._rate_solve, self._rate_step = _compiled.rate_solve, _compiled.rate_step
+        events_pay = _compiled.events_pay
 
         nc = problem.nc
         self.bi, self.ci = _contact_entries(problem)
@@ -151,8 +156,12 @@ class _Rates:
         """The rate (size,) of the active set ``active`` (n - 1, nc) (``flat``: the same
         array, (n - 1) nc), the points ``flipped`` (flat indices, ascending) switched since
         the last call; None where singular or not finite."""
-        from ._compiled import band_lu, band_solve, rate_solve, rate_step
-
+        band_lu, band_solve, rate_solve, rate_step = (
+            self._lu,
+            self._solve,
+            self._rate_solve,
+            self._rate_step,
+        )
         band, kl, ku = self.band, self.kl, self.ku
         if self.last is not None and self.fast:  # an event's steps compiled (solve restarted)
             ab, ipiv = self.last
